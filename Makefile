@@ -1,0 +1,47 @@
+# sim2radar — one-command setup, main job, tests and benchmarks.
+#   make demo    set up (once) and run the main job on the built-in default
+#   make test    set up (once) and run the test suite
+SHELL := /bin/bash
+PY ?= python3
+VENV := .venv
+BIN := $(VENV)/bin
+export PREFECT_HOME ?= $(CURDIR)/.prefect
+export PREFECT_SERVER_ANALYTICS_ENABLED ?= false
+export PREFECT_LOGGING_LEVEL ?= WARNING
+OUT ?= out
+
+.PHONY: setup demo test test-all bench lint clean
+
+$(BIN)/.installed: pyproject.toml
+	@# Mitsuba's LLVM variants need libllvm19 (LLVM 14 is refused, 15/16 crash): DESIGN.md
+	@if ! ldconfig -p | grep -q 'libLLVM.so.19\|libLLVM-19'; then \
+	  echo "[setup] installing libllvm19 (apt)"; \
+	  SUDO=$$( [ "$$(id -u)" = 0 ] || echo sudo ); \
+	  $$SUDO apt-get update -qq && $$SUDO apt-get install -y -qq libllvm19 >/dev/null; \
+	fi
+	@[ -x $(BIN)/python ] || $(PY) -m venv $(VENV)
+	@# torch first, pinned: any other spec downloads the multi-GB CUDA build (DESIGN.md)
+	$(BIN)/python -m pip install -q --upgrade pip
+	$(BIN)/python -m pip install -q torch==2.13.0
+	$(BIN)/python -m pip install -q -e '.[dev]'
+	@touch $@
+
+setup: $(BIN)/.installed
+
+demo: setup
+	$(BIN)/sim2radar demo --out $(OUT)
+
+test: setup
+	$(BIN)/python -m pytest -q
+
+test-all: setup
+	$(BIN)/python -m pytest -q -m ''
+
+bench: setup
+	$(BIN)/python -m benchmarks
+
+lint: setup
+	$(BIN)/ruff check .
+
+clean:
+	rm -rf $(OUT) .pytest_cache .ruff_cache

@@ -1,0 +1,22 @@
+"""The ``sim2radar`` command line.
+
+Each stage's commands live in their own module and register on the shared Typer ``app``.
+Heavy imports (Prefect, Mitsuba, torch) happen inside the commands, so ``sim2radar --help``
+stays fast. Commands that run flows import from ``flows`` lazily: the library itself never
+imports Prefect.
+"""
+
+from __future__ import annotations
+
+from sim2radar.cli._app import app
+
+# Registration imports: each module adds its commands to ``app``.
+from sim2radar.cli import info as _info  # noqa: E402,F401  isort: skip
+from sim2radar.cli import simulate as _simulate  # noqa: E402,F401  isort: skip
+
+__all__ = ["app", "main"]
+
+
+def main() -> None:
+    """Console-script entry point."""
+    app()

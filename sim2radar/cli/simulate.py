@@ -1,0 +1,1 @@
+"""``sim2radar simulate`` and ``sim2radar demo`` (owned by the radar/storage work)."""

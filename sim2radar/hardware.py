@@ -1,0 +1,102 @@
+"""The one place that picks hardware: the Mitsuba variant and the torch device.
+
+Order of preference is CUDA -> LLVM (CPU, vectorised JIT) -> scalar (CPU, ~25x slower).
+``SIM2RADAR_MITSUBA_VARIANT`` and ``SIM2RADAR_TORCH_DEVICE`` override the choice.
+"""
+
+from __future__ import annotations
+
+import functools
+import logging
+import os
+
+log = logging.getLogger(__name__)
+
+#: Mitsuba variants in order of preference. ``*_ad_rgb`` keeps Dr.Jit's JIT (and AD, unused).
+MITSUBA_VARIANTS: tuple[str, ...] = ("cuda_ad_rgb", "llvm_ad_rgb", "scalar_rgb")
+
+
+def _variant_works(mi, variant: str) -> bool:
+    """Set ``variant`` and trace one ray; False if the backend is missing or broken."""
+    try:
+        mi.set_variant(variant)
+        scene = mi.load_dict({"type": "scene", "r": {"type": "rectangle"}})
+        ray = mi.Ray3f(mi.Point3f(0, 0, 1), mi.Vector3f(0, 0, -1))
+        si = scene.ray_intersect(ray)
+        import drjit as dr
+
+        dr.eval(si.t)
+        return True
+    except Exception as exc:  # noqa: BLE001 - any backend failure means "not usable"
+        log.debug("mitsuba variant %s unusable: %s", variant, exc)
+        return False
+
+
+@functools.cache
+def mitsuba_variant(prefer: str | None = None) -> str:
+    """Select, activate and return the fastest working Mitsuba variant.
+
+    Parameters
+    ----------
+    prefer : str, optional
+        A variant name to try first (also read from ``SIM2RADAR_MITSUBA_VARIANT``).
+        If it is set explicitly and does not work, this raises instead of falling back.
+
+    Returns
+    -------
+    str
+        The active variant, e.g. ``"llvm_ad_rgb"``.
+    """
+    try:
+        import mitsuba as mi
+    except ImportError as exc:  # pragma: no cover - mitsuba is a hard dependency
+        raise ImportError("mitsuba is not installed: run `make setup`") from exc
+
+    forced = prefer or os.environ.get("SIM2RADAR_MITSUBA_VARIANT")
+    if forced:
+        if forced not in mi.variants():
+            raise ValueError(
+                f"SIM2RADAR_MITSUBA_VARIANT={forced!r} is not a compiled Mitsuba variant; "
+                f"choose one of {mi.variants()}"
+            )
+        if not _variant_works(mi, forced):
+            raise RuntimeError(
+                f"Mitsuba variant {forced!r} failed to trace a ray. LLVM variants need "
+                "libllvm19 (`apt-get install -y libllvm19`); CUDA variants need a GPU."
+            )
+        log.info("mitsuba variant: %s (forced)", forced)
+        return forced
+
+    for variant in MITSUBA_VARIANTS:
+        if variant in mi.variants() and _variant_works(mi, variant):
+            if variant.startswith("scalar"):
+                log.warning(
+                    "mitsuba: falling back to %s (~25x slower). Install libllvm19 "
+                    "(`apt-get install -y libllvm19`) for the LLVM variant.",
+                    variant,
+                )
+            else:
+                log.info("mitsuba variant: %s", variant)
+            return variant
+    raise RuntimeError("no Mitsuba variant works on this machine")
+
+
+def torch_device(prefer: str | None = None):
+    """Return the torch device to use: ``prefer`` / ``SIM2RADAR_TORCH_DEVICE``, else CUDA if
+    available, else CPU."""
+    import torch
+
+    name = prefer or os.environ.get("SIM2RADAR_TORCH_DEVICE")
+    if name:
+        return torch.device(name)
+    return torch.device("cuda" if torch.cuda.is_available() else "cpu")
+
+
+def has_cuda() -> bool:
+    """True if torch sees a CUDA GPU (used by tests to skip ``gpu``-marked cases)."""
+    try:
+        import torch
+
+        return torch.cuda.is_available()
+    except ImportError:  # pragma: no cover
+        return False
