@@ -1,0 +1,1 @@
+"""``sim2radar train`` / ``sim2radar evaluate`` commands (PointPillars detector)."""

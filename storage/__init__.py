@@ -1,0 +1,1 @@
+"""The Parquet artifact store: schemas, content keys, atomic publish, provenance, manifests."""
