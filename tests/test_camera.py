@@ -1,0 +1,28 @@
+"""Tests for sim2radar/camera.py."""
+
+import numpy as np
+import pytest
+
+from sim2radar.camera import CameraIntrinsics, back_project, project
+
+
+def test_back_project_then_project_is_identity():
+    k = CameraIntrinsics.from_fov(64, 48, 65.0)
+    depth = np.full((48, 64), 3.0, dtype=np.float32)
+    pts = back_project(depth, k)
+    uv, valid = project(pts.reshape(-1, 3), k)
+    assert valid.all()
+    jj, ii = np.meshgrid(np.arange(64) + 0.5, np.arange(48) + 0.5)
+    np.testing.assert_allclose(uv[:, 0], jj.ravel(), atol=1e-3)
+    np.testing.assert_allclose(uv[:, 1], ii.ravel(), atol=1e-3)
+    # the image edge ray makes half the horizontal FOV with the optical axis
+    assert np.degrees(np.arctan2(pts[0, 0, 0] - (-0.0), 3.0)) == pytest.approx(-32.5, abs=0.6)
+
+
+def test_invalid_intrinsics_name_the_field(tmp_path):
+    with pytest.raises(ValueError, match="fx/fy"):
+        CameraIntrinsics(-1, 1, 0, 0, 10, 10)
+    p = tmp_path / "k.yaml"
+    p.write_text("fx: 500\nfy: 500\ncx: 320\nwidth: 640\nheight: 480\n")
+    with pytest.raises(ValueError, match="missing field 'cy'"):
+        CameraIntrinsics.from_yaml(p)
