@@ -1,1 +1,7 @@
-"""sim2radar.evaluate"""
+"""Evaluation: KITTI-protocol AP for 3D / BEV boxes, rotated IoU (and, from other modules,
+reconstruction and sim-real gap metrics)."""
+
+from sim2radar.evaluate.ap import average_precision, evaluate_detections, precision_recall
+from sim2radar.evaluate.iou import bev_iou, iou_3d
+
+__all__ = ["average_precision", "evaluate_detections", "precision_recall", "bev_iou", "iou_3d"]
