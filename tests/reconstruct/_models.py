@@ -1,0 +1,169 @@
+"""Test fixtures for the production reconstruction backends (helper E1).
+
+* An analytic corridor scene (axis-aligned planes + one cabinet box) ray-cast from the camera:
+  RGB, exact z-depth, face ids, and a 16-beam-like LiDAR scan — the ground truth for the depth
+  backends.
+* Tiny torch models exported to ONNX with the public input/output signatures of MoGe-2, SAM2
+  (encoder + decoder) and Grounding DINO, producing known outputs, so the backends' loading,
+  pre- and post-processing are tested without any real weights.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from sim2radar.camera import CameraIntrinsics
+
+# ---------------------------------------------------------------------------------------------
+# Analytic corridor
+# ---------------------------------------------------------------------------------------------
+
+#: Corridor interior [m] in the camera frame (x right, y down, z forward); camera at the origin.
+CORRIDOR_LO = np.array([-1.2, -1.3, -1.0])
+CORRIDOR_HI = np.array([1.0, 1.5, 14.0])
+#: A cabinet standing against the left wall [m].
+CABINET_LO = np.array([-1.2, 0.3, 3.0])
+CABINET_HI = np.array([-0.6, 1.5, 4.0])
+
+# face ids: 0..5 corridor (-x wall, +x wall, ceiling, floor, back, end wall), 6..11 cabinet faces
+FACE_COLOURS = np.array(
+    [
+        [200, 190, 170], [185, 175, 160], [240, 240, 235], [110, 110, 120], [90, 90, 90],
+        [150, 160, 200],
+        [60, 90, 140], [70, 100, 150], [50, 80, 130], [55, 85, 135], [65, 95, 145],
+        [45, 75, 125],
+    ],
+    dtype=np.float64,
+)
+
+
+def _raycast(dirs: np.ndarray, with_cabinet: bool = True) -> tuple[np.ndarray, np.ndarray]:
+    """Ray parameter t (distance along unit-less dir) and face id for rays from the origin."""
+    d = np.where(np.abs(dirs) < 1e-12, 1e-12, dirs)
+    # Exit of the corridor box (we are inside it).
+    t_lo = CORRIDOR_LO / d
+    t_hi = CORRIDOR_HI / d
+    t_far = np.maximum(t_lo, t_hi)
+    axis = np.argmin(t_far, axis=1)
+    t = t_far[np.arange(len(d)), axis]
+    positive_side = t_hi[np.arange(len(d)), axis] >= t_lo[np.arange(len(d)), axis]
+    face = 2 * axis + positive_side.astype(int)
+    if with_cabinet:
+        c_lo = CABINET_LO / d
+        c_hi = CABINET_HI / d
+        t_near = np.minimum(c_lo, c_hi)
+        t_out = np.maximum(c_lo, c_hi).min(axis=1)
+        t_in = t_near.max(axis=1)
+        hit = (t_in <= t_out) & (t_in > 0) & (t_in < t)
+        c_axis = np.argmax(t_near, axis=1)
+        c_pos = c_hi[np.arange(len(d)), c_axis] < c_lo[np.arange(len(d)), c_axis]
+        t = np.where(hit, t_in, t)
+        face = np.where(hit, 6 + 2 * c_axis + c_pos.astype(int), face)
+    return t, face
+
+
+def corridor_intrinsics(width: int = 96, height: int = 72, hfov_deg: float = 70.0):
+    return CameraIntrinsics.from_fov(width, height, hfov_deg)
+
+
+def render_corridor(k: CameraIntrinsics, with_cabinet: bool = True, noise: float = 2.0, seed=0):
+    """RGB (H, W, 3) uint8, z-depth (H, W) float32 [m], face id (H, W) int of the corridor."""
+    u = np.arange(k.width) + 0.5
+    v = np.arange(k.height) + 0.5
+    uu, vv = np.meshgrid(u, v)
+    dirs = np.stack([(uu - k.cx) / k.fx, (vv - k.cy) / k.fy, np.ones_like(uu)], -1).reshape(-1, 3)
+    t, face = _raycast(dirs, with_cabinet)
+    depth = (t * dirs[:, 2]).reshape(k.height, k.width).astype(np.float32)
+    face = face.reshape(k.height, k.width)
+    rng = np.random.default_rng(seed)
+    rgb = FACE_COLOURS[face] + rng.normal(0, noise, (k.height, k.width, 3))
+    return np.clip(rgb, 0, 255).astype(np.uint8), depth, face
+
+
+def lidar_scan(
+    n_beams: int = 16,
+    elev_deg: tuple[float, float] = (-30.0, 30.0),
+    az_step_deg: float = 0.4,
+    az_half_deg: float = 60.0,
+    with_cabinet: bool = True,
+) -> np.ndarray:
+    """A 16-beam-like spinning LiDAR at the camera origin: (N, 3) float32 points [m]."""
+    el = np.radians(np.linspace(elev_deg[0], elev_deg[1], n_beams))
+    az = np.radians(np.arange(-az_half_deg, az_half_deg + 1e-9, az_step_deg))
+    ee, aa = np.meshgrid(el, az, indexing="ij")
+    dirs = np.stack(
+        [np.cos(ee) * np.sin(aa), -np.sin(ee), np.cos(ee) * np.cos(aa)], -1
+    ).reshape(-1, 3)
+    t, _ = _raycast(dirs, with_cabinet)
+    return (dirs * t[:, None]).astype(np.float32)
+
+
+# ---------------------------------------------------------------------------------------------
+# Tiny ONNX models
+# ---------------------------------------------------------------------------------------------
+
+
+def export_moge_like(
+    path: Path,
+    *,
+    plane: tuple[float, float, float],
+    fx_px: float,
+    fy_px: float,
+    cx_px: float,
+    cy_px: float,
+    affine_scale: float,
+    affine_shift: float,
+    metric_scale: float,
+    output_names: tuple[str, ...] = ("points", "normal", "mask", "metric_scale"),
+) -> Path:
+    """Export a tiny model with MoGe-2's ONNX signature that outputs an affine point map.
+
+    The true scene is the plane ``1/z = a*x_n + b*y_n + c`` (``x_n = (u - cx)/fx`` etc., pixel
+    centres, camera of the *input* image size ``W0 x H0`` given through ``fx_px..cy_px`` for that
+    size; the model rescales them to whatever H, W it receives). It outputs
+    ``points = (X, Y, Z / affine_scale... )``: precisely ``P_true / affine_scale - (0, 0,
+    affine_shift)`` with ``P_true = metric_scale_true * ...``; see the test for the relation.
+    ``metric_scale`` is reported as ``metric_scale``.
+    """
+    import torch
+
+    a, b, c = plane
+
+    class MoGeLike(torch.nn.Module):
+        def forward(self, image, num_tokens):
+            bsz, _, h, w = image.shape
+            hf = h.to(torch.float32) if torch.is_tensor(h) else torch.tensor(float(h))
+            wf = w.to(torch.float32) if torch.is_tensor(w) else torch.tensor(float(w))
+            # intrinsics for this resolution (fx, cx scale with width; fy, cy with height)
+            sx = wf / W0
+            sy = hf / H0
+            u = (torch.arange(w, dtype=torch.float32) + 0.5)[None, :].expand(h, w)
+            v = (torch.arange(h, dtype=torch.float32) + 0.5)[:, None].expand(h, w)
+            xn = (u - cx_px * sx) / (fx_px * sx)
+            yn = (v - cy_px * sy) / (fy_px * sy)
+            z = 1.0 / (a * xn + b * yn + c)
+            p = torch.stack([xn * z, yn * z, z], -1) / affine_scale
+            p = p - torch.tensor([0.0, 0.0, affine_shift])
+            p = p[None].expand(bsz, h, w, 3)
+            # the image participates (an all-true mask computed from it)
+            mask = (image.mean(1) >= -1.0).to(torch.float32)
+            normal = torch.zeros_like(p) + torch.tensor([0.0, 0.0, -1.0])
+            ms = torch.ones(bsz) * metric_scale + num_tokens.to(torch.float32) * 0.0
+            return p, normal, mask, ms
+
+    W0, H0 = 2 * cx_px, 2 * cy_px  # the model was defined for an image with centred cx, cy
+    model = MoGeLike().eval()
+    dummy = (torch.rand(1, 3, 24, 32), torch.tensor(1800, dtype=torch.int64))
+    torch.onnx.export(
+        model,
+        dummy,
+        str(path),
+        input_names=["image", "num_tokens"],
+        output_names=list(output_names),
+        dynamic_axes={"image": {0: "batch", 2: "height", 3: "width"}},
+        opset_version=17,
+        dynamo=False,
+    )
+    return path
