@@ -1,1 +1,76 @@
-"""The Parquet artifact store: schemas, content keys, atomic publish, provenance, manifests."""
+"""The Parquet artifact store: declared schemas, content keys, atomic publish, provenance,
+per-dataset manifests. Local folder by default; any fsspec URI (``s3://``, ``gs://``,
+``memory://``) works the same.
+
+Typical use by a stage::
+
+    from storage import ArtifactStore, content_key
+
+    store = ArtifactStore("out/store")
+    key = content_key(stage="radar_points", stage_version=1,
+                      inputs={"scene": scene_key}, config=radar.to_dict())
+    if not store.exists("radar_points", key):
+        store.write("radar_points", key, table, stage_version=1,
+                    provenance={"inputs": {"scene": scene_key}, "config": radar.to_dict(),
+                                "seed": 0, "timings_s": {"simulate": 0.4}})
+    table = store.read("radar_points", key)            # validated against storage/schemas.py
+    store.manifest("demo").upsert("corridor", "ok", artifacts={"radar_points": key})
+
+Schemas are declared once in :mod:`storage.schemas` (other stages append blocks there); array
+columns are built with :mod:`storage.codecs`. This package never imports Prefect.
+"""
+
+from storage.codecs import (
+    RadarPointsFrame,
+    fixed_rows,
+    fixed_rows_column,
+    meshes_from_table,
+    meshes_to_table,
+    radar_frames_from_table,
+    radar_frames_to_table,
+    ragged_arrays,
+    ragged_column,
+)
+from storage.keys import KEY_LENGTH, bytes_digest, canonical_json, content_key, file_digest
+from storage.manifest import STATUSES, Manifest
+from storage.provenance import PROVENANCE_KEY, build_provenance, model_file_hashes, package_versions
+from storage.schemas import (
+    ArtifactSchema,
+    SchemaError,
+    field,
+    get_schema,
+    register_schema,
+    schema_names,
+)
+from storage.store import ArtifactNotFoundError, ArtifactStore
+
+__all__ = [
+    "ArtifactStore",
+    "ArtifactNotFoundError",
+    "ArtifactSchema",
+    "SchemaError",
+    "Manifest",
+    "STATUSES",
+    "KEY_LENGTH",
+    "content_key",
+    "canonical_json",
+    "bytes_digest",
+    "file_digest",
+    "field",
+    "get_schema",
+    "register_schema",
+    "schema_names",
+    "PROVENANCE_KEY",
+    "build_provenance",
+    "model_file_hashes",
+    "package_versions",
+    "ragged_column",
+    "ragged_arrays",
+    "fixed_rows_column",
+    "fixed_rows",
+    "meshes_to_table",
+    "meshes_from_table",
+    "radar_frames_to_table",
+    "radar_frames_from_table",
+    "RadarPointsFrame",
+]

@@ -1,0 +1,185 @@
+"""Per-dataset manifests: one row per scene with status, error, artifact keys and timings.
+
+A manifest is stored as one small Parquet file per scene under
+``<root>/manifests/<dataset>/``, each published atomically, so many workers (threads,
+processes, Dask) can record scenes concurrently without a lock or a lost update, and a killed
+run loses at most the scene it was on. :meth:`Manifest.table` gathers the rows.
+
+Status vocabulary:
+
+``ok``
+    the scene's artifacts were computed and written by the latest run;
+``skipped``
+    every artifact already existed under its content key, nothing was recomputed;
+``failed``
+    the latest run raised; ``error`` holds the message.
+
+Resume = run again (done scenes are skipped by content key); retry the failed scenes = run
+again (they have no artifact, so they are computed again) or pass ``manifest.failed()``.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import re
+from collections.abc import Mapping
+from datetime import UTC, datetime
+from typing import TYPE_CHECKING, Any
+
+import pyarrow as pa
+import pyarrow.parquet as pq
+
+from storage.schemas import MANIFEST
+
+if TYPE_CHECKING:  # pragma: no cover
+    from storage.store import ArtifactStore
+
+__all__ = ["Manifest", "STATUSES"]
+
+STATUSES: tuple[str, ...] = ("ok", "skipped", "failed")
+
+
+def _row_name(scene_id: str) -> str:
+    """A file name for ``scene_id``: readable prefix + hash (ids may contain '/' etc.)."""
+    safe = re.sub(r"[^A-Za-z0-9_.-]", "_", scene_id)[:80].lstrip(".") or "scene"
+    digest = hashlib.sha256(scene_id.encode()).hexdigest()[:10]
+    return f"{safe}-{digest}.parquet"
+
+
+class Manifest:
+    """The manifest of one dataset in an :class:`~storage.store.ArtifactStore`.
+
+    Obtain it with ``store.manifest("name")``.
+    """
+
+    def __init__(self, store: ArtifactStore, dataset: str) -> None:
+        self.store = store
+        self.dataset = dataset
+        self._folder = store._join("manifests", dataset)
+
+    def __repr__(self) -> str:
+        return f"Manifest({self.store.root!r}, {self.dataset!r})"
+
+    def _path(self, scene_id: str) -> str:
+        return f"{self._folder}/{_row_name(scene_id)}"
+
+    # -- write ------------------------------------------------------------------------------
+    def upsert(
+        self,
+        scene_id: str,
+        status: str,
+        *,
+        error: str = "",
+        artifacts: Mapping[str, str] | None = None,
+        timings_s: Mapping[str, float] | None = None,
+        source: str = "",
+    ) -> dict[str, Any]:
+        """Insert or replace the row of ``scene_id``; returns the row as a dict.
+
+        ``attempts`` counts how many runs recorded this scene (incremented here).
+        """
+        if status not in STATUSES:
+            raise ValueError(f"manifest status must be one of {STATUSES}, got {status!r}")
+        if not isinstance(scene_id, str) or not scene_id:
+            raise ValueError("manifest scene_id must be a non-empty string")
+        previous = self.get(scene_id)
+        row = {
+            "scene_id": scene_id,
+            "status": status,
+            "error": str(error or ""),
+            "artifacts": dict(artifacts or {}),
+            "timings_s": {k: float(v) for k, v in (timings_s or {}).items()},
+            "source": str(source or ""),
+            "attempts": (previous["attempts"] if previous else 0) + 1,
+            "updated_utc": datetime.now(UTC),
+        }
+        table = pa.Table.from_pylist(
+            [
+                {
+                    **row,
+                    "artifacts": list(row["artifacts"].items()),
+                    "timings_s": list(row["timings_s"].items()),
+                }
+            ],
+            schema=MANIFEST.schema,
+        )
+        table = MANIFEST.validate(table)
+        table = table.replace_schema_metadata({b"sim2radar.schema": f"manifest:{MANIFEST.version}".encode()})
+        path = self._path(scene_id)
+        self.store._io(f"manifest upsert {path}", lambda: self.store._publish(path, table))
+        return row
+
+    # -- read -------------------------------------------------------------------------------
+    def _read_file(self, path: str) -> pa.Table:
+        with self.store.fs.open(path, "rb") as fh:
+            table = pq.read_table(fh)
+        MANIFEST.check_file_schema(table.schema, path)
+        return table
+
+    def get(self, scene_id: str) -> dict[str, Any] | None:
+        """The row of ``scene_id`` as a dict (``artifacts``/``timings_s`` as dicts), or None."""
+        path = self._path(scene_id)
+        if not self.store._io(f"exists {path}", lambda: self.store.fs.exists(path)):
+            return None
+        rows = _to_rows(self.store._io(f"read {path}", lambda: self._read_file(path)))
+        return rows[0] if rows else None
+
+    def table(self) -> pa.Table:
+        """All rows, sorted by ``scene_id`` (an empty table with the declared schema if none)."""
+
+        def gather() -> pa.Table:
+            fs = self.store.fs
+            if not fs.exists(self._folder):
+                return MANIFEST.schema.empty_table()
+            paths = sorted(
+                p for p in fs.ls(self._folder, detail=False)
+                if p.endswith(".parquet") and not p.rsplit("/", 1)[-1].startswith(".")
+            )
+            if not paths:
+                return MANIFEST.schema.empty_table()
+            tables = [self._read_file(p).replace_schema_metadata(None) for p in paths]
+            return pa.concat_tables(tables).sort_by("scene_id")
+
+        return self.store._io(f"read manifest {self.dataset}", gather)
+
+    def rows(self) -> list[dict[str, Any]]:
+        """All rows as dicts, sorted by ``scene_id``."""
+        return _to_rows(self.table())
+
+    def counts(self) -> dict[str, int]:
+        """``{status: number of scenes}`` for every status."""
+        counts = dict.fromkeys(STATUSES, 0)
+        for status in self.table().column("status").to_pylist():
+            counts[status] += 1
+        return counts
+
+    def scene_ids(self, status: str | None = None) -> list[str]:
+        """Scene ids, optionally only those with ``status``."""
+        return [r["scene_id"] for r in self.rows() if status is None or r["status"] == status]
+
+    def failed(self) -> list[str]:
+        """Scene ids whose latest run failed (the ones to retry)."""
+        return self.scene_ids("failed")
+
+    def write_csv(self, path: str) -> str:
+        """A flat CSV copy for humans (maps as JSON text); returns ``path``."""
+        import csv
+        import json
+
+        with open(path, "w", newline="") as fh:
+            writer = csv.writer(fh)
+            cols = MANIFEST.schema.names
+            writer.writerow(cols)
+            for r in self.rows():
+                writer.writerow(
+                    [json.dumps(r[c]) if isinstance(r[c], dict) else r[c] for c in cols]
+                )
+        return path
+
+
+def _to_rows(table: pa.Table) -> list[dict[str, Any]]:
+    rows = table.to_pylist()
+    for r in rows:
+        r["artifacts"] = dict(r["artifacts"] or [])
+        r["timings_s"] = dict(r["timings_s"] or [])
+    return rows

@@ -1,0 +1,303 @@
+"""Declared Parquet schemas, one per artifact stage — the single place a table layout is defined.
+
+Every artifact the store writes or reads is validated against the :class:`ArtifactSchema`
+registered for its stage. Arrays are typed Arrow list columns (``list<float32>``,
+``list<fixed_size_list<float32, 3>>``, ...) or ``binary`` (e.g. PNG bytes) — never pickles.
+Units live in the field names and in each field's metadata (``unit``, ``doc``).
+
+Adding a stage (other helpers / stages): append a clearly delimited block at the end of this
+file that calls :func:`register_schema`, e.g.::
+
+    # ---- worlds (owner: worlds stage) ------------------------------------------------------
+    WORLD_FRAMES = register_schema(ArtifactSchema(
+        stage="world_frames", version=1, row="one rendered frame",
+        description="RGB/depth/masks of a procedural world",
+        schema=pa.schema([field("frame_index", pa.int32(), doc="frame number"), ...]),
+    ))
+
+Bump ``version`` (and the producing stage's ``stage_version``) whenever the layout changes; a
+file whose recorded schema version differs from the declared one is refused with a clear error.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Iterator
+
+import pyarrow as pa
+
+__all__ = [
+    "ArtifactSchema",
+    "SchemaError",
+    "field",
+    "register_schema",
+    "get_schema",
+    "schema_names",
+    "SCENE_MESHES",
+    "RADAR_POINTS",
+    "MANIFEST",
+]
+
+
+class SchemaError(ValueError):
+    """A table does not match its declared schema; the message names the stage and column."""
+
+
+def field(name: str, type_: pa.DataType, *, unit: str = "", doc: str = "", nullable: bool = False):
+    """A ``pa.field`` carrying ``unit`` and ``doc`` metadata (shown by ``describe()``)."""
+    meta = {}
+    if unit:
+        meta["unit"] = unit
+    if doc:
+        meta["doc"] = doc
+    return pa.field(name, type_, nullable=nullable, metadata=meta or None)
+
+
+@dataclasses.dataclass(frozen=True)
+class ArtifactSchema:
+    """The declared layout of one stage's artifacts.
+
+    Attributes
+    ----------
+    stage : str
+        Stage name (store folder), lowercase snake case.
+    version : int
+        Layout version, recorded in every file's metadata and checked on read.
+    schema : pyarrow.Schema
+        Column names, types, nullability; field metadata gives ``unit`` and ``doc``.
+    row : str
+        What one row is (``"one radar frame"``).
+    description : str
+        One line on the artifact.
+    """
+
+    stage: str
+    version: int
+    schema: pa.Schema
+    row: str
+    description: str
+
+    def validate(self, table: pa.Table) -> pa.Table:
+        """Return ``table`` with columns in declared order and types, or raise :class:`SchemaError`.
+
+        Missing or unexpected columns, nulls in non-nullable columns, and values that do not
+        fit a declared type (e.g. ``float64`` that would lose data as ``int32``) are refused.
+        Lossless conversions (``int64`` -> ``int32`` within range, ``list<float64>`` ->
+        ``list<float32>``) are applied.
+        """
+        where = f"stage {self.stage!r} (schema v{self.version})"
+        if not isinstance(table, pa.Table):
+            raise SchemaError(f"{where}: expected a pyarrow.Table, got {type(table).__name__}")
+        declared = self.schema.names
+        missing = [n for n in declared if n not in table.column_names]
+        extra = [n for n in table.column_names if n not in declared]
+        if missing or extra:
+            raise SchemaError(
+                f"{where}: columns do not match the declared schema in storage/schemas.py; "
+                f"missing {missing}, unexpected {extra}; declared columns: {declared}"
+            )
+        columns = []
+        for f in self.schema:
+            col = table.column(f.name)
+            if not col.type.equals(f.type):
+                if not _same_kind(col.type, f.type):
+                    raise SchemaError(
+                        f"{where}: column {f.name!r} has type {col.type}, declared {f.type}"
+                    )
+                try:
+                    # float64 -> float32 is a declared narrowing for array payloads; everything
+                    # else must be safe (no overflow, no truncation)
+                    col = col.cast(f.type, safe=not _is_float_narrowing(col.type, f.type))
+                except (pa.ArrowInvalid, pa.ArrowNotImplementedError) as exc:
+                    raise SchemaError(
+                        f"{where}: column {f.name!r} has type {col.type}, declared {f.type}; "
+                        f"cannot convert: {exc}"
+                    ) from None
+            if not f.nullable and col.null_count:
+                raise SchemaError(
+                    f"{where}: column {f.name!r} has {col.null_count} null value(s) but is "
+                    "declared non-nullable"
+                )
+            columns.append(col)
+        return pa.Table.from_arrays(columns, schema=self.schema)
+
+    def check_file_schema(self, file_schema: pa.Schema, where: str) -> None:
+        """Refuse a stored file whose columns/types differ from the declared schema."""
+        got = {f.name: f.type for f in file_schema}
+        want = {f.name: f.type for f in self.schema}
+        if got != want:
+            diff = sorted(
+                n for n in set(got) | set(want) if got.get(n) is None or not got[n].equals(want.get(n))
+            )
+            raise SchemaError(
+                f"{where}: stored columns differ from stage {self.stage!r} schema v{self.version} "
+                f"in {diff}; the file was written by another version of the code — bump the "
+                "stage version to recompute it, or read it with the matching code version"
+            )
+
+    def describe(self) -> str:
+        """Human-readable column list with units."""
+        lines = [f"{self.stage} v{self.version} — {self.description} (one row = {self.row})"]
+        for f in self.schema:
+            meta = {k.decode(): v.decode() for k, v in (f.metadata or {}).items()}
+            unit = f" [{meta['unit']}]" if meta.get("unit") else ""
+            doc = f" — {meta['doc']}" if meta.get("doc") else ""
+            lines.append(f"  {f.name}: {f.type}{unit}{doc}")
+        return "\n".join(lines)
+
+
+def _kind(t: pa.DataType) -> str:
+    if pa.types.is_integer(t) or pa.types.is_floating(t):
+        return "number"
+    if pa.types.is_string(t) or pa.types.is_large_string(t):
+        return "string"
+    if pa.types.is_binary(t) or pa.types.is_large_binary(t) or pa.types.is_fixed_size_binary(t):
+        return "binary"
+    if pa.types.is_list(t) or pa.types.is_large_list(t) or pa.types.is_fixed_size_list(t):
+        return "list"
+    return str(t)
+
+
+def _same_kind(src: pa.DataType, dst: pa.DataType) -> bool:
+    """True if converting ``src`` to ``dst`` keeps meaning (number->number, list->list, ...);
+    numbers never silently become strings and vice versa."""
+    if _kind(src) != _kind(dst):
+        return pa.types.is_timestamp(src) and pa.types.is_timestamp(dst)
+    if _kind(src) == "list":
+        return _same_kind(src.value_type, dst.value_type)
+    if pa.types.is_integer(dst) and pa.types.is_floating(src):
+        return False  # float -> int would truncate
+    return True
+
+
+def _is_float_narrowing(src: pa.DataType, dst: pa.DataType) -> bool:
+    """True if ``src`` -> ``dst`` only narrows floating point values (possibly inside lists)."""
+    while pa.types.is_list(src) or pa.types.is_large_list(src) or pa.types.is_fixed_size_list(src):
+        if not (pa.types.is_list(dst) or pa.types.is_large_list(dst) or pa.types.is_fixed_size_list(dst)):
+            return False
+        src, dst = src.value_type, dst.value_type
+    return pa.types.is_floating(src) and pa.types.is_floating(dst)
+
+
+_REGISTRY: dict[str, ArtifactSchema] = {}
+
+
+def register_schema(schema: ArtifactSchema) -> ArtifactSchema:
+    """Declare a stage's schema. Re-registering the identical schema is a no-op; a different
+    one under the same stage name is an error (two stages must not share a folder)."""
+    old = _REGISTRY.get(schema.stage)
+    if old is not None and (old.version != schema.version or not old.schema.equals(schema.schema)):
+        raise ValueError(f"stage {schema.stage!r} already has a different declared schema")
+    _REGISTRY[schema.stage] = schema
+    return schema
+
+
+def get_schema(stage: str) -> ArtifactSchema:
+    """The declared schema of ``stage``; an unknown name lists the declared ones."""
+    try:
+        return _REGISTRY[stage]
+    except KeyError:
+        raise SchemaError(
+            f"no schema declared for stage {stage!r}; declared stages: {schema_names()}. "
+            "Declare it with register_schema(...) in storage/schemas.py"
+        ) from None
+
+
+def schema_names() -> list[str]:
+    """Declared stage names, sorted."""
+    return sorted(_REGISTRY)
+
+
+def iter_schemas() -> Iterator[ArtifactSchema]:
+    """All declared schemas, sorted by stage."""
+    return (_REGISTRY[n] for n in schema_names())
+
+
+# ---------------------------------------------------------------------------------------------
+# Core stages (owner: storage / radar simulation)
+# ---------------------------------------------------------------------------------------------
+_VEC3_F32 = pa.list_(pa.float32(), 3)
+_TRI_I32 = pa.list_(pa.int32(), 3)
+_BOX7_F32 = pa.list_(pa.float32(), 7)
+_MAT44_F64 = pa.list_(pa.float64(), 16)
+
+SCENE_MESHES = register_schema(
+    ArtifactSchema(
+        stage="scene_meshes",
+        version=1,
+        row="one material-labelled triangle mesh",
+        description="a scene as MaterialMesh list (world frame), input of the radar simulation",
+        schema=pa.schema(
+            [
+                field("name", pa.string(), doc="mesh name, unique within the scene"),
+                field("material", pa.string(), doc="material name understood by sim2radar.em"),
+                field("semantic", pa.string(), doc="class label (vocab.SEMANTIC_CLASSES) or ''"),
+                field("vertices_m", pa.list_(_VEC3_F32), unit="m", doc="(V, 3) vertex positions"),
+                field("faces", pa.list_(_TRI_I32), doc="(F, 3) vertex indices per triangle"),
+            ]
+        ),
+    )
+)
+
+RADAR_POINTS = register_schema(
+    ArtifactSchema(
+        stage="radar_points",
+        version=1,
+        row="one simulated radar frame",
+        description="radar point cloud per frame (radar frame: x forward, y left, z up) + door boxes",
+        schema=pa.schema(
+            [
+                field("scene_id", pa.string(), doc="scene name"),
+                field("frame_index", pa.int32(), doc="frame number within the scene"),
+                field(
+                    "radar_to_world",
+                    _MAT44_F64,
+                    unit="m",
+                    doc="(4, 4) row-major radar-to-world transform (translation in m)",
+                ),
+                field("n_points", pa.int32(), doc="number of detected points"),
+                field("x_m", pa.list_(pa.float32()), unit="m", doc="(N,) forward coordinate"),
+                field("y_m", pa.list_(pa.float32()), unit="m", doc="(N,) left coordinate"),
+                field("z_m", pa.list_(pa.float32()), unit="m", doc="(N,) up coordinate"),
+                field("intensity_db", pa.list_(pa.float32()), unit="dB", doc="(N,) intensity"),
+                field(
+                    "boxes",
+                    pa.list_(_BOX7_F32),
+                    unit="m, rad",
+                    doc="(M, 7) ground-truth boxes x y z dx dy dz heading in the radar frame",
+                ),
+                field("box_labels", pa.list_(pa.string()), doc="(M,) class name of each box"),
+                field("sim_seconds", pa.float64(), unit="s", doc="simulation wall time"),
+            ]
+        ),
+    )
+)
+
+MANIFEST = register_schema(
+    ArtifactSchema(
+        stage="manifest",
+        version=1,
+        row="one scene of a dataset",
+        description="per-dataset run record: status, error, artifact keys, timings",
+        schema=pa.schema(
+            [
+                field("scene_id", pa.string(), doc="scene identifier within the dataset"),
+                field("status", pa.string(), doc="ok (computed) | skipped (cached) | failed"),
+                field("error", pa.string(), doc="error text when failed, else ''"),
+                field(
+                    "artifacts",
+                    pa.map_(pa.string(), pa.string()),
+                    doc="stage -> content key of each artifact of this scene",
+                ),
+                field("timings_s", pa.map_(pa.string(), pa.float64()), unit="s", doc="per step"),
+                field("source", pa.string(), doc="where the scene came from (file path / URI)"),
+                field("attempts", pa.int32(), doc="how many runs have processed this scene"),
+                field("updated_utc", pa.timestamp("ms", tz="UTC"), doc="last update"),
+            ]
+        ),
+    )
+)
+
+# ---------------------------------------------------------------------------------------------
+# Further stages: append blocks below (see module docstring).
+# ---------------------------------------------------------------------------------------------

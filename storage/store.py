@@ -1,0 +1,376 @@
+"""The artifact store: one Parquet file per (stage, key), published atomically.
+
+Layout under the root (a local folder or any fsspec URI: ``s3://bucket/x``, ``gs://…``,
+``memory://…``)::
+
+    <root>/<stage>/<key>.parquet              published artifacts (complete by construction)
+    <root>/<stage>/.tmp-<key>-<uuid>.parquet  in-flight writes (never read; see clean_partial)
+    <root>/manifests/<dataset>/<scene>.parquet  one manifest row per scene (see manifest.py)
+
+Atomic publish: a file is written under a hidden temporary name in the same folder and then
+renamed to its final name (``os.replace`` after ``fsync`` on local disks; on object stores the
+final object appears whole when its upload/copy completes). A reader never sees half a file, and
+a killed run leaves only ``.tmp-*`` files, which ``exists``/``keys``/``read`` ignore.
+
+Remote I/O can flake: on non-local file systems every operation is retried ``io_retries`` times
+with exponential backoff (``OSError``/``TimeoutError``/``ConnectionError`` only; a missing file
+or a schema error is never retried). Local I/O is not retried.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import os
+import re
+import time
+import uuid
+from collections.abc import Callable, Mapping
+from pathlib import Path
+from typing import Any, TypeVar
+
+import fsspec
+import pyarrow as pa
+import pyarrow.parquet as pq
+
+from storage.provenance import PROVENANCE_KEY, build_provenance
+from storage.schemas import SchemaError, get_schema
+
+__all__ = ["ArtifactStore", "ArtifactNotFoundError", "SCHEMA_KEY"]
+
+log = logging.getLogger(__name__)
+
+#: Parquet key-value metadata key holding ``"<stage>:<schema version>"``.
+SCHEMA_KEY = b"sim2radar.schema"
+TMP_PREFIX = ".tmp-"
+_KEY_RE = re.compile(r"[0-9a-f]{8,64}")  # content keys (storage.keys.KEY_LENGTH) or digests
+_DATASET_RE = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]*$")
+T = TypeVar("T")
+
+
+class ArtifactNotFoundError(FileNotFoundError):
+    """No published artifact for (stage, key); the message names the path."""
+
+
+class ArtifactStore:
+    """Parquet artifacts keyed by content, under a local path or fsspec URI.
+
+    Parameters
+    ----------
+    root : str or Path
+        Local folder (created on first write) or URI such as ``s3://bucket/prefix`` or
+        ``memory://store``.
+    io_retries : int, optional
+        Retries of a failed remote I/O operation (default 3 for remote file systems, 0 local).
+    retry_backoff_s : float
+        First backoff delay [s]; doubles on each retry.
+    compression : str
+        Parquet codec (``zstd`` by default).
+    storage_options : mapping, optional
+        Passed to fsspec (credentials, endpoint URLs, ...).
+
+    Examples
+    --------
+    >>> store = ArtifactStore("out/store")
+    >>> key = content_key(stage="radar_points", stage_version=1, inputs={"scene": skey},
+    ...                   config=radar.to_dict())
+    >>> if not store.exists("radar_points", key):
+    ...     store.write("radar_points", key, table, provenance={"config": radar.to_dict()})
+    >>> table = store.read("radar_points", key)
+    """
+
+    def __init__(
+        self,
+        root: str | os.PathLike,
+        *,
+        io_retries: int | None = None,
+        retry_backoff_s: float = 0.5,
+        compression: str = "zstd",
+        storage_options: Mapping[str, Any] | None = None,
+    ) -> None:
+        self.root_uri = os.fspath(root)
+        self.storage_options = dict(storage_options or {})
+        self.fs, base = fsspec.core.url_to_fs(self.root_uri, **self.storage_options)
+        self._base = base.rstrip("/") or "/"
+        self.is_local = "file" in _protocols(self.fs)
+        if self.is_local:
+            self._base = str(Path(self._base).resolve())
+        self.io_retries = (0 if self.is_local else 3) if io_retries is None else int(io_retries)
+        self.retry_backoff_s = float(retry_backoff_s)
+        self.compression = compression
+
+    # -- pickling (Prefect / Dask workers rebuild the file system from the URI) ---------------
+    def __reduce__(self):
+        return (
+            _rebuild_store,
+            (self.root_uri, self.io_retries, self.retry_backoff_s, self.compression, self.storage_options),
+        )
+
+    def __repr__(self) -> str:
+        return f"ArtifactStore({self.root_uri!r})"
+
+    # -- paths --------------------------------------------------------------------------------
+    def _join(self, *parts: str) -> str:
+        return "/".join([self._base.rstrip("/"), *parts]) if self._base != "/" else "/" + "/".join(parts)
+
+    def path(self, stage: str, key: str) -> str:
+        """Path of an artifact inside the store's file system."""
+        _check_stage_key(stage, key)
+        return self._join(stage, f"{key}.parquet")
+
+    def uri(self, stage: str, key: str) -> str:
+        """Human-readable location of an artifact (local path, or ``protocol://path``)."""
+        p = self.path(stage, key)
+        if self.is_local:
+            return p
+        proto = _protocols(self.fs)[0]
+        return f"{proto}://{p.lstrip('/')}" if proto != "memory" else f"memory://{p}"
+
+    @property
+    def root(self) -> str:
+        """The store root as a path (local) or URI."""
+        if self.is_local:
+            return self._base
+        return self.root_uri
+
+    # -- retries ------------------------------------------------------------------------------
+    def _io(self, what: str, fn: Callable[[], T]) -> T:
+        delay = self.retry_backoff_s
+        for attempt in range(self.io_retries + 1):
+            try:
+                return fn()
+            except (FileNotFoundError, SchemaError, ArtifactNotFoundError):
+                raise
+            except (OSError, TimeoutError, ConnectionError) as exc:
+                if attempt == self.io_retries:
+                    raise
+                log.warning(
+                    "storage: %s failed (%s); retry %d/%d in %.1f s",
+                    what, exc, attempt + 1, self.io_retries, delay,
+                )
+                time.sleep(delay)
+                delay *= 2
+        raise AssertionError("unreachable")  # pragma: no cover
+
+    # -- queries ------------------------------------------------------------------------------
+    def exists(self, stage: str, key: str) -> bool:
+        """True if a complete artifact (stage, key) is published."""
+        path = self.path(stage, key)
+        return bool(self._io(f"exists {path}", lambda: self.fs.exists(path)))
+
+    def keys(self, stage: str) -> list[str]:
+        """Published keys of ``stage``, sorted (in-flight ``.tmp-*`` files are not listed)."""
+        get_schema(stage)
+        folder = self._join(stage)
+
+        def ls() -> list[str]:
+            if not self.fs.exists(folder):
+                return []
+            return [p.rsplit("/", 1)[-1] for p in self.fs.ls(folder, detail=False)]
+
+        names = self._io(f"list {folder}", ls)
+        stems = (n[: -len(".parquet")] for n in names if n.endswith(".parquet"))
+        return sorted(s for s in stems if _KEY_RE.fullmatch(s))
+
+    # -- write --------------------------------------------------------------------------------
+    def write(
+        self,
+        stage: str,
+        key: str,
+        table: pa.Table,
+        *,
+        provenance: Mapping[str, Any] | None = None,
+        stage_version: int | None = None,
+    ) -> str:
+        """Validate ``table`` against the stage's declared schema and publish it atomically.
+
+        Parameters
+        ----------
+        stage, key : str
+            Stage name (declared in ``storage/schemas.py``) and content key
+            (:func:`storage.content_key`).
+        table : pyarrow.Table
+            The artifact; converted losslessly to the declared column order and types.
+        provenance : mapping, optional
+            ``inputs``, ``config``, ``seed``, ``timings_s``, ``model_files``, ``extra`` (see
+            :func:`storage.provenance.build_provenance`); package versions, time and host are
+            added here.
+        stage_version : int, optional
+            The stage version that went into ``key`` (recorded for humans).
+
+        Returns
+        -------
+        str
+            The artifact's location (:meth:`uri`).
+        """
+        schema = get_schema(stage)
+        table = schema.validate(table)
+        doc = build_provenance(
+            stage=stage,
+            stage_version=stage_version if stage_version is not None else -1,
+            schema_version=schema.version,
+            key=key,
+            provenance=provenance,
+        )
+        meta = dict(table.schema.metadata or {})
+        meta[PROVENANCE_KEY] = json.dumps(doc, sort_keys=True).encode()
+        meta[SCHEMA_KEY] = f"{stage}:{schema.version}".encode()
+        table = table.replace_schema_metadata(meta)
+        final = self.path(stage, key)
+        self._io(f"write {final}", lambda: self._publish(final, table))
+        return self.uri(stage, key)
+
+    def _publish(self, final: str, table: pa.Table) -> None:
+        """Write ``table`` to a temporary sibling of ``final``, then rename it into place."""
+        folder, name = final.rsplit("/", 1)
+        tmp = f"{folder}/{TMP_PREFIX}{name[: -len('.parquet')]}-{uuid.uuid4().hex[:12]}.parquet"
+        try:
+            if self.is_local:
+                os.makedirs(folder, exist_ok=True)
+                with open(tmp, "wb") as fh:
+                    pq.write_table(table, fh, compression=self.compression)
+                    fh.flush()
+                    os.fsync(fh.fileno())
+                os.replace(tmp, final)  # atomic on POSIX within one file system
+            else:
+                self.fs.makedirs(folder, exist_ok=True)
+                with self.fs.open(tmp, "wb") as fh:
+                    pq.write_table(table, fh, compression=self.compression)
+                self.fs.mv(tmp, final)
+        except BaseException:
+            try:
+                if self.fs.exists(tmp):
+                    self.fs.rm(tmp)
+            except Exception:  # noqa: BLE001 - best effort; the tmp name is ignored anyway
+                log.warning("storage: could not remove partial file %s", tmp)
+            raise
+
+    # -- read ---------------------------------------------------------------------------------
+    def _open_checked(self, stage: str, key: str) -> tuple[str, pq.ParquetFile, Any]:
+        schema = get_schema(stage)
+        path = self.path(stage, key)
+        try:
+            fh = self.fs.open(path, "rb")
+        except FileNotFoundError:
+            raise ArtifactNotFoundError(
+                f"no artifact {stage}/{key} in store {self.root}: {path} does not exist"
+            ) from None
+        try:
+            pf = pq.ParquetFile(fh)
+        except Exception as exc:
+            fh.close()
+            raise SchemaError(f"{path}: not a readable Parquet file: {exc}") from exc
+        recorded = (pf.schema_arrow.metadata or {}).get(SCHEMA_KEY, b"").decode()
+        expected = f"{stage}:{schema.version}"
+        if recorded != expected:
+            fh.close()
+            raise SchemaError(
+                f"{path}: recorded schema {recorded or '(none)'!r} differs from declared "
+                f"{expected!r}; it was written by another code version — bump the stage version "
+                "to recompute, or read it with the code that wrote it"
+            )
+        schema.check_file_schema(pf.schema_arrow, path)
+        return path, pf, fh
+
+    def read(self, stage: str, key: str, *, columns: list[str] | None = None) -> pa.Table:
+        """Read a published artifact, validated against its declared schema.
+
+        Raises
+        ------
+        ArtifactNotFoundError
+            If the artifact is not published.
+        SchemaError
+            If the file's recorded schema differs from the declared one.
+        """
+
+        def go() -> pa.Table:
+            _, pf, fh = self._open_checked(stage, key)
+            with fh:
+                return pf.read(columns=columns)
+
+        return self._io(f"read {stage}/{key}", go)
+
+    def read_provenance(self, stage: str, key: str) -> dict[str, Any]:
+        """The provenance document stored with an artifact (see :mod:`storage.provenance`)."""
+
+        def go() -> dict[str, Any]:
+            _, pf, fh = self._open_checked(stage, key)
+            with fh:
+                raw = (pf.schema_arrow.metadata or {}).get(PROVENANCE_KEY)
+            return json.loads(raw) if raw else {}
+
+        return self._io(f"read provenance {stage}/{key}", go)
+
+    # -- maintenance --------------------------------------------------------------------------
+    def delete(self, stage: str, key: str) -> bool:
+        """Remove an artifact; True if it existed."""
+        path = self.path(stage, key)
+        if not self.exists(stage, key):
+            return False
+        self._io(f"delete {path}", lambda: self.fs.rm(path))
+        return True
+
+    def partial_files(self) -> list[str]:
+        """In-flight or abandoned ``.tmp-*`` files (left by killed runs), all stages."""
+        if not self.fs.exists(self._base):
+            return []
+        found = self.fs.find(self._base)
+        return sorted(p for p in found if p.rsplit("/", 1)[-1].startswith(TMP_PREFIX))
+
+    def clean_partial(self, older_than_s: float = 3600.0) -> list[str]:
+        """Delete ``.tmp-*`` files older than ``older_than_s`` [s]; returns their paths.
+
+        Keep the age margin above the longest write, so a concurrent writer is not disturbed.
+        """
+        removed = []
+        now = time.time()
+        for p in self.partial_files():
+            try:
+                modified = self.fs.modified(p).timestamp()
+            except (NotImplementedError, AttributeError, OSError):
+                modified = 0.0
+            if now - modified >= older_than_s:
+                self.fs.rm(p)
+                removed.append(p)
+        return removed
+
+    # -- manifests ----------------------------------------------------------------------------
+    def manifest(self, dataset: str):
+        """The :class:`storage.manifest.Manifest` of ``dataset`` in this store."""
+        from storage.manifest import Manifest
+
+        if not isinstance(dataset, str) or not _DATASET_RE.match(dataset):
+            raise ValueError(
+                f"dataset name must match {_DATASET_RE.pattern} (letters, digits, _ . -), got {dataset!r}"
+            )
+        return Manifest(self, dataset)
+
+    def manifests(self) -> list[str]:
+        """Names of the datasets that have a manifest in this store."""
+        folder = self._join("manifests")
+        if not self.fs.exists(folder):
+            return []
+        return sorted(p.rstrip("/").rsplit("/", 1)[-1] for p in self.fs.ls(folder, detail=False))
+
+
+def _protocols(fs) -> tuple[str, ...]:
+    proto = fs.protocol
+    return (proto,) if isinstance(proto, str) else tuple(proto)
+
+
+def _check_stage_key(stage: str, key: str) -> None:
+    get_schema(stage)
+    if not isinstance(key, str) or not _KEY_RE.fullmatch(key):
+        raise ValueError(
+            f"artifact key must be lowercase hex (from storage.content_key), got {key!r}"
+        )
+
+
+def _rebuild_store(root, io_retries, retry_backoff_s, compression, storage_options):
+    return ArtifactStore(
+        root,
+        io_retries=io_retries,
+        retry_backoff_s=retry_backoff_s,
+        compression=compression,
+        storage_options=storage_options,
+    )

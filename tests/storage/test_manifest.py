@@ -1,0 +1,56 @@
+"""Manifests: one row per scene; upsert replaces; resume/retry semantics; concurrent writers."""
+
+from __future__ import annotations
+
+from concurrent.futures import ThreadPoolExecutor
+
+import pytest
+
+from storage import ArtifactStore
+
+
+@pytest.fixture(params=["local", "memory"])
+def manifest(request, tmp_path, memory_root):
+    root = tmp_path / "store" if request.param == "local" else memory_root
+    return ArtifactStore(root).manifest("demo")
+
+
+def test_upsert_replaces_the_row_and_counts_attempts(manifest):
+    assert manifest.rows() == [] and manifest.counts() == {"ok": 0, "skipped": 0, "failed": 0}
+    manifest.upsert("corridor/a", "failed", error="MeshFileError: door.ply: mesh file not found")
+    manifest.upsert("room", "ok", artifacts={"radar_points": "ab" * 10}, timings_s={"sim": 0.3})
+    assert manifest.failed() == ["corridor/a"]
+    # retry: the failed scene now succeeds; the row is replaced, not duplicated
+    manifest.upsert("corridor/a", "ok", artifacts={"radar_points": "cd" * 10})
+    rows = {r["scene_id"]: r for r in manifest.rows()}
+    assert set(rows) == {"corridor/a", "room"}
+    assert rows["corridor/a"]["status"] == "ok" and rows["corridor/a"]["error"] == ""
+    assert rows["corridor/a"]["attempts"] == 2 and rows["room"]["attempts"] == 1
+    assert rows["room"]["timings_s"] == {"sim": 0.3}
+    assert manifest.get("room")["artifacts"] == {"radar_points": "ab" * 10}
+    # resume: a second run finds the artifacts and records "skipped"
+    manifest.upsert("room", "skipped", artifacts={"radar_points": "ab" * 10})
+    assert manifest.counts() == {"ok": 1, "skipped": 1, "failed": 0}
+    assert manifest.failed() == []
+
+
+def test_bad_status_is_refused(manifest):
+    with pytest.raises(ValueError, match="ok', 'skipped', 'failed"):
+        manifest.upsert("x", "done")
+    with pytest.raises(ValueError, match="dataset name"):
+        manifest.store.manifest("../evil")
+
+
+def test_concurrent_upserts_lose_no_row(manifest):
+    ids = [f"scene_{i:02d}" for i in range(16)]
+    with ThreadPoolExecutor(4) as pool:
+        list(pool.map(lambda s: manifest.upsert(s, "ok"), ids))
+    assert manifest.scene_ids() == ids
+    assert manifest.store.manifests() == ["demo"]
+
+
+def test_csv_export(manifest, tmp_path):
+    manifest.upsert("a", "ok", artifacts={"radar_points": "ab" * 10})
+    text = open(manifest.write_csv(str(tmp_path / "m.csv"))).read()
+    assert text.splitlines()[0].startswith("scene_id,status,error,artifacts")
+    assert '"{""radar_points"": ""abababababababababab""}"' in text
