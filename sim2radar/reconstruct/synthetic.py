@@ -218,7 +218,7 @@ def corridor_frame(
     add("wall_end", "wall", wall_mat, wall_rgb * 0.95,
         ("quad", ([x1, -cw / 2, 0], [0, cw, 0], [0, 0, ch])))
 
-    slots = np.sort(rng.choice(np.arange(2.0, cl - 1.5, 1.6), size=n_doors, replace=False))
+    slots = np.sort(rng.choice(np.arange(3.8, cl - 1.0, 1.5), size=n_doors, replace=False))
     for i, xc in enumerate(slots):
         side = 1 if (i % 2 == 0) == (rng.random() < 0.5) else -1
         dw, dh, thick = rng.uniform(0.85, 1.1), rng.uniform(1.95, 2.15), 0.06
@@ -231,11 +231,11 @@ def corridor_frame(
         door_boxes.append([xc, yc, dh / 2, dw, thick, dh, 0.0])
 
     # one fire extinguisher (red, small) and one handrail (metal) on the walls
-    ext_x = float(rng.uniform(1.5, cl - 2))
+    ext_x = float(rng.uniform(2.2, 3.2))
     add("extinguisher", "fire_extinguisher", "metal", [0.8, 0.08, 0.06],
         ("box", ([ext_x, -cw / 2 + 0.1, 0.65], [0.18, 0.18, 0.5])))
     add("handrail", "handrail", "metal", [0.75, 0.75, 0.78],
-        ("box", ([cl / 2, cw / 2 - 0.05, 0.95], [cl * 0.6, 0.05, 0.05])))
+        ("box", ([1.9, cw / 2 - 0.05, 0.95], [2.8, 0.05, 0.05])))
 
     intr = CameraIntrinsics.from_fov(width, height, hfov_deg)
     rig_to_world = np.eye(4)

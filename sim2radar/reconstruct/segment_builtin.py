@@ -1,0 +1,395 @@
+"""Stage 2 ``builtin`` backend: classical segmentation of RGB + depth + normals, geometric labels.
+
+No learned weights. The method, step by step:
+
+1. Back-project the (metric, e.g. LiDAR-completed) depth; normals from the point-grid gradients.
+2. Gravity from the dominant horizontal planes (``backproject.estimate_up``; a roughly level
+   camera is assumed), giving a level frame: x forward, y left, z up, origin at the camera.
+3. Edges between neighbouring pixels where the normal turns by more than ``normal_thresh_deg``,
+   the depth jumps (relative jump above the largest a continuous surface at
+   ``max_incidence_deg`` could make), the local plane offset n·p steps (a door a few cm proud
+   of or set into its wall), or the smoothed CIE-Lab colour differs by more than
+   ``colour_thresh`` (ΔE*ab, CIE 1976). Connected components of the edge-free pixels are the
+   seed regions; tiny ones and the edge pixels join their nearest region.
+4. Adjacent regions that are coplanar (normals within ``merge_normal_deg``, plane offsets within
+   ``merge_offset_m``) and alike in colour (ΔE < ``merge_colour_thresh``) are merged
+   (union-find), so tile grout, texture and shading do not fragment a wall or floor.
+5. Labels from geometry in the level frame: horizontal up-facing regions near the lowest level
+   are ``floor``, down-facing ones near the highest level ``ceiling``; vertical regions are
+   ``door`` when door-sized (``door_width_m`` × ``door_height_m``), standing on the floor and
+   ending below the ceiling; ``window`` when a wall-set rectangle with a sill; ``handrail`` when
+   long, thin and at hand height; small red regions ``fire_extinguisher``; remaining large
+   vertical regions ``wall``; the rest ``clutter``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import cv2
+import numpy as np
+
+from sim2radar.reconstruct.backproject import (
+    estimate_up,
+    level_from_camera,
+    normals_from_points,
+    points_from_depth,
+)
+from sim2radar.reconstruct.types import (
+    SEGMENT_BACKENDS,
+    DepthResult,
+    FrameInput,
+    ReconstructionInputError,
+    Segments,
+)
+
+__all__ = ["BuiltinSegments", "SegmentGeometry", "region_geometry"]
+
+
+@dataclasses.dataclass(frozen=True)
+class SegmentGeometry:
+    """Shape of one region in the level frame (x forward, y left, z up) [m].
+
+    Attributes
+    ----------
+    n_px : int — pixel count.
+    centroid : (3,) float64 [m]
+    normal : (3,) float64 — unit plane normal (PCA), facing the camera.
+    planarity : float — RMS distance of the points to their plane [m].
+    width_m : float [m] — horizontal extent along the plane (1st–99th percentile).
+    z_min_m, z_max_m : float [m] — vertical extent (1st / 99th percentile).
+    fill : float — pixel count over the area of the region's convex hull in the image.
+    touches_border : bool — the region reaches the image border.
+    """
+
+    n_px: int
+    centroid: np.ndarray
+    normal: np.ndarray
+    planarity: float
+    width_m: float
+    z_min_m: float
+    z_max_m: float
+    fill: float
+    touches_border: bool
+
+    @property
+    def height_m(self) -> float:
+        return self.z_max_m - self.z_min_m
+
+    @property
+    def vertical_cos(self) -> float:
+        """|n · z|: 1 for a horizontal plane, 0 for a vertical one."""
+        return abs(float(self.normal[2]))
+
+
+def region_geometry(points_level: np.ndarray, mask: np.ndarray, max_points: int = 4000
+                    ) -> SegmentGeometry:
+    """Plane fit and extents of the pixels ``mask`` of a level-frame point map (H, W, 3)."""
+    pts = points_level[mask]
+    pts = pts[np.isfinite(pts).all(axis=1)].astype(np.float64)
+    h, w = mask.shape
+    touches = bool(mask[0].any() or mask[-1].any() or mask[:, 0].any() or mask[:, -1].any())
+    if len(pts) < 3:
+        c = pts.mean(axis=0) if len(pts) else np.zeros(3)
+        return SegmentGeometry(len(pts), c, np.array([1.0, 0, 0]), 0.0, 0.0, 0.0, 0.0, 0.0,
+                               touches)
+    if len(pts) > max_points:
+        pts = pts[np.linspace(0, len(pts) - 1, max_points).astype(int)]
+    c = pts.mean(axis=0)
+    _, s, vt = np.linalg.svd(pts - c, full_matrices=False)
+    n = vt[2]
+    if n @ c > 0:  # face the camera (origin)
+        n = -n
+    planarity = float(s[2] / math.sqrt(len(pts)))
+    horiz = np.array([-n[1], n[0], 0.0])
+    if np.linalg.norm(horiz) < 1e-6:
+        horiz = np.array([1.0, 0.0, 0.0])
+    horiz /= np.linalg.norm(horiz)
+    a = pts @ horiz
+    z = pts[:, 2]
+    a0, a1 = np.percentile(a, [1, 99])
+    z0, z1 = np.percentile(z, [1, 99])
+    # fill: pixels over the area of their convex hull in the image (a rectangle seen in
+    # perspective projects to a convex quadrilateral, so a whole door gives ~1)
+    ij = np.argwhere(mask)
+    if len(ij) >= 3:
+        hull = cv2.convexHull(ij[:, ::-1].astype(np.int32))
+        fill = min(1.0, len(ij) / max(cv2.contourArea(hull) + 0.5 * cv2.arcLength(hull, True) + 1, 1))
+    else:
+        fill = 0.0
+    return SegmentGeometry(int(mask.sum()), c, n, planarity, float(a1 - a0), float(z0), float(z1),
+                           float(fill), touches)
+
+
+class _UnionFind:
+    def __init__(self, n: int) -> None:
+        self.parent = list(range(n))
+
+    def find(self, i: int) -> int:
+        while self.parent[i] != i:
+            self.parent[i] = self.parent[self.parent[i]]
+            i = self.parent[i]
+        return i
+
+    def union(self, a: int, b: int) -> None:
+        ra, rb = self.find(a), self.find(b)
+        if ra != rb:
+            self.parent[max(ra, rb)] = min(ra, rb)
+
+
+def _fill_nearest(labels: np.ndarray, fillable: np.ndarray) -> np.ndarray:
+    """Give every ``fillable`` pixel with label < 0 the label of the nearest labelled pixel."""
+    known = labels >= 0
+    if known.all() or not known.any():
+        return labels
+    src = np.where(known, 0, 255).astype(np.uint8)
+    _, idx = cv2.distanceTransformWithLabels(src, cv2.DIST_L2, 5, labelType=cv2.DIST_LABEL_PIXEL)
+    # idx counts zero pixels in row-major order, starting at 1
+    lut = np.concatenate([[-1], labels[known]])
+    out = labels.copy()
+    todo = fillable & ~known
+    out[todo] = lut[idx[todo]]
+    return out
+
+
+@SEGMENT_BACKENDS.register("builtin")
+class BuiltinSegments:
+    """Weight-free segmentation + geometric labelling (see the module docstring).
+
+    Keyword options (all optional; defaults suit 640×480 corridor images and scale with size):
+    ``normal_thresh_deg`` (20), ``colour_thresh`` (ΔE 14), ``max_incidence_deg`` (84),
+    ``min_region_frac`` (3e-4 of the image), ``merge_normal_deg`` (12), ``merge_offset_m``
+    (0.06), ``merge_colour_thresh`` (ΔE 12), ``door_width_m`` ((0.55, 2.0)), ``door_height_m``
+    ((1.85, 2.5)), ``floor_tolerance_m`` (0.25), ``offset_thresh_m`` (0.015; plane-offset step
+    between neighbours, plus 0.4 % of the depth).
+    """
+
+    def __init__(
+        self,
+        *,
+        normal_thresh_deg: float = 20.0,
+        colour_thresh: float = 14.0,
+        max_incidence_deg: float = 84.0,
+        min_region_frac: float = 3e-4,
+        merge_normal_deg: float = 12.0,
+        merge_offset_m: float = 0.06,
+        merge_colour_thresh: float = 12.0,
+        door_width_m: tuple[float, float] = (0.55, 2.0),
+        door_height_m: tuple[float, float] = (1.85, 2.5),
+        floor_tolerance_m: float = 0.25,
+        offset_thresh_m: float = 0.015,
+    ) -> None:
+        self.normal_thresh_deg = float(normal_thresh_deg)
+        self.colour_thresh = float(colour_thresh)
+        self.max_incidence_deg = float(max_incidence_deg)
+        self.min_region_frac = float(min_region_frac)
+        self.merge_normal_deg = float(merge_normal_deg)
+        self.merge_offset_m = float(merge_offset_m)
+        self.merge_colour_thresh = float(merge_colour_thresh)
+        self.door_width_m = tuple(float(x) for x in door_width_m)
+        self.door_height_m = tuple(float(x) for x in door_height_m)
+        self.floor_tolerance_m = float(floor_tolerance_m)
+        self.offset_thresh_m = float(offset_thresh_m)
+        #: Diagnostics of the last call: up vector, floor / ceiling level, region count.
+        self.last_info: dict = {}
+
+    # -- stage entry ------------------------------------------------------------------------
+    def segment(self, frame: FrameInput, depth: DepthResult) -> Segments:
+        k = frame.intrinsics
+        depth_m = np.asarray(depth.depth_m, dtype=np.float32)
+        if depth_m.shape != frame.shape:
+            raise ReconstructionInputError(
+                f"{frame.name}: depth is {depth_m.shape} but the image is {frame.shape}"
+            )
+        points = points_from_depth(depth_m, k)
+        valid = np.isfinite(points).all(axis=-1)
+        if valid.sum() < 16:
+            raise ReconstructionInputError(
+                f"{frame.name}: no segments — the depth map has {int(valid.sum())} valid pixels; "
+                "check the depth backend (LiDAR in view? model output?)"
+            )
+        h, w = frame.shape
+        step = max(1, round(w / 200))
+        normals = normals_from_points(points, step_px=step)
+        normals = self._smooth_normals(normals, valid, step)
+        up = estimate_up(normals)
+        rot = level_from_camera(up)[:3, :3]
+        pl = points @ rot.T
+        nl = normals @ rot.T
+
+        lab = self._lab(frame.rgb, w)
+        regions = self._regions(points, normals, lab, valid, k.fx)
+        regions = self._merge(regions, pl, lab, valid)
+        labels, scores, info = self._label(regions, pl, frame.rgb)
+        seg, labels, scores = self._compact(regions, labels, scores)
+        self.last_info = {"up_cam": up.tolist(), **info, "n_segments": len(labels)}
+        if not labels:
+            raise ReconstructionInputError(f"{frame.name}: no segments found")
+        return Segments(seg, tuple(labels), np.asarray(scores, np.float32))
+
+    # -- steps ------------------------------------------------------------------------------
+    @staticmethod
+    def _smooth_normals(normals: np.ndarray, valid: np.ndarray, step: int) -> np.ndarray:
+        n = np.where(np.isfinite(normals), normals, 0).astype(np.float32)
+        k = 2 * step + 1
+        n = cv2.blur(n, (k, k))
+        norm = np.linalg.norm(n, axis=-1, keepdims=True)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            n = n / norm
+        n[~valid | (norm[..., 0] < 1e-6)] = np.nan
+        return n
+
+    @staticmethod
+    def _lab(rgb: np.ndarray, width: int) -> np.ndarray:
+        sigma = max(0.8, width / 320)
+        blur = cv2.GaussianBlur(rgb, (0, 0), sigma)
+        lab = cv2.cvtColor(blur.astype(np.float32) / 255.0, cv2.COLOR_RGB2LAB)
+        return lab  # L in [0, 100], a/b in about [-127, 127]
+
+    def _regions(self, points, normals, lab, valid, focal_px) -> np.ndarray:
+        z = np.where(valid, points[..., 2], np.nan)
+        cos_n = math.cos(math.radians(self.normal_thresh_deg))
+        jump = math.tan(math.radians(self.max_incidence_deg)) / focal_px + 0.02
+
+        def broken(sl_a, sl_b):
+            za, zb = z[sl_a], z[sl_b]
+            with np.errstate(invalid="ignore"):
+                dj = np.abs(za - zb) / np.minimum(za, zb) > jump
+                dn = np.sum(normals[sl_a] * normals[sl_b], axis=-1) < cos_n
+                dc = np.linalg.norm(lab[sl_a] - lab[sl_b], axis=-1) > self.colour_thresh
+                # plane-offset step: a door proud of / set into a coplanar wall
+                off = np.abs(np.sum(normals[sl_a] * points[sl_a], axis=-1)
+                             - np.sum(normals[sl_b] * points[sl_b], axis=-1))
+                do = off > self.offset_thresh_m + 0.004 * np.minimum(za, zb)
+            return dj | dn | dc | do | ~(valid[sl_a] & valid[sl_b])
+
+        edge = np.zeros(valid.shape, bool)
+        edge[:, :-1] |= broken((slice(None), slice(None, -1)), (slice(None), slice(1, None)))
+        edge[:-1, :] |= broken((slice(None, -1), slice(None)), (slice(1, None), slice(None)))
+        core = valid & ~edge
+        n, cc, stats, _ = cv2.connectedComponentsWithStats(core.astype(np.uint8), connectivity=4)
+        min_px = max(4, int(self.min_region_frac * valid.size))
+        keep = stats[:, cv2.CC_STAT_AREA] >= min_px
+        keep[0] = False
+        lut = np.full(n, -1, np.int64)
+        lut[keep] = np.arange(int(keep.sum()))
+        labels = lut[cc]
+        return _fill_nearest(labels, valid)
+
+    def _merge(self, regions, pl, lab, valid) -> np.ndarray:
+        n = int(regions.max()) + 1
+        if n <= 1:
+            return regions
+        for _ in range(3):
+            n = int(regions.max()) + 1
+            flat = regions.ravel()
+            ok = flat >= 0
+            cnt = np.bincount(flat[ok], minlength=n).astype(np.float64)
+            geo = [None] * n
+            col = np.zeros((n, 3))
+            for c in range(3):
+                col[:, c] = np.bincount(flat[ok], lab[..., c].ravel()[ok], minlength=n)
+            col /= np.maximum(cnt, 1)[:, None]
+            # adjacent pairs
+            pairs = set()
+            for a, b in ((regions[:, :-1], regions[:, 1:]), (regions[:-1, :], regions[1:, :])):
+                m = (a != b) & (a >= 0) & (b >= 0)
+                pa, pb = a[m], b[m]
+                codes = np.unique(np.minimum(pa, pb) * n + np.maximum(pa, pb))
+                pairs.update(codes.tolist())
+            uf = _UnionFind(n)
+            cos_m = math.cos(math.radians(self.merge_normal_deg))
+            merged = False
+            for code in sorted(pairs):
+                a, b = divmod(code, n)
+                if np.linalg.norm(col[a] - col[b]) > self.merge_colour_thresh:
+                    continue
+                for i in (a, b):
+                    if geo[i] is None:
+                        geo[i] = region_geometry(pl, regions == i, max_points=1500)
+                ga, gb = geo[a], geo[b]
+                if ga.n_px < 3 or gb.n_px < 3:
+                    continue
+                if abs(ga.normal @ gb.normal) < cos_m:
+                    continue
+                d = gb.centroid - ga.centroid
+                if abs(ga.normal @ d) > self.merge_offset_m or abs(gb.normal @ d) > self.merge_offset_m:
+                    continue
+                uf.union(a, b)
+                merged = True
+            if not merged:
+                break
+            roots = np.array([uf.find(i) for i in range(n)])
+            _, new = np.unique(roots, return_inverse=True)
+            regions = np.where(regions >= 0, new[np.clip(regions, 0, None)], -1)
+        return regions
+
+    def _label(self, regions, pl, rgb):
+        n = int(regions.max()) + 1
+        geos = [region_geometry(pl, regions == i) for i in range(n)]
+        hsv = cv2.cvtColor(rgb, cv2.COLOR_RGB2HSV)
+        red = (((hsv[..., 0] < 8) | (hsv[..., 0] > 170)) & (hsv[..., 1] > 140)
+               & (hsv[..., 2] > 50))
+        flat = regions.ravel()
+        ok = flat >= 0
+        red_frac = np.bincount(flat[ok], red.ravel()[ok], minlength=n) / np.maximum(
+            np.bincount(flat[ok], minlength=n), 1)
+        cos_h = math.cos(math.radians(25))
+        sin_v = math.sin(math.radians(25))
+        # floor and ceiling levels: the largest up-/down-facing horizontal regions
+        ups = [g for g in geos if g.vertical_cos > cos_h and g.normal[2] > 0 and g.centroid[2] < -0.3]
+        downs = [g for g in geos if g.vertical_cos > cos_h and g.normal[2] < 0 and g.centroid[2] > 0.2]
+        zs = pl[..., 2][np.isfinite(pl[..., 2])]
+        floor_z = (max(ups, key=lambda g: g.n_px).centroid[2] if ups
+                   else float(np.percentile(zs, 1)))
+        ceil_z = (max(downs, key=lambda g: g.n_px).centroid[2] if downs
+                  else float(np.percentile(zs, 99)))
+        tol = self.floor_tolerance_m
+        labels, scores = [], []
+        for i, g in enumerate(geos):
+            label, score = "clutter", 0.4
+            size = max(g.width_m, g.height_m)
+            if red_frac[i] > 0.5 and size < 1.2:
+                label, score = "fire_extinguisher", 0.7
+            elif g.vertical_cos > cos_h:
+                if g.normal[2] > 0 and g.centroid[2] < floor_z + tol:
+                    label, score = "floor", 0.9
+                elif g.normal[2] < 0 and g.centroid[2] > ceil_z - tol:
+                    label, score = "ceiling", 0.9
+            elif g.vertical_cos < sin_v:
+                label, score = self._vertical_label(g, floor_z, ceil_z, bool(downs))
+            labels.append(label)
+            scores.append(score)
+        info = {"floor_z_m": float(floor_z), "ceiling_z_m": float(ceil_z)}
+        return labels, scores, info
+
+    def _vertical_label(self, g: SegmentGeometry, floor_z: float, ceil_z: float,
+                        ceiling_seen: bool) -> tuple[str, float]:
+        tol = self.floor_tolerance_m
+        on_floor = g.z_min_m < floor_z + tol
+        below_ceiling = g.z_max_m < ceil_z - 0.1 or not ceiling_seen
+        w_lo, w_hi = self.door_width_m
+        h_lo, h_hi = self.door_height_m
+        if g.touches_border:  # partly out of view: accept narrower / shorter rectangles
+            w_lo, h_lo = 0.25, h_lo * 0.8
+        rel_bottom = g.z_min_m - floor_z
+        if (on_floor and below_ceiling and w_lo <= g.width_m <= w_hi
+                and h_lo <= g.height_m <= h_hi and g.fill > 0.5):
+            return "door", float(min(0.9, 0.5 + 0.4 * g.fill))
+        if (g.width_m > 0.8 and g.height_m < 0.2 and 0.6 < rel_bottom < 1.2):
+            return "handrail", 0.6
+        if (0.4 < rel_bottom < 1.5 and below_ceiling and 0.4 <= g.width_m <= 3.0
+                and 0.4 <= g.height_m <= 1.8 and g.fill > 0.6 and g.planarity < 0.02):
+            return "window", 0.5
+        if g.height_m > 1.0 or g.width_m > 1.5:
+            return "wall", 0.8
+        return "clutter", 0.4
+
+    @staticmethod
+    def _compact(regions, labels, scores):
+        ids = np.unique(regions[regions >= 0])
+        remap = np.full(int(regions.max()) + 2, -1, np.int64)
+        remap[ids] = np.arange(len(ids))
+        seg = np.where(regions >= 0, remap[np.clip(regions, 0, None)], -1).astype(np.int32)
+        return seg, [labels[i] for i in ids], [scores[i] for i in ids]
