@@ -216,7 +216,6 @@ class BuiltinSegments:
         up = estimate_up(normals)
         rot = level_from_camera(up)[:3, :3]
         pl = points @ rot.T
-        nl = normals @ rot.T
 
         lab = self._lab(frame.rgb, w)
         regions = self._regions(points, normals, lab, valid, k.fx)
