@@ -109,61 +109,70 @@ def export_moge_like(
     path: Path,
     *,
     plane: tuple[float, float, float],
-    fx_px: float,
-    fy_px: float,
-    cx_px: float,
-    cy_px: float,
-    affine_scale: float,
-    affine_shift: float,
-    metric_scale: float,
+    ref_intrinsics: CameraIntrinsics,
+    scale: float,
+    shift: float,
+    reported_metric_scale: float | None = None,
     output_names: tuple[str, ...] = ("points", "normal", "mask", "metric_scale"),
+    input_names: tuple[str, ...] = ("image", "num_tokens"),
 ) -> Path:
-    """Export a tiny model with MoGe-2's ONNX signature that outputs an affine point map.
+    """Export a tiny model with MoGe-2's ONNX signature whose output is a known affine point map.
 
-    The true scene is the plane ``1/z = a*x_n + b*y_n + c`` (``x_n = (u - cx)/fx`` etc., pixel
-    centres, camera of the *input* image size ``W0 x H0`` given through ``fx_px..cy_px`` for that
-    size; the model rescales them to whatever H, W it receives). It outputs
-    ``points = (X, Y, Z / affine_scale... )``: precisely ``P_true / affine_scale - (0, 0,
-    affine_shift)`` with ``P_true = metric_scale_true * ...``; see the test for the relation.
-    ``metric_scale`` is reported as ``metric_scale``.
+    The true scene is the plane ``1/Z = a x_n + b y_n + c`` seen by a camera with
+    ``ref_intrinsics`` (``x_n = (u - cx) / fx``, ``y_n = (v - cy) / fy`` at pixel centres; the
+    model rescales the intrinsics to the H, W it is fed). MoGe's convention is
+    ``P_metric = (points + (0, 0, shift)) * metric_scale``, so the model outputs
+    ``points = P_true / scale - (0, 0, shift)``, ``mask`` = 1, ``normal`` = (0, 0, -1) and
+    ``metric_scale = reported_metric_scale`` (default ``scale``: a perfect metric head).
+
+    Inputs: ``image`` (B, 3, H, W) float32 in [0, 1], ``num_tokens`` int64 scalar.
+    Outputs: ``points`` (B, H, W, 3), ``normal`` (B, H, W, 3), ``mask`` (B, H, W),
+    ``metric_scale`` (B,).
     """
     import torch
 
     a, b, c = plane
+    k = ref_intrinsics
+    ms = scale if reported_metric_scale is None else reported_metric_scale
 
     class MoGeLike(torch.nn.Module):
         def forward(self, image, num_tokens):
-            bsz, _, h, w = image.shape
-            hf = h.to(torch.float32) if torch.is_tensor(h) else torch.tensor(float(h))
-            wf = w.to(torch.float32) if torch.is_tensor(w) else torch.tensor(float(w))
-            # intrinsics for this resolution (fx, cx scale with width; fy, cy with height)
-            sx = wf / W0
-            sy = hf / H0
-            u = (torch.arange(w, dtype=torch.float32) + 0.5)[None, :].expand(h, w)
-            v = (torch.arange(h, dtype=torch.float32) + 0.5)[:, None].expand(h, w)
-            xn = (u - cx_px * sx) / (fx_px * sx)
-            yn = (v - cy_px * sy) / (fy_px * sy)
+            ones = torch.ones_like(image[0, 0])  # (H, W), keeps H and W dynamic in the graph
+            u = ones.cumsum(1) - 0.5
+            v = ones.cumsum(0) - 0.5
+            sx = ones.sum(1)[0] / k.width
+            sy = ones.sum(0)[0] / k.height
+            xn = (u - k.cx * sx) / (k.fx * sx)
+            yn = (v - k.cy * sy) / (k.fy * sy)
             z = 1.0 / (a * xn + b * yn + c)
-            p = torch.stack([xn * z, yn * z, z], -1) / affine_scale
-            p = p - torch.tensor([0.0, 0.0, affine_shift])
-            p = p[None].expand(bsz, h, w, 3)
-            # the image participates (an all-true mask computed from it)
+            p = torch.stack([xn * z, yn * z, z - shift * scale], -1) / scale
+            p = p[None] * torch.ones_like(image[:, :1, :1, :1]).permute(0, 2, 3, 1)
             mask = (image.mean(1) >= -1.0).to(torch.float32)
             normal = torch.zeros_like(p) + torch.tensor([0.0, 0.0, -1.0])
-            ms = torch.ones(bsz) * metric_scale + num_tokens.to(torch.float32) * 0.0
-            return p, normal, mask, ms
+            msc = torch.ones_like(image[:, 0, 0, 0]) * ms + num_tokens.to(torch.float32) * 0.0
+            return p, normal, mask, msc
 
-    W0, H0 = 2 * cx_px, 2 * cy_px  # the model was defined for an image with centred cx, cy
-    model = MoGeLike().eval()
     dummy = (torch.rand(1, 3, 24, 32), torch.tensor(1800, dtype=torch.int64))
-    torch.onnx.export(
-        model,
-        dummy,
-        str(path),
-        input_names=["image", "num_tokens"],
-        output_names=list(output_names),
-        dynamic_axes={"image": {0: "batch", 2: "height", 3: "width"}},
-        opset_version=17,
-        dynamo=False,
-    )
+    _export(MoGeLike().eval(), dummy, path, input_names, output_names,
+            {input_names[0]: {0: "batch", 2: "height", 3: "width"}})
     return path
+
+
+def _export(model, dummy, path, input_names, output_names, dynamic_axes=None) -> None:
+    """torch.onnx.export with the TorchScript exporter, quietly."""
+    import warnings
+
+    import torch
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        torch.onnx.export(
+            model,
+            dummy,
+            str(path),
+            input_names=list(input_names),
+            output_names=list(output_names),
+            dynamic_axes=dynamic_axes,
+            opset_version=17,
+            dynamo=False,
+        )
