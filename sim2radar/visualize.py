@@ -1,0 +1,127 @@
+"""Bird's-eye-view (BEV) pictures of radar point clouds, boxes and the radar's field of view.
+
+Pure functions over arrays: they return PNG bytes (and write them if given a path). Matplotlib
+runs on its Agg backend through an explicit ``Figure`` — no pyplot global state, safe in worker
+threads.
+
+View convention: the radar frame is x forward, y left, z up. The picture looks down on it with
+forward (+x) pointing up the page and left (+y) pointing left, as a driver would draw it.
+"""
+
+from __future__ import annotations
+
+import io
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+
+__all__ = ["bev_png", "box_corners_xy"]
+
+
+def box_corners_xy(boxes: np.ndarray) -> np.ndarray:
+    """(M, 4, 2) corner x, y [m] of boxes ``x y z dx dy dz heading`` (counter-clockwise)."""
+    b = np.asarray(boxes, dtype=np.float64).reshape(-1, 7)
+    half = np.array([[1, 1], [-1, 1], [-1, -1], [1, -1]], dtype=np.float64) * 0.5
+    local = half[None] * b[:, None, 3:5]  # (M, 4, 2) along (dx, dy)
+    c, s = np.cos(b[:, 6])[:, None], np.sin(b[:, 6])[:, None]
+    x = local[..., 0] * c - local[..., 1] * s + b[:, None, 0]
+    y = local[..., 0] * s + local[..., 1] * c + b[:, None, 1]
+    return np.stack([x, y], axis=-1)
+
+
+def bev_png(
+    points: np.ndarray,
+    *,
+    boxes: np.ndarray | None = None,
+    box_labels: Sequence[str] | None = None,
+    fov_deg: float | None = None,
+    max_range_m: float | None = None,
+    title: str = "",
+    extent_m: tuple[float, float, float, float] | None = None,
+    path: str | Path | None = None,
+    size_px: int = 800,
+) -> bytes:
+    """Render a bird's-eye view of radar points as a PNG.
+
+    Parameters
+    ----------
+    points : (N, 3+) float — x, y, z [m] in the radar frame, optional 4th column intensity [dB]
+        (colour); without it points are drawn in one colour.
+    boxes : (M, 7), optional — ``x y z dx dy dz heading`` [m, rad] in the radar frame.
+    box_labels : M strings, optional — drawn next to each box.
+    fov_deg : float, optional — full azimuth field of view [deg]; drawn as two rays from the radar.
+    max_range_m : float, optional — drawn as an arc (with ``fov_deg``) [m].
+    title : str — figure title.
+    extent_m : (x_min, x_max, y_min, y_max), optional — view window [m]; default fits the
+        points, boxes and the radar.
+    path : str or Path, optional — also write the PNG there (parent folders are created).
+    size_px : int — image height and width [px].
+
+    Returns
+    -------
+    bytes
+        The PNG file content.
+    """
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+    from matplotlib.patches import Polygon, Wedge
+
+    pts = np.asarray(points, dtype=np.float64)
+    if pts.ndim != 2 or pts.shape[1] < 3:
+        raise ValueError(f"points must have shape (N, 3) or (N, 4), got {pts.shape}")
+    bxs = np.zeros((0, 7)) if boxes is None else np.asarray(boxes, dtype=np.float64).reshape(-1, 7)
+    if box_labels is not None and len(box_labels) != len(bxs):
+        raise ValueError(f"{len(box_labels)} box labels for {len(bxs)} boxes")
+
+    if extent_m is None:
+        xs = [0.0, *pts[:, 0], *box_corners_xy(bxs)[..., 0].ravel()]
+        ys = [0.0, *pts[:, 1], *box_corners_xy(bxs)[..., 1].ravel()]
+        pad = 0.5
+        x0, x1 = min(xs) - pad, max(xs) + pad
+        y0, y1 = min(ys) - pad, max(ys) + pad
+    else:
+        x0, x1, y0, y1 = extent_m
+
+    dpi = 100
+    fig = Figure(figsize=(size_px / dpi, size_px / dpi), dpi=dpi)
+    FigureCanvasAgg(fig)
+    ax = fig.add_subplot(1, 1, 1)
+    # page coordinates: horizontal = y (left is +y), vertical = x (forward is up)
+    if fov_deg is not None:
+        reach = max_range_m if max_range_m is not None else float(np.hypot(x1 - x0, y1 - y0))
+        half = np.radians(fov_deg) / 2
+        for sign in (-1, 1):
+            ax.plot([0, sign * reach * np.sin(half)], [0, reach * np.cos(half)], color="0.6", lw=0.8, ls="--")
+        if max_range_m is not None:
+            # angles measured on the page: 90° is straight up (+x); +y is to the left
+            ax.add_patch(
+                Wedge((0, 0), max_range_m, 90 - np.degrees(half), 90 + np.degrees(half),
+                      facecolor="0.9", edgecolor="0.6", lw=0.8, alpha=0.4, zorder=0)
+            )
+    for i, corners in enumerate(box_corners_xy(bxs)):
+        ax.add_patch(Polygon(corners[:, ::-1], closed=True, fill=False, edgecolor="tab:red", lw=1.5))
+        if box_labels is not None:
+            ax.text(corners[:, 1].max(), corners[:, 0].max(), box_labels[i], color="tab:red", fontsize=8)
+    if len(pts):
+        if pts.shape[1] >= 4:
+            sc = ax.scatter(pts[:, 1], pts[:, 0], c=pts[:, 3], s=6, cmap="viridis", linewidths=0)
+            fig.colorbar(sc, ax=ax, fraction=0.046, pad=0.04, label="intensity [dB]")
+        else:
+            ax.scatter(pts[:, 1], pts[:, 0], s=6, color="tab:blue", linewidths=0)
+    ax.plot([0], [0], marker="^", color="k", ms=8)
+    ax.set_xlim(y1, y0)  # +y to the left
+    ax.set_ylim(x0, x1)
+    ax.set_aspect("equal")
+    ax.set_xlabel("y (left) [m]")
+    ax.set_ylabel("x (forward) [m]")
+    ax.grid(True, lw=0.3, alpha=0.5)
+    ax.set_title(title or f"{len(pts)} radar points", fontsize=10)
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=dpi)
+    data = buf.getvalue()
+    if path is not None:
+        path = Path(path)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_bytes(data)
+    return data
