@@ -1,0 +1,401 @@
+"""Radar configuration: FMCW chirp, MIMO array, field of view, ray density, detection.
+
+A :class:`RadarConfig` is loaded from YAML (a preset name such as ``"ti-mmwcas"`` or a path)
+and validated at the edge; derived values are properties, never typed in:
+
+* range resolution ``dR = c / (2 B)`` (FMCW; TI SWRA553 "Introduction to mmWave sensing:
+  FMCW radars", range-resolution section);
+* maximum range ``R_max = f_s c / (2 S)`` for complex baseband sampling (same source),
+  which equals ``N_adc * dR`` because ``B = S N_adc / f_s``;
+* azimuth / elevation resolution of the virtual array: the -3 dB beamwidth of a uniform
+  aperture, ``0.886 lambda / D`` with ``D = N d`` (``d = lambda / 2``), i.e. ``1.772 / N`` rad
+  for ``N`` filled virtual positions at lambda/2 (86 -> 1.18 deg for the TI cascade).
+
+Antenna positions are given as ``[azimuth, elevation]`` pairs in units of lambda/2
+(the TI convention), the virtual array being every TX + RX sum.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+from functools import cached_property
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
+
+from sim2radar.constants import SPEED_OF_LIGHT_M_S
+from sim2radar.em import get_material
+
+__all__ = [
+    "DetectionConfig",
+    "ScatteringConfig",
+    "RadarConfig",
+    "RadarConfigError",
+    "load_radar_config",
+    "preset_names",
+    "PRESET_DIR",
+]
+
+#: Folder of the built-in YAML presets.
+PRESET_DIR = Path(__file__).parent / "presets"
+
+#: Default effective-roughness scattering coefficients S (fraction of reflected field
+#: amplitude scattered diffusely; Degli-Esposti et al., IEEE TAP 55(1), 2007, "ER model").
+#: Heuristic values for 77 GHz indoor surfaces: rough masonry scatters more, glass and metal
+#: sheets less. Override per material in the YAML ``scattering.coefficients`` mapping.
+DEFAULT_SCATTERING_COEFFICIENTS: dict[str, float] = {
+    "metal": 0.2,
+    "glass": 0.1,
+    "wood": 0.35,
+    "plasterboard": 0.35,
+    "ceramic_tile": 0.3,
+    "concrete": 0.5,
+    "brick": 0.5,
+    "fabric": 0.7,
+    "plastic": 0.3,
+    "marble": 0.2,
+    "carpet_tile": 0.6,
+    "vinyl_tile": 0.3,
+    "unknown": 0.4,
+}
+
+
+class RadarConfigError(ValueError):
+    """An invalid radar configuration; the message names the source, the field and the fix."""
+
+
+class _Frozen(BaseModel):
+    model_config = ConfigDict(frozen=True, extra="forbid")
+
+
+class DetectionConfig(_Frozen):
+    """Peak detection on the range-azimuth-elevation power cube.
+
+    CA-CFAR along range (per azimuth/elevation beam): a cell is a detection when
+    ``P > alpha * (mean(training cells) + noise)`` with ``alpha = 10**(threshold_db/10)``
+    (Richards, *Fundamentals of Radar Signal Processing*, §6.5), its power exceeds the
+    absolute ``noise_floor_db`` by ``min_snr_db``, and (``peak_grouping``) it is a local
+    maximum of its 3x3x3 neighbourhood.
+    """
+
+    cfar_guard_cells: int = Field(2, ge=0, le=64, description="guard cells each side [bins]")
+    cfar_training_cells: int = Field(8, ge=1, le=256, description="training cells each side [bins]")
+    cfar_threshold_db: float = Field(10.0, ge=0.0, le=60.0, description="CFAR scale alpha [dB]")
+    noise_floor_db: float = Field(
+        -110.0, description="receiver noise power per cell [dB re simulator power unit]"
+    )
+    min_snr_db: float = Field(10.0, ge=0.0, description="minimum cell SNR over the noise [dB]")
+    peak_grouping: bool = Field(True, description="keep only local maxima (3x3x3)")
+    max_points: int | None = Field(None, ge=1, description="keep the strongest N points")
+
+
+class ScatteringConfig(_Frozen):
+    """Effective-roughness (ER) scattering coefficients S per material (Degli-Esposti 2007).
+
+    ``S`` in [0, 1]: a fraction ``S^2`` of the reflected power is scattered diffusely
+    (Lambertian), ``1 - S^2`` stays in the specular (physical-optics) component.
+    """
+
+    default: float = Field(0.4, ge=0.0, le=1.0)
+    coefficients: dict[str, float] = Field(
+        default_factory=lambda: dict(DEFAULT_SCATTERING_COEFFICIENTS)
+    )
+
+    @field_validator("coefficients")
+    @classmethod
+    def _check_coefficients(cls, value: dict[str, float]) -> dict[str, float]:
+        for name, s in value.items():
+            get_material(name)  # raises, listing the known names
+            if not 0.0 <= float(s) <= 1.0:
+                raise ValueError(f"scattering coefficient for {name!r} must lie in [0, 1], got {s}")
+        return {k: float(v) for k, v in value.items()}
+
+    def coefficient(self, material: str) -> float:
+        """S for ``material`` (its own entry, else ``default``)."""
+        from sim2radar.em import normalize_material_name
+
+        return float(self.coefficients.get(normalize_material_name(material), self.default))
+
+
+class RadarConfig(_Frozen):
+    """A validated FMCW MIMO radar description (all lengths [m], frequencies [Hz], angles [deg]).
+
+    Attributes
+    ----------
+    name : str
+        Preset or user name.
+    start_frequency_hz : float
+        Chirp start frequency [Hz].
+    bandwidth_hz : float
+        Swept (sampled) bandwidth B [Hz].
+    adc_samples : int
+        ADC samples per chirp = number of range bins.
+    adc_sample_rate_hz : float
+        Complex ADC sample rate [Hz].
+    chirp_slope_hz_per_s : float | None
+        Chirp slope S [Hz/s]; derived as ``B f_s / N`` when omitted; when given it must agree.
+    n_chirps : int
+        Chirps per frame (per TX); stored for Doppler-capable backends.
+    tx_antennas_half_wl, rx_antennas_half_wl : list of (azimuth, elevation)
+        Antenna positions in units of lambda/2.
+    azimuth_fov_deg, elevation_fov_deg : float
+        Full field of view [deg], in (0, 180].
+    ray_spacing_deg : float
+        Angular spacing of the ray grid [deg] (the ray density).
+    max_bounces : int
+        Specular bounces followed (1 = direct returns only).
+    azimuth_bin_deg, elevation_bin_deg : float | None
+        Angular bin widths of the cube [deg]; default the array's resolution.
+    """
+
+    name: str = "custom"
+    description: str = ""
+    start_frequency_hz: float = Field(gt=0)
+    bandwidth_hz: float = Field(gt=0)
+    adc_samples: int = Field(gt=1, le=1 << 16)
+    adc_sample_rate_hz: float = Field(gt=0)
+    chirp_slope_hz_per_s: float | None = Field(None, gt=0)
+    n_chirps: int = Field(1, ge=1)
+    tx_antennas_half_wl: list[tuple[float, float]] = Field(min_length=1)
+    rx_antennas_half_wl: list[tuple[float, float]] = Field(min_length=1)
+    azimuth_fov_deg: float = Field(gt=0, le=180)
+    elevation_fov_deg: float = Field(gt=0, le=180)
+    azimuth_bin_deg: float | None = Field(None, gt=0)
+    elevation_bin_deg: float | None = Field(None, gt=0)
+    ray_spacing_deg: float = Field(0.2, gt=0.005, le=10.0)
+    max_bounces: int = Field(2, ge=1, le=8)
+    detection: DetectionConfig = Field(default_factory=DetectionConfig)
+    scattering: ScatteringConfig = Field(default_factory=ScatteringConfig)
+
+    @model_validator(mode="after")
+    def _check_consistency(self) -> RadarConfig:
+        derived = self.bandwidth_hz * self.adc_sample_rate_hz / self.adc_samples
+        if self.chirp_slope_hz_per_s is not None:
+            if abs(self.chirp_slope_hz_per_s - derived) > 0.01 * derived:
+                raise ValueError(
+                    f"chirp_slope_hz_per_s={self.chirp_slope_hz_per_s:.6g} disagrees with "
+                    f"bandwidth_hz * adc_sample_rate_hz / adc_samples = {derived:.6g} (>1 %); "
+                    "fix one of them or omit chirp_slope_hz_per_s to derive it"
+                )
+        if self.bandwidth_hz >= self.start_frequency_hz:
+            raise ValueError("bandwidth_hz must be smaller than start_frequency_hz")
+        return self
+
+    # -- derived values -----------------------------------------------------------------
+    @property
+    def slope_hz_per_s(self) -> float:
+        """Chirp slope S [Hz/s] (given, or ``B f_s / N_adc``)."""
+        if self.chirp_slope_hz_per_s is not None:
+            return float(self.chirp_slope_hz_per_s)
+        return self.bandwidth_hz * self.adc_sample_rate_hz / self.adc_samples
+
+    @property
+    def center_frequency_hz(self) -> float:
+        """Centre of the swept band [Hz]; sets the wavelength used for phases."""
+        return self.start_frequency_hz + 0.5 * self.bandwidth_hz
+
+    @property
+    def wavelength_m(self) -> float:
+        """Wavelength at the centre frequency, ``c / f_c`` [m]."""
+        return SPEED_OF_LIGHT_M_S / self.center_frequency_hz
+
+    @property
+    def range_resolution_m(self) -> float:
+        """FMCW range resolution ``c / (2 B)`` [m]."""
+        return SPEED_OF_LIGHT_M_S / (2.0 * self.bandwidth_hz)
+
+    @property
+    def max_range_m(self) -> float:
+        """Maximum unambiguous range ``f_s c / (2 S)`` [m] (complex sampling)."""
+        return self.adc_sample_rate_hz * SPEED_OF_LIGHT_M_S / (2.0 * self.slope_hz_per_s)
+
+    @property
+    def n_range_bins(self) -> int:
+        """Range bins in the cube (= ADC samples)."""
+        return int(self.adc_samples)
+
+    @cached_property
+    def virtual_array_half_wl(self) -> np.ndarray:
+        """(N_tx * N_rx, 2) float64 — virtual antenna positions [lambda/2]: TX + RX sums."""
+        tx = np.asarray(self.tx_antennas_half_wl, dtype=np.float64).reshape(-1, 2)
+        rx = np.asarray(self.rx_antennas_half_wl, dtype=np.float64).reshape(-1, 2)
+        return (tx[:, None, :] + rx[None, :, :]).reshape(-1, 2)
+
+    @property
+    def n_virtual(self) -> int:
+        """Number of virtual channels (N_tx * N_rx)."""
+        return len(self.virtual_array_half_wl)
+
+    @staticmethod
+    def _aperture_elements(positions: np.ndarray) -> float:
+        """Filled-aperture length in lambda/2 units: span + 1 element."""
+        unique = np.unique(np.round(positions, 6))
+        return float(unique.max() - unique.min() + 1.0)
+
+    @property
+    def n_azimuth_virtual(self) -> int:
+        """Distinct azimuth positions of the virtual array."""
+        return int(len(np.unique(np.round(self.virtual_array_half_wl[:, 0], 6))))
+
+    @property
+    def azimuth_resolution_rad(self) -> float:
+        """-3 dB beamwidth ``0.886 lambda / D_az`` [rad], ``D_az = N_az lambda/2``."""
+        return 0.886 * 2.0 / self._aperture_elements(self.virtual_array_half_wl[:, 0])
+
+    @property
+    def elevation_resolution_rad(self) -> float:
+        """-3 dB beamwidth ``0.886 lambda / D_el`` [rad] (capped at pi)."""
+        return min(math.pi, 0.886 * 2.0 / self._aperture_elements(self.virtual_array_half_wl[:, 1]))
+
+    @property
+    def azimuth_fov_rad(self) -> float:
+        return math.radians(self.azimuth_fov_deg)
+
+    @property
+    def elevation_fov_rad(self) -> float:
+        return math.radians(self.elevation_fov_deg)
+
+    @property
+    def n_azimuth_bins(self) -> int:
+        """Azimuth bins covering the FOV, each no wider than the bin width."""
+        width = math.radians(self.azimuth_bin_deg) if self.azimuth_bin_deg else self.azimuth_resolution_rad
+        return max(1, math.ceil(self.azimuth_fov_rad / width - 1e-9))
+
+    @property
+    def n_elevation_bins(self) -> int:
+        """Elevation bins covering the FOV, each no wider than the bin width."""
+        width = (
+            math.radians(self.elevation_bin_deg)
+            if self.elevation_bin_deg
+            else self.elevation_resolution_rad
+        )
+        return max(1, math.ceil(self.elevation_fov_rad / width - 1e-9))
+
+    @property
+    def range_bins_m(self) -> np.ndarray:
+        """(n_range,) float32 — range bin centres ``i * dR`` [m]."""
+        return (np.arange(self.n_range_bins) * self.range_resolution_m).astype(np.float32)
+
+    @property
+    def azimuth_bins_rad(self) -> np.ndarray:
+        """(n_az,) float32 — azimuth bin centres [rad], uniform over the FOV (+ = left)."""
+        n = self.n_azimuth_bins
+        w = self.azimuth_fov_rad / n
+        return (-0.5 * self.azimuth_fov_rad + (np.arange(n) + 0.5) * w).astype(np.float32)
+
+    @property
+    def elevation_bins_rad(self) -> np.ndarray:
+        """(n_el,) float32 — elevation bin centres [rad], uniform over the FOV (+ = up)."""
+        n = self.n_elevation_bins
+        w = self.elevation_fov_rad / n
+        return (-0.5 * self.elevation_fov_rad + (np.arange(n) + 0.5) * w).astype(np.float32)
+
+    @property
+    def ray_grid_shape(self) -> tuple[int, int]:
+        """(n_azimuth_rays, n_elevation_rays) of the ray grid."""
+        return (
+            max(1, math.ceil(self.azimuth_fov_deg / self.ray_spacing_deg)),
+            max(1, math.ceil(self.elevation_fov_deg / self.ray_spacing_deg)),
+        )
+
+    @property
+    def n_rays(self) -> int:
+        """Primary rays per frame."""
+        a, e = self.ray_grid_shape
+        return a * e
+
+    # -- serialisation ------------------------------------------------------------------
+    def to_dict(self) -> dict[str, Any]:
+        """Resolved, JSON-able configuration (the slope filled in); stable for hashing."""
+        d = self.model_dump(mode="json")
+        d["chirp_slope_hz_per_s"] = self.slope_hz_per_s
+        return d
+
+    def derived(self) -> dict[str, float]:
+        """Derived values for reports (JSON-able)."""
+        return {
+            "center_frequency_hz": self.center_frequency_hz,
+            "wavelength_m": self.wavelength_m,
+            "range_resolution_m": self.range_resolution_m,
+            "max_range_m": self.max_range_m,
+            "azimuth_resolution_deg": math.degrees(self.azimuth_resolution_rad),
+            "elevation_resolution_deg": math.degrees(self.elevation_resolution_rad),
+            "n_virtual": self.n_virtual,
+            "n_azimuth_virtual": self.n_azimuth_virtual,
+            "cube_shape": (self.n_range_bins, self.n_azimuth_bins, self.n_elevation_bins),
+            "n_rays": self.n_rays,
+        }
+
+    def content_hash(self) -> str:
+        """SHA-256 (hex, 16 chars) of :meth:`to_dict` with sorted keys."""
+        blob = json.dumps(self.to_dict(), sort_keys=True).encode()
+        return hashlib.sha256(blob).hexdigest()[:16]
+
+    def with_updates(self, **changes: Any) -> RadarConfig:
+        """A validated copy with some fields changed (nested configs as dicts allowed)."""
+        data = self.model_dump()
+        for key, value in changes.items():
+            if key in ("detection", "scattering") and isinstance(value, dict):
+                data[key] = {**data[key], **value}
+            else:
+                data[key] = value
+        return RadarConfig.model_validate(data)
+
+
+def preset_names() -> list[str]:
+    """Names of the built-in presets (``presets/*.yaml`` stems), sorted."""
+    return sorted(p.stem for p in PRESET_DIR.glob("*.yaml"))
+
+
+def _format_validation_error(source: str, exc: ValidationError) -> str:
+    lines = [f"invalid radar config {source}:"]
+    for err in exc.errors():
+        loc = ".".join(str(p) for p in err["loc"]) or "(root)"
+        value = err.get("input")
+        shown = "" if isinstance(value, dict) else f" (got {value!r})"
+        lines.append(f"  field '{loc}': {err['msg']}{shown}")
+    return "\n".join(lines)
+
+
+def load_radar_config(name_or_path: str | Path | RadarConfig, **overrides: Any) -> RadarConfig:
+    """Load a preset by name (see :func:`preset_names`) or a YAML file, then validate.
+
+    Parameters
+    ----------
+    name_or_path : str, Path or RadarConfig
+        ``"ti-mmwcas"``, ``"ti-iwr1843"``, a path to a YAML file, or an existing config.
+    **overrides
+        Field values replacing those of the file (e.g. ``max_bounces=1``).
+
+    Raises
+    ------
+    RadarConfigError
+        Unknown preset (lists the known ones), unreadable YAML, or invalid fields (each named).
+    """
+    if isinstance(name_or_path, RadarConfig):
+        return name_or_path.with_updates(**overrides) if overrides else name_or_path
+    text = str(name_or_path)
+    path = Path(text)
+    if not path.suffix and (PRESET_DIR / f"{text}.yaml").is_file():
+        path = PRESET_DIR / f"{text}.yaml"
+    if not path.is_file():
+        raise RadarConfigError(
+            f"radar config {text!r} is neither a preset nor a file; "
+            f"presets: {', '.join(preset_names())}"
+        )
+    try:
+        doc = yaml.safe_load(path.read_text())
+    except yaml.YAMLError as exc:
+        raise RadarConfigError(f"{path}: invalid YAML: {exc}") from exc
+    if not isinstance(doc, dict):
+        raise RadarConfigError(f"{path}: expected a mapping of radar fields")
+    doc = {**doc, **overrides}
+    try:
+        return RadarConfig.model_validate(doc)
+    except ValidationError as exc:
+        raise RadarConfigError(_format_validation_error(str(path), exc)) from None
