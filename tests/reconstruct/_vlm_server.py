@@ -1,0 +1,132 @@
+"""A loopback HTTP server speaking OpenAI chat-completions, with scripted misbehaviour.
+
+Binds 127.0.0.1 on an ephemeral port, serves from a daemon thread, stops on ``close()`` (use it
+as a context manager). The answer's material follows the semantic label named in the prompt:
+door -> metal, floor -> ceramic_tile, wall -> plasterboard, window -> glass, else concrete.
+
+Modes (``mode``):
+  json      bare JSON answer                     prose   JSON inside prose
+  fence     JSON in a ```json fence              garbage text without JSON
+  oov       material "unobtainium"               no_rf   HTTP 400 when response_format is sent
+Independent of the mode: the first ``n_slow`` requests sleep ``slow_s`` before answering, the
+first ``n_fail`` requests get HTTP 500, ``delay_s`` is added to every request (to observe the
+number of requests in flight, recorded in ``max_in_flight``).
+"""
+
+from __future__ import annotations
+
+import json
+import re
+import threading
+import time
+from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
+
+MATERIAL_FOR = {"door": "metal", "floor": "ceramic_tile", "wall": "plasterboard",
+                "window": "glass"}
+
+
+class VlmTestServer:
+    def __init__(self, mode: str = "json", *, n_slow: int = 0, slow_s: float = 0.0,
+                 n_fail: int = 0, delay_s: float = 0.0) -> None:
+        self.mode = mode
+        self.n_slow, self.slow_s, self.n_fail, self.delay_s = n_slow, slow_s, n_fail, delay_s
+        self.requests: list[dict] = []
+        self.in_flight = 0
+        self.max_in_flight = 0
+        self._lock = threading.Lock()
+        outer = self
+
+        class Handler(BaseHTTPRequestHandler):
+            def log_message(self, *args):  # keep test output quiet
+                pass
+
+            def do_POST(self):  # noqa: N802 (http.server API)
+                outer._handle(self)
+
+        self.httpd = ThreadingHTTPServer(("127.0.0.1", 0), Handler)
+        self.httpd.daemon_threads = True
+        self.thread = threading.Thread(target=self.httpd.serve_forever, kwargs={"poll_interval": 0.02},
+                                       daemon=True)
+        self.thread.start()
+
+    @property
+    def base_url(self) -> str:
+        return f"http://127.0.0.1:{self.httpd.server_address[1]}/v1"
+
+    @property
+    def n_requests(self) -> int:
+        with self._lock:
+            return len(self.requests)
+
+    def close(self) -> None:
+        self.httpd.shutdown()
+        self.httpd.server_close()
+        self.thread.join(timeout=5)
+
+    def __enter__(self) -> VlmTestServer:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    # -----------------------------------------------------------------------------------------
+    def _handle(self, h: BaseHTTPRequestHandler) -> None:
+        length = int(h.headers.get("Content-Length", 0))
+        body = json.loads(h.rfile.read(length) or b"{}")
+        with self._lock:
+            self.requests.append(body)
+            n = len(self.requests)
+            self.in_flight += 1
+            self.max_in_flight = max(self.max_in_flight, self.in_flight)
+        try:
+            if h.path != "/v1/chat/completions":
+                return self._send(h, 404, {"error": f"no route {h.path}"})
+            if n <= self.n_slow:
+                time.sleep(self.slow_s)
+            if self.delay_s:
+                time.sleep(self.delay_s)
+            if n <= self.n_fail:
+                return self._send(h, 500, {"error": "internal error (scripted)"})
+            if self.mode == "no_rf" and "response_format" in body:
+                return self._send(h, 400, {"error": "response_format is not supported"})
+            text = self._answer(body)
+            self._send(h, 200, {
+                "id": f"chatcmpl-{n}", "object": "chat.completion", "model": body.get("model"),
+                "choices": [{"index": 0, "finish_reason": "stop",
+                             "message": {"role": "assistant", "content": text}}],
+            })
+        except (BrokenPipeError, ConnectionResetError):
+            pass  # the client gave up (timeout); fine
+        finally:
+            with self._lock:
+                self.in_flight -= 1
+
+    def _answer(self, body: dict) -> str:
+        prompt = ""
+        for msg in body.get("messages", []):
+            content = msg.get("content")
+            parts = content if isinstance(content, list) else [{"type": "text", "text": content}]
+            prompt += " ".join(p.get("text", "") for p in parts if p.get("type") == "text")
+        m = re.search(r'labelled this segment "(\w+)"', prompt)
+        label = m.group(1) if m else "unknown"
+        material = MATERIAL_FOR.get(label, "concrete")
+        if self.mode == "oov":
+            material = "unobtainium"
+        ans = json.dumps({"material": material, "confidence": 0.87,
+                          "reason": f"{label}s in corridors are usually {material}"})
+        if self.mode == "prose":
+            return f"Looking at the image, this is a {label}. My answer: {ans} Hope it helps!"
+        if self.mode == "fence":
+            return f"Sure.\n```json\n{ans}\n```"
+        if self.mode == "garbage":
+            return "It is probably made of something shiny, I am not sure."
+        return ans
+
+    @staticmethod
+    def _send(h: BaseHTTPRequestHandler, code: int, doc: dict) -> None:
+        data = json.dumps(doc).encode()
+        h.send_response(code)
+        h.send_header("Content-Type", "application/json")
+        h.send_header("Content-Length", str(len(data)))
+        h.end_headers()
+        h.wfile.write(data)
