@@ -21,11 +21,17 @@ from sim2radar.em import get_material
 from sim2radar.mesh import MaterialMesh
 from sim2radar.radar.binning import Accumulator
 from sim2radar.radar.config import RadarConfig
-from sim2radar.radar.returns import FRESNEL_LUT_SIZE, MIN_COS, fresnel_lut, ray_grid
+from sim2radar.radar.returns import (
+    FRESNEL_LUT_SIZE,
+    GOLDEN,
+    MIN_COS,
+    diffuse_phase_seed,
+    fresnel_lut,
+    ray_grid,
+)
 
 __all__ = ["RadarScene", "TraceResult", "merge_meshes", "check_pose"]
 
-_GOLDEN = 0.6180339887498949  # decorrelates the diffuse phase between bounces
 
 
 def check_pose(pose: np.ndarray | None) -> np.ndarray:
@@ -101,7 +107,8 @@ class TraceResult:
 class _Prepared:
     """Per-(config, seed) device arrays: ray grid, solid angles, tables."""
 
-    directions: np.ndarray  # (N, 3) float32, radar frame
+    directions: object  # mi.Vector3f (N,), radar frame
+    n_rays: int
     solid_angle: object  # mi.Float (N,)
     diffuse_u: object  # mi.Float (N,) in [0, 1)
     spacing_rad: float
@@ -171,13 +178,13 @@ class RadarScene:
             math.radians(radar.ray_spacing_deg),
             seed=seed,
         )
-        rng = np.random.default_rng(0x5EED if seed is None else seed + 1)
         lut = fresnel_lut(self.materials, radar.center_frequency_hz).astype(np.complex64)
         s = np.array([radar.scattering.coefficient(m) for m in self.materials], dtype=np.float32)
         prep = _Prepared(
-            directions=directions.astype(np.float32),
+            directions=mi.Vector3f(*(mi.Float(directions[:, i].astype(np.float32)) for i in range(3))),
+            n_rays=len(directions),
             solid_angle=mi.Float(solid_angle.astype(np.float32)),
-            diffuse_u=mi.Float(rng.random(len(directions)).astype(np.float32)),
+            diffuse_u=mi.Float(diffuse_phase_seed(len(directions), seed).astype(np.float32)),
             spacing_rad=spacing,
             lut_re=mi.Float(lut.real.ravel()),
             lut_im=mi.Float(lut.imag.ravel()),
@@ -190,11 +197,15 @@ class RadarScene:
         return prep
 
     def _primary_rays(self, prep: _Prepared, pose: np.ndarray):
+        """Rotate the cached radar-frame grid by the pose (opaque scalars: no recompilation)."""
         mi, dr = self._mi, self._dr
-        d_world = prep.directions @ pose[:3, :3].T.astype(np.float32)
+        rot = [[dr.opaque(mi.Float, float(pose[i, j])) for j in range(3)] for i in range(3)]
         origin = mi.Point3f(*(dr.opaque(mi.Float, float(v)) for v in pose[:3, 3]))
-        d = mi.Vector3f(mi.Float(d_world[:, 0]), mi.Float(d_world[:, 1]), mi.Float(d_world[:, 2]))
-        return mi.Ray3f(origin, d), origin
+        d = prep.directions
+        d_world = mi.Vector3f(
+            *(rot[i][0] * d.x + rot[i][1] * d.y + rot[i][2] * d.z for i in range(3))
+        )
+        return mi.Ray3f(origin, d_world), origin
 
     # ------------------------------------------------------------------------------------
     def simulate(
@@ -221,7 +232,7 @@ class RadarScene:
         t0 = time.perf_counter()
         prep = self._prepare(radar, seed)
         ray, radar_pos = self._primary_rays(prep, pose)
-        n = len(prep.directions)
+        n = prep.n_rays
         t1 = time.perf_counter()
 
         wavenumber = 2.0 * math.pi / radar.wavelength_m
@@ -302,7 +313,7 @@ class RadarScene:
             a_im = z_re * amp_c
             # diffuse (Lambertian) term with a per-ray pseudo-random phase
             amp_d = s_coef * dr.sqrt(d_omega * dr.maximum(cos_out, 0.0) / math.pi) / r_out
-            u = prep.diffuse_u + bounce * _GOLDEN
+            u = prep.diffuse_u + bounce * GOLDEN
             sin_d, cos_d = dr.sincos(phase - 2.0 * math.pi * (u - dr.floor(u)))
             a_re += (cg_re * cos_d - cg_im * sin_d) * amp_d
             a_im += (cg_re * sin_d + cg_im * cos_d) * amp_d
@@ -340,6 +351,7 @@ class RadarScene:
                 dr.eval(ray, carry_re, carry_im, path_in, active, *acc, hits)
 
         dr.eval(*acc, hits)
+        dr.sync_thread()
         t2 = time.perf_counter()
         arrays = [a.numpy().astype(np.float64) for a in acc]
         accumulator = Accumulator(*arrays)
@@ -364,8 +376,9 @@ class RadarScene:
         pose = check_pose(pose)
         prep = self._prepare(radar, seed)
         ray, _ = self._primary_rays(prep, pose)
-        n = len(prep.directions)
+        n = prep.n_rays
         dr.eval(ray)
+        dr.sync_thread()
         active = dr.full(mi.Bool, True, n)
         t0 = time.perf_counter()
         count = 0
@@ -380,4 +393,5 @@ class RadarScene:
             else:
                 dr.eval(si.t, si.p, si.n, si.prim_index, valid)
             count += n
+        dr.sync_thread()
         return {"seconds": time.perf_counter() - t0, "n_intersections": count}

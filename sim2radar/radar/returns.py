@@ -56,7 +56,9 @@ from sim2radar.em import unpolarized_reflection
 
 __all__ = [
     "FRESNEL_LUT_SIZE",
+    "GOLDEN",
     "MIN_COS",
+    "diffuse_phase_seed",
     "fresnel_lut",
     "nyquist_window",
     "ray_grid",
@@ -64,6 +66,8 @@ __all__ = [
 
 #: Samples of the Fresnel look-up table over cos(theta) in [0, 1].
 FRESNEL_LUT_SIZE = 1025
+#: Golden-ratio offset that decorrelates the diffuse phase between bounces.
+GOLDEN = 0.6180339887498949
 #: Floor on cos(theta_in) in the obliquity factors (avoids 1/0 at exact grazing).
 MIN_COS = 0.02
 
@@ -78,6 +82,13 @@ def fresnel_lut(materials: list[str], frequency_hz: float, size: int = FRESNEL_L
     cos_t = np.linspace(0.0, 1.0, size)
     theta = np.arccos(np.clip(cos_t, 0.0, 1.0))
     return np.stack([unpolarized_reflection(m, frequency_hz, theta) for m in materials])
+
+
+def diffuse_phase_seed(n_rays: int, seed: int | None) -> np.ndarray:
+    """(n_rays,) float64 in [0, 1): per-ray speckle phase fraction; bounce ``k`` uses
+    ``frac(u + k * 0.618...)`` (golden-ratio decorrelation)."""
+    rng = np.random.default_rng(0x5EED if seed is None else int(seed) + 1)
+    return rng.random(n_rays)
 
 
 def nyquist_window(dphi: np.ndarray) -> np.ndarray:
