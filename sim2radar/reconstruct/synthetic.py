@@ -126,6 +126,33 @@ def _cast(origins: np.ndarray, dirs: np.ndarray, quads: list[_Quad]):
     return best_t, best_i, best_n
 
 
+def _texture(hit_world: np.ndarray, inst: np.ndarray, materials: list[str],
+             rng: np.random.Generator) -> np.ndarray:
+    """Brightness modulation (H, W) by material, in world-space surface coordinates: tiles with
+    dark grout for ceramic tile, low-frequency mottling for concrete, grain for wood."""
+    out = np.ones(inst.shape)
+    x, y, z = hit_world[..., 0], hit_world[..., 1], hit_world[..., 2]
+    phase = rng.uniform(0, 2 * np.pi, 6)
+    for i, mat in enumerate(materials):
+        m = inst == i
+        if not m.any():
+            continue
+        # surface coordinates: the two axes along which this surface extends most
+        ext = np.array([np.ptp(c[m]) for c in (x, y, z)])
+        a, b = (np.stack([x, y, z])[k] for k in np.argsort(ext)[::-1][:2])
+        if mat == "ceramic_tile":
+            fa, fb = (a / 0.4) % 1, (b / 0.4) % 1
+            grout = np.minimum(np.minimum(fa, 1 - fa), np.minimum(fb, 1 - fb)) < 0.04
+            out[m] = np.where(grout, 0.45, 1.0)[m]
+        elif mat == "concrete":
+            mott = (np.sin(3.1 * a + phase[0]) * np.sin(2.3 * b + phase[1])
+                    + 0.5 * np.sin(7.7 * a + 5.3 * b + phase[2]))
+            out[m] = (1 + 0.12 * mott)[m]
+        elif mat == "wood":
+            out[m] = (1 + 0.25 * np.sin(2 * np.pi * (6 * a + 0.4 * np.sin(3 * b + phase[3]))))[m]
+    return out
+
+
 def _rot_z(angle_rad: float) -> np.ndarray:
     c, s = math.cos(angle_rad), math.sin(angle_rad)
     return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
@@ -206,7 +233,7 @@ def corridor_frame(
     floor_mat = str(rng.choice(["ceramic_tile", "concrete"], p=[0.6, 0.4]))
     wall_mat = str(rng.choice(["plasterboard", "concrete"], p=[0.7, 0.3]))
     grey = rng.uniform(0.55, 0.85)
-    add("floor", "floor", floor_mat, rng.uniform(0.3, 0.6, 3),
+    add("floor", "floor", floor_mat, rng.uniform(0.35, 0.55) * rng.uniform(0.85, 1.0, 3),
         ("quad", ([x0, -cw / 2, 0], [x1 - x0, 0, 0], [0, cw, 0])))
     add("ceiling", "ceiling", "plasterboard", [0.9, 0.9, 0.88],
         ("quad", ([x0, -cw / 2, ch], [0, cw, 0], [x1 - x0, 0, 0])))
@@ -271,8 +298,10 @@ def corridor_frame(
     shade = np.clip(-np.sum(normals * (d_cam / np.linalg.norm(d_cam, axis=1, keepdims=True))
                             .reshape(height, width, 3), axis=-1), 0, 1)
     light = 0.35 + 0.65 * shade / (1 + 0.03 * depth**2)
-    tex = 1 + 0.04 * rng.standard_normal((height, width, 1))
-    rgb = np.clip(col * light[..., None] * tex * 255, 0, 255)
+    hit = (origin + np.where(valid, t, 0)[:, None] * d_world).reshape(height, width, 3)
+    tex = _texture(hit, inst, [o["material"] for o in objects], rng)
+    tex = tex * (1 + 0.03 * rng.standard_normal((height, width)))
+    rgb = np.clip(col * (light * tex)[..., None] * 255, 0, 255)
     rgb[inst < 0] = 0
     rgb = rgb.astype(np.uint8)
 

@@ -1,0 +1,201 @@
+"""Stage 4c: 3D door boxes (``x y z dx dy dz heading``) fitted from door-segment points.
+
+Boxes follow ``vocab.BOX_FIELDS`` and the procedural worlds' convention: in a z-up frame, ``dx``
+runs along the wall (the door's width), ``dy`` across it (thickness), ``dz`` is the height and
+``heading`` [rad] is the direction of ``dx`` about +z, folded into (−π/2, π/2] (a door box is
+symmetric under a half turn).
+
+Fitting (per door): principal axis of the points' ground-plane projection (PCA; for a door
+panel this is the wall direction, its normal is the wall normal), extents along it and in z from
+robust percentiles, the thickness from the points or ``thickness_m`` when only one face is seen
+(then the box is pushed ``face_to_center_m`` behind the visible face, into the wall). Door
+segments that are coplanar and touch along the wall (double-door leaves, a leaf and its frame)
+are merged into one box first.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+
+__all__ = ["DoorFitConfig", "fit_door_box", "fit_door_boxes", "transform_boxes", "box_corners"]
+
+
+@dataclasses.dataclass(frozen=True)
+class DoorFitConfig:
+    """Options of door-box fitting.
+
+    Attributes
+    ----------
+    thickness_m : float [m] — minimum box thickness ``dy`` (a wall-set door seen from one side).
+    face_to_center_m : float [m] — how far behind the visible face the box centre lies when the
+        thickness comes from ``thickness_m``.
+    merge_gap_m : float [m] — door segments closer than this along the wall (and coplanar within
+        ``merge_offset_m``, headings within ``merge_angle_deg``) form one door.
+    merge_offset_m : float [m]
+    merge_angle_deg : float [deg]
+    snap_to_floor_m : float [m] — a box whose bottom is within this of the floor is extended to it.
+    min_points : int — door segments with fewer valid points are ignored.
+    inlier_m : float [m] — points farther than this from the door's median plane are dropped
+        before measuring extents (when at least half the points remain).
+    split_gap_m : float [m] — a gap this wide along the wall splits the points; the largest
+        run is the door.
+    """
+
+    thickness_m: float = 0.15
+    face_to_center_m: float = 0.05
+    merge_gap_m: float = 0.2
+    merge_offset_m: float = 0.15
+    merge_angle_deg: float = 15.0
+    snap_to_floor_m: float = 0.3
+    min_points: int = 20
+    inlier_m: float = 0.04
+    split_gap_m: float = 0.25
+
+
+def _wrap_half(angle: float | np.ndarray):
+    """Fold an angle into (−π/2, π/2]."""
+    a = (np.asarray(angle) + np.pi / 2) % np.pi - np.pi / 2
+    a = np.where(np.isclose(a, -np.pi / 2), np.pi / 2, a)
+    return float(a) if np.ndim(a) == 0 else a
+
+
+def _axes(points: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
+    xy = points[:, :2] - points[:, :2].mean(axis=0)
+    cov = xy.T @ xy / max(len(xy), 1)
+    w, v = np.linalg.eigh(cov)
+    a = v[:, 1]
+    heading = _wrap_half(math.atan2(a[1], a[0]))
+    a = np.array([math.cos(heading), math.sin(heading)])
+    n = np.array([-a[1], a[0]])
+    return a, n, heading
+
+
+def fit_door_box(points_level: np.ndarray, config: DoorFitConfig = DoorFitConfig(),
+                 floor_z_m: float | None = None) -> np.ndarray:
+    """Fit one door box to its points.
+
+    Parameters
+    ----------
+    points_level : (N, 3) float — door points in a z-up frame with the camera/sensor at the
+        origin (the level frame of :mod:`sim2radar.reconstruct.backproject`) [m].
+    floor_z_m : float, optional [m] — floor height in that frame, to snap the bottom to.
+
+    Returns
+    -------
+    (7,) float32 — ``x y z dx dy dz heading``.
+    """
+    p = np.asarray(points_level, dtype=np.float64)
+    p = p[np.isfinite(p).all(axis=1)]
+    if len(p) < 3:
+        raise ValueError(f"a door box needs >= 3 points, got {len(p)}")
+    a, n, heading = _axes(p)
+    t = p[:, :2] @ n
+    # keep the door face: points off the dominant vertical plane (jambs, wall pixels at the
+    # segment border, seen at grazing angles) would inflate the extents
+    face = np.abs(t - np.median(t)) < config.inlier_m
+    if face.sum() >= max(3, 0.5 * len(p)):
+        p = p[face]
+        a, n, heading = _axes(p)
+        t = p[:, :2] @ n
+    s = p[:, :2] @ a
+    # keep the largest run of points along the wall without a gap > split_gap_m (drops stray
+    # wall columns that segmentation attached to the door)
+    order = np.argsort(s)
+    breaks = np.flatnonzero(np.diff(s[order]) > config.split_gap_m)
+    if len(breaks):
+        keep = max(np.split(order, breaks + 1), key=len)
+        p, s = p[keep], s[keep]
+        t = p[:, :2] @ n
+    s0, s1 = np.percentile(s, [1, 99])
+    t0, t1 = np.percentile(t, [2, 98])
+    z0, z1 = np.percentile(p[:, 2], [1, 99])
+    if floor_z_m is not None and 0 < z0 - floor_z_m < config.snap_to_floor_m:
+        z0 = floor_z_m
+    thick = t1 - t0
+    tc = 0.5 * (t0 + t1)
+    if thick < config.thickness_m:
+        # one face seen: move the centre away from the viewer (origin), into the wall
+        face = float(np.median(t))
+        away = 1.0 if face > 0 else -1.0  # the viewer (origin) has t = 0
+        tc = face + away * config.face_to_center_m
+        thick = config.thickness_m
+    sc = 0.5 * (s0 + s1)
+    cxy = sc * a + tc * n
+    return np.array([cxy[0], cxy[1], 0.5 * (z0 + z1), s1 - s0, thick, z1 - z0, heading],
+                    dtype=np.float32)
+
+
+def fit_door_boxes(segment_points: list[np.ndarray], config: DoorFitConfig = DoorFitConfig(),
+                   floor_z_m: float | None = None) -> tuple[np.ndarray, list[list[int]]]:
+    """Group door segments into doors and fit a box to each group.
+
+    Parameters
+    ----------
+    segment_points : list of (N_k, 3) arrays — points of each door segment, level frame [m].
+
+    Returns
+    -------
+    boxes : (M, 7) float32; groups : list of lists of input indices, one per box.
+    """
+    pts = [np.asarray(p, np.float64)[np.isfinite(p).all(axis=1)] for p in segment_points]
+    usable = [i for i, p in enumerate(pts) if len(p) >= config.min_points]
+    if not usable:
+        return np.zeros((0, 7), np.float32), []
+    single = {i: fit_door_box(pts[i], config, floor_z_m) for i in usable}
+    parent = {i: i for i in usable}
+
+    def find(i):
+        while parent[i] != i:
+            i = parent[i]
+        return i
+
+    cos_m = math.cos(math.radians(config.merge_angle_deg))
+    for ii, i in enumerate(usable):
+        for j in usable[ii + 1:]:
+            bi, bj = single[i], single[j]
+            if abs(math.cos(bi[6] - bj[6])) < cos_m:
+                continue
+            a = np.array([math.cos(bi[6]), math.sin(bi[6])])
+            n = np.array([-a[1], a[0]])
+            d = bj[:2] - bi[:2]
+            if abs(d @ n) > config.merge_offset_m:
+                continue
+            gap = abs(d @ a) - 0.5 * (bi[3] + bj[3])
+            if gap > config.merge_gap_m:
+                continue
+            parent[find(j)] = find(i)
+    groups: dict[int, list[int]] = {}
+    for i in usable:
+        groups.setdefault(find(i), []).append(i)
+    boxes, out_groups = [], []
+    for members in groups.values():
+        p = np.concatenate([pts[i] for i in members])
+        boxes.append(fit_door_box(p, config, floor_z_m))
+        out_groups.append(sorted(members))
+    return np.stack(boxes).astype(np.float32), out_groups
+
+
+def transform_boxes(boxes: np.ndarray, matrix: np.ndarray) -> np.ndarray:
+    """Re-express boxes in another z-up frame.
+
+    ``matrix`` (4, 4) maps the boxes' frame to the target frame. The centre is transformed
+    exactly; the heading is rotated by the transform's yaw (its rotation is assumed to be about
+    z, which holds between level, world and radar frames up to the gravity-estimate error).
+    """
+    b = np.asarray(boxes, dtype=np.float64).reshape(-1, 7).copy()
+    m = np.asarray(matrix, dtype=np.float64)
+    b[:, :3] = b[:, :3] @ m[:3, :3].T + m[:3, 3]
+    b[:, 6] = _wrap_half(b[:, 6] + math.atan2(m[1, 0], m[0, 0]))
+    return b.astype(np.float32)
+
+
+def box_corners(box: np.ndarray) -> np.ndarray:
+    """(8, 3) corners of one ``x y z dx dy dz heading`` box."""
+    x, y, z, dx, dy, dz, h = (float(v) for v in box)
+    c = np.array([[sx, sy, sz] for sx in (-.5, .5) for sy in (-.5, .5) for sz in (-.5, .5)])
+    c = c * [dx, dy, dz]
+    rot = np.array([[math.cos(h), -math.sin(h), 0], [math.sin(h), math.cos(h), 0], [0, 0, 1]])
+    return c @ rot.T + [x, y, z]

@@ -1,0 +1,469 @@
+"""The reconstruction pipeline (paper §3): RGB [+ LiDAR] -> material-labelled 3D scene.
+
+    from sim2radar.reconstruct import ReconstructionConfig, reconstruct, FrameInput
+
+    config = ReconstructionConfig()                       # lidar depth, builtin segments, prior
+    scene = reconstruct(FrameInput(rgb, intrinsics, lidar_points), config)
+    meshes = scene.meshes_in(radar_from_camera)           # ready for sim2radar.radar.simulate_frame
+    scene.door_boxes_in(radar_from_camera)                # (M, 7) pseudo-labels, radar frame
+
+Stages and their backends are chosen by name (registries in :mod:`.types`); ``oracle`` backends
+receive ``ground_truth`` (a ``WorldFrame`` or a dict of arrays). Stage 4 (back-projection,
+per-segment meshes, door boxes) has no backends. Every stage is timed; fallbacks (e.g. a mesh
+whose material is ``unknown`` given ``unknown_material`` for the radar) are recorded in
+``LabeledScene.info["fallbacks"]``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+from pydantic import BaseModel, ConfigDict, Field, field_validator
+
+from sim2radar.camera import CameraIntrinsics
+from sim2radar.mesh import MaterialMesh, save_ply
+from sim2radar.reconstruct.backproject import (
+    estimate_up,
+    level_from_camera,
+    normals_from_points,
+    points_from_depth,
+)
+from sim2radar.reconstruct.doors import DoorFitConfig, fit_door_boxes, transform_boxes
+from sim2radar.reconstruct.meshing import MeshingConfig, segment_meshes
+from sim2radar.reconstruct.types import (
+    DEPTH_BACKENDS,
+    MATERIAL_BACKENDS,
+    SEGMENT_BACKENDS,
+    DepthResult,
+    FrameInput,
+    MaterialLabel,
+    ReconstructionInputError,
+    Segments,
+)
+from sim2radar.vocab import MATERIAL_CLASSES, SEMANTIC_CLASSES
+
+__all__ = [
+    "BackendSpec",
+    "ReconstructionConfig",
+    "LabeledScene",
+    "reconstruct",
+    "build_backends",
+]
+
+log = logging.getLogger(__name__)
+
+#: Version of the reconstruction stage's output; part of artifact content keys.
+STAGE_VERSION = 1
+
+
+class BackendSpec(BaseModel):
+    """A backend chosen by registry name, with its keyword options."""
+
+    model_config = ConfigDict(frozen=True, extra="forbid")
+    name: str
+    options: dict[str, Any] = Field(default_factory=dict)
+
+
+class MeshingOptions(BaseModel):
+    """See :class:`sim2radar.reconstruct.meshing.MeshingConfig`."""
+
+    model_config = ConfigDict(frozen=True, extra="forbid")
+    stride_px: int = 2
+    max_incidence_deg: float = 84.0
+    min_jump_rel: float = 0.02
+    target_faces: int = 400
+    min_faces: int = 2
+
+    def to_config(self) -> MeshingConfig:
+        return MeshingConfig(**self.model_dump())
+
+
+class DoorOptions(BaseModel):
+    """See :class:`sim2radar.reconstruct.doors.DoorFitConfig`."""
+
+    model_config = ConfigDict(frozen=True, extra="forbid")
+    thickness_m: float = 0.15
+    face_to_center_m: float = 0.05
+    merge_gap_m: float = 0.2
+    merge_offset_m: float = 0.15
+    merge_angle_deg: float = 15.0
+    snap_to_floor_m: float = 0.3
+    min_points: int = 20
+    inlier_m: float = 0.04
+    split_gap_m: float = 0.25
+
+    def to_config(self) -> DoorFitConfig:
+        return DoorFitConfig(**self.model_dump())
+
+
+class ReconstructionConfig(BaseModel):
+    """Typed configuration of :func:`reconstruct`.
+
+    Attributes
+    ----------
+    depth, segments, materials : BackendSpec — registry name + options per stage.
+    meshing : MeshingOptions; doors : DoorOptions.
+    max_depth_m : float [m] — depth beyond this is treated as invalid.
+    unknown_material : str — material given to meshes whose label is ``unknown`` (the radar
+        simulator needs a material); recorded as a fallback.
+    """
+
+    model_config = ConfigDict(frozen=True, extra="forbid")
+    depth: BackendSpec = BackendSpec(name="lidar")
+    segments: BackendSpec = BackendSpec(name="builtin")
+    materials: BackendSpec = BackendSpec(name="prior")
+    meshing: MeshingOptions = MeshingOptions()
+    doors: DoorOptions = DoorOptions()
+    max_depth_m: float = 30.0
+    unknown_material: str = "plasterboard"
+
+    @field_validator("unknown_material")
+    @classmethod
+    def _known_material(cls, v: str) -> str:
+        if v not in MATERIAL_CLASSES or v == "unknown":
+            raise ValueError(f"unknown_material must be one of {MATERIAL_CLASSES[1:]}, got {v!r}")
+        return v
+
+    @classmethod
+    def from_yaml(cls, path: str | Path) -> ReconstructionConfig:
+        """Load a YAML config; relative ``*path*`` options resolve against the file's folder."""
+        path = Path(path)
+        if not path.is_file():
+            raise FileNotFoundError(f"{path}: reconstruction config not found")
+        doc = yaml.safe_load(path.read_text()) or {}
+        if not isinstance(doc, dict):
+            raise ValueError(f"{path}: expected a mapping (depth, segments, materials, ...)")
+        for stage in ("depth", "segments", "materials"):
+            spec = doc.get(stage)
+            if isinstance(spec, str):
+                doc[stage] = spec = {"name": spec}
+            if isinstance(spec, dict):
+                opts = spec.get("options") or {}
+                for k, v in list(opts.items()):
+                    if isinstance(v, str) and k.endswith("path") and not Path(v).is_absolute() \
+                            and "://" not in v:
+                        opts[k] = str((path.parent / v).resolve())
+        try:
+            return cls.model_validate(doc)
+        except Exception as exc:
+            raise ValueError(f"{path}: invalid reconstruction config: {exc}") from exc
+
+    @classmethod
+    def preset(cls, name: str) -> ReconstructionConfig:
+        """``builtin`` (lidar + builtin + prior, the default), ``oracle`` (all ground truth),
+        ``builtin-oracle-depth`` (oracle depth + builtin segments + prior materials)."""
+        presets = {
+            "builtin": {},
+            "oracle": {"depth": {"name": "oracle"}, "segments": {"name": "oracle"},
+                       "materials": {"name": "oracle"}},
+            "builtin-oracle-depth": {"depth": {"name": "oracle"}},
+        }
+        if name not in presets:
+            raise ValueError(f"unknown reconstruction preset {name!r}; known: {sorted(presets)}")
+        return cls.model_validate(presets[name])
+
+    def to_dict(self) -> dict:
+        """JSON-able resolved config (hashed into artifact keys)."""
+        return self.model_dump(mode="json")
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class LabeledScene:
+    """A material-labelled 3D scene reconstructed from one frame.
+
+    Attributes
+    ----------
+    name : str
+    intrinsics : CameraIntrinsics
+    rgb : (H, W, 3) uint8 — the input image.
+    depth_m : (H, W) float32 — z-depth [m], 0 where invalid.
+    points_cam : (H, W, 3) float32 — per-pixel points, camera frame (OpenCV) [m]; NaN invalid.
+    segment_id : (H, W) int32 — segment per pixel, −1 unassigned.
+    segment_labels : tuple[str, ...] — semantic class per segment.
+    segment_scores : (S,) float32 — label confidence.
+    segment_materials : tuple[MaterialLabel, ...] — material label per segment.
+    semantic_id : (H, W) uint8 — per-pixel index into ``vocab.SEMANTIC_CLASSES``.
+    material_id : (H, W) uint8 — per-pixel index into ``vocab.MATERIAL_CLASSES``.
+    meshes : list[MaterialMesh] — one per segment, camera frame [m].
+    door_boxes : (M, 7) float32 — ``x y z dx dy dz heading`` in the level frame.
+    level_from_camera : (4, 4) float64 — camera frame -> level frame (x fwd, y left, z up).
+    floor_z_m : float [m] — floor height in the level frame (NaN if no floor seen).
+    timings_s : dict[str, float] — wall time per stage [s].
+    info : dict — backend diagnostics and recorded fallbacks.
+    """
+
+    name: str
+    intrinsics: CameraIntrinsics
+    rgb: np.ndarray
+    depth_m: np.ndarray
+    points_cam: np.ndarray
+    segment_id: np.ndarray
+    segment_labels: tuple[str, ...]
+    segment_scores: np.ndarray
+    segment_materials: tuple[MaterialLabel, ...]
+    semantic_id: np.ndarray
+    material_id: np.ndarray
+    meshes: list
+    door_boxes: np.ndarray
+    level_from_camera: np.ndarray
+    floor_z_m: float
+    timings_s: dict
+    info: dict
+
+    # -- frames ---------------------------------------------------------------------------
+    def meshes_in(self, camera_to_target: np.ndarray | None = None) -> list[MaterialMesh]:
+        """Meshes in another frame; ``camera_to_target`` (4, 4) maps camera -> target.
+
+        ``None`` gives the level frame (x forward, y left, z up at the camera), which is the
+        radar frame of a radar mounted at the camera: pass the result to
+        ``simulate_frame(meshes, radar, pose=None)``. For a procedural world use
+        ``inv(radar_to_world) @ camera_to_world`` to get the rig's radar frame.
+        """
+        m = self.level_from_camera if camera_to_target is None else np.asarray(camera_to_target)
+        return [mesh.transformed(m) for mesh in self.meshes]
+
+    def door_boxes_in(self, camera_to_target: np.ndarray | None = None) -> np.ndarray:
+        """Door boxes (M, 7) in a z-up target frame (``None``: the level frame)."""
+        if camera_to_target is None:
+            return self.door_boxes.copy()
+        level_to_target = np.asarray(camera_to_target) @ np.linalg.inv(self.level_from_camera)
+        return transform_boxes(self.door_boxes, level_to_target)
+
+    def points_in(self, camera_to_target: np.ndarray | None = None) -> np.ndarray:
+        """Valid points (N, 3) float32 in the target frame (``None``: level frame)."""
+        m = self.level_from_camera if camera_to_target is None else np.asarray(camera_to_target)
+        p = self.points_cam[np.isfinite(self.points_cam).all(axis=-1)].astype(np.float64)
+        return (p @ m[:3, :3].T + m[:3, 3]).astype(np.float32)
+
+    @property
+    def n_segments(self) -> int:
+        return len(self.segment_labels)
+
+    # -- exporters ------------------------------------------------------------------------
+    def write_scene(self, out_dir: str | Path, camera_to_target: np.ndarray | None = None) -> Path:
+        """Write the meshes as PLY files plus ``scene.yaml`` (``sim2radar.mesh.load_scene``
+        format, so ``sim2radar simulate scene.yaml`` runs on it) and ``scene.xml`` (Mitsuba).
+
+        Returns the path of ``scene.yaml``.
+        """
+        out = Path(out_dir)
+        out.mkdir(parents=True, exist_ok=True)
+        entries = []
+        for mesh in self.meshes_in(camera_to_target):
+            save_ply(mesh, out / f"{mesh.name}.ply")
+            entries.append({"file": f"{mesh.name}.ply", "material": mesh.material,
+                            "semantic": mesh.semantic, "name": mesh.name})
+        path = out / "scene.yaml"
+        path.write_text(yaml.safe_dump({"meshes": entries}, sort_keys=False))
+        (out / "scene.xml").write_text(mitsuba_xml(entries))
+        return path
+
+    def to_mitsuba_dict(self, camera_to_target: np.ndarray | None = None) -> dict:
+        """A Mitsuba scene dict with one in-memory ``mi.Mesh`` per segment (needs mitsuba; the
+        variant comes from :func:`sim2radar.hardware.mitsuba_variant`). Each shape carries its
+        material name as the BSDF id (``diffuse`` placeholder; the radar reads materials by
+        name from the mesh list)."""
+        import mitsuba as mi
+
+        from sim2radar.hardware import mitsuba_variant
+
+        mitsuba_variant()
+        scene: dict[str, Any] = {"type": "scene"}
+        for i, mesh in enumerate(self.meshes_in(camera_to_target)):
+            m = mi.Mesh(mesh.name or f"mesh_{i}", len(mesh.vertices), len(mesh.faces))
+            params = mi.traverse(m)
+            params["vertex_positions"] = mi.Float(mesh.vertices.ravel().astype(np.float32))
+            params["faces"] = mi.UInt32(mesh.faces.ravel().astype(np.uint32))
+            params.update()
+            scene[mesh.name or f"mesh_{i}"] = m
+        return scene
+
+    def to_tables(self, camera_to_target: np.ndarray | None = None) -> dict:
+        """Parquet tables: ``scene_meshes`` (meshes in the target frame) and
+        ``reconstruction`` (per-pixel maps, labels, boxes); see :mod:`.artifacts`."""
+        from sim2radar.reconstruct.artifacts import scene_to_tables
+
+        return scene_to_tables(self, camera_to_target)
+
+
+def mitsuba_xml(entries: list[dict]) -> str:
+    """Mitsuba 3 scene XML referencing PLY files (one shape per mesh, BSDF id = material)."""
+    lines = ['<scene version="3.0.0">']
+    for mat in sorted({e["material"] for e in entries}):
+        lines.append(f'  <bsdf type="diffuse" id="{mat}"/>')
+    for e in entries:
+        lines.append(f'  <shape type="ply" id="{e["name"]}">')
+        lines.append(f'    <string name="filename" value="{e["file"]}"/>')
+        lines.append(f'    <ref id="{e["material"]}"/>')
+        lines.append("  </shape>")
+    lines.append("</scene>")
+    return "\n".join(lines) + "\n"
+
+
+def build_backends(config: ReconstructionConfig, ground_truth=None) -> tuple[Any, Any, Any]:
+    """Instantiate the three stage backends named in ``config`` (``oracle`` ones get
+    ``ground_truth``)."""
+    import sim2radar.reconstruct  # noqa: F401  (registers every backend module)
+
+    out = []
+    for spec, registry in ((config.depth, DEPTH_BACKENDS), (config.segments, SEGMENT_BACKENDS),
+                           (config.materials, MATERIAL_BACKENDS)):
+        cls = registry.get(spec.name)
+        kwargs = dict(spec.options)
+        if spec.name == "oracle":
+            kwargs["ground_truth"] = ground_truth
+        try:
+            out.append(cls(**kwargs))
+        except TypeError as exc:
+            raise ValueError(f"{registry.stage} backend {spec.name!r}: bad options {spec.options}: "
+                             f"{exc}") from exc
+    return tuple(out)
+
+
+def _check_depth(frame: FrameInput, depth: DepthResult, max_depth_m: float) -> DepthResult:
+    d = np.asarray(depth.depth_m, dtype=np.float32)
+    if d.shape != frame.shape:
+        raise ReconstructionInputError(
+            f"{frame.name}: depth backend returned {d.shape}, image is {frame.shape}"
+        )
+    d = np.where(np.isfinite(d) & (d > 0) & (d <= max_depth_m), d, 0).astype(np.float32)
+    if not (d > 0).any():
+        raise ReconstructionInputError(
+            f"{frame.name}: depth has no valid pixel (all 0/NaN or beyond max_depth_m="
+            f"{max_depth_m}); check the depth backend and its input (LiDAR in view?)"
+        )
+    return DepthResult(d, dict(depth.info))
+
+
+def _check_segments(frame: FrameInput, seg: Segments) -> Segments:
+    ids = np.asarray(seg.segment_id)
+    if ids.shape != frame.shape:
+        raise ReconstructionInputError(
+            f"{frame.name}: segmentation returned {ids.shape}, image is {frame.shape}"
+        )
+    if seg.n_segments == 0 or not (ids >= 0).any():
+        raise ReconstructionInputError(f"{frame.name}: no segments in this image")
+    if ids.max() >= seg.n_segments:
+        raise ReconstructionInputError(
+            f"{frame.name}: segment ids reach {ids.max()} but only {seg.n_segments} labels"
+        )
+    bad = sorted({lbl for lbl in seg.labels if lbl not in SEMANTIC_CLASSES})
+    if bad:
+        raise ReconstructionInputError(f"{frame.name}: unknown segment labels {bad}")
+    return seg
+
+
+def reconstruct(
+    frame: FrameInput,
+    config: ReconstructionConfig | None = None,
+    ground_truth=None,
+    *,
+    backends: tuple | None = None,
+) -> LabeledScene:
+    """Run the four stages on one frame.
+
+    Parameters
+    ----------
+    frame : FrameInput — RGB, intrinsics, optional LiDAR (camera frame).
+    config : ReconstructionConfig — backends and options (default: lidar/builtin/prior).
+    ground_truth : ``WorldFrame``-like or dict — required by ``oracle`` backends.
+    backends : (depth, segments, materials) instances — reuse across frames (e.g. a VLM
+        client with its cache); default: built from ``config``.
+
+    Returns
+    -------
+    LabeledScene
+
+    Raises
+    ------
+    ReconstructionInputError
+        Bad image/intrinsics/LiDAR, no valid depth, no segments.
+    """
+    config = config or ReconstructionConfig()
+    timings: dict[str, float] = {}
+    fallbacks: list[str] = []
+    t0 = time.perf_counter()
+    depth_be, seg_be, mat_be = backends or build_backends(config, ground_truth)
+
+    t = time.perf_counter()
+    depth = _check_depth(frame, depth_be.estimate(frame), config.max_depth_m)
+    timings["depth"] = time.perf_counter() - t
+
+    t = time.perf_counter()
+    segments = _check_segments(frame, seg_be.segment(frame, depth))
+    timings["segments"] = time.perf_counter() - t
+
+    t = time.perf_counter()
+    labels = list(mat_be.label(frame, depth, segments))
+    if len(labels) != segments.n_segments:
+        raise RuntimeError(
+            f"{frame.name}: material backend {config.materials.name!r} returned {len(labels)} "
+            f"labels for {segments.n_segments} segments"
+        )
+    for i, lab in enumerate(labels):
+        if lab.material not in MATERIAL_CLASSES:
+            fallbacks.append(f"segment {i}: material {lab.material!r} not in vocabulary -> unknown")
+            labels[i] = MaterialLabel("unknown", 0.0, f"out of vocabulary: {lab.material!r}")
+    timings["materials"] = time.perf_counter() - t
+
+    # Stage 4: back-projection, gravity, meshes, door boxes
+    t = time.perf_counter()
+    k = frame.intrinsics
+    points = points_from_depth(depth.depth_m, k)
+    step = max(1, round(k.width / 200))
+    up = estimate_up(normals_from_points(points, step_px=step))
+    level = level_from_camera(up)
+    seg = segments.segment_id
+    sem_lut = np.array([SEMANTIC_CLASSES.index(s) for s in segments.labels] + [0], np.uint8)
+    mat_lut = np.array([MATERIAL_CLASSES.index(m.material) for m in labels] + [0], np.uint8)
+    semantic_id = sem_lut[seg]  # -1 picks the trailing 0
+    material_id = mat_lut[seg]
+    timings["backproject"] = time.perf_counter() - t
+
+    t = time.perf_counter()
+    mesh_materials = []
+    for i, lab in enumerate(labels):
+        if lab.material == "unknown":
+            fallbacks.append(f"segment {i} ({segments.labels[i]}): material unknown -> "
+                             f"{config.unknown_material} for the radar mesh")
+            mesh_materials.append(config.unknown_material)
+        else:
+            mesh_materials.append(lab.material)
+    meshes = segment_meshes(points, seg, segments.labels, mesh_materials, k.fx,
+                            config.meshing.to_config())
+    timings["meshing"] = time.perf_counter() - t
+
+    t = time.perf_counter()
+    pl = points @ level[:3, :3].T.astype(np.float32)
+    floor_pts = pl[semantic_id == SEMANTIC_CLASSES.index("floor")]
+    floor_pts = floor_pts[np.isfinite(floor_pts).all(axis=1)]
+    floor_z = float(np.median(floor_pts[:, 2])) if len(floor_pts) >= 20 else float("nan")
+    door_ids = [i for i, s in enumerate(segments.labels) if s == "door"]
+    boxes, _ = fit_door_boxes([pl[seg == i] for i in door_ids], config.doors.to_config(),
+                              None if np.isnan(floor_z) else floor_z)
+    timings["doors"] = time.perf_counter() - t
+    timings["total"] = time.perf_counter() - t0
+
+    info = {
+        "depth": depth.info,
+        "segments": getattr(seg_be, "last_info", {}),
+        "up_cam": up.tolist(),
+        "fallbacks": fallbacks,
+        "config": config.to_dict(),
+    }
+    for f in fallbacks:
+        log.info("%s: %s", frame.name, f)
+    return LabeledScene(
+        name=frame.name, intrinsics=k, rgb=frame.rgb, depth_m=depth.depth_m, points_cam=points,
+        segment_id=seg.astype(np.int32), segment_labels=tuple(segments.labels),
+        segment_scores=np.asarray(segments.scores, np.float32),
+        segment_materials=tuple(labels), semantic_id=semantic_id, material_id=material_id,
+        meshes=meshes, door_boxes=boxes, level_from_camera=level, floor_z_m=floor_z,
+        timings_s=timings, info=info,
+    )
