@@ -110,7 +110,10 @@ class ScatteringConfig(_Frozen):
     @classmethod
     def _check_coefficients(cls, value: dict[str, float]) -> dict[str, float]:
         for name, s in value.items():
-            get_material(name)  # raises, listing the known names
+            try:
+                get_material(name)
+            except KeyError as exc:  # pydantic needs ValueError to report the field
+                raise ValueError(str(exc)) from None
             if not 0.0 <= float(s) <= 1.0:
                 raise ValueError(f"scattering coefficient for {name!r} must lie in [0, 1], got {s}")
         return {k: float(v) for k, v in value.items()}

@@ -254,6 +254,7 @@ class RadarScene:
         path_in = dr.zeros(mi.Float, n)
         active = dr.full(mi.Bool, True, n)
         d_omega = prep.solid_angle
+        prev_hit = mi.Point3f(radar_pos)
 
         for bounce in range(radar.max_bounces):
             si = self._scene.ray_intersect(ray, active)
@@ -264,7 +265,9 @@ class RadarScene:
             normal = dr.select(cos_in < 0, -normal, normal)
             cos_in = dr.abs(cos_in)
             hit = si.p
-            path_in = path_in + dr.select(valid, si.t, 0.0)
+            # unfold the path from the true hit points: si.t is measured from the spawned
+            # origin, which Mitsuba offsets ~(1+|p|) 1e-4 m off the surface (~0.1 lambda)
+            path_in = path_in + dr.select(valid, dr.norm(hit - prev_hit), 0.0)
             to_radar = radar_pos - hit
             r_out = dr.norm(to_radar)
             u_out = to_radar / r_out
@@ -295,7 +298,10 @@ class RadarScene:
             cg_im = carry_re * g_im + carry_im * g_re
 
             path = path_in + r_out
-            phase = -wavenumber * path  # e^{-jkL}
+            # e^{-jkL}: reduce to the fractional number of wavelengths first (float32 sincos
+            # loses accuracy for |arguments| of 1e4 rad, i.e. paths of a few metres)
+            cycles = path * inv_lambda
+            phase = -2.0 * math.pi * (cycles - dr.floor(cycles))
             sin_p, cos_p = dr.sincos(phase)
             # physical-optics (specular) term with the Nyquist window
             ci = dr.maximum(cos_in, MIN_COS)
@@ -347,8 +353,9 @@ class RadarScene:
                 carry_im = cg_im * spec
                 reflected = ray.d + 2.0 * cos_in * normal
                 ray = si.spawn_ray(reflected)
+                prev_hit = hit
                 active = valid & ((carry_re * carry_re + carry_im * carry_im) > 1e-10)
-                dr.eval(ray, carry_re, carry_im, path_in, active, *acc, hits)
+                dr.eval(ray, prev_hit, carry_re, carry_im, path_in, active, *acc, hits)
 
         dr.eval(*acc, hits)
         dr.sync_thread()
