@@ -282,6 +282,8 @@ class RigConfig(BaseModel):
     spp: int = 16
     #: Path length of the RGB path tracer (2 = direct light only, 3 = one indirect bounce).
     max_depth: int = 3
+    #: Denoise the RGB (edge-aware, guided by the exact normal/instance maps).
+    denoise: bool = True
     #: A door counts as visible when at least this fraction of the image shows it.
     min_visible_fraction: float = 0.002
 

@@ -68,6 +68,7 @@ class Appearance:
     texture_scale_m : float [m] — size of one texture period (tile edge, grain spacing).
     texture_contrast : float — relative brightness modulation of the texture in [0, 1].
     emission : float — radiance of an emitter (ceiling light panels), 0 for ordinary surfaces.
+    texture_seed : int — seed of the procedural texture image.
     """
 
     base_color: tuple[float, float, float]
@@ -77,6 +78,7 @@ class Appearance:
     texture_scale_m: float = 0.5
     texture_contrast: float = 0.0
     emission: float = 0.0
+    texture_seed: int = 0
 
     def to_dict(self) -> dict[str, Any]:
         return dataclasses.asdict(self)
