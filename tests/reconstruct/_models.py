@@ -176,3 +176,138 @@ def _export(model, dummy, path, input_names, output_names, dynamic_axes=None) ->
             opset_version=17,
             dynamo=False,
         )
+
+
+# ---------------------------------------------------------------------------------------------
+# SAM2 and Grounding DINO look-alikes
+# ---------------------------------------------------------------------------------------------
+
+#: Synthetic 64 x 64 scene for segmentation: name -> (row0, row1, col0, col1, RGB). Painted in
+#: order; boundaries on multiples of 4 px (the tiny SAM2's 16 x 16 embedding grid).
+SEG_SCENE = {
+    "ceiling": (0, 8, 0, 64, (240, 240, 235)),
+    "wall": (8, 48, 0, 64, (200, 190, 170)),
+    "floor": (48, 64, 0, 64, (110, 110, 120)),
+    "door": (12, 48, 8, 24, (150, 30, 30)),
+    "window": (12, 28, 40, 56, (120, 170, 230)),
+    "fire_extinguisher": (32, 40, 32, 36, (230, 10, 10)),
+}
+SEG_HW = (64, 64)
+SAM_INPUT = 64  # the tiny SAM2's square input size [px]
+
+#: BERT-like vocabulary for the tiny Grounding DINO (id = index).
+TINY_VOCAB = [
+    "[PAD]", "[UNK]", "[CLS]", "[SEP]", "[MASK]", ".", ",", "?", "door", "wall", "floor",
+    "ceiling", "window", "fire", "ex", "##ting", "##uish", "##er", "hand", "##rail", "cat",
+]
+
+
+def render_seg_scene() -> tuple[np.ndarray, dict[str, np.ndarray]]:
+    """RGB (64, 64, 3) uint8 and the visible mask of each named region."""
+    h, w = SEG_HW
+    rgb = np.zeros((h, w, 3), np.uint8)
+    owner = np.empty((h, w), object)
+    for name, (r0, r1, c0, c1, col) in SEG_SCENE.items():
+        rgb[r0:r1, c0:c1] = col
+        owner[r0:r1, c0:c1] = name
+    return rgb, {name: owner == name for name in SEG_SCENE}
+
+
+def export_sam2_like(encoder_path: Path, decoder_path: Path, *, with_orig_size: bool = True):
+    """Tiny SAM2 encoder/decoder pair with the samexporter signatures (input size 64).
+
+    Encoder: ``image`` (1, 3, 64, 64) -> ``image_embed`` (1, 3, 16, 16) (4x4 average colour),
+    ``high_res_feats_0`` (1, 1, 64, 64), ``high_res_feats_1`` (1, 1, 32, 32).
+    Decoder: the mask of a point (logits saturating at +-6) is the set of embedding cells whose colour is within 0.3
+    (normalised units) of the colour under the point: a flat-colour region. Three multimask
+    outputs with thresholds 0.3 / 0.1 / 1.0 and predicted IoUs 0.95 / 0.6 / 0.5; masks come out at
+    32 x 32 (upsampled x2), like SAM's low-resolution masks that the caller resizes.
+    """
+    import torch
+    import torch.nn.functional as F  # noqa: N812
+
+    class Enc(torch.nn.Module):
+        def forward(self, image):
+            emb = F.avg_pool2d(image, 4)
+            return emb, image[:, :1], F.avg_pool2d(image[:, :1], 2)
+
+    class Dec(torch.nn.Module):
+        def forward(self, image_embed, hr0, hr1, point_coords, point_labels, mask_input,
+                    has_mask_input, *orig):
+            e = image_embed[0].reshape(3, 256)  # (3, 256)
+            ix = torch.clamp(torch.floor(point_coords[:, 0, 0] / 4), 0, 15).long()
+            iy = torch.clamp(torch.floor(point_coords[:, 0, 1] / 4), 0, 15).long()
+            col = torch.index_select(e, 1, iy * 16 + ix)  # (3, B)
+            d = torch.sqrt(((e[:, None, :] - col[:, :, None]) ** 2).sum(0) + 1e-12)  # (B, 256)
+            extra = (hr0.mean() + hr1.mean() + mask_input.mean() + has_mask_input.sum()
+                     + point_labels.sum()) * 0.0
+            if orig:
+                extra = extra + orig[0].sum().to(torch.float32) * 0.0
+            logits = 6 * torch.tanh(torch.stack([20 * (0.3 - d), 20 * (0.1 - d), 20 * (1.0 - d)], 1))
+            logits = logits + extra
+            logits = F.interpolate(logits.reshape(-1, 3, 16, 16), scale_factor=2.0,
+                                   mode="nearest")
+            ious = torch.ones_like(logits[:, :, 0, 0]) * torch.tensor([0.95, 0.6, 0.5])
+            return logits, ious
+
+    _export(Enc().eval(), (torch.rand(1, 3, SAM_INPUT, SAM_INPUT),), encoder_path, ["image"],
+            ["image_embed", "high_res_feats_0", "high_res_feats_1"])
+    names = ["image_embed", "high_res_feats_0", "high_res_feats_1", "point_coords",
+             "point_labels", "mask_input", "has_mask_input"]
+    dummy = [torch.rand(1, 3, 16, 16), torch.rand(1, 1, 64, 64), torch.rand(1, 1, 32, 32),
+             torch.rand(2, 1, 2) * 64, torch.ones(2, 1), torch.zeros(2, 1, 16, 16),
+             torch.zeros(1)]
+    if with_orig_size:
+        names.append("orig_im_size")
+        dummy.append(torch.tensor(list(SEG_HW), dtype=torch.int64))
+    _export(Dec().eval(), tuple(dummy), decoder_path, names, ["masks", "iou_predictions"],
+            {"point_coords": {0: "b", 1: "p"}, "point_labels": {0: "b", 1: "p"},
+             "mask_input": {0: "b"}})
+    return encoder_path, decoder_path
+
+
+def seg_scene_boxes() -> dict[str, tuple[float, float, float, float]]:
+    """Normalised (cx, cy, w, h) boxes of the regions' full rectangles."""
+    out = {}
+    for name, (r0, r1, c0, c1, _) in SEG_SCENE.items():
+        h, w = SEG_HW
+        out[name] = ((c0 + c1) / 2 / w, (r0 + r1) / 2 / h, (c1 - c0) / w, (r1 - r0) / h)
+    return out
+
+
+def export_gdino_like(path: Path, queries: list[tuple[str, int, tuple]], *, img_hw=SEG_HW):
+    """Tiny Grounding DINO with the public ONNX signature.
+
+    Each query ``(token, position_id, box_cxcywh)`` fires (logit +8, else -8) on the text
+    positions whose token id is ``TINY_VOCAB.index(token)`` *and* whose position id (restarting
+    in every phrase) equals ``position_id``; its box is ``box_cxcywh``. Logits are (1, Q, 256).
+    """
+    import torch
+
+    tok = torch.tensor([TINY_VOCAB.index(t) for t, _, _ in queries], dtype=torch.int64)
+    pid = torch.tensor([p for _, p, _ in queries], dtype=torch.int64)
+    boxes = torch.tensor([b for _, _, b in queries], dtype=torch.float32)
+
+    class Gd(torch.nn.Module):
+        def forward(self, img, input_ids, attention_mask, position_ids, token_type_ids,
+                    text_token_mask):
+            ids = input_ids[0]
+            pos = torch.ones_like(ids).cumsum(0) - 1  # (T,) text positions
+            onehot = (pos[:, None] == torch.arange(256)[None, :]).to(torch.float32)  # (T, 256)
+            ok = (ids[None, :] == tok[:, None]) & (position_ids[0][None, :] == pid[:, None])
+            ok = ok & attention_mask[0][None, :].to(torch.bool)
+            ok = ok & text_token_mask[0].diagonal()[None, :].to(torch.bool)
+            logits = ok.to(torch.float32) @ onehot * 16.0 - 8.0
+            logits = logits + token_type_ids.sum().to(torch.float32) * 0.0
+            b = boxes + img.mean() * 0.0
+            return logits[None], b[None]
+
+    t = 6
+    dummy = (torch.rand(1, 3, *img_hw), torch.zeros(1, t, dtype=torch.int64),
+             torch.ones(1, t, dtype=torch.bool), torch.zeros(1, t, dtype=torch.int64),
+             torch.zeros(1, t, dtype=torch.int64), torch.ones(1, t, t, dtype=torch.bool))
+    names = ["img", "input_ids", "attention_mask", "position_ids", "token_type_ids",
+             "text_token_mask"]
+    _export(Gd().eval(), dummy, path, names, ["logits", "boxes"],
+            {n: {1: "t"} for n in names[1:5]} | {"text_token_mask": {1: "t", 2: "t"}})
+    return path
