@@ -1,0 +1,91 @@
+"""simulate_frame / RadarScene: poses, seeds, outputs and input errors."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from sim2radar.mesh import MaterialMesh
+from sim2radar.radar import RadarFrame, RadarScene, simulate_frame
+from tests.radar.conftest import dihedral, facing_plate
+
+
+def _pose(yaw_rad: float, t) -> np.ndarray:
+    c, s = math.cos(yaw_rad), math.sin(yaw_rad)
+    m = np.eye(4)
+    m[:3, :3] = [[c, -s, 0], [s, c, 0], [0, 0, 1]]
+    m[:3, 3] = t
+    return m
+
+
+def test_frame_contents(mmwcas):
+    frame = simulate_frame([facing_plate(3.0)], mmwcas, return_cube=True)
+    assert isinstance(frame, RadarFrame)
+    assert frame.points.dtype == np.float32 and frame.points.shape[1] == 4
+    assert frame.cube.shape == (mmwcas.n_range_bins, mmwcas.n_azimuth_bins,
+                                mmwcas.n_elevation_bins)
+    assert frame.cube.dtype == np.complex64
+    assert len(frame.range_bins_m) == mmwcas.n_range_bins
+    assert frame.stats["n_rays"] == mmwcas.n_rays and frame.stats["n_hits"] > 0
+    assert {"trace", "detect", "total"} <= set(frame.stats["seconds"])
+    assert np.all(np.diff(frame.intensity_db) <= 0)  # strongest first
+    assert simulate_frame([facing_plate(3.0)], mmwcas).cube is None
+
+
+def test_moving_radar_and_scene_together_gives_the_same_points(mmwcas):
+    meshes = [facing_plate(3.0, 0.5, size=0.6, name="a"), *dihedral(4.5, size=0.6)]
+    pose = _pose(math.radians(35.0), [2.0, -1.0, 0.5])
+    moved = [m.transformed(pose) for m in meshes]
+    radar = mmwcas.with_updates(max_bounces=2)
+    a = simulate_frame(meshes, radar)
+    b = simulate_frame(moved, radar, pose=pose)
+    assert a.n_points > 0
+    k = min(5, a.n_points)
+    np.testing.assert_allclose(b.points[:k, :3], a.points[:k, :3], atol=0.01)
+    np.testing.assert_allclose(b.points[:k, 3], a.points[:k, 3], atol=0.5)
+
+
+def test_scene_is_built_once_and_reused_across_poses(mmwcas):
+    scene = RadarScene([facing_plate(3.0)])
+    first = scene.simulate(mmwcas, _pose(0.0, [0, 0, 0]))
+    # radar stepped 1 m toward the plate: the plate appears at 2 m
+    second = scene.simulate(mmwcas, _pose(0.0, [1.0, 0, 0]))
+    assert np.linalg.norm(first.points[0, :3]) == pytest.approx(3.0, abs=0.04)
+    assert np.linalg.norm(second.points[0, :3]) == pytest.approx(2.0, abs=0.04)
+    # radar turned 90 deg left: the plate is now behind its right shoulder, out of view
+    turned = scene.simulate(mmwcas, _pose(math.radians(90), [0, 0, 0]))
+    assert turned.n_points == 0
+
+
+def test_seed_is_reproducible_and_adds_noise(mmwcas):
+    meshes = [facing_plate(3.0)]
+    a = simulate_frame(meshes, mmwcas, seed=7, return_cube=True)
+    b = simulate_frame(meshes, mmwcas, seed=7, return_cube=True)
+    c = simulate_frame(meshes, mmwcas, seed=8, return_cube=True)
+    np.testing.assert_array_equal(a.points, b.points)
+    assert not np.array_equal(a.cube, c.cube)
+    # noise fills empty cells at about the configured floor
+    empty = np.abs(a.cube[200:]) ** 2
+    noise_db = 10 * np.log10(empty.mean())
+    assert noise_db == pytest.approx(mmwcas.detection.noise_floor_db, abs=0.5)
+    # the plate is still found at 3 m
+    assert np.linalg.norm(a.points[0, :3]) == pytest.approx(3.0, abs=mmwcas.range_resolution_m)
+
+
+def test_preset_name_accepted(mmwcas):
+    frame = simulate_frame([facing_plate(3.0)], "ti-mmwcas")
+    assert frame.n_points > 0
+
+
+def test_bad_inputs_are_explained(mmwcas):
+    with pytest.raises(ValueError, match="no meshes"):
+        simulate_frame([], mmwcas)
+    bad = MaterialMesh(np.eye(3), [[0, 1, 2]], material="unobtainium", name="blob")
+    with pytest.raises(ValueError, match="blob.*unobtainium.*concrete"):
+        simulate_frame([bad], mmwcas)
+    with pytest.raises(ValueError, match=r"\(4, 4\)"):
+        simulate_frame([facing_plate(3.0)], mmwcas, pose=np.eye(3))
+    with pytest.raises(ValueError, match="rotation"):
+        simulate_frame([facing_plate(3.0)], mmwcas, pose=np.diag([2.0, 1, 1, 1]))
