@@ -56,7 +56,7 @@ def bev_png(
     extent_m : (x_min, x_max, y_min, y_max), optional — view window [m]; default fits the
         points, boxes and the radar.
     path : str or Path, optional — also write the PNG there (parent folders are created).
-    size_px : int — image height and width [px].
+    size_px : int — image height [px]; the width follows the view's aspect ratio.
 
     Returns
     -------
@@ -84,7 +84,10 @@ def bev_png(
         x0, x1, y0, y1 = extent_m
 
     dpi = 100
-    fig = Figure(figsize=(size_px / dpi, size_px / dpi), dpi=dpi)
+    # width follows the view's aspect (page width = y span, height = x span) + room for labels
+    aspect = float(np.clip((y1 - y0) / max(x1 - x0, 1e-6), 0.5, 2.0))
+    width_px = int(round(size_px * aspect)) + 200
+    fig = Figure(figsize=(width_px / dpi, size_px / dpi), dpi=dpi, layout="constrained")
     FigureCanvasAgg(fig)
     ax = fig.add_subplot(1, 1, 1)
     # page coordinates: horizontal = y (left is +y), vertical = x (forward is up)

@@ -1,1 +1,208 @@
-"""``sim2radar simulate`` and ``sim2radar demo`` (owned by the radar/storage work)."""
+"""``sim2radar simulate`` and ``sim2radar demo``: scene files -> radar point clouds in the store.
+
+Prefect and the flows are imported inside the commands, so ``sim2radar --help`` stays fast.
+Prefect state goes to ``./.prefect`` unless ``PREFECT_HOME`` or ``PREFECT_API_URL`` is set
+(then your own Prefect profile / server is used).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+from typing import Any
+
+import typer
+
+from sim2radar.cli._app import app
+
+
+def _prefect_env(verbose: bool) -> None:
+    """Project-local Prefect state and quiet logs, unless the user configured Prefect."""
+    if not os.environ.get("PREFECT_HOME") and not os.environ.get("PREFECT_API_URL"):
+        os.environ["PREFECT_HOME"] = str(Path.cwd() / ".prefect")
+    os.environ.setdefault("PREFECT_SERVER_ANALYTICS_ENABLED", "false")
+    os.environ.setdefault("PREFECT_LOGGING_LEVEL", "INFO" if verbose else "WARNING")
+
+
+def run_scenes(
+    scenes: list[Path],
+    *,
+    radar: str,
+    store: str,
+    dataset: str,
+    png_dir: Path | None,
+    seed: int = 0,
+    force: bool = False,
+    workers: int = 1,
+    dask_address: str | None = None,
+    use_prefect: bool = True,
+    show_progress: bool = True,
+    verbose: bool = False,
+) -> dict[str, Any]:
+    """Simulate ``scenes`` with a progress bar (Prefect flow, or the plain loop); return the
+    flow's summary. Failures are in the summary (never raised)."""
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+
+    scene_strs = [str(s) for s in scenes]
+    columns = [
+        TextColumn("[bold]simulate"),
+        BarColumn(),
+        MofNCompleteColumn(),
+        TimeElapsedColumn(),
+        TextColumn("{task.description}"),
+    ]
+    with Progress(*columns, disable=not show_progress, transient=False) as progress:
+        bar = progress.add_task("starting" + (" Prefect" if use_prefect else ""), total=len(scenes))
+
+        def on_scene(outcome) -> None:
+            pts = "/".join(str(n) for n in outcome.n_points) or "-"
+            progress.update(bar, advance=1, description=f"{outcome.scene_id}: {outcome.status} ({pts} pts)")
+
+        if use_prefect:
+            _prefect_env(verbose)
+            from flows.simulate import progress_callback, run_simulation
+
+            with progress_callback(on_scene):
+                return run_simulation(
+                    scene_strs,
+                    radar=radar,
+                    store=store,
+                    dataset=dataset,
+                    seed=seed,
+                    png_dir=png_dir,
+                    force=force,
+                    workers=workers,
+                    dask_address=dask_address,
+                )
+        from tasks.radar import simulate_scenes_plain
+
+        return simulate_scenes_plain(
+            scene_strs, radar, store, dataset, seed=seed, png_dir=png_dir, force=force, on_scene=on_scene
+        )
+
+
+def print_summary(summary: dict[str, Any], png_dir: Path | None) -> None:
+    """Human summary: per scene status, points per frame, where artifacts and pictures went."""
+    from rich.console import Console
+
+    console = Console()
+    counts = summary["counts"]
+    console.print(
+        f"[bold]{counts['ok']} computed, {counts['skipped']} cached (skipped), "
+        f"{counts['failed']} failed[/bold] — radar {summary['radar']}, dataset {summary['dataset']!r}"
+    )
+    for s in summary["scenes"]:
+        if s["status"] == "failed":
+            console.print(f"  [red]✗ {s['scene_id']}[/red] ({s['source']}): {s['error']}")
+            continue
+        pts = s["n_points"]
+        mean = sum(pts) / len(pts) if pts else 0.0
+        mark = "✓" if s["status"] == "ok" else "↺"
+        console.print(
+            f"  {mark} {s['scene_id']}: {len(pts)} frame(s), points per frame {pts} "
+            f"(mean {mean:.0f}) {'[dim](cached)[/dim]' if s['status'] == 'skipped' else ''}"
+        )
+        console.print(f"      points:   {s['locations'].get('radar_points', '')}")
+    console.print(f"store:    {summary['store']}")
+    console.print(f"manifest: {summary['manifest']}")
+    if png_dir is not None:
+        console.print(f"pictures: {png_dir}")
+
+
+@app.command()
+def simulate(
+    scenes: list[Path] = typer.Argument(..., help="Scene YAML file(s): meshes + materials (+ radar_poses, boxes)."),
+    radar: str = typer.Option("ti-mmwcas", "--radar", "-r", help="Radar preset name or YAML path."),
+    out: str = typer.Option("out/store", "--out", "-o", help="Artifact store: folder or fsspec URI (s3://…)."),
+    dataset: str = typer.Option("default", help="Manifest (dataset) name."),
+    png_dir: Path | None = typer.Option(None, "--png-dir", help="Where to write BEV PNGs [default: OUT/../bev for local stores]."),
+    no_png: bool = typer.Option(False, "--no-png", help="Do not write bird's-eye-view PNGs."),
+    seed: int = typer.Option(0, help="Run seed (per-frame seeds derive from it)."),
+    force: bool = typer.Option(False, help="Recompute even when the artifacts exist."),
+    strict: bool = typer.Option(False, help="Exit with status 1 if any scene failed."),
+    workers: int = typer.Option(1, help="Scenes simulated concurrently (threads)."),
+    dask: str | None = typer.Option(None, help="Dask scheduler address, or 'local' (needs prefect-dask)."),
+    no_prefect: bool = typer.Option(False, "--no-prefect", help="Run the plain loop without the Prefect engine."),
+    json_out: Path | None = typer.Option(None, "--json", help="Also write the run summary as JSON."),
+    verbose: bool = typer.Option(False, "--verbose", "-v", help="Show Prefect's logs."),
+) -> None:
+    """Simulate radar point clouds for scene files into a Parquet store.
+
+    One frame per radar pose of each scene; a second run with the same inputs recomputes
+    nothing (content keys). Broken scenes are recorded as failed in the manifest; the others
+    finish. Exit status: 0, or 1 with --strict when any scene failed; 2 for bad arguments.
+    """
+    from sim2radar.radar import RadarConfigError, load_radar_config
+
+    try:
+        load_radar_config(radar)
+    except RadarConfigError as exc:
+        typer.secho(f"error: --radar: {exc}", fg="red", err=True)
+        raise typer.Exit(2) from None
+    if png_dir is None and not no_png:
+        png_dir = _default_png_dir(out)
+    summary = run_scenes(
+        list(scenes),
+        radar=radar,
+        store=out,
+        dataset=dataset,
+        png_dir=None if no_png else png_dir,
+        seed=seed,
+        force=force,
+        workers=workers,
+        dask_address=dask,
+        use_prefect=not no_prefect,
+        verbose=verbose,
+    )
+    print_summary(summary, None if no_png else png_dir)
+    if json_out is not None:
+        json_out.parent.mkdir(parents=True, exist_ok=True)
+        json_out.write_text(json.dumps(summary, indent=1, default=str))
+    if strict and summary["counts"]["failed"]:
+        raise typer.Exit(1)
+
+
+def _default_png_dir(out: str) -> Path | None:
+    """``<store parent>/bev`` for a local store; None (no pictures) for remote stores."""
+    if "://" in out and not out.startswith("file://"):
+        return None
+    return Path(out.removeprefix("file://")).resolve().parent / "bev"
+
+
+def run_demo(out: Path, *, radar: str = "ti-mmwcas", use_prefect: bool = True, verbose: bool = False) -> dict[str, Any]:
+    """The main job on the built-in default: simulate the demo scene(s) into ``OUT/store``,
+    pictures into ``OUT/bev``, summary into ``OUT/summary.json``.
+
+    (Extend here when the built-in default input changes, e.g. to procedural worlds.)
+    """
+    from sim2radar.scenes import demo_scene_paths
+
+    out = Path(out)
+    png_dir = out / "bev"
+    summary = run_scenes(
+        demo_scene_paths(),
+        radar=radar,
+        store=str(out / "store"),
+        dataset="demo",
+        png_dir=png_dir,
+        use_prefect=use_prefect,
+        verbose=verbose,
+    )
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "summary.json").write_text(json.dumps(summary, indent=1, default=str))
+    print_summary(summary, png_dir)
+    return summary
+
+
+@app.command()
+def demo(
+    out: Path = typer.Option(Path("out"), "--out", "-o", help="Output folder (store + pictures)."),
+    radar: str = typer.Option("ti-mmwcas", "--radar", "-r", help="Radar preset name or YAML path."),
+    no_prefect: bool = typer.Option(False, "--no-prefect", help="Run without the Prefect engine."),
+    verbose: bool = typer.Option(False, "--verbose", "-v", help="Show Prefect's logs."),
+) -> None:
+    """Run the main job on the built-in default: the demo corridor -> radar points + BEV PNGs."""
+    summary = run_demo(out, radar=radar, use_prefect=not no_prefect, verbose=verbose)
+    if summary["counts"]["failed"]:
+        raise typer.Exit(1)

@@ -1,0 +1,190 @@
+"""Flow: simulate radar point clouds for scene files into the artifact store.
+
+    from flows.simulate import run_simulation
+    summary = run_simulation(["scene.yaml"], radar="ti-mmwcas", store="out/store", dataset="demo")
+
+One task per scene (``simulate_scene_task.submit``), gathered as they complete; each outcome
+is written to the dataset manifest (``store.manifest(dataset)``). A second run with the same
+inputs recomputes nothing: every scene is ``skipped`` by content key.
+
+Failure policy: a broken scene (bad mesh file, unknown material, ...) fails its own task; the
+flow records it as ``failed`` (with the error text) in the manifest and lets the other scenes
+finish. The flow then *returns* its summary (``counts["failed"] > 0``) — a dataset run is a
+batch job that should keep what succeeded — unless ``strict=True``, which raises
+:class:`SceneFailures` after every scene has been recorded (Prefect marks the run failed). The
+CLI maps this to its exit code: 0 by default, 1 with ``--strict`` when any scene failed.
+
+Task runner: scenes run one at a time by default (``workers=1``: Mitsuba/Dr.Jit already uses
+every core for one frame). ``workers>1`` uses a thread pool; ``dask_address`` (or
+``"local"``) uses ``prefect_dask.DaskTaskRunner`` when ``prefect-dask`` is installed.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Callable, Sequence
+from contextlib import contextmanager
+from pathlib import Path
+from typing import Any
+
+from prefect import flow, get_run_logger
+from prefect.futures import as_completed
+from prefect.task_runners import ThreadPoolTaskRunner
+
+from storage import ArtifactStore
+from tasks.radar import (
+    SceneOutcome,
+    failed_outcome,
+    record_outcome_task,
+    simulate_scene_task,
+    summarize,
+)
+
+__all__ = ["simulate_flow", "run_simulation", "SceneFailures", "progress_callback"]
+
+_PROGRESS: list[Callable[[SceneOutcome], None]] = []
+
+
+class SceneFailures(RuntimeError):
+    """Raised by a ``strict`` run when at least one scene failed; ``.summary`` has the details."""
+
+    def __init__(self, summary: dict[str, Any]) -> None:
+        failed = [s for s in summary["scenes"] if s["status"] == "failed"]
+        lines = [f"{s['scene_id']}: {s['error']}" for s in failed]
+        super().__init__(f"{len(failed)} scene(s) failed:\n" + "\n".join(lines))
+        self.summary = summary
+
+
+@contextmanager
+def progress_callback(fn: Callable[[SceneOutcome], None]):
+    """Call ``fn(outcome)`` in the flow process after each scene finishes (progress bars)."""
+    _PROGRESS.append(fn)
+    try:
+        yield
+    finally:
+        _PROGRESS.remove(fn)
+
+
+def _check_unique_ids(scenes: Sequence[str]) -> None:
+    from tasks.common import scene_id_for
+
+    seen: dict[str, str] = {}
+    for s in scenes:
+        sid = scene_id_for(s)
+        if sid in seen and os.path.abspath(seen[sid]) != os.path.abspath(s):
+            raise ValueError(
+                f"two scene files share the scene id {sid!r}: {seen[sid]} and {s}; give each a "
+                "unique 'name:' in its YAML or write them to different datasets"
+            )
+        seen[sid] = s
+
+
+@flow(name="simulate-radar", task_runner=ThreadPoolTaskRunner(max_workers=1), log_prints=False)
+def simulate_flow(
+    scenes: list[str],
+    radar: str = "ti-mmwcas",
+    store: str = "out/store",
+    dataset: str = "default",
+    seed: int = 0,
+    png_dir: str | None = None,
+    force: bool = False,
+    strict: bool = False,
+) -> dict[str, Any]:
+    """Simulate each scene file into ``store`` and record it in the ``dataset`` manifest.
+
+    Parameters
+    ----------
+    scenes : scene YAML paths (:mod:`sim2radar.scenes`)
+    radar : radar preset name or YAML path
+    store : artifact store root (local path or fsspec URI)
+    dataset : manifest name
+    seed : run seed
+    png_dir : folder for bird's-eye-view PNGs (local), or None
+    force : recompute even when artifacts exist
+    strict : raise :class:`SceneFailures` at the end if any scene failed
+
+    Returns
+    -------
+    dict
+        ``{"store", "dataset", "radar", "counts": {ok, skipped, failed}, "scenes": [outcome
+        dicts], "manifest": path}``
+    """
+    logger = get_run_logger()
+    scenes = [str(s) for s in scenes]
+    _check_unique_ids(scenes)
+    st = ArtifactStore(store)
+    st.manifest(dataset)  # validates the dataset name before any work
+    futures = {
+        simulate_scene_task.with_options(task_run_name=f"simulate-{Path(s).stem}").submit(
+            s, radar, store, seed=seed, png_dir=png_dir, force=force
+        ): s
+        for s in scenes
+    }
+    outcomes: dict[str, SceneOutcome] = {}
+    for fut in as_completed(list(futures)):
+        path = futures[fut]
+        result = fut.result(raise_on_failure=False)  # waits; the exception if the task failed
+        if isinstance(result, SceneOutcome):
+            outcome = result
+        else:
+            state = fut.state
+            error = result if isinstance(result, BaseException) else (state.message or repr(result))
+            outcome = failed_outcome(path, error)
+        record_outcome_task(store, dataset, outcome)
+        if outcome.status == "failed":
+            logger.error("scene %s FAILED: %s", outcome.scene_id, outcome.error)
+        elif outcome.status == "skipped":
+            logger.info("scene %s: skipped (cached %s)", outcome.scene_id, outcome.artifacts)
+        else:
+            logger.info("scene %s: ok, points per frame %s", outcome.scene_id, outcome.n_points)
+        outcomes[path] = outcome
+        for fn in list(_PROGRESS):
+            fn(outcome)
+    summary = summarize(st, dataset, radar, [outcomes[s] for s in scenes])
+    counts = summary["counts"]
+    logger.info("simulate-radar: %s into %s (dataset %s)", counts, st.root, dataset)
+    if strict and counts["failed"]:
+        raise SceneFailures(summary)
+    return summary
+
+
+def _task_runner(workers: int, dask_address: str | None):
+    if dask_address:
+        try:
+            from prefect_dask import DaskTaskRunner
+        except ImportError as exc:
+            raise ImportError(
+                "dask_address needs prefect-dask: pip install 'sim2radar[dask]' "
+                "(prefect-dask, distributed)"
+            ) from exc
+        if dask_address == "local":
+            return DaskTaskRunner(cluster_kwargs={"n_workers": max(1, workers), "threads_per_worker": 1})
+        return DaskTaskRunner(address=dask_address)
+    return ThreadPoolTaskRunner(max_workers=max(1, int(workers)))
+
+
+def run_simulation(
+    scenes: Sequence[str | os.PathLike],
+    radar: str = "ti-mmwcas",
+    store: str | os.PathLike = "out/store",
+    dataset: str = "default",
+    *,
+    seed: int = 0,
+    png_dir: str | os.PathLike | None = None,
+    force: bool = False,
+    strict: bool = False,
+    workers: int = 1,
+    dask_address: str | None = None,
+) -> dict[str, Any]:
+    """Run :func:`simulate_flow` with a chosen task runner (see the module docstring)."""
+    runner = _task_runner(workers, dask_address)
+    return simulate_flow.with_options(task_runner=runner)(
+        scenes=[str(s) for s in scenes],
+        radar=str(radar),
+        store=os.fspath(store),
+        dataset=dataset,
+        seed=seed,
+        png_dir=None if png_dir is None else os.fspath(png_dir),
+        force=force,
+        strict=strict,
+    )

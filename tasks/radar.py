@@ -1,0 +1,409 @@
+"""Radar simulation of scene files into the artifact store (plain functions + Prefect tasks).
+
+Per scene, :func:`simulate_scene`:
+
+1. hashes the scene YAML and its mesh files (:func:`sim2radar.scenes.scene_digest`) into the
+   ``scene_meshes`` key, and that key + the resolved radar config + seed into the
+   ``radar_points`` key (:func:`storage.content_key`);
+2. if both artifacts exist, does nothing else: status ``skipped`` (resume / no recompute);
+3. otherwise loads the scene (clear errors for bad mesh files / unknown materials), simulates
+   one frame per radar pose with :func:`sim2radar.radar.simulate_frame`, and publishes
+   ``scene_meshes`` + ``radar_points`` atomically with provenance: status ``ok``;
+4. optionally renders one bird's-eye-view PNG per frame (from the stored table, so cached
+   scenes get pictures too).
+
+Errors propagate (the Prefect task fails; the flow records it in the manifest).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+import os
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from prefect import task
+from prefect.cache_policies import NO_CACHE
+
+from storage import (
+    ArtifactStore,
+    content_key,
+    meshes_to_table,
+    radar_frames_from_table,
+    radar_frames_to_table,
+)
+from tasks.common import (
+    REMOTE_IO_RETRIES,
+    REMOTE_IO_RETRY_DELAYS_S,
+    jsonable,
+    open_store,
+    scene_id_for,
+)
+
+__all__ = [
+    "RADAR_POINTS_STAGE_VERSION",
+    "SCENE_MESHES_STAGE_VERSION",
+    "SceneOutcome",
+    "scene_keys",
+    "simulate_scene",
+    "render_scene_pngs",
+    "record_outcome",
+    "failed_outcome",
+    "summarize",
+    "simulate_scenes_plain",
+    "simulate_scene_task",
+    "record_outcome_task",
+]
+
+log = logging.getLogger(__name__)
+
+#: Bump when the radar_points output of the same inputs changes (simulator or table logic).
+RADAR_POINTS_STAGE_VERSION = 1
+#: Bump when scene_meshes output changes for the same files.
+SCENE_MESHES_STAGE_VERSION = 1
+
+
+@dataclasses.dataclass
+class SceneOutcome:
+    """What happened to one scene (one manifest row).
+
+    Attributes
+    ----------
+    scene_id, source : str — scene name and its YAML path
+    status : str — ``ok`` (computed), ``skipped`` (cached) or ``failed``
+    error : str — ``"ExceptionType: message"`` when failed
+    artifacts : dict — stage -> content key
+    timings_s : dict — step -> wall time [s]
+    n_points : list[int] — points per frame
+    locations : dict — stage -> where the artifact is (path / URI)
+    pngs : list[str] — bird's-eye-view pictures written
+    """
+
+    scene_id: str
+    source: str
+    status: str
+    error: str = ""
+    artifacts: dict[str, str] = dataclasses.field(default_factory=dict)
+    timings_s: dict[str, float] = dataclasses.field(default_factory=dict)
+    n_points: list[int] = dataclasses.field(default_factory=list)
+    locations: dict[str, str] = dataclasses.field(default_factory=dict)
+    pngs: list[str] = dataclasses.field(default_factory=list)
+
+    def to_dict(self) -> dict[str, Any]:
+        return dataclasses.asdict(self)
+
+
+def _load_radar(radar):
+    from sim2radar.radar import load_radar_config
+
+    return load_radar_config(radar)
+
+
+def scene_keys(scene_path: str | os.PathLike, radar, seed: int = 0) -> dict[str, str]:
+    """Content keys of a scene's artifacts without loading its meshes.
+
+    Returns ``{"scene_meshes": key, "radar_points": key}``; ``radar`` is a preset name, YAML
+    path or :class:`~sim2radar.radar.RadarConfig`.
+    """
+    from sim2radar.scenes import scene_digest
+
+    digest = scene_digest(scene_path)
+    scene_key = content_key(
+        stage="scene_meshes",
+        stage_version=SCENE_MESHES_STAGE_VERSION,
+        inputs={"scene_files": digest},
+    )
+    cfg = _load_radar(radar)
+    radar_key = content_key(
+        stage="radar_points",
+        stage_version=RADAR_POINTS_STAGE_VERSION,
+        inputs={"scene": scene_key},
+        config={"radar": cfg.to_dict(), "seed": int(seed)},
+    )
+    return {"scene_meshes": scene_key, "radar_points": radar_key, "scene_files": digest}
+
+
+def _frame_seed(seed: int, scene_key: str, frame_index: int) -> int:
+    """Independent per-frame seed from (run seed, scene, frame) (NumPy SeedSequence)."""
+    entropy = [int(seed), int(scene_key[:8], 16), int(frame_index)]
+    return int(np.random.SeedSequence(entropy).generate_state(1)[0])
+
+
+def simulate_scene(
+    scene_path: str | os.PathLike,
+    radar: Any = "ti-mmwcas",
+    store: str | os.PathLike | ArtifactStore = "out/store",
+    *,
+    seed: int = 0,
+    png_dir: str | os.PathLike | None = None,
+    force: bool = False,
+    simulate_fn: Callable | None = None,
+) -> SceneOutcome:
+    """Simulate every radar pose of one scene file into the store (skip if cached).
+
+    Parameters
+    ----------
+    scene_path : path — scene YAML (see :mod:`sim2radar.scenes`)
+    radar : preset name, YAML path or RadarConfig
+    store : store root (path / URI) or :class:`~storage.ArtifactStore`
+    seed : int — run seed; per-frame seeds derive from it, the scene key and the frame index
+    png_dir : path, optional — write ``<scene_id>_f<k>.png`` bird's-eye views there
+    force : bool — recompute even if the artifacts exist
+    simulate_fn : callable, optional — replaces :func:`sim2radar.radar.simulate_frame`
+        (same signature); for tests and alternative simulators
+
+    Returns
+    -------
+    SceneOutcome with status ``ok`` or ``skipped``.
+
+    Raises
+    ------
+    sim2radar.mesh.MeshFileError
+        Broken scene/mesh files, unknown materials (message names the file and entry).
+    """
+    t_start = time.perf_counter()
+    store = open_store(store)
+    scene_path = Path(scene_path)
+    scene_id = scene_id_for(scene_path)
+    cfg = _load_radar(radar)
+    keys = scene_keys(scene_path, cfg, seed)
+    artifacts = {"scene_meshes": keys["scene_meshes"], "radar_points": keys["radar_points"]}
+    timings: dict[str, float] = {"keys": time.perf_counter() - t_start}
+
+    cached = not force and all(store.exists(stage, key) for stage, key in artifacts.items())
+    n_points: list[int]
+    if cached:
+        status = "skipped"
+        n_points = store.read("radar_points", keys["radar_points"], columns=["n_points"]).column(
+            "n_points"
+        ).to_pylist()
+        log.info("scene %s: cached (radar_points %s), nothing to compute", scene_id, keys["radar_points"])
+    else:
+        status = "ok"
+        n_points = _compute(scene_path, scene_id, cfg, store, keys, seed, timings, simulate_fn)
+
+    outcome = SceneOutcome(
+        scene_id=scene_id,
+        source=str(scene_path),
+        status=status,
+        artifacts=artifacts,
+        timings_s=timings,
+        n_points=n_points,
+        locations={stage: store.uri(stage, key) for stage, key in artifacts.items()},
+    )
+    if png_dir is not None:
+        t0 = time.perf_counter()
+        outcome.pngs = render_scene_pngs(store, keys["radar_points"], png_dir, cfg, scene_id)
+        timings["png"] = time.perf_counter() - t0
+    timings["total"] = time.perf_counter() - t_start
+    return outcome
+
+
+def _compute(scene_path, scene_id, cfg, store, keys, seed, timings, simulate_fn) -> list[int]:
+    from sim2radar.scenes import load_scene_file
+
+    t0 = time.perf_counter()
+    scene = load_scene_file(scene_path)
+    meshes = list(scene.meshes)
+    if simulate_fn is None:
+        from sim2radar.radar import RadarScene, simulate_frame
+
+        # build the Mitsuba scene once, simulate every pose from it
+        simulate_fn, geometry = simulate_frame, RadarScene(meshes)
+    else:
+        geometry = meshes
+    timings["load"] = time.perf_counter() - t0
+
+    points, seconds, stats = [], [], []
+    for k, pose in enumerate(scene.radar_poses):
+        t0 = time.perf_counter()
+        frame = simulate_fn(geometry, cfg, pose, seed=_frame_seed(seed, keys["scene_meshes"], k))
+        seconds.append(time.perf_counter() - t0)
+        pts = np.asarray(frame.points, dtype=np.float32).reshape(-1, 4)
+        points.append(pts)
+        stats.append(jsonable(getattr(frame, "stats", {}) or {}))
+        log.info("scene %s frame %d: %d points in %.2f s", scene_id, k, len(pts), seconds[-1])
+    timings["simulate"] = float(sum(seconds))
+
+    t0 = time.perf_counter()
+    common = {"seed": int(seed), "extra": {"scene_id": scene_id, "source": str(scene_path)}}
+    store.write(
+        "scene_meshes",
+        keys["scene_meshes"],
+        meshes_to_table(meshes),
+        stage_version=SCENE_MESHES_STAGE_VERSION,
+        provenance={**common, "inputs": {"scene_files": keys["scene_files"]}},
+    )
+    table = radar_frames_to_table(
+        scene_id=scene_id,
+        radar_to_world=list(scene.radar_poses),
+        points=points,
+        boxes=[scene.boxes_in_radar(k) for k in range(len(scene.radar_poses))],
+        box_labels=[list(scene.box_labels)] * len(scene.radar_poses),
+        sim_seconds=seconds,
+    )
+    store.write(
+        "radar_points",
+        keys["radar_points"],
+        table,
+        stage_version=RADAR_POINTS_STAGE_VERSION,
+        provenance={
+            **common,
+            "inputs": {"scene": keys["scene_meshes"]},
+            "config": {"radar": cfg.to_dict(), "seed": int(seed)},
+            "timings_s": {"load": timings["load"], "simulate": timings["simulate"]},
+            "extra": {**common["extra"], "frame_stats": stats, "radar_derived": _derived(cfg)},
+        },
+    )
+    timings["write"] = time.perf_counter() - t0
+    return [len(p) for p in points]
+
+
+def _derived(cfg) -> dict[str, Any]:
+    derived = getattr(cfg, "derived", None)
+    try:
+        return jsonable(derived() if callable(derived) else (derived or {}))
+    except Exception:  # noqa: BLE001 - provenance extras must never fail a run
+        return {}
+
+
+def _radar_view(cfg) -> tuple[float | None, float | None]:
+    """Azimuth FOV [deg] and max range [m] of a radar config, if it exposes them."""
+    fov = getattr(cfg, "azimuth_fov_rad", None)
+    rng = getattr(cfg, "max_range_m", None)
+    return (float(np.degrees(fov)) if fov is not None else None, float(rng) if rng is not None else None)
+
+
+def render_scene_pngs(
+    store: ArtifactStore, radar_key: str, png_dir: str | os.PathLike, cfg=None, scene_id: str | None = None
+) -> list[str]:
+    """Bird's-eye-view PNG per frame of a stored ``radar_points`` artifact.
+
+    Files are named ``<scene_id>_f<frame>.png``; returns their paths.
+    """
+    from sim2radar.visualize import bev_png
+
+    frames = radar_frames_from_table(store.read("radar_points", radar_key))
+    fov_deg, max_range_m = _radar_view(cfg) if cfg is not None else (None, None)
+    out = []
+    for f in frames:
+        sid = scene_id or f.scene_id
+        path = Path(png_dir) / f"{sid}_f{f.frame_index:03d}.png"
+        pts = f.points
+        # frame the picture on the scene, not the radar's full range
+        extent = None
+        if len(pts) or len(f.boxes):
+            xy = np.concatenate([pts[:, :2], f.boxes[:, :2].astype(np.float32), np.zeros((1, 2))])
+            lo, hi = xy.min(axis=0) - 1.0, xy.max(axis=0) + 1.0
+            extent = (lo[0], hi[0], lo[1], hi[1])
+        bev_png(
+            pts,
+            boxes=f.boxes,
+            box_labels=f.box_labels,
+            fov_deg=fov_deg,
+            max_range_m=None if extent is not None else max_range_m,
+            extent_m=extent,
+            title=f"{sid} frame {f.frame_index}: {len(pts)} points",
+            path=path,
+        )
+        out.append(str(path))
+    return out
+
+
+def failed_outcome(scene_path: str | os.PathLike, error: BaseException | str) -> SceneOutcome:
+    """A ``failed`` outcome for a scene whose simulation raised ``error``."""
+    text = error if isinstance(error, str) else f"{type(error).__name__}: {error}"
+    return SceneOutcome(scene_id=scene_id_for(scene_path), source=str(scene_path), status="failed", error=text)
+
+
+def record_outcome(store: str | os.PathLike | ArtifactStore, dataset: str, outcome: SceneOutcome) -> dict:
+    """Upsert the outcome as the scene's manifest row; returns the row."""
+    return open_store(store).manifest(dataset).upsert(
+        outcome.scene_id,
+        outcome.status,
+        error=outcome.error,
+        artifacts=outcome.artifacts,
+        timings_s=outcome.timings_s,
+        source=outcome.source,
+    )
+
+
+def summarize(
+    store: str | os.PathLike | ArtifactStore, dataset: str, radar: Any, outcomes: list[SceneOutcome]
+) -> dict[str, Any]:
+    """The run summary returned by the flow and printed by the CLI.
+
+    ``{"store", "dataset", "radar", "counts": {ok, skipped, failed}, "scenes": [outcome dicts],
+    "manifest": where the manifest rows are}``
+    """
+    st = open_store(store)
+    return {
+        "store": st.root,
+        "dataset": dataset,
+        "radar": str(radar),
+        "counts": {k: sum(o.status == k for o in outcomes) for k in ("ok", "skipped", "failed")},
+        "scenes": [o.to_dict() for o in outcomes],
+        "manifest": st._join("manifests", dataset),
+    }
+
+
+def simulate_scenes_plain(
+    scenes: list[str | os.PathLike],
+    radar: Any = "ti-mmwcas",
+    store: str | os.PathLike | ArtifactStore = "out/store",
+    dataset: str = "default",
+    *,
+    seed: int = 0,
+    png_dir: str | os.PathLike | None = None,
+    force: bool = False,
+    on_scene: Callable[[SceneOutcome], None] | None = None,
+    simulate_fn: Callable | None = None,
+) -> dict[str, Any]:
+    """The simulate flow's semantics without the Prefect engine (notebooks, debugging,
+    ``sim2radar simulate --no-prefect``): scenes one after another, failures recorded and
+    not raised. Returns :func:`summarize`'s dict."""
+    st = open_store(store)
+    st.manifest(dataset)  # validates the name before any work
+    outcomes = []
+    for path in scenes:
+        try:
+            outcome = simulate_scene(
+                path, radar, st, seed=seed, png_dir=png_dir, force=force, simulate_fn=simulate_fn
+            )
+        except Exception as exc:  # noqa: BLE001 - a broken scene must not stop the others
+            log.error("scene %s failed: %s: %s", path, type(exc).__name__, exc)
+            outcome = failed_outcome(path, exc)
+        record_outcome(st, dataset, outcome)
+        outcomes.append(outcome)
+        if on_scene is not None:
+            on_scene(outcome)
+    return summarize(st, dataset, radar, outcomes)
+
+
+# ---------------------------------------------------------------------------------------------
+# Prefect tasks: thin wrappers. Simulation is deterministic -> no retries (fail fast with the real
+# error); manifest writes are storage I/O -> retried with backoff. Caching is by content key
+# inside simulate_scene, so Prefect's own cache is off.
+# ---------------------------------------------------------------------------------------------
+@task(name="simulate-scene", cache_policy=NO_CACHE, retries=0, persist_result=False)
+def simulate_scene_task(
+    scene_path: str, radar: str, store: str, seed: int = 0, png_dir: str | None = None, force: bool = False
+) -> SceneOutcome:
+    """Prefect task around :func:`simulate_scene`."""
+    return simulate_scene(scene_path, radar, store, seed=seed, png_dir=png_dir, force=force)
+
+
+@task(
+    name="record-manifest",
+    cache_policy=NO_CACHE,
+    retries=REMOTE_IO_RETRIES,
+    retry_delay_seconds=REMOTE_IO_RETRY_DELAYS_S,
+    persist_result=False,
+)
+def record_outcome_task(store: str, dataset: str, outcome: SceneOutcome) -> dict:
+    """Prefect task around :func:`record_outcome` (retried: storage I/O)."""
+    return record_outcome(store, dataset, outcome)
