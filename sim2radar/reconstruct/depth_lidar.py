@@ -260,8 +260,10 @@ class LidarDepth:
     """Stage 1 backend ``lidar``: RGB-guided completion of the frame's sparse LiDAR.
 
     Options are the fields of :class:`LidarDepthConfig` (keyword arguments). ``estimate`` returns
-    a :class:`DepthResult` whose ``info`` holds ``confidence`` ((H, W) float32), ``n_lidar_points``
-    (points projected into the image), ``hole_fraction`` and the filter settings.
+    a :class:`DepthResult` whose ``info`` holds JSON-able scalars: ``n_lidar_points`` (LiDAR
+    pixels in the image), ``hole_fraction``, ``filled_fraction``, ``confidence_mean`` and the
+    filter strength ``lambda``. The per-pixel confidence map ((H, W) float32 in [0, 1], 0 in
+    holes) of the last frame is ``self.last_confidence``.
     """
 
     def __init__(self, **options) -> None:
@@ -270,6 +272,7 @@ class LidarDepth:
         except TypeError as exc:
             known = ", ".join(f.name for f in dataclasses.fields(LidarDepthConfig))
             raise ValueError(f"lidar depth backend: {exc}; known options: {known}") from None
+        self.last_confidence: np.ndarray | None = None
 
     def estimate(self, frame: FrameInput) -> DepthResult:
         if frame.lidar_points is None:
@@ -294,7 +297,9 @@ class LidarDepth:
         except ReconstructionInputError as exc:
             raise ReconstructionInputError(f"{frame.name}: {exc}") from None
         log.debug("%s: lidar completion %s", frame.name, info)
+        self.last_confidence = conf
+        valid = depth > 0
+        info["confidence_mean"] = float(conf[valid].mean()) if valid.any() else 0.0
         return DepthResult(
-            depth_m=depth,
-            info={"backend": "lidar", "confidence": conf, "n_lidar_points": n_view, **info},
+            depth_m=depth, info={"backend": "lidar", "n_lidar_points": n_view, **info}
         )

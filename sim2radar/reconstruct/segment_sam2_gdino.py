@@ -598,17 +598,36 @@ class Sam2GdinoSegments:
     -------
     sam2 : dict — :class:`Sam2Config` fields (``encoder_path``, ``decoder_path`` required).
     gdino : dict — :class:`GroundingDinoConfig` fields (``model_path``, ``vocab_path`` required).
+    sam2_<field>, gdino_<field> — the same fields as flat options (e.g. ``sam2_encoder_path``,
+        ``gdino_vocab_path``), so a YAML config can stay flat; they override the dicts.
     match_iou : float — minimum mask-to-box IoU for a label (default 0.25).
     keep_unmatched : bool — keep segments without a matching detection as ``unknown`` (default
         True; they still carry geometry) or drop them (pixels -1).
+
+    After :meth:`segment`, ``last_detections`` holds the Grounding DINO :class:`Detections` and
+    ``last_info`` a JSON-able summary (mask and detection counts, detections as
+    ``[label, score, x0, y0, x1, y1]``).
     """
 
     def __init__(self, sam2: dict | None = None, gdino: dict | None = None,
-                 match_iou: float = 0.25, keep_unmatched: bool = True) -> None:
+                 match_iou: float = 0.25, keep_unmatched: bool = True, **flat) -> None:
+        sam2 = dict(sam2 or {})
+        gdino = dict(gdino or {})
+        for key, value in flat.items():
+            if key.startswith("sam2_"):
+                sam2[key[5:]] = value
+            elif key.startswith("gdino_"):
+                gdino[key[6:]] = value
+            else:
+                raise ValueError(
+                    f"sam2-gdino: unknown option {key!r}; use sam2/gdino dicts, sam2_<field>, "
+                    "gdino_<field>, match_iou, keep_unmatched"
+                )
         if not sam2 or not gdino:
             raise ValueError(
                 "sam2-gdino backend needs options sam2: {encoder_path, decoder_path} and "
-                "gdino: {model_path, vocab_path} pointing at your ONNX exports"
+                "gdino: {model_path, vocab_path} (or sam2_encoder_path, ... as flat options) "
+                "pointing at your ONNX exports"
             )
         if not 0 < match_iou <= 1:
             raise ValueError(f"sam2-gdino: match_iou must lie in (0, 1], got {match_iou}")
@@ -618,6 +637,7 @@ class Sam2GdinoSegments:
         self.match_iou = float(match_iou)
         self.keep_unmatched = bool(keep_unmatched)
         self.last_detections: Detections | None = None
+        self.last_info: dict = {}
 
     def segment(self, frame: FrameInput, depth: DepthResult) -> Segments:
         masks, _ = self.sam.generate(frame.rgb)
@@ -638,6 +658,14 @@ class Sam2GdinoSegments:
             seg = np.where(seg >= 0, remap[seg], -1).astype(np.int32)
             labels = [labels[i] for i in keep]
             scores = scores[keep] if keep else np.zeros(0, np.float32)
+        self.last_info = {
+            "backend": "sam2-gdino",
+            "n_masks": len(masks),
+            "n_segments": len(labels),
+            "n_labelled": int(sum(lab != "unknown" for lab in labels)),
+            "detections": [[lab, float(sc), *map(float, box)] for lab, sc, box in
+                           zip(dets.labels, dets.scores, dets.boxes, strict=True)],
+        }
         log.info("%s: %d SAM2 segments, %d detections, %d labelled", frame.name,
                  len(labels), len(dets), sum(lab != "unknown" for lab in labels))
         return Segments(seg.astype(np.int32), tuple(labels), np.asarray(scores, np.float32))

@@ -119,9 +119,16 @@ def test_masks_and_labels_of_the_synthetic_scene(models, frame):
     assert len(dets) == 7  # the decoy "cat" query never fires
 
 
-def test_decoder_without_orig_im_size_input(models, frame):
-    seg = _backend(models, dec="dec_no_orig").segment(frame, _depth())
+def test_decoder_without_orig_im_size_input_and_flat_options(models, frame):
+    backend = Sam2GdinoSegments(
+        sam2_encoder_path=str(models["enc"]), sam2_decoder_path=str(models["dec_no_orig"]),
+        sam2_input_size=SAM_INPUT, sam2_points_per_side=16, sam2_min_area_px=4,
+        gdino_model_path=str(models["gd"]), gdino_vocab_path=str(models["vocab"]),
+    )
+    seg = backend.segment(frame, _depth())
     assert "fire_extinguisher" in seg.labels
+    info = json.loads(json.dumps(backend.last_info))
+    assert info["n_labelled"] == 6 and len(info["detections"]) == 7
 
 
 def test_unmatched_masks_kept_as_unknown_or_dropped(models, frame):
@@ -151,6 +158,8 @@ def test_match_by_iou_prefers_the_tight_box():
 def test_errors_are_clear(models, frame, tmp_path):
     with pytest.raises(ValueError, match="needs options sam2"):
         Sam2GdinoSegments()
+    with pytest.raises(ValueError, match="unknown option 'encoder'"):
+        Sam2GdinoSegments(encoder="x.onnx")
     with pytest.raises(FileNotFoundError, match="SAM2 encoder"):
         _backend(models, sam2={"encoder_path": str(tmp_path / "none.onnx")})
     with pytest.raises(ModelSignatureError, match="missing outputs"):
