@@ -55,9 +55,11 @@ class AppearanceFeatures:
     ----------
     hue_deg : float [deg] — circular mean hue (0 red, 30 orange/brown, 120 green, 240 blue).
     saturation, value : float — median HSV saturation and value in [0, 1].
-    lf_contrast : float — std of the band-pass (σ 1.5–6 px) luminance over its mean (mottling).
+    lf_contrast : float — robust std (1.4826·MAD) of the band-pass (σ 1–5 px) luminance over
+        its local mean: texture contrast with the shading removed (mottling, speckle).
     grout_frac : float — fraction of pixels > 25 % darker than their 7×7 median (grout lines).
-    coherence : float — structure-tensor coherence in [0, 1] (1 = all gradients one direction).
+    coherence : float — structure-tensor coherence of the band-passed luminance in [0, 1]
+        (1 = all texture gradients in one direction: grain, brushing).
     n_px : int — pixels used.
     """
 
@@ -73,14 +75,15 @@ class AppearanceFeatures:
 def _image_maps(rgb: np.ndarray) -> dict[str, np.ndarray]:
     hsv = cv2.cvtColor(rgb, cv2.COLOR_RGB2HSV_FULL).astype(np.float32)
     gray = cv2.cvtColor(rgb, cv2.COLOR_RGB2GRAY).astype(np.float32) + 1.0
-    b1 = cv2.GaussianBlur(gray, (0, 0), 1.5)
-    b2 = cv2.GaussianBlur(gray, (0, 0), 6.0)
+    b1 = cv2.GaussianBlur(gray, (0, 0), 1.0)
+    b2 = cv2.GaussianBlur(gray, (0, 0), 5.0)
+    band = (b1 - b2) / b2  # local texture contrast, shading (low frequencies) removed
     med = cv2.medianBlur(gray.astype(np.uint8), 7).astype(np.float32) + 1.0
-    gx = cv2.Sobel(b1, cv2.CV_32F, 1, 0, ksize=3)
-    gy = cv2.Sobel(b1, cv2.CV_32F, 0, 1, ksize=3)
+    gx = cv2.Sobel(band, cv2.CV_32F, 1, 0, ksize=3)
+    gy = cv2.Sobel(band, cv2.CV_32F, 0, 1, ksize=3)
     return {
         "hue": hsv[..., 0] * (2 * np.pi / 256), "sat": hsv[..., 1] / 255, "val": hsv[..., 2] / 255,
-        "band": (b1 - b2) / b2, "dark": gray < 0.75 * med,
+        "band": band, "dark": gray < 0.75 * med,
         "jxx": gx * gx, "jyy": gy * gy, "jxy": gx * gy,
     }
 
@@ -105,7 +108,7 @@ def _features(maps: dict[str, np.ndarray], mask: np.ndarray) -> AppearanceFeatur
         hue_deg=hue_deg,
         saturation=float(np.median(sat)),
         value=float(np.median(maps["val"][m])),
-        lf_contrast=float(np.std(maps["band"][m])),
+        lf_contrast=float(1.4826 * np.median(np.abs(maps["band"][m] - np.median(maps["band"][m])))),
         grout_frac=float(maps["dark"][m].mean()),
         coherence=coherence,
         n_px=n,
@@ -123,14 +126,17 @@ def _is_wood(f: AppearanceFeatures) -> bool:
 
 #: (name, test, {material: likelihood ratio}) — applied in order; each that fires multiplies.
 RULES: tuple = (
-    ("wood hue + grain", lambda f: _is_wood(f) and f.coherence > 0.25, {"wood": 8.0}),
-    ("wood hue", lambda f: _is_wood(f) and f.coherence <= 0.25, {"wood": 2.5}),
-    ("grout lines", lambda f: f.grout_frac > 0.03 and f.coherence < 0.6, {"ceramic_tile": 6.0}),
-    ("grey mottling", lambda f: f.lf_contrast > 0.05 and f.saturation < 0.2 and f.grout_frac < 0.03,
-     {"concrete": 4.0}),
-    ("smooth paint", lambda f: f.lf_contrast < 0.025 and f.grout_frac < 0.01,
+    ("wood hue + grain", lambda f: _is_wood(f) and (f.coherence > 0.3 or f.lf_contrast > 0.05),
+     {"wood": 8.0}),
+    ("wood hue", lambda f: _is_wood(f) and f.coherence <= 0.3 and f.lf_contrast <= 0.05,
+     {"wood": 3.0}),
+    ("grout lines", lambda f: f.grout_frac > 0.03 and not _is_wood(f), {"ceramic_tile": 6.0}),
+    ("grey mottling", lambda f: f.lf_contrast > 0.027 and f.saturation < 0.2
+     and f.grout_frac < 0.03, {"concrete": 4.0}),
+    ("smooth paint", lambda f: f.lf_contrast < 0.02 and f.grout_frac < 0.01,
      {"plasterboard": 1.5, "metal": 1.3}),
-    ("brushed streaks", lambda f: f.coherence > 0.5 and f.saturation < 0.15, {"metal": 3.0}),
+    ("brushed streaks", lambda f: f.coherence > 0.6 and f.saturation < 0.15
+     and f.lf_contrast > 0.02, {"metal": 2.0}),
     ("saturated plain colour", lambda f: f.saturation > 0.45 and f.lf_contrast < 0.03
      and not _is_wood(f), {"plastic": 2.0}),
 )

@@ -16,7 +16,8 @@ world : z up; the corridor runs along +x, floor at z = 0.
 camera : OpenCV (x right, y down, z forward), :mod:`sim2radar.camera`.
 radar : x forward, y left, z up (DESIGN.md), at the rig, 0.1 m below the camera.
 Boxes : ``x y z dx dy dz heading`` (``vocab.BOX_FIELDS``); for a door ``dx`` is its width
-    (along the wall), ``dy`` its thickness, ``dz`` its height, heading the wall direction.
+    (along the wall), ``dy`` = 0.15 m (the door face plus a nominal wall thickness behind it,
+    as the worlds' boxes span the wall), ``dz`` its height, heading the wall direction.
 """
 
 from __future__ import annotations
@@ -52,6 +53,7 @@ class SyntheticFrame:
     intrinsics : CameraIntrinsics
     camera_to_world, radar_to_world : (4, 4) float64
     door_boxes_world, door_boxes_radar : (M, 7) float32 — ``vocab.BOX_FIELDS``.
+    door_visible : (M,) bool — the door covers at least 0.2 % of the image (as the worlds' flag).
     meshes : list[MaterialMesh] — the scene in the world frame.
     objects : list[dict] — name, semantic, material per instance id.
     """
@@ -68,6 +70,7 @@ class SyntheticFrame:
     radar_to_world: np.ndarray
     door_boxes_world: np.ndarray
     door_boxes_radar: np.ndarray
+    door_visible: np.ndarray
     meshes: list
     objects: list
     seed: int = 0
@@ -145,9 +148,11 @@ def _texture(hit_world: np.ndarray, inst: np.ndarray, materials: list[str],
             grout = np.minimum(np.minimum(fa, 1 - fa), np.minimum(fb, 1 - fb)) < 0.04
             out[m] = np.where(grout, 0.45, 1.0)[m]
         elif mat == "concrete":
-            mott = (np.sin(3.1 * a + phase[0]) * np.sin(2.3 * b + phase[1])
-                    + 0.5 * np.sin(7.7 * a + 5.3 * b + phase[2]))
-            out[m] = (1 + 0.12 * mott)[m]
+            mott = sum(np.sin(2 * np.pi * (a * fa + b * fb) + ph) / (k + 1)
+                       for k, (fa, fb, ph) in enumerate(zip(rng.uniform(0.5, 6, 8),
+                                                            rng.uniform(0.5, 6, 8),
+                                                            rng.uniform(0, 6.3, 8), strict=True)))
+            out[m] = (1 + 0.08 * mott)[m]
         elif mat == "wood":
             out[m] = (1 + 0.25 * np.sin(2 * np.pi * (6 * a + 0.4 * np.sin(3 * b + phase[3]))))[m]
     return out
@@ -211,6 +216,7 @@ def corridor_frame(
     meshes: list[MaterialMesh] = []
     colours: list[np.ndarray] = []
     door_boxes = []
+    door_instances: list[int] = []
 
     def add(name, sem, mat, colour, geom):
         idx = len(objects)
@@ -254,8 +260,12 @@ def corridor_frame(
                   rng.choice([[0.25, 0.35, 0.6], [0.6, 0.15, 0.12], [0.3, 0.3, 0.32]]))
         yc = side * (cw / 2 - thick / 2 + 0.02)  # 4 cm proud of the wall plane
         center = [float(xc), yc, dh / 2]
-        add(f"door_{i}", "door", mat, colour, ("box", (center, [dw, thick, dh])))
-        door_boxes.append([xc, yc, dh / 2, dw, thick, dh, 0.0])
+        door_instances.append(
+            add(f"door_{i}", "door", mat, colour, ("box", (center, [dw, thick, dh]))))
+        # box convention of the worlds (dy = wall thickness): the door plus a nominal 0.15 m
+        # wall behind its face
+        face = side * (cw / 2 - 0.04)
+        door_boxes.append([xc, face + side * 0.075, dh / 2, dw, 0.15, dh, 0.0])
 
     # one fire extinguisher (red, small) and one handrail (metal) on the walls
     ext_x = float(rng.uniform(2.2, 3.2))
@@ -321,5 +331,6 @@ def corridor_frame(
         material_id=material, lidar_points=lidar, intrinsics=intr,
         camera_to_world=camera_to_world, radar_to_world=radar_to_world,
         door_boxes_world=boxes_w, door_boxes_radar=_boxes_to(boxes_w, radar_to_world),
+        door_visible=np.array([(inst == i).mean() >= 0.002 for i in door_instances], bool),
         meshes=meshes, objects=objects, seed=seed,
     )
