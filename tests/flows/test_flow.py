@@ -1,0 +1,53 @@
+"""The Prefect flow itself (ephemeral test API): resume without recompute, failures recorded."""
+
+from __future__ import annotations
+
+import pytest
+
+import sim2radar.radar as radar_mod
+from storage import ArtifactStore
+
+
+@pytest.fixture
+def count_sim(monkeypatch):
+    calls = {"n": 0}
+    real = radar_mod.simulate_frame
+
+    def counting(*args, **kwargs):
+        calls["n"] += 1
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(radar_mod, "simulate_frame", counting)
+    return calls
+
+
+def test_flow_runs_twice_second_computes_nothing_and_failures_are_recorded(
+    prefect_server, plate_scene, broken_scenes, tmp_path, count_sim
+):
+    from flows.simulate import SceneFailures, progress_callback, run_simulation
+
+    root = tmp_path / "store"
+    scenes = [plate_scene, broken_scenes["unknown"]]
+    seen = []
+    with progress_callback(lambda o: seen.append((o.scene_id, o.status))):
+        first = run_simulation(scenes, radar="ti-mmwcas", store=root, dataset="t", png_dir=tmp_path / "png")
+    assert first["counts"] == {"ok": 1, "skipped": 0, "failed": 1}
+    assert sorted(seen) == [("plate", "ok"), ("unknown_material", "failed")]
+    assert count_sim["n"] == 2  # two poses of the plate scene
+    store = ArtifactStore(root)
+    rows = {r["scene_id"]: r for r in store.manifest("t").rows()}
+    assert rows["plate"]["status"] == "ok"
+    assert "unobtainium" in rows["unknown_material"]["error"]
+    assert len(list((tmp_path / "png").glob("plate_f*.png"))) == 2
+    key = rows["plate"]["artifacts"]["radar_points"]
+    assert store.exists("radar_points", key)
+
+    # second run, same inputs: nothing simulated, the scene is recorded as skipped;
+    # strict=True makes the flow fail at the end because one scene still fails
+    with pytest.raises(SceneFailures, match="unknown_material"):
+        run_simulation(scenes, radar="ti-mmwcas", store=root, dataset="t", strict=True)
+    assert count_sim["n"] == 2
+    rows = {r["scene_id"]: r for r in store.manifest("t").rows()}
+    assert rows["plate"]["status"] == "skipped" and rows["plate"]["attempts"] == 2
+    assert rows["plate"]["artifacts"]["radar_points"] == key
+    assert rows["unknown_material"]["status"] == "failed" and rows["unknown_material"]["attempts"] == 2
