@@ -1,0 +1,185 @@
+"""Parquet artifacts of the reconstruction stage, through the project's store (:mod:`storage`).
+
+Two artifacts per frame, both keyed by ``content_key(stage, STAGE_VERSION, inputs={"image":
+digest of the RGB [+ LiDAR]}, config=resolved ReconstructionConfig + target frame)``:
+
+* ``scene_meshes`` (declared in ``storage/schemas.py``): the per-segment meshes in the target
+  frame (level frame by default: a radar at the camera with ``pose=None``), ready for the radar
+  simulation flow.
+* ``reconstruction`` (declared here, schema v1): one row per frame with the per-pixel maps
+  (depth, segment, semantic and material ids), segment labels/materials/confidences/reasons,
+  door boxes, the level frame and timings.
+
+``storage`` is imported lazily by the callers of these functions; this module registers the
+``reconstruction`` schema when imported.
+"""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pyarrow as pa
+
+from sim2radar.camera import CameraIntrinsics
+from storage import (
+    ArtifactSchema,
+    bytes_digest,
+    content_key,
+    field,
+    get_schema,
+    meshes_to_table,
+    register_schema,
+)
+
+__all__ = ["RECONSTRUCTION_SCHEMA", "scene_to_tables", "write_scene_artifacts",
+           "read_reconstruction", "frame_digest"]
+
+_BOX7 = pa.list_(pa.float32(), 7)
+
+
+def _register() -> ArtifactSchema:
+    try:
+        return get_schema("reconstruction")
+    except Exception:  # noqa: BLE001 - not registered yet
+        pass
+    return register_schema(ArtifactSchema(
+        stage="reconstruction",
+        version=1,
+        row="one reconstructed RGB frame",
+        description="per-pixel depth/segments/semantics/materials, segment labels, door boxes",
+        schema=pa.schema([
+            field("name", pa.string(), doc="frame name"),
+            field("width", pa.int32(), unit="px"),
+            field("height", pa.int32(), unit="px"),
+            field("intrinsics", pa.list_(pa.float64(), 4), unit="px", doc="fx, fy, cx, cy"),
+            field("depth_m", pa.list_(pa.float32()), unit="m", doc="(H*W,) z-depth, 0 invalid"),
+            field("segment_id", pa.list_(pa.int32()), doc="(H*W,) segment per pixel, -1 none"),
+            field("semantic_id", pa.list_(pa.uint8()), doc="(H*W,) vocab.SEMANTIC_CLASSES index"),
+            field("material_id", pa.list_(pa.uint8()), doc="(H*W,) vocab.MATERIAL_CLASSES index"),
+            field("segment_labels", pa.list_(pa.string()), doc="(S,) semantic class"),
+            field("segment_scores", pa.list_(pa.float32()), doc="(S,) label confidence"),
+            field("segment_materials", pa.list_(pa.string()), doc="(S,) material class"),
+            field("material_confidence", pa.list_(pa.float32()), doc="(S,) in [0, 1]"),
+            field("material_reasons", pa.list_(pa.string()), doc="(S,) rule / VLM reasoning"),
+            field("door_boxes", pa.list_(_BOX7), unit="m, rad",
+                  doc="(M, 7) x y z dx dy dz heading in the artifact's target frame"),
+            field("camera_to_target", pa.list_(pa.float64(), 16),
+                  doc="(4, 4) row-major camera -> target frame of meshes and boxes"),
+            field("level_from_camera", pa.list_(pa.float64(), 16),
+                  doc="(4, 4) row-major camera -> level frame (x fwd, y left, z up)"),
+            field("floor_z_m", pa.float64(), unit="m", doc="floor height, level frame"),
+            field("timings_s", pa.map_(pa.string(), pa.float64()), unit="s", doc="per stage"),
+            field("info_json", pa.string(), doc="backend diagnostics and fallbacks (JSON)"),
+        ]),
+    ))
+
+
+RECONSTRUCTION_SCHEMA = _register()
+
+
+def frame_digest(rgb: np.ndarray, lidar_points: np.ndarray | None = None) -> str:
+    """Content digest of a frame's inputs (RGB bytes [+ LiDAR bytes])."""
+    data = np.ascontiguousarray(rgb, np.uint8).tobytes()
+    if lidar_points is not None:
+        data += np.ascontiguousarray(lidar_points, np.float32).tobytes()
+    return bytes_digest(data)
+
+
+def _jsonable(obj):
+    if isinstance(obj, dict):
+        return {str(k): _jsonable(v) for k, v in obj.items()}
+    if isinstance(obj, list | tuple):
+        return [_jsonable(v) for v in obj]
+    if isinstance(obj, np.ndarray):
+        return f"<array {obj.shape} {obj.dtype}>" if obj.size > 16 else obj.tolist()
+    if isinstance(obj, np.generic):
+        return obj.item()
+    return obj
+
+
+def scene_to_tables(scene, camera_to_target: np.ndarray | None = None) -> dict[str, pa.Table]:
+    """``{"scene_meshes": ..., "reconstruction": ...}`` for one :class:`LabeledScene`.
+
+    ``camera_to_target`` (4, 4) maps camera -> target frame of meshes and boxes; ``None`` means
+    the level frame.
+    """
+    m = scene.level_from_camera if camera_to_target is None else np.asarray(camera_to_target)
+    k: CameraIntrinsics = scene.intrinsics
+    mats = scene.segment_materials
+    row = {
+        "name": [scene.name],
+        "width": [k.width], "height": [k.height],
+        "intrinsics": [[k.fx, k.fy, k.cx, k.cy]],
+        "depth_m": [np.asarray(scene.depth_m, np.float32).ravel()],
+        "segment_id": [np.asarray(scene.segment_id, np.int32).ravel()],
+        "semantic_id": [np.asarray(scene.semantic_id, np.uint8).ravel()],
+        "material_id": [np.asarray(scene.material_id, np.uint8).ravel()],
+        "segment_labels": [list(scene.segment_labels)],
+        "segment_scores": [np.asarray(scene.segment_scores, np.float32)],
+        "segment_materials": [[x.material for x in mats]],
+        "material_confidence": [np.array([x.confidence for x in mats], np.float32)],
+        "material_reasons": [[x.reason for x in mats]],
+        "door_boxes": [scene.door_boxes_in(camera_to_target).astype(np.float32).tolist()],
+        "camera_to_target": [np.asarray(m, np.float64).ravel()],
+        "level_from_camera": [np.asarray(scene.level_from_camera, np.float64).ravel()],
+        "floor_z_m": [float(scene.floor_z_m)],
+        "timings_s": [list(scene.timings_s.items())],
+        "info_json": [json.dumps(_jsonable(scene.info), sort_keys=True)],
+    }
+    table = pa.Table.from_pydict(
+        {name: pa.array(v, type=RECONSTRUCTION_SCHEMA.schema.field(name).type)
+         for name, v in row.items()})
+    return {"scene_meshes": meshes_to_table(scene.meshes_in(camera_to_target)),
+            "reconstruction": table}
+
+
+def write_scene_artifacts(store, scene, *, inputs: dict[str, str], config: dict,
+                          camera_to_target: np.ndarray | None = None, seed: int | None = None,
+                          stage_version: int = 1) -> dict[str, str]:
+    """Write both artifacts of ``scene`` (skipping any that exist) and return stage -> key.
+
+    Parameters
+    ----------
+    store : storage.ArtifactStore
+    inputs : name -> content key/digest of the frame's inputs (e.g. ``{"image": frame_digest(...)}``).
+    config : the resolved reconstruction config (``ReconstructionConfig.to_dict()``).
+    """
+    frame_cfg = None if camera_to_target is None else np.asarray(camera_to_target).round(9).tolist()
+    keys = {}
+    tables = None
+    for stage in ("scene_meshes", "reconstruction"):
+        key = content_key(stage=stage, stage_version=stage_version, inputs=inputs,
+                          config={"reconstruction": config, "camera_to_target": frame_cfg})
+        keys[stage] = key
+        if store.exists(stage, key):
+            continue
+        tables = tables or scene_to_tables(scene, camera_to_target)
+        store.write(stage, key, tables[stage], stage_version=stage_version,
+                    provenance={"inputs": inputs, "config": config, "seed": seed,
+                                "timings_s": dict(scene.timings_s),
+                                "extra": {"frame": "level" if frame_cfg is None else "target",
+                                          "name": scene.name}})
+    return keys
+
+
+def read_reconstruction(store, key: str) -> dict:
+    """Read a ``reconstruction`` artifact back into arrays (maps reshaped to (H, W))."""
+    t = store.read("reconstruction", key).to_pylist()[0]
+    h, w = t["height"], t["width"]
+    return {
+        "name": t["name"],
+        "intrinsics": CameraIntrinsics(*t["intrinsics"], w, h),
+        "depth_m": np.asarray(t["depth_m"], np.float32).reshape(h, w),
+        "segment_id": np.asarray(t["segment_id"], np.int32).reshape(h, w),
+        "semantic_id": np.asarray(t["semantic_id"], np.uint8).reshape(h, w),
+        "material_id": np.asarray(t["material_id"], np.uint8).reshape(h, w),
+        "segment_labels": t["segment_labels"],
+        "segment_materials": t["segment_materials"],
+        "material_confidence": np.asarray(t["material_confidence"], np.float32),
+        "door_boxes": np.asarray(t["door_boxes"], np.float32).reshape(-1, 7),
+        "camera_to_target": np.asarray(t["camera_to_target"]).reshape(4, 4),
+        "level_from_camera": np.asarray(t["level_from_camera"]).reshape(4, 4),
+        "timings_s": dict(t["timings_s"]),
+        "info": json.loads(t["info_json"]),
+    }
