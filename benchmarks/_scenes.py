@@ -73,35 +73,119 @@ def corridor(
     ex, ey, ez = np.eye(3)
     L = x1 - x0
     meshes = [
-        grid_plane([x0, y_r, z_f], L * ex, width_m * ey, n_len, n_w, material="concrete",
-                   name="floor", semantic="floor"),
-        grid_plane([x0, y_r, z_c], L * ex, width_m * ey, n_len, n_w, material="ceiling_board",
-                   name="ceiling", semantic="ceiling", flip=True),
-        grid_plane([x0, y_l, z_f], L * ex, height_m * ez, n_len, n_h, material="plasterboard",
-                   name="wall_left", semantic="wall", flip=True),
-        grid_plane([x0, y_r, z_f], L * ex, height_m * ez, n_len, n_h, material="concrete",
-                   name="wall_right", semantic="wall"),
-        grid_plane([x1, y_r, z_f], width_m * ey, height_m * ez, n_w, n_h, material="brick",
-                   name="end_wall", semantic="wall", flip=True),
+        grid_plane(
+            [x0, y_r, z_f],
+            L * ex,
+            width_m * ey,
+            n_len,
+            n_w,
+            material="concrete",
+            name="floor",
+            semantic="floor",
+        ),
+        grid_plane(
+            [x0, y_r, z_c],
+            L * ex,
+            width_m * ey,
+            n_len,
+            n_w,
+            material="ceiling_board",
+            name="ceiling",
+            semantic="ceiling",
+            flip=True,
+        ),
+        grid_plane(
+            [x0, y_l, z_f],
+            L * ex,
+            height_m * ez,
+            n_len,
+            n_h,
+            material="plasterboard",
+            name="wall_left",
+            semantic="wall",
+            flip=True,
+        ),
+        grid_plane(
+            [x0, y_r, z_f],
+            L * ex,
+            height_m * ez,
+            n_len,
+            n_h,
+            material="concrete",
+            name="wall_right",
+            semantic="wall",
+        ),
+        grid_plane(
+            [x1, y_r, z_f],
+            width_m * ey,
+            height_m * ez,
+            n_w,
+            n_h,
+            material="brick",
+            name="end_wall",
+            semantic="wall",
+            flip=True,
+        ),
     ]
     # doors: slightly proud of the walls, alternating sides and materials
     for k, xd in enumerate(np.arange(2.0, x1 - 1.0, 2.5)):
         side = 1 if k % 2 == 0 else -1
         yd = side * (width_m / 2 - 0.03)
         mat = ("wood", "metal", "glass")[k % 3]
-        meshes.append(box_mesh([xd, yd, z_f + 1.05], [0.95, 0.04, 2.1], material=mat,
-                               name=f"door_{k}", semantic="door"))
-        meshes.append(box_mesh([xd + 0.52, yd, z_f + 1.05], [0.05, 0.07, 2.1],
-                               material="metal", name=f"door_frame_{k}", semantic="door"))
+        meshes.append(
+            box_mesh(
+                [xd, yd, z_f + 1.05],
+                [0.95, 0.04, 2.1],
+                material=mat,
+                name=f"door_{k}",
+                semantic="door",
+            )
+        )
+        meshes.append(
+            box_mesh(
+                [xd + 0.52, yd, z_f + 1.05],
+                [0.05, 0.07, 2.1],
+                material="metal",
+                name=f"door_frame_{k}",
+                semantic="door",
+            )
+        )
     # clutter: extinguishers (metal), a cabinet (wood), a bin (plastic), handrail (metal)
     for k, xe in enumerate((3.2, 8.1)):
-        meshes.append(box_mesh([xe, y_r + 0.12, z_f + 0.45], [0.16, 0.16, 0.5],
-                               material="metal", name=f"extinguisher_{k}",
-                               semantic="fire_extinguisher"))
-    meshes.append(box_mesh([5.5, y_l - 0.25, z_f + 0.6], [0.9, 0.45, 1.2], material="wood",
-                           name="cabinet", semantic="clutter"))
-    meshes.append(box_mesh([6.8, y_r + 0.2, z_f + 0.3], [0.35, 0.35, 0.6],
-                           material="plastic", name="bin", semantic="clutter"))
-    meshes.append(box_mesh([(x0 + x1) / 2, y_l - 0.06, z_f + 0.9], [L * 0.8, 0.04, 0.04],
-                           material="metal", name="handrail", semantic="handrail"))
+        meshes.append(
+            box_mesh(
+                [xe, y_r + 0.12, z_f + 0.45],
+                [0.16, 0.16, 0.5],
+                material="metal",
+                name=f"extinguisher_{k}",
+                semantic="fire_extinguisher",
+            )
+        )
+    meshes.append(
+        box_mesh(
+            [5.5, y_l - 0.25, z_f + 0.6],
+            [0.9, 0.45, 1.2],
+            material="wood",
+            name="cabinet",
+            semantic="clutter",
+        )
+    )
+    meshes.append(
+        box_mesh(
+            [6.8, y_r + 0.2, z_f + 0.3],
+            [0.35, 0.35, 0.6],
+            material="plastic",
+            name="bin",
+            semantic="clutter",
+        )
+    )
+    meshes.append(
+        box_mesh(
+            [(x0 + x1) / 2, y_l - 0.06, z_f + 0.9],
+            [L * 0.8, 0.04, 0.04],
+            material="metal",
+            name="handrail",
+            semantic="handrail",
+        )
+    )
     return meshes

@@ -100,8 +100,10 @@ def main() -> dict:
         print(f"{key:<{width}}  {value}")
     ok_time = sec <= 1.0
     ok_ratio = result["overhead_ratio_median"] <= 2.0
-    print(f"targets: <= 1 s/frame {'met' if ok_time else 'MISSED'}; "
-          f"overhead <= 2.0 {'met' if ok_ratio else 'MISSED'}")
+    print(
+        f"targets: <= 1 s/frame {'met' if ok_time else 'MISSED'}; "
+        f"overhead <= 2.0 {'met' if ok_ratio else 'MISSED'}"
+    )
     sys.stdout.flush()
     return result
 

@@ -104,7 +104,9 @@ class Material:
         return (min(r.f_min_ghz for r in self.rows), max(r.f_max_ghz for r in self.rows))
 
 
-def _tan_delta_row(eps_r: float, tan_delta: float, f_min_ghz: float, f_max_ghz: float) -> MaterialRow:
+def _tan_delta_row(
+    eps_r: float, tan_delta: float, f_min_ghz: float, f_max_ghz: float
+) -> MaterialRow:
     """Row for a material given as (eps', tan delta): sigma = 2 pi f eps0 eps' tan(delta).
 
     With f in GHz this is ``sigma = c * f`` with ``c = 2 pi 1e9 eps0 eps' tan(delta)`` [S/m].

@@ -95,34 +95,58 @@ class DetectionConfig(_Frozen):
 
 
 class ScatteringConfig(_Frozen):
-    """Effective-roughness (ER) scattering coefficients S per material (Degli-Esposti 2007).
+    """Surface model per material.
 
-    ``S`` in [0, 1]: a fraction ``S^2`` of the reflected power is scattered diffusely
-    (Lambertian), ``1 - S^2`` stays in the specular (physical-optics) component.
+    ``coefficients``: effective-roughness (ER) scattering coefficient ``S`` in [0, 1]
+    (Degli-Esposti et al., IEEE TAP 55(1), 2007): a fraction ``S^2`` of the reflected power is
+    scattered diffusely (Lambertian), ``1 - S^2`` stays in the specular (physical-optics)
+    component. Materials not listed use ``default``.
+
+    ``slab_thickness_m``: materials listed here reflect as a single homogeneous slab of that
+    thickness [m] in air (ITU-R P.2040-3 §3, multiple internal reflections) instead of a
+    half-space, e.g. ``{glass: 0.008, plasterboard: 0.0125}``. Empty by default.
     """
 
     default: float = Field(0.4, ge=0.0, le=1.0)
     coefficients: dict[str, float] = Field(
         default_factory=lambda: dict(DEFAULT_SCATTERING_COEFFICIENTS)
     )
+    slab_thickness_m: dict[str, float] = Field(default_factory=dict)
+
+    @staticmethod
+    def _canonical(name: str) -> str:
+        try:
+            return get_material(name).name
+        except KeyError as exc:  # pydantic needs ValueError to report the field
+            raise ValueError(str(exc)) from None
 
     @field_validator("coefficients")
     @classmethod
     def _check_coefficients(cls, value: dict[str, float]) -> dict[str, float]:
+        out = {}
         for name, s in value.items():
-            try:
-                get_material(name)
-            except KeyError as exc:  # pydantic needs ValueError to report the field
-                raise ValueError(str(exc)) from None
             if not 0.0 <= float(s) <= 1.0:
                 raise ValueError(f"scattering coefficient for {name!r} must lie in [0, 1], got {s}")
-        return {k: float(v) for k, v in value.items()}
+            out[cls._canonical(name)] = float(s)
+        return out
+
+    @field_validator("slab_thickness_m")
+    @classmethod
+    def _check_thickness(cls, value: dict[str, float]) -> dict[str, float]:
+        out = {}
+        for name, d in value.items():
+            if not (math.isfinite(float(d)) and float(d) > 0.0):
+                raise ValueError(f"slab thickness for {name!r} must be > 0 [m], got {d}")
+            out[cls._canonical(name)] = float(d)
+        return out
 
     def coefficient(self, material: str) -> float:
         """S for ``material`` (its own entry, else ``default``)."""
-        from sim2radar.em import normalize_material_name
+        return float(self.coefficients.get(get_material(material).name, self.default))
 
-        return float(self.coefficients.get(normalize_material_name(material), self.default))
+    def thickness_m(self, material: str) -> float | None:
+        """Slab thickness [m] of ``material``, or ``None`` for a half-space."""
+        return self.slab_thickness_m.get(get_material(material).name)
 
 
 class RadarConfig(_Frozen):
@@ -266,7 +290,11 @@ class RadarConfig(_Frozen):
     @property
     def n_azimuth_bins(self) -> int:
         """Azimuth bins covering the FOV, each no wider than the bin width."""
-        width = math.radians(self.azimuth_bin_deg) if self.azimuth_bin_deg else self.azimuth_resolution_rad
+        width = (
+            math.radians(self.azimuth_bin_deg)
+            if self.azimuth_bin_deg
+            else self.azimuth_resolution_rad
+        )
         return max(1, math.ceil(self.azimuth_fov_rad / width - 1e-9))
 
     @property

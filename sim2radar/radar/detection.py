@@ -56,15 +56,16 @@ def spherical_to_cartesian(
     """(N, 3) x, y, z [m] in the radar frame (x forward, y left, z up)."""
     ce = np.cos(elevation_rad)
     return np.stack(
-        [range_m * ce * np.cos(azimuth_rad), range_m * ce * np.sin(azimuth_rad),
-         range_m * np.sin(elevation_rad)],
+        [
+            range_m * ce * np.cos(azimuth_rad),
+            range_m * ce * np.sin(azimuth_rad),
+            range_m * np.sin(elevation_rad),
+        ],
         axis=1,
     )
 
 
-def detect_points(
-    cube: np.ndarray, acc: Accumulator | None, radar: RadarConfig
-) -> np.ndarray:
+def detect_points(cube: np.ndarray, acc: Accumulator | None, radar: RadarConfig) -> np.ndarray:
     """Detect peaks in a complex cube and return the point cloud.
 
     Parameters

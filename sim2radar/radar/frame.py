@@ -79,9 +79,9 @@ def simulate_scene_frame(
         # receiver noise: circular complex Gaussian, power N0 per cell
         rng = np.random.default_rng(seed)
         sigma = math.sqrt(10.0 ** (radar.detection.noise_floor_db / 10.0) / 2.0)
-        cube = cube + (sigma * (rng.standard_normal(shape) + 1j * rng.standard_normal(shape))).astype(
-            np.complex64
-        )
+        cube = cube + (
+            sigma * (rng.standard_normal(shape) + 1j * rng.standard_normal(shape))
+        ).astype(np.complex64)
     points = detect_points(cube, result.accumulator, radar)
     t2 = time.perf_counter()
     seconds = dict(result.seconds)

@@ -33,7 +33,6 @@ from sim2radar.radar.returns import (
 __all__ = ["RadarScene", "TraceResult", "merge_meshes", "check_pose"]
 
 
-
 def check_pose(pose: np.ndarray | None) -> np.ndarray:
     """Validate a (4, 4) radar-to-world transform (rigid); ``None`` -> identity."""
     if pose is None:
@@ -51,7 +50,9 @@ def check_pose(pose: np.ndarray | None) -> np.ndarray:
     return m
 
 
-def merge_meshes(meshes: Sequence[MaterialMesh]) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[str]]:
+def merge_meshes(
+    meshes: Sequence[MaterialMesh],
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[str]]:
     """Concatenate meshes into one triangle soup with a per-face material index.
 
     Returns
@@ -178,10 +179,14 @@ class RadarScene:
             math.radians(radar.ray_spacing_deg),
             seed=seed,
         )
-        lut = fresnel_lut(self.materials, radar.center_frequency_hz).astype(np.complex64)
+        thickness = [radar.scattering.thickness_m(m) for m in self.materials]
+        lut = fresnel_lut(self.materials, radar.center_frequency_hz, thickness_m=thickness)
+        lut = lut.astype(np.complex64)
         s = np.array([radar.scattering.coefficient(m) for m in self.materials], dtype=np.float32)
         prep = _Prepared(
-            directions=mi.Vector3f(*(mi.Float(directions[:, i].astype(np.float32)) for i in range(3))),
+            directions=mi.Vector3f(
+                *(mi.Float(directions[:, i].astype(np.float32)) for i in range(3))
+            ),
             n_rays=len(directions),
             solid_angle=mi.Float(solid_angle.astype(np.float32)),
             diffuse_u=mi.Float(diffuse_phase_seed(len(directions), seed).astype(np.float32)),
@@ -336,10 +341,7 @@ class RadarScene:
             ia = mi.Int32(dr.floor((az + az_half) * inv_daz))
             ie = mi.Int32(dr.floor((el + el_half) * inv_del))
             inside = (
-                visible
-                & (ir >= 0) & (ir < n_r)
-                & (ia >= 0) & (ia < n_a)
-                & (ie >= 0) & (ie < n_e)
+                visible & (ir >= 0) & (ir < n_r) & (ia >= 0) & (ia < n_a) & (ie >= 0) & (ie < n_e)
             )
             idx = mi.UInt32((ir * n_a + ia) * n_e + ie)
             pw = a_re * a_re + a_im * a_im

@@ -72,8 +72,21 @@ GOLDEN = 0.6180339887498949
 MIN_COS = 0.02
 
 
-def fresnel_lut(materials: list[str], frequency_hz: float, size: int = FRESNEL_LUT_SIZE) -> np.ndarray:
+def fresnel_lut(
+    materials: list[str],
+    frequency_hz: float,
+    size: int = FRESNEL_LUT_SIZE,
+    thickness_m: list[float | None] | None = None,
+) -> np.ndarray:
     """Unpolarised Fresnel coefficient tables, sampled uniformly in ``cos(theta)``.
+
+    Parameters
+    ----------
+    materials : list of str
+    frequency_hz : float [Hz]
+    size : int — samples over cos(theta) in [0, 1].
+    thickness_m : list of (float or None), optional
+        Per material: slab thickness [m] (ITU-R P.2040-3 §3) or ``None`` for a half-space.
 
     Returns
     -------
@@ -81,7 +94,13 @@ def fresnel_lut(materials: list[str], frequency_hz: float, size: int = FRESNEL_L
     """
     cos_t = np.linspace(0.0, 1.0, size)
     theta = np.arccos(np.clip(cos_t, 0.0, 1.0))
-    return np.stack([unpolarized_reflection(m, frequency_hz, theta) for m in materials])
+    thickness = thickness_m or [None] * len(materials)
+    return np.stack(
+        [
+            unpolarized_reflection(m, frequency_hz, theta, d)
+            for m, d in zip(materials, thickness, strict=True)
+        ]
+    )
 
 
 def diffuse_phase_seed(n_rays: int, seed: int | None) -> np.ndarray:

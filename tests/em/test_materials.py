@@ -12,8 +12,19 @@ from sim2radar.constants import VACUUM_PERMITTIVITY_F_M
 from sim2radar.vocab import MATERIAL_CLASSES
 
 ITU_ROWS = [
-    "concrete", "brick", "plasterboard", "wood", "glass", "ceiling_board", "chipboard",
-    "plywood", "marble", "floorboard", "metal", "vinyl_tile", "carpet_tile",
+    "concrete",
+    "brick",
+    "plasterboard",
+    "wood",
+    "glass",
+    "ceiling_board",
+    "chipboard",
+    "plywood",
+    "marble",
+    "floorboard",
+    "metal",
+    "vinyl_tile",
+    "carpet_tile",
 ]
 
 

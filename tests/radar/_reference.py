@@ -19,7 +19,7 @@ from sim2radar.radar.returns import GOLDEN, MIN_COS, diffuse_phase_seed, nyquist
 
 
 def intersect(orig: np.ndarray, dirs: np.ndarray, tris: np.ndarray, eps: float = 1e-9):
-    """Closest hit of each ray (Möller & Trumbore 1997). Returns (t, face) with t=inf for misses."""
+    """Closest hit of each ray (Möller & Trumbore 1997): (t, face), t = inf for misses."""
     v0, v1, v2 = tris[:, 0], tris[:, 1], tris[:, 2]
     e1, e2 = v1 - v0, v2 - v0  # (F, 3)
     pvec = np.cross(dirs[:, None, :], e2[None])  # (N, F, 3)
@@ -83,7 +83,10 @@ def reference_trace(meshes, radar: RadarConfig, pose=None) -> Accumulator:
         for m_i, m_name in enumerate(materials):
             sel = valid & (mat == m_i)
             gamma[sel] = unpolarized_reflection(
-                m_name, freq, np.arccos(np.clip(cos_in[sel], 0.0, 1.0))
+                m_name,
+                freq,
+                np.arccos(np.clip(cos_in[sel], 0.0, 1.0)),
+                radar.scattering.thickness_m(m_name),
             )
         s = s_tab[mat]
         spec = spec_tab[mat]
@@ -94,8 +97,10 @@ def reference_trace(meshes, radar: RadarConfig, pose=None) -> Accumulator:
         grad_t = grad - np.einsum("nk,nk->n", grad, n)[:, None] * n
         dphi = k * np.linalg.norm(grad_t, axis=1) * path_in * spacing / ci
         amp_c = (
-            spec * d_omega * (cos_in + cos_out) / (2 * ci) * (path_in / np.maximum(r_out, 1e-12))
-        ) * nyquist_window(dphi) / radar.wavelength_m
+            (spec * d_omega * (cos_in + cos_out) / (2 * ci) * (path_in / np.maximum(r_out, 1e-12)))
+            * nyquist_window(dphi)
+            / radar.wavelength_m
+        )
         a = 1j * cg * amp_c * np.exp(-1j * k * path)
         amp_d = s * np.sqrt(d_omega * np.maximum(cos_out, 0) / math.pi) / np.maximum(r_out, 1e-12)
         uu = u_seed + bounce * GOLDEN

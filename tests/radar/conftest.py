@@ -29,8 +29,18 @@ def dihedral(x_crease, size=1.0, material="metal"):
     boresight, opening toward the radar (a dihedral corner reflector)."""
     half = size / 2 * np.sqrt(0.5)
     return [
-        box_mesh([x_crease - half, half, 0.0], [0.005, size, size], np.pi / 4,
-                 material=material, name="left"),
-        box_mesh([x_crease - half, -half, 0.0], [0.005, size, size], -np.pi / 4,
-                 material=material, name="right"),
+        box_mesh(
+            [x_crease - half, half, 0.0],
+            [0.005, size, size],
+            np.pi / 4,
+            material=material,
+            name="left",
+        ),
+        box_mesh(
+            [x_crease - half, -half, 0.0],
+            [0.005, size, size],
+            -np.pi / 4,
+            material=material,
+            name="right",
+        ),
     ]

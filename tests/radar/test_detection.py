@@ -32,8 +32,14 @@ def test_points_land_at_the_weighted_position(mmwcas):
     el = np.zeros(2)
     idx = bin_indices(rng_m, az, el, mmwcas)
     assert idx[0] == idx[1] >= 0
-    acc = accumulate(idx, np.array([1e-2, 1e-2 + 0j]), rng_m, az, el,
-                     n_cells=mmwcas.n_range_bins * mmwcas.n_azimuth_bins * mmwcas.n_elevation_bins)
+    acc = accumulate(
+        idx,
+        np.array([1e-2, 1e-2 + 0j]),
+        rng_m,
+        az,
+        el,
+        n_cells=mmwcas.n_range_bins * mmwcas.n_azimuth_bins * mmwcas.n_elevation_bins,
+    )
     cube = acc.cube((mmwcas.n_range_bins, mmwcas.n_azimuth_bins, mmwcas.n_elevation_bins))
     pts = detect_points(cube, acc, mmwcas)
     assert len(pts) == 1
@@ -43,6 +49,5 @@ def test_points_land_at_the_weighted_position(mmwcas):
 
 
 def test_out_of_fov_returns_are_dropped(mmwcas):
-    idx = bin_indices(np.array([3.0, 3.0, 20.0]), np.radians([0.0, 80.0, 0.0]),
-                      np.zeros(3), mmwcas)
+    idx = bin_indices(np.array([3.0, 3.0, 20.0]), np.radians([0.0, 80.0, 0.0]), np.zeros(3), mmwcas)
     assert idx[0] >= 0 and idx[1] == -1 and idx[2] == -1

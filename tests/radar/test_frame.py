@@ -24,8 +24,7 @@ def test_frame_contents(mmwcas):
     frame = simulate_frame([facing_plate(3.0)], mmwcas, return_cube=True)
     assert isinstance(frame, RadarFrame)
     assert frame.points.dtype == np.float32 and frame.points.shape[1] == 4
-    assert frame.cube.shape == (mmwcas.n_range_bins, mmwcas.n_azimuth_bins,
-                                mmwcas.n_elevation_bins)
+    assert frame.cube.shape == (mmwcas.n_range_bins, mmwcas.n_azimuth_bins, mmwcas.n_elevation_bins)
     assert frame.cube.dtype == np.complex64
     assert len(frame.range_bins_m) == mmwcas.n_range_bins
     assert frame.stats["n_rays"] == mmwcas.n_rays and frame.stats["n_hits"] > 0

@@ -91,8 +91,9 @@ def test_metal_returns_stronger_than_wood_at_the_same_place(mmwcas):
 
 def test_surface_at_grazing_incidence_returns_weakly(mmwcas):
     facing = simulate_frame([facing_plate(3.0)], mmwcas, return_cube=True)
-    tilted = simulate_frame([facing_plate(3.0, tilt_rad=math.radians(70))], mmwcas,
-                            return_cube=True)
+    tilted = simulate_frame(
+        [facing_plate(3.0, tilt_rad=math.radians(70))], mmwcas, return_cube=True
+    )
     assert _peak_db(tilted) < _peak_db(facing) - 20.0
 
 
@@ -106,3 +107,20 @@ def test_empty_field_of_view_gives_no_points(mmwcas):
     behind = facing_plate(-3.0)  # behind the radar
     frame = simulate_frame([behind], mmwcas)
     assert frame.n_points == 0 and frame.stats["n_hits"] == 0
+
+
+def test_half_wave_slab_reflects_far_less_than_a_half_space(mmwcas):
+    """A glass layer one internal half-wavelength thick is nearly transparent at normal
+    incidence (slab model, ITU-R P.2040-3 §3: |R| 0.07 vs 0.43 for the half-space)."""
+    from sim2radar.em import complex_permittivity
+
+    eta = complex_permittivity("glass", mmwcas.center_frequency_hz)
+    half_wave_m = mmwcas.wavelength_m / (2 * np.sqrt(eta.real))
+    plate = [facing_plate(3.0, material="glass")]
+    half_space = simulate_frame(plate, mmwcas, return_cube=True)
+    slab = simulate_frame(
+        plate,
+        mmwcas.with_updates(scattering={"slab_thickness_m": {"glass": half_wave_m}}),
+        return_cube=True,
+    )
+    assert _peak_db(slab) < _peak_db(half_space) - 10.0
