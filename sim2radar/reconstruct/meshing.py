@@ -4,7 +4,7 @@ Every 2×2 block of (strided) pixels inside one segment becomes two triangles, u
 straddles a depth discontinuity: an edge whose relative depth jump exceeds what a continuous
 surface seen at ``max_incidence_deg`` could produce is cut, so no triangle bridges e.g. a door
 edge and the wall behind it. The mesh is then decimated by quadric edge collapse (Garland &
-Heckbert 1997) with boundaries preserved, and its faces are turned towards the camera.
+Heckbert 1997) with boundary edges heavily weighted, and its faces are turned towards the camera.
 """
 
 from __future__ import annotations
@@ -115,8 +115,9 @@ def simplify_mesh(
 ) -> tuple[np.ndarray, np.ndarray]:
     """Quadric edge-collapse decimation (pymeshlab) to about ``target_faces`` faces.
 
-    Boundaries are preserved (``preserveboundary``) so holes and outlines stay where the depth
-    grid put them; planar regions collapse to few triangles (``planarquadric``).
+    Boundary edges carry a heavy quadric weight (``boundaryweight`` 10) so outlines and holes
+    stay where the depth grid put them while straight runs of boundary vertices may collapse;
+    planar regions collapse to few triangles (``planarquadric``).
     """
     if target_faces <= 0 or len(faces) <= target_faces:
         return vertices, faces
@@ -126,8 +127,8 @@ def simplify_mesh(
     ms.add_mesh(pymeshlab.Mesh(np.asarray(vertices, np.float64), np.asarray(faces, np.int32)))
     ms.meshing_decimation_quadric_edge_collapse(
         targetfacenum=int(target_faces),
-        preserveboundary=True,
-        boundaryweight=2.0,
+        preserveboundary=False,
+        boundaryweight=10.0,
         preservenormal=True,
         planarquadric=True,
         qualitythr=0.3,
