@@ -1,5 +1,10 @@
 """Procedural indoor worlds (IFR-like corridors with rooms and doors) rendered by Mitsuba.
 
+    from sim2radar.worlds import generate_world, trajectory, render_frame, RigConfig
+    world = generate_world(seed=7)                       # World: meshes, objects, doors
+    poses = trajectory(world, n_frames=10, seed=0)       # list[RigPose]
+    frame = render_frame(world, poses[0], RigConfig())   # WorldFrame: rgb, depth, masks, LiDAR
+
 See :mod:`sim2radar.worlds.frame` for the data types and frame conventions.
 """
 
@@ -10,6 +15,7 @@ from sim2radar.worlds.config import (
     load_worlds_config,
     make_rig_config,
     make_world_config,
+    radar_view,
 )
 from sim2radar.worlds.frame import (
     NO_INSTANCE,
@@ -21,9 +27,14 @@ from sim2radar.worlds.frame import (
     WorldFrame,
     WorldObject,
 )
+from sim2radar.worlds.generate import STAGE_VERSION, generate_world
+from sim2radar.worlds.render import RENDER_VERSION, cast_rays, render_frame, rig_extrinsics
+from sim2radar.worlds.trajectory import rig_pose, trajectory
 
 __all__ = [
     "NO_INSTANCE",
+    "RENDER_VERSION",
+    "STAGE_VERSION",
     "Appearance",
     "DoorSpec",
     "RigConfig",
@@ -34,7 +45,14 @@ __all__ = [
     "WorldConfigError",
     "WorldFrame",
     "WorldObject",
+    "cast_rays",
+    "generate_world",
     "load_worlds_config",
     "make_rig_config",
     "make_world_config",
+    "radar_view",
+    "render_frame",
+    "rig_extrinsics",
+    "rig_pose",
+    "trajectory",
 ]

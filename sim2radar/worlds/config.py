@@ -30,6 +30,9 @@ __all__ = [
     "RigConfig",
     "WorldConfigError",
     "load_worlds_config",
+    "make_world_config",
+    "make_rig_config",
+    "radar_view",
     "LAYOUTS",
     "DOOR_STATES",
     "CLUTTER_KINDS",
@@ -265,11 +268,11 @@ class RigConfig(BaseModel):
     camera_pitch_deg: float = 3.0
     radar_preset: str = "ti-mmwcas"
     radar_position_m: tuple[float, float, float] = (0.05, 0.0, 1.05)
-    #: Radar azimuth field of view, full angle [deg] (ti-mmwcas: ~120).
-    radar_azimuth_fov_deg: float = 120.0
-    #: Radar elevation field of view, full angle [deg].
-    radar_elevation_fov_deg: float = 40.0
-    radar_max_range_m: float = 15.0
+    #: Radar azimuth / elevation field of view, full angles [deg], and maximum range [m] used
+    #: for the door flags; ``None`` takes them from the ``radar_preset``'s RadarConfig.
+    radar_azimuth_fov_deg: float | None = None
+    radar_elevation_fov_deg: float | None = None
+    radar_max_range_m: float | None = None
     lidar_position_m: tuple[float, float, float] = (0.0, 0.0, 1.45)
     lidar_beams: int = 16
     #: Lowest and highest beam elevation [deg] (VLP-16: -15..15).
@@ -313,7 +316,9 @@ class RigConfig(BaseModel):
         "lidar_azimuth_step_deg", "lidar_max_range_m",
     )
     @classmethod
-    def _posf(cls, v: float, info) -> float:
+    def _posf(cls, v: float | None, info) -> float | None:
+        if v is None:
+            return v
         if not (math.isfinite(v) and v > 0):
             raise ValueError(f"{info.field_name}: must be finite and > 0, got {v}")
         return v
@@ -334,11 +339,27 @@ class RigConfig(BaseModel):
         return v
 
 
+def radar_view(rig: RigConfig) -> tuple[float, float, float]:
+    """Radar azimuth FOV [deg], elevation FOV [deg] and maximum range [m] for ``rig``: its
+    explicit values, else those of ``rig.radar_preset`` (:func:`sim2radar.radar.load_radar_config`).
+    """
+    az, el, rng = rig.radar_azimuth_fov_deg, rig.radar_elevation_fov_deg, rig.radar_max_range_m
+    if az is None or el is None or rng is None:
+        from sim2radar.radar import load_radar_config
+
+        radar = load_radar_config(rig.radar_preset)
+        az = radar.azimuth_fov_deg if az is None else az
+        el = radar.elevation_fov_deg if el is None else el
+        rng = radar.max_range_m if rng is None else rng
+    return float(az), float(el), float(rng)
+
+
 def _format_validation(exc: ValidationError, where: str) -> str:
     lines = []
     for err in exc.errors():
         loc = ".".join(str(p) for p in err["loc"]) or "(root)"
         msg = err["msg"].removeprefix("Value error, ")
+        msg = msg.removeprefix(f"{loc}: ")
         lines.append(f"{where}{loc}: {msg}")
     return "; ".join(lines)
 

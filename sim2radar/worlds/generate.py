@@ -106,7 +106,7 @@ class _Obj:
 class _Raster:
     """A ``grid_m`` raster of the floor plan: free-space owner and wall owner per cell."""
 
-    def __init__(self, spaces: list[Space], t: float, g: float, margin: float = 2.0):
+    def __init__(self, spaces: list[Space], t: float, g: float, margin: float = 6.5):
         rects = np.array([s.rect_m for s in spaces])
         self.g = g
         self.ox = math.floor((rects[:, 0].min() - t - margin) / g) * g
@@ -273,10 +273,8 @@ def generate_world(seed: int, config: WorldConfig | None = None) -> World:
                 ok = (b - a >= cfg.room_width_m[0] - _EPS
                       and side.free(a, b, ("opening",))
                       and all(_separation(rect, s.rect_m) >= t - _EPS for s in spaces))
-                if ok:
-                    room = Space(len(spaces), "room", rect)
-                    spaces.append(room)
-                    plan_door(side, None, a + 0.15, b - 0.15, room.index, True)
+                if ok and plan_door(side, None, a + 0.15, b - 0.15, len(spaces), True):
+                    spaces.append(Space(len(spaces), "room", rect))
                     pos = b + t + q(u(rr, cfg.room_gap_m))
                     continue
             if rr.uniform() < cfg.blind_door_probability:
@@ -324,7 +322,7 @@ def generate_world(seed: int, config: WorldConfig | None = None) -> World:
             place = rw_.uniform() < cfg.window_probability
             a, b = pos, pos + ww
             if place and b <= side.u1 - 0.3 and side.free(a - 0.2, b + 0.2, ("opening", "door")):
-                behind = _rect_of_band(side, a - 0.1, b + 0.1, -t - g, -t - 1.0)
+                behind = _rect_of_band(side, a - 0.3, b + 0.3, -t - g, -t - 6.0)
                 if raster.void(*behind):
                     sill = q(u(rw_, cfg.window_sill_m))
                     top = q(u(rw_, cfg.window_top_m))

@@ -25,7 +25,7 @@ from sim2radar.camera import CameraIntrinsics
 from sim2radar.hardware import mitsuba_variant
 from sim2radar.vocab import material_id, semantic_id
 from sim2radar.worlds.appearance import texture_image
-from sim2radar.worlds.config import RigConfig
+from sim2radar.worlds.config import RigConfig, radar_view
 from sim2radar.worlds.frame import NO_INSTANCE, RigPose, World, WorldFrame
 
 __all__ = [
@@ -322,9 +322,10 @@ def render_frame(
     c = boxes_r[:, :3]
     az_r = np.arctan2(c[:, 1], c[:, 0])
     el_r = np.arctan2(c[:, 2], np.hypot(c[:, 0], c[:, 1]))
-    in_fov = ((c[:, 0] > 0) & (np.abs(az_r) <= math.radians(rig.radar_azimuth_fov_deg) / 2)
-              & (np.abs(el_r) <= math.radians(rig.radar_elevation_fov_deg) / 2))
-    in_range = np.linalg.norm(c, axis=1) <= rig.radar_max_range_m
+    az_fov_deg, el_fov_deg, max_range_m = radar_view(rig)
+    in_fov = ((c[:, 0] > 0) & (np.abs(az_r) <= math.radians(az_fov_deg) / 2)
+              & (np.abs(el_r) <= math.radians(el_fov_deg) / 2))
+    in_range = np.linalg.norm(c, axis=1) <= max_range_m
 
     return WorldFrame(
         rgb=image,
