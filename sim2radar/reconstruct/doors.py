@@ -74,7 +74,8 @@ def _axes(points: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
 
 
 def fit_door_box(points_level: np.ndarray, config: DoorFitConfig = DoorFitConfig(),
-                 floor_z_m: float | None = None) -> np.ndarray:
+                 floor_z_m: float | None = None, pixel_angle_rad: float | None = None
+                 ) -> np.ndarray:
     """Fit one door box to its points.
 
     Parameters
@@ -82,6 +83,8 @@ def fit_door_box(points_level: np.ndarray, config: DoorFitConfig = DoorFitConfig
     points_level : (N, 3) float — door points in a z-up frame with the camera/sensor at the
         origin (the level frame of :mod:`sim2radar.reconstruct.backproject`) [m].
     floor_z_m : float, optional [m] — floor height in that frame, to snap the bottom to.
+    pixel_angle_rad : float, optional [rad] — angular pixel pitch (≈ 1/fx); widens the gap
+        that splits the points to three pixel footprints for doors seen at grazing angles.
 
     Returns
     -------
@@ -104,7 +107,14 @@ def fit_door_box(points_level: np.ndarray, config: DoorFitConfig = DoorFitConfig
     # keep the largest run of points along the wall without a gap > split_gap_m (drops stray
     # wall columns that segmentation attached to the door)
     order = np.argsort(s)
-    breaks = np.flatnonzero(np.diff(s[order]) > config.split_gap_m)
+    centroid = p.mean(axis=0)
+    normal = np.array([n[0], n[1], 0.0])
+    rng = float(np.linalg.norm(centroid))
+    gap = config.split_gap_m
+    if pixel_angle_rad:
+        cos_inc = abs(float(normal @ centroid)) / max(rng, 1e-9)
+        gap = max(gap, 3.0 * rng * pixel_angle_rad / max(cos_inc, 0.1))
+    breaks = np.flatnonzero(np.diff(s[order]) > gap)
     if len(breaks):
         keep = max(np.split(order, breaks + 1), key=len)
         p, s = p[keep], s[keep]
@@ -129,7 +139,8 @@ def fit_door_box(points_level: np.ndarray, config: DoorFitConfig = DoorFitConfig
 
 
 def fit_door_boxes(segment_points: list[np.ndarray], config: DoorFitConfig = DoorFitConfig(),
-                   floor_z_m: float | None = None) -> tuple[np.ndarray, list[list[int]]]:
+                   floor_z_m: float | None = None, pixel_angle_rad: float | None = None
+                   ) -> tuple[np.ndarray, list[list[int]]]:
     """Group door segments into doors and fit a box to each group.
 
     Parameters
@@ -144,7 +155,7 @@ def fit_door_boxes(segment_points: list[np.ndarray], config: DoorFitConfig = Doo
     usable = [i for i, p in enumerate(pts) if len(p) >= config.min_points]
     if not usable:
         return np.zeros((0, 7), np.float32), []
-    single = {i: fit_door_box(pts[i], config, floor_z_m) for i in usable}
+    single = {i: fit_door_box(pts[i], config, floor_z_m, pixel_angle_rad) for i in usable}
     parent = {i: i for i in usable}
 
     def find(i):
@@ -173,7 +184,7 @@ def fit_door_boxes(segment_points: list[np.ndarray], config: DoorFitConfig = Doo
     boxes, out_groups = [], []
     for members in groups.values():
         p = np.concatenate([pts[i] for i in members])
-        boxes.append(fit_door_box(p, config, floor_z_m))
+        boxes.append(fit_door_box(p, config, floor_z_m, pixel_angle_rad))
         out_groups.append(sorted(members))
     return np.stack(boxes).astype(np.float32), out_groups
 

@@ -446,7 +446,7 @@ def reconstruct(
     floor_z = float(np.median(floor_pts[:, 2])) if len(floor_pts) >= 20 else float("nan")
     door_ids = [i for i, s in enumerate(segments.labels) if s == "door"]
     boxes, _ = fit_door_boxes([pl[seg == i] for i in door_ids], config.doors.to_config(),
-                              None if np.isnan(floor_z) else floor_z)
+                              None if np.isnan(floor_z) else floor_z, 1.0 / k.fx)
     timings["doors"] = time.perf_counter() - t
     timings["total"] = time.perf_counter() - t0
 

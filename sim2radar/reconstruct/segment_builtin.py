@@ -44,7 +44,7 @@ from sim2radar.reconstruct.types import (
     Segments,
 )
 
-__all__ = ["BuiltinSegments", "SegmentGeometry", "region_geometry"]
+__all__ = ["BuiltinSegments", "SegmentGeometry", "region_geometry", "footprint_gap_m"]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -83,9 +83,24 @@ class SegmentGeometry:
         return abs(float(self.normal[2]))
 
 
-def region_geometry(points_level: np.ndarray, mask: np.ndarray, max_points: int = 4000
-                    ) -> SegmentGeometry:
-    """Plane fit and extents of the pixels ``mask`` of a level-frame point map (H, W, 3)."""
+def footprint_gap_m(centroid: np.ndarray, normal: np.ndarray, pixel_angle_rad: float | None,
+                    min_gap_m: float = 0.25) -> float:
+    """Largest gap [m] between neighbouring samples of one surface to still call it
+    contiguous: three pixel footprints along the surface (range·pixel angle / cos incidence),
+    at least ``min_gap_m``."""
+    if not pixel_angle_rad:
+        return min_gap_m
+    rng = float(np.linalg.norm(centroid))
+    cos_inc = abs(float(normal @ centroid)) / max(rng, 1e-9)
+    return max(min_gap_m, 3.0 * rng * pixel_angle_rad / max(cos_inc, 0.1))
+
+
+def region_geometry(points_level: np.ndarray, mask: np.ndarray, max_points: int = 4000,
+                    pixel_angle_rad: float | None = None) -> SegmentGeometry:
+    """Plane fit and extents of the pixels ``mask`` of a level-frame point map (H, W, 3).
+
+    ``pixel_angle_rad`` (≈ 1/fx) sets the gap that splits the points along the plane
+    (:func:`footprint_gap_m`); the width is that of the largest contiguous run."""
     pts = points_level[mask]
     pts = pts[np.isfinite(pts).all(axis=1)].astype(np.float64)
     h, w = mask.shape
@@ -108,6 +123,13 @@ def region_geometry(points_level: np.ndarray, mask: np.ndarray, max_points: int 
     horiz /= np.linalg.norm(horiz)
     a = pts @ horiz
     z = pts[:, 2]
+    # the largest run along the plane without a gap: stray pixels of a neighbouring surface
+    # seen at a grazing angle must not inflate the width
+    order = np.argsort(a)
+    breaks = np.flatnonzero(np.diff(a[order]) > footprint_gap_m(c, n, pixel_angle_rad))
+    if len(breaks):
+        keep = max(np.split(order, breaks + 1), key=len)
+        a, z = a[keep], z[keep]
     a0, a1 = np.percentile(a, [1, 99])
     z0, z1 = np.percentile(z, [1, 99])
     # fill: pixels over the area of their convex hull in the image (a rectangle seen in
@@ -193,6 +215,7 @@ class BuiltinSegments:
         self.offset_thresh_m = float(offset_thresh_m)
         #: Diagnostics of the last call: up vector, floor / ceiling level, region count.
         self.last_info: dict = {}
+        self._pixel_angle: float | None = None
 
     # -- stage entry ------------------------------------------------------------------------
     def segment(self, frame: FrameInput, depth: DepthResult) -> Segments:
@@ -219,7 +242,10 @@ class BuiltinSegments:
 
         lab = self._lab(frame.rgb, w)
         regions = self._regions(points, normals, lab, valid, k.fx)
-        regions = self._merge(regions, pl, lab, valid)
+        nl = normals @ rot.T
+        floor_z = self._level(pl, nl, up=True)
+        self._pixel_angle = 1.0 / k.fx
+        regions = self._merge(regions, pl, lab, valid, floor_z)
         labels, scores, info = self._label(regions, pl, frame.rgb)
         seg, labels, scores = self._compact(regions, labels, scores)
         self.last_info = {"up_cam": up.tolist(), **info, "n_segments": len(labels)}
@@ -276,7 +302,25 @@ class BuiltinSegments:
         labels = lut[cc]
         return _fill_nearest(labels, valid)
 
-    def _merge(self, regions, pl, lab, valid) -> np.ndarray:
+    @staticmethod
+    def _level(pl, nl, up: bool) -> float | None:
+        """Median height of pixels on horizontal surfaces facing up (floor) or down (ceiling)."""
+        with np.errstate(invalid="ignore"):
+            sel = (nl[..., 2] > 0.95) & (pl[..., 2] < -0.3) if up else \
+                  (nl[..., 2] < -0.95) & (pl[..., 2] > 0.2)
+        if sel.sum() < 20:
+            return None
+        return float(np.median(pl[..., 2][sel]))
+
+    def _door_like(self, g: SegmentGeometry, floor_z: float | None) -> bool:
+        """Door-sized vertical rectangle standing on the floor (before labelling)."""
+        if floor_z is None or g.vertical_cos > 0.4:
+            return False
+        return (g.z_min_m < floor_z + self.floor_tolerance_m
+                and self.door_height_m[0] <= g.height_m <= self.door_height_m[1]
+                and g.width_m <= self.door_width_m[1])
+
+    def _merge(self, regions, pl, lab, valid, floor_z=None) -> np.ndarray:
         n = int(regions.max()) + 1
         if n <= 1:
             return regions
@@ -306,9 +350,14 @@ class BuiltinSegments:
                     continue
                 for i in (a, b):
                     if geo[i] is None:
-                        geo[i] = region_geometry(pl, regions == i, max_points=1500)
+                        geo[i] = region_geometry(pl, regions == i, max_points=1500,
+                                                 pixel_angle_rad=self._pixel_angle)
                 ga, gb = geo[a], geo[b]
                 if ga.n_px < 3 or gb.n_px < 3:
+                    continue
+                # two door-sized rectangles side by side stay apart (neighbouring doors whose
+                # wall strip is too thin to survive; double-door leaves are joined later)
+                if self._door_like(ga, floor_z) and self._door_like(gb, floor_z):
                     continue
                 if abs(ga.normal @ gb.normal) < cos_m:
                     continue
@@ -326,7 +375,8 @@ class BuiltinSegments:
 
     def _label(self, regions, pl, rgb):
         n = int(regions.max()) + 1
-        geos = [region_geometry(pl, regions == i) for i in range(n)]
+        geos = [region_geometry(pl, regions == i, pixel_angle_rad=self._pixel_angle)
+                for i in range(n)]
         hsv = cv2.cvtColor(rgb, cv2.COLOR_RGB2HSV)
         red = (((hsv[..., 0] < 8) | (hsv[..., 0] > 170)) & (hsv[..., 1] > 140)
                & (hsv[..., 2] > 50))

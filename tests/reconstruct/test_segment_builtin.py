@@ -1,0 +1,84 @@
+"""Built-in segmentation on an analytic corridor: exact depth, known masks and labels."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from sim2radar.reconstruct.segment_builtin import BuiltinSegments, region_geometry
+from sim2radar.reconstruct.synthetic import corridor_frame
+from sim2radar.reconstruct.types import DepthResult, FrameInput, ReconstructionInputError
+from sim2radar.vocab import SEMANTIC_CLASSES, semantic_id
+
+
+@pytest.fixture(scope="module")
+def frames():
+    return [corridor_frame(256, 192, seed=s) for s in (1, 3)]
+
+
+def _semantic(seg):
+    lut = np.array([semantic_id(s) for s in seg.labels] + [0])
+    return lut[seg.segment_id]
+
+
+def _iou(a, b):
+    return (a & b).sum() / max((a | b).sum(), 1)
+
+
+def test_structure_classes_are_recovered(frames):
+    for f in frames:
+        backend = BuiltinSegments()
+        seg = backend.segment(FrameInput(f.rgb, f.intrinsics), DepthResult(f.depth_m))
+        sem = _semantic(seg)
+        for name in ("wall", "floor", "ceiling"):
+            c = semantic_id(name)
+            assert _iou(sem == c, f.semantic_id == c) > 0.85, name
+        # gravity: the camera is level, so up is -y
+        assert np.dot(backend.last_info["up_cam"], [0, -1, 0]) > np.cos(np.radians(1))
+        assert backend.last_info["floor_z_m"] == pytest.approx(-1.5, abs=0.05)
+
+
+def test_the_nearest_visible_door_is_segmented_as_a_door(frames):
+    found = 0
+    for f in frames:
+        seg = BuiltinSegments().segment(FrameInput(f.rgb, f.intrinsics), DepthResult(f.depth_m))
+        sem = _semantic(seg)
+        door = semantic_id("door")
+        inst = [i for i, o in enumerate(f.objects) if o["semantic"] == "door"]
+        sizes = [(f.instance_id == i).sum() for i in inst]
+        nearest = inst[int(np.argmax(sizes))]
+        if _iou(sem == door, f.instance_id == nearest) > 0.3 or (
+            ((sem == door) & (f.instance_id == nearest)).sum() > 0.7 * max(sizes)
+        ):
+            found += 1
+        # no door label on the floor or ceiling
+        assert not ((sem == door) & np.isin(f.semantic_id, [2, 3])).sum() > 0.02 * (sem == door).sum()
+    assert found == len(frames)
+
+
+def test_region_geometry_of_a_wall(frames):
+    f = frames[0]
+    from sim2radar.reconstruct.backproject import level_from_camera, points_from_depth
+
+    pl = points_from_depth(f.depth_m, f.intrinsics) @ level_from_camera([0, -1, 0])[:3, :3].T
+    wall = f.instance_id == next(i for i, o in enumerate(f.objects) if o["name"] == "wall_end")
+    g = region_geometry(pl, wall)
+    assert g.vertical_cos < 0.05  # vertical plane
+    assert g.planarity < 1e-3
+    assert g.height_m == pytest.approx(2.7, abs=0.15)
+
+
+def test_empty_depth_is_a_clear_error(frames):
+    f = frames[0]
+    with pytest.raises(ReconstructionInputError, match="no segments"):
+        BuiltinSegments().segment(FrameInput(f.rgb, f.intrinsics),
+                                  DepthResult(np.zeros_like(f.depth_m)))
+
+
+def test_labels_are_in_the_vocabulary(frames):
+    f = frames[1]
+    seg = BuiltinSegments().segment(FrameInput(f.rgb, f.intrinsics), DepthResult(f.depth_m))
+    assert set(seg.labels) <= set(SEMANTIC_CLASSES)
+    assert seg.segment_id.max() == seg.n_segments - 1
+    assert len(seg.scores) == seg.n_segments
+    assert ((seg.segment_id >= 0) == (f.depth_m > 0)).all()
