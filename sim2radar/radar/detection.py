@@ -28,26 +28,46 @@ def ca_cfar_mask(power: np.ndarray, cfg: DetectionConfig) -> np.ndarray:
     """Boolean detection mask of a (n_range, n_az, n_el) power cube (CA-CFAR along axis 0)."""
     p = np.asarray(power, dtype=np.float64)
     g, t = cfg.cfar_guard_cells, cfg.cfar_training_cells
-    n_r = p.shape[0]
-    # cumulative sums along range give every window sum in O(n)
-    c = np.concatenate([np.zeros((1,) + p.shape[1:]), np.cumsum(p, axis=0)], axis=0)
-    idx = np.arange(n_r)
+    # training cells = (full window of 2(g+t)+1 cells) - (guard window of 2g+1 cells),
+    # both as O(n) running sums along range (zero-padded beyond the ends)
+    n_full, n_guard = 2 * (g + t) + 1, 2 * g + 1
 
-    def window_sum(lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        lo = np.clip(lo, 0, n_r)
-        hi = np.clip(hi, 0, n_r)
-        return c[hi] - c[lo], (hi - lo).astype(np.float64)
+    def window_sum(a: np.ndarray, size: int, axis: int = 0) -> np.ndarray:
+        return size * ndimage.uniform_filter1d(a, size, axis=axis, mode="constant", cval=0.0)
 
-    lead_sum, lead_n = window_sum(idx - g - t, idx - g)
-    lag_sum, lag_n = window_sum(idx + g + 1, idx + g + 1 + t)
-    count = np.maximum(lead_n + lag_n, 1.0).reshape((-1,) + (1,) * (p.ndim - 1))
-    mean_train = (lead_sum + lag_sum) / count
+    train_sum = window_sum(p, n_full) - window_sum(p, n_guard)
+    ones = np.ones(p.shape[0])
+    count = window_sum(ones, n_full) - window_sum(ones, n_guard)  # fewer near the ends
+    shape = (-1,) + (1,) * (p.ndim - 1)
+    mean_train = train_sum / np.maximum(count, 1.0).reshape(shape)
     noise = 10.0 ** (cfg.noise_floor_db / 10.0)
     alpha = 10.0 ** (cfg.cfar_threshold_db / 10.0)
     mask = (p > alpha * (mean_train + noise)) & (p > noise * 10.0 ** (cfg.min_snr_db / 10.0))
     if cfg.peak_grouping:
-        mask &= p >= ndimage.maximum_filter(p, size=3, mode="constant", cval=0.0)
+        mask &= _is_local_max(p, mask)
     return mask
+
+
+def _is_local_max(p: np.ndarray, candidates: np.ndarray) -> np.ndarray:
+    """True where a candidate cell is >= all its 3^ndim - 1 neighbours (zero outside).
+
+    Only the (few) candidate cells are tested, which is much cheaper than a full
+    maximum filter over the cube.
+    """
+    idx = np.nonzero(candidates)
+    out = np.zeros_like(candidates)
+    if len(idx[0]) == 0:
+        return out
+    padded = np.pad(p, 1, mode="constant", constant_values=0.0)
+    centre = p[idx]
+    keep = np.ones(len(centre), dtype=bool)
+    for offset in np.ndindex(*(3,) * p.ndim):
+        if all(o == 1 for o in offset):
+            continue
+        neighbour = padded[tuple(i + o for i, o in zip(idx, offset, strict=True))]
+        keep &= centre >= neighbour
+    out[tuple(i[keep] for i in idx)] = True
+    return out
 
 
 def spherical_to_cartesian(
