@@ -367,6 +367,12 @@ def generate_world(seed: int, config: WorldConfig | None = None) -> World:
         thresholds.setdefault(owner, []).append(
             box_arrays(_center_of_band(side, s0, s1, 0.0, -t, -_FLOOR_THICKNESS_M, 0.0),
                        _size_of_band(side, s0, s1, t, _FLOOR_THICKNESS_M)))
+        if plan["leads_to"] < 0:
+            # nothing is modelled behind a blind/end door: back it with a slab so no ray
+            # escapes through the gaps around the leaf
+            lintels[owner].append(
+                box_arrays(_center_of_band(side, s0 - 0.05, s1 + 0.05, -t, -t - 0.05, 0.0, height),
+                           _size_of_band(side, s0 - 0.05, s1 + 0.05, 0.05, height)))
         # local door frame: u along the wall, v through the wall towards the swing side, z up
         yaw_v = side.behind_yaw()
         yaw_u = yaw_v - math.pi / 2
