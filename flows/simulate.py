@@ -21,6 +21,7 @@ every core for one frame). ``workers>1`` uses a thread pool; ``dask_address`` (o
 
 from __future__ import annotations
 
+import logging
 import os
 from collections.abc import Callable, Sequence
 from contextlib import contextmanager
@@ -40,7 +41,14 @@ from tasks.radar import (
     summarize,
 )
 
-__all__ = ["simulate_flow", "run_simulation", "SceneFailures", "progress_callback"]
+__all__ = [
+    "simulate_flow",
+    "simulate_dataset",
+    "run_simulation",
+    "expand_scenes",
+    "SceneFailures",
+    "progress_callback",
+]
 
 _PROGRESS: list[Callable[[SceneOutcome], None]] = []
 
@@ -187,4 +195,60 @@ def run_simulation(
         png_dir=None if png_dir is None else os.fspath(png_dir),
         force=force,
         strict=strict,
+    )
+
+
+def expand_scenes(scenes: Sequence[str | os.PathLike]) -> list[str]:
+    """Scene paths from files, folders (every ``*.yaml`` inside, recursively) and globs.
+
+    A glob that matches nothing is logged and ignored (e.g. an empty ``scenes/`` folder on a
+    nightly schedule); nothing found at all is an error.
+    """
+    import glob
+
+    out: list[str] = []
+    for item in scenes:
+        text = os.fspath(item)
+        if any(c in text for c in "*?["):
+            matches = sorted(glob.glob(text, recursive=True))
+            if not matches:
+                logging.getLogger(__name__).warning("scene pattern %r matches no file", text)
+            out.extend(matches)
+        elif Path(text).is_dir():
+            found = sorted(str(p) for p in Path(text).rglob("*.yaml"))
+            if not found:
+                raise FileNotFoundError(f"scene folder {text!r} holds no *.yaml scene file")
+            out.extend(found)
+        else:
+            out.append(text)  # a missing file is recorded as a failed scene by the flow
+    if not out:
+        raise FileNotFoundError(f"no scene files found in {[os.fspath(s) for s in scenes]}")
+    return list(dict.fromkeys(out))  # de-duplicated, order kept
+
+
+@flow(name="simulate-dataset", log_prints=False)
+def simulate_dataset(
+    scenes: list[str],
+    radar: str = "ti-mmwcas",
+    store: str = "out/store",
+    dataset: str = "default",
+    seed: int = 0,
+    png_dir: str | None = None,
+    strict: bool = False,
+    workers: int = 1,
+    dask_address: str | None = None,
+) -> dict[str, Any]:
+    """Deployment entry point (see ``deploy/prefect.yaml``): expand scene files / folders /
+    globs and run :func:`simulate_flow` as a subflow on the chosen task runner (threads, or
+    Dask with ``dask_address`` = scheduler address or ``"local"``)."""
+    return run_simulation(
+        expand_scenes(scenes),
+        radar=radar,
+        store=store,
+        dataset=dataset,
+        seed=seed,
+        png_dir=png_dir,
+        strict=strict,
+        workers=workers,
+        dask_address=dask_address,
     )
