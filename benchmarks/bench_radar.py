@@ -21,7 +21,7 @@ import numpy as np
 from benchmarks._scenes import corridor
 from sim2radar.radar import RadarScene, load_radar_config
 
-N_FRAMES = 7
+N_FRAMES = 9
 TARGET_TRIANGLES = 100_000
 
 
