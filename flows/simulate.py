@@ -21,7 +21,6 @@ every core for one frame). ``workers>1`` uses a thread pool; ``dask_address`` (o
 
 from __future__ import annotations
 
-import logging
 import os
 from collections.abc import Callable, Sequence
 from contextlib import contextmanager
@@ -33,6 +32,7 @@ from prefect.futures import as_completed
 from prefect.task_runners import ThreadPoolTaskRunner
 
 from storage import ArtifactStore
+from tasks.common import expand_scenes
 from tasks.radar import (
     SceneOutcome,
     failed_outcome,
@@ -196,34 +196,6 @@ def run_simulation(
         force=force,
         strict=strict,
     )
-
-
-def expand_scenes(scenes: Sequence[str | os.PathLike]) -> list[str]:
-    """Scene paths from files, folders (every ``*.yaml`` inside, recursively) and globs.
-
-    A glob that matches nothing is logged and ignored (e.g. an empty ``scenes/`` folder on a
-    nightly schedule); nothing found at all is an error.
-    """
-    import glob
-
-    out: list[str] = []
-    for item in scenes:
-        text = os.fspath(item)
-        if any(c in text for c in "*?["):
-            matches = sorted(glob.glob(text, recursive=True))
-            if not matches:
-                logging.getLogger(__name__).warning("scene pattern %r matches no file", text)
-            out.extend(matches)
-        elif Path(text).is_dir():
-            found = sorted(str(p) for p in Path(text).rglob("*.yaml"))
-            if not found:
-                raise FileNotFoundError(f"scene folder {text!r} holds no *.yaml scene file")
-            out.extend(found)
-        else:
-            out.append(text)  # a missing file is recorded as a failed scene by the flow
-    if not out:
-        raise FileNotFoundError(f"no scene files found in {[os.fspath(s) for s in scenes]}")
-    return list(dict.fromkeys(out))  # de-duplicated, order kept
 
 
 @flow(name="simulate-dataset", log_prints=False)

@@ -1,12 +1,16 @@
-"""Task helpers shared by every stage: store handles, retry policy, scene ids, JSON-safe stats.
+"""Task helpers shared by every stage: store handles, retry policy, scene ids and scene-file
+expansion, JSON-safe stats.
 
 Plain functions (no Prefect engine needed) so tests call them directly.
 """
 
 from __future__ import annotations
 
+import glob
+import logging
 import math
 import os
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -15,7 +19,16 @@ import yaml
 
 from storage import ArtifactStore
 
-__all__ = ["open_store", "REMOTE_IO_RETRIES", "REMOTE_IO_RETRY_DELAYS_S", "scene_id_for", "jsonable"]
+__all__ = [
+    "expand_scenes",
+    "open_store",
+    "REMOTE_IO_RETRIES",
+    "REMOTE_IO_RETRY_DELAYS_S",
+    "scene_id_for",
+    "jsonable",
+]
+
+log = logging.getLogger(__name__)
 
 #: Prefect retries for tasks whose work is storage I/O (remote object stores can flake).
 #: Simulation tasks get none: a deterministic failure would only fail again.
@@ -60,3 +73,29 @@ def jsonable(obj: Any) -> Any:
     if obj is None or isinstance(obj, (bool, int, str)):
         return obj
     return repr(obj)
+
+
+def expand_scenes(scenes: Sequence[str | os.PathLike]) -> list[str]:
+    """Scene paths from files, folders (every ``*.yaml`` inside, recursively) and globs.
+
+    A glob that matches nothing is logged and ignored (e.g. an empty ``scenes/`` folder on a
+    nightly schedule); nothing found at all is an error.
+    """
+    out: list[str] = []
+    for item in scenes:
+        text = os.fspath(item)
+        if any(c in text for c in "*?["):
+            matches = sorted(glob.glob(text, recursive=True))
+            if not matches:
+                log.warning("scene pattern %r matches no file", text)
+            out.extend(matches)
+        elif Path(text).is_dir():
+            found = sorted(str(p) for p in Path(text).rglob("*.yaml"))
+            if not found:
+                raise FileNotFoundError(f"scene folder {text!r} holds no *.yaml scene file")
+            out.extend(found)
+        else:
+            out.append(text)  # a missing file is recorded as a failed scene by the flow
+    if not out:
+        raise FileNotFoundError(f"no scene files found in {[os.fspath(s) for s in scenes]}")
+    return list(dict.fromkeys(out))  # de-duplicated, order kept

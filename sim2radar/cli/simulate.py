@@ -112,7 +112,9 @@ def print_summary(summary: dict[str, Any], png_dir: Path | None) -> None:
 
 @app.command()
 def simulate(
-    scenes: list[Path] = typer.Argument(..., help="Scene YAML file(s): meshes + materials (+ radar_poses, boxes)."),
+    scenes: list[str] = typer.Argument(
+        ..., help="Scene YAML files, folders (all *.yaml inside) or globs: meshes + materials (+ radar_poses, boxes)."
+    ),
     radar: str = typer.Option("ti-mmwcas", "--radar", "-r", help="Radar preset name or YAML path."),
     out: str = typer.Option("out/store", "--out", "-o", help="Artifact store: folder or fsspec URI (s3://…)."),
     dataset: str = typer.Option("default", help="Manifest (dataset) name."),
@@ -142,8 +144,15 @@ def simulate(
         raise typer.Exit(2) from None
     if png_dir is None and not no_png:
         png_dir = _default_png_dir(out)
+    from tasks.common import expand_scenes
+
+    try:
+        scene_files = expand_scenes(scenes)
+    except FileNotFoundError as exc:
+        typer.secho(f"error: {exc}", fg="red", err=True)
+        raise typer.Exit(2) from None
     summary = run_scenes(
-        list(scenes),
+        [Path(s) for s in scene_files],
         radar=radar,
         store=out,
         dataset=dataset,
