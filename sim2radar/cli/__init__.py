@@ -16,6 +16,7 @@ from sim2radar.cli import simulate as _simulate  # noqa: E402,F401  isort: skip
 from sim2radar.cli import worlds as _worlds  # noqa: E402,F401  isort: skip
 from sim2radar.cli import detect as _detect  # noqa: E402,F401  isort: skip
 from sim2radar.cli import reconstruct as _reconstruct  # noqa: E402,F401  isort: skip
+from sim2radar.cli import generate as _generate  # noqa: E402,F401  isort: skip
 
 __all__ = ["app", "main"]
 

@@ -1,0 +1,1 @@
+"""``sim2radar generate``: the factory main job (procedural worlds -> radar frames + door boxes)."""
