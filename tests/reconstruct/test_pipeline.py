@@ -1,0 +1,165 @@
+"""The four-stage pipeline end to end, configs, bad input, exporters and the radar hand-off."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from sim2radar.camera import CameraIntrinsics
+from sim2radar.evaluate.reconstruction import score_reconstruction
+from sim2radar.mesh import load_scene
+from sim2radar.reconstruct import (
+    MATERIAL_BACKENDS,
+    FrameInput,
+    MaterialLabel,
+    ReconstructionConfig,
+    ReconstructionInputError,
+    build_backends,
+    reconstruct,
+)
+from sim2radar.reconstruct.synthetic import corridor_frame
+from sim2radar.registry import UnknownBackendError
+
+
+@pytest.fixture(scope="module")
+def frame():
+    return corridor_frame(160, 120, seed=1)
+
+
+def _inp(f, **kw):
+    return FrameInput(f.rgb, f.intrinsics, f.lidar_points, name="corridor", **kw)
+
+
+@pytest.fixture(scope="module")
+def builtin_scene(frame):
+    return reconstruct(_inp(frame), ReconstructionConfig.preset("builtin-oracle-depth"),
+                       ground_truth=frame)
+
+
+def test_oracle_pipeline_reproduces_the_ground_truth(frame):
+    scene = reconstruct(_inp(frame), ReconstructionConfig.preset("oracle"), ground_truth=frame)
+    s = score_reconstruction(scene, frame)
+    assert s.depth["abs_rel"] == 0 and s.segmentation.miou() == 1
+    assert s.materials.accuracy() == 1
+    assert {"depth", "segments", "materials", "meshing", "doors", "total"} <= set(scene.timings_s)
+
+
+def test_builtin_stages_on_exact_depth(frame, builtin_scene):
+    s = score_reconstruction(builtin_scene, frame).summary()
+    assert s["miou"] > 0.5
+    assert s["material_acc"] > 0.8
+    # the nearest door (large in the image) gets a box within IoU 0.3 of the truth
+    assert s["door_recall@0.3"] >= 0.25
+    assert all(m.material != "unknown" for m in builtin_scene.meshes)
+
+
+def test_scene_goes_to_the_radar_frame_and_simulator(frame, builtin_scene):
+    radar_from_camera = np.linalg.inv(frame.radar_to_world) @ frame.camera_to_world
+    meshes = builtin_scene.meshes_in(radar_from_camera)
+    floor = [m for m in meshes if m.semantic == "floor"]
+    assert floor
+    # the radar is 1.4 m above the floor in the synthetic rig
+    assert np.median(floor[0].vertices[:, 2]) == pytest.approx(-1.4, abs=0.05)
+    boxes = builtin_scene.door_boxes_in(radar_from_camera)
+    assert boxes.shape[1] == 7 and np.all(boxes[:, 2] > -1.4) and np.all(boxes[:, 0] > 0)
+    from sim2radar.radar import load_radar_config, simulate_frame
+
+    points = simulate_frame(meshes, load_radar_config("ti-mmwcas")).points
+    assert len(points) > 20
+    # detections lie on the reconstructed corridor: inside its walls, beyond the radar
+    assert np.all(points[:, 0] > 0) and np.all(np.abs(points[:, 1]) < 3.0)
+
+
+def test_level_frame_default_and_point_export(builtin_scene):
+    pts = builtin_scene.points_in()
+    assert pts.ndim == 2 and pts.shape[1] == 3 and np.isfinite(pts).all()
+    # level frame: floor about 1.5 m below the camera
+    floor = builtin_scene.semantic_id.ravel()[np.isfinite(builtin_scene.points_cam).all(-1).ravel()] == 2
+    assert np.median(pts[floor, 2]) == pytest.approx(-1.5, abs=0.05)
+    assert builtin_scene.floor_z_m == pytest.approx(-1.5, abs=0.05)
+
+
+def test_write_scene_is_loadable_and_mitsuba_xml(tmp_path, builtin_scene):
+    path = builtin_scene.write_scene(tmp_path / "scene")
+    meshes = load_scene(path)
+    assert len(meshes) == len(builtin_scene.meshes)
+    assert {m.material for m in meshes} == {m.material for m in builtin_scene.meshes}
+    xml = (tmp_path / "scene" / "scene.xml").read_text()
+    assert xml.count("<shape") == len(meshes)
+
+
+def test_artifacts_round_trip_through_the_store(tmp_path, builtin_scene, frame):
+    from sim2radar.reconstruct.artifacts import (
+        frame_digest,
+        read_reconstruction,
+        write_scene_artifacts,
+    )
+    from storage import ArtifactStore, meshes_from_table
+
+    store = ArtifactStore(tmp_path / "store")
+    cfg = ReconstructionConfig.preset("builtin-oracle-depth").to_dict()
+    inputs = {"image": frame_digest(frame.rgb, frame.lidar_points)}
+    keys = write_scene_artifacts(store, builtin_scene, inputs=inputs, config=cfg)
+    again = write_scene_artifacts(store, builtin_scene, inputs=inputs, config=cfg)
+    assert keys == again
+    back = read_reconstruction(store, keys["reconstruction"])
+    np.testing.assert_array_equal(back["semantic_id"], builtin_scene.semantic_id)
+    np.testing.assert_allclose(back["door_boxes"], builtin_scene.door_boxes, atol=1e-6)
+    assert back["segment_labels"] == list(builtin_scene.segment_labels)
+    meshes = meshes_from_table(store.read("scene_meshes", keys["scene_meshes"]))
+    assert len(meshes) == len(builtin_scene.meshes)
+
+
+def test_config_yaml_presets_and_unknown_backend(tmp_path):
+    (tmp_path / "m.onnx").write_bytes(b"")
+    cfg_path = tmp_path / "c.yaml"
+    cfg_path.write_text("depth: {name: moge, options: {model_path: m.onnx}}\n"
+                        "segments: builtin\nmaterials: {name: prior}\nmeshing: {stride_px: 3}\n")
+    cfg = ReconstructionConfig.from_yaml(cfg_path)
+    assert cfg.depth.options["model_path"] == str((tmp_path / "m.onnx").resolve())
+    assert cfg.segments.name == "builtin" and cfg.meshing.stride_px == 3
+    (tmp_path / "bad.yaml").write_text("meshing: {strid_px: 3}\n")
+    with pytest.raises(ValueError, match="bad.yaml"):
+        ReconstructionConfig.from_yaml(tmp_path / "bad.yaml")
+    with pytest.raises(UnknownBackendError, match="known backends"):
+        build_backends(ReconstructionConfig(depth={"name": "midas"}))
+    with pytest.raises(ValueError, match="unknown_material"):
+        ReconstructionConfig(unknown_material="unknown")
+    with pytest.raises(ValueError, match="preset"):
+        ReconstructionConfig.preset("fancy")
+
+
+def test_bad_inputs_give_clear_errors(frame):
+    k = frame.intrinsics
+    with pytest.raises(ReconstructionInputError, match="uint8"):
+        FrameInput(frame.rgb.astype(np.float32) / 255, k)
+    with pytest.raises(ReconstructionInputError, match="intrinsics"):
+        FrameInput(frame.rgb, CameraIntrinsics.from_fov(100, 75, 60))
+    with pytest.raises(ReconstructionInputError, match="NaN"):
+        FrameInput(frame.rgb, k, np.full((5, 3), np.nan))
+    with pytest.raises(ValueError):
+        CameraIntrinsics(float("nan"), 1, 1, 1, 10, 10)
+    with pytest.raises(ReconstructionInputError, match="ground truth"):
+        reconstruct(_inp(frame), ReconstructionConfig.preset("oracle"))
+    with pytest.raises(ReconstructionInputError, match="no valid pixel"):
+        reconstruct(_inp(frame), ReconstructionConfig.preset("builtin-oracle-depth"),
+                    ground_truth={"depth_m": np.zeros_like(frame.depth_m)})
+    behind = -np.abs(frame.lidar_points)  # every LiDAR point behind the camera
+    with pytest.raises(ReconstructionInputError):
+        reconstruct(FrameInput(frame.rgb, k, behind), ReconstructionConfig())
+
+
+def test_out_of_vocabulary_and_unknown_materials_are_recorded(frame):
+    @MATERIAL_BACKENDS.register("test-garbage")
+    class Garbage:
+        def label(self, frame, depth, segments):
+            return [MaterialLabel("steel" if i == 0 else "unknown", 0.5, "")
+                    for i in range(segments.n_segments)]
+
+    cfg = ReconstructionConfig(depth={"name": "oracle"}, materials={"name": "test-garbage"})
+    scene = reconstruct(_inp(frame), cfg, ground_truth=frame)
+    assert scene.segment_materials[0].material == "unknown"
+    assert any("not in vocabulary" in f for f in scene.info["fallbacks"])
+    assert any("plasterboard" in f for f in scene.info["fallbacks"])
+    assert {m.material for m in scene.meshes} == {"plasterboard"}
+    assert (scene.material_id[scene.segment_id >= 0] == 0).all()
