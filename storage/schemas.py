@@ -301,3 +301,99 @@ MANIFEST = register_schema(
 # ---------------------------------------------------------------------------------------------
 # Further stages: append blocks below (see module docstring).
 # ---------------------------------------------------------------------------------------------
+
+# ---------------------------------------------------------------------------------------------
+# worlds (owner: procedural worlds stage, sim2radar/worlds + tasks/worlds.py)
+# World geometry itself is stored as a ``scene_meshes`` artifact (radar-ready).
+# ---------------------------------------------------------------------------------------------
+_VEC2_F64 = pa.list_(pa.float64(), 2)
+
+WORLD_SPECS = register_schema(
+    ArtifactSchema(
+        stage="world_specs",
+        version=1,
+        row="one procedural world",
+        description="layout, object table (semantic/material/appearance) and door boxes of a world",
+        schema=pa.schema(
+            [
+                field("world_id", pa.string(), doc="world identifier (world_<seed>)"),
+                field("seed", pa.int64(), doc="world seed"),
+                field("layout", pa.string(), doc="straight | t_junction | l_turn"),
+                field("ceiling_height_m", pa.float64(), unit="m", doc="ceiling height"),
+                field("spaces_json", pa.string(), doc="JSON list of corridors/rooms (rect_m x0 x1 y0 y1)"),
+                field("doors_json", pa.string(), doc="JSON list of doors (kind, state, swing_deg, ...)"),
+                field(
+                    "door_boxes_world",
+                    pa.list_(_BOX7_F32),
+                    unit="m, rad",
+                    doc="(M, 7) door boxes x y z dx dy dz heading, world frame",
+                ),
+                field("object_names", pa.list_(pa.string()), doc="(O,) object/mesh names"),
+                field("object_semantics", pa.list_(pa.string()), doc="(O,) vocab.SEMANTIC_CLASSES"),
+                field("object_materials", pa.list_(pa.string()), doc="(O,) vocab.MATERIAL_CLASSES"),
+                field("object_kinds", pa.list_(pa.string()), doc="(O,) door_leaf, cabinet, ..."),
+                field("object_door_index", pa.list_(pa.int32()), doc="(O,) door index or -1"),
+                field("object_space_index", pa.list_(pa.int32()), doc="(O,) space index or -1"),
+                field("appearances_json", pa.string(), doc="JSON list of (O,) optical appearances"),
+                field("path_world_m", pa.list_(_VEC2_F64), unit="m", doc="(P, 2) corridor centre-line"),
+                field("config_json", pa.string(), doc="resolved WorldConfig as JSON"),
+            ]
+        ),
+    )
+)
+
+WORLD_FRAMES = register_schema(
+    ArtifactSchema(
+        stage="world_frames",
+        version=1,
+        row="one rendered frame of a world",
+        description="RGB (PNG), depth (float16), normals, instance/semantic/material masks (PNG), "
+        "LiDAR, poses, intrinsics, door boxes with flags",
+        schema=pa.schema(
+            [
+                field("world_id", pa.string(), doc="world identifier"),
+                field("seed", pa.int64(), doc="world seed"),
+                field("frame_index", pa.int32(), doc="frame number along the trajectory"),
+                field("width", pa.int32(), unit="px", doc="image width"),
+                field("height", pa.int32(), unit="px", doc="image height"),
+                field("fx", pa.float64(), unit="px", doc="focal length x"),
+                field("fy", pa.float64(), unit="px", doc="focal length y"),
+                field("cx", pa.float64(), unit="px", doc="principal point x"),
+                field("cy", pa.float64(), unit="px", doc="principal point y"),
+                field("rgb_png", pa.binary(), doc="sRGB image, 8-bit PNG"),
+                field(
+                    "depth_f16",
+                    pa.binary(),
+                    unit="m",
+                    doc="(H, W) z-depth, little-endian float16 row-major, 0 = no surface",
+                ),
+                field("depth_min_m", pa.float32(), unit="m", doc="smallest valid depth"),
+                field("depth_max_m", pa.float32(), unit="m", doc="largest depth"),
+                field("normals_png", pa.binary(), doc="camera-frame normals, PNG of (n + 1) * 127.5"),
+                field("instance_png", pa.binary(), doc="16-bit PNG of instance_id + 1 (0 = none)"),
+                field("semantic_png", pa.binary(), doc="8-bit PNG of vocab.SEMANTIC_CLASSES ids"),
+                field("material_png", pa.binary(), doc="8-bit PNG of vocab.MATERIAL_CLASSES ids"),
+                field(
+                    "lidar_points_cam_m",
+                    pa.list_(_VEC3_F32),
+                    unit="m",
+                    doc="(N, 3) LiDAR returns in the camera frame (OpenCV axes)",
+                ),
+                field("lidar_ring", pa.list_(pa.uint8()), doc="(N,) beam index per return"),
+                field("camera_to_world", _MAT44_F64, unit="m", doc="(4, 4) row-major"),
+                field("radar_to_world", _MAT44_F64, unit="m", doc="(4, 4) row-major"),
+                field("lidar_to_world", _MAT44_F64, unit="m", doc="(4, 4) row-major"),
+                field("rig_to_world", _MAT44_F64, unit="m", doc="(4, 4) row-major"),
+                field("lidar_to_camera", _MAT44_F64, unit="m", doc="(4, 4) row-major"),
+                field("door_boxes_world", pa.list_(_BOX7_F32), unit="m, rad", doc="(M, 7) world"),
+                field("door_boxes_radar", pa.list_(_BOX7_F32), unit="m, rad", doc="(M, 7) radar"),
+                field("door_visible", pa.list_(pa.bool_()), doc="(M,) seen by the camera"),
+                field("door_visible_pixels", pa.list_(pa.int32()), unit="px", doc="(M,) pixels"),
+                field("door_in_fov", pa.list_(pa.bool_()), doc="(M,) centre in radar FOV"),
+                field("door_in_range", pa.list_(pa.bool_()), doc="(M,) centre within max range"),
+                field("render_seconds", pa.float64(), unit="s", doc="render wall time"),
+            ]
+        ),
+    )
+)
+# ---- end worlds ------------------------------------------------------------------------------

@@ -43,7 +43,7 @@ from sim2radar.worlds.geometry import (
 __all__ = ["generate_world", "STAGE_VERSION"]
 
 #: Bump when generation changes what a seed produces (part of every artifact key).
-STAGE_VERSION = "worlds-gen-1"
+STAGE_VERSION = 1
 
 _STREAMS = {"layout": 1, "rooms": 2, "doors": 3, "materials": 4, "appearance": 5, "props": 6,
             "windows": 7, "lights": 8}

@@ -38,7 +38,7 @@ __all__ = [
 ]
 
 #: Bump when rendering changes its output for the same world and pose (artifact keys).
-RENDER_VERSION = "worlds-render-1"
+RENDER_VERSION = 1
 #: Radiance of the constant environment (outside, seen through windows).
 _SKY_RADIANCE = 1.2
 #: Exposure multiplier applied before the sRGB curve.

@@ -1,0 +1,252 @@
+"""Procedural worlds into the artifact store (plain functions + thin Prefect tasks).
+
+Per world seed, :func:`generate_world_artifacts`:
+
+1. computes content keys from (seed, resolved WorldConfig, generator version) for the
+   ``scene_meshes`` and ``world_specs`` artifacts, and from (those keys, resolved RigConfig,
+   frame count, trajectory seed, render version) for ``world_frames``;
+2. if all three exist, does nothing else: status ``skipped`` (resume / no recompute);
+3. otherwise generates the world, walks the trajectory, renders every frame with Mitsuba and
+   publishes the three artifacts atomically with provenance: status ``ok``.
+
+The world's geometry is a plain ``scene_meshes`` artifact, so the radar stage can simulate it
+directly; ``world_frames`` rows carry each frame's ``radar_to_world`` pose and door boxes.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+import os
+import time
+from typing import Any
+
+from prefect import task
+from prefect.cache_policies import NO_CACHE
+
+from storage import ArtifactStore, content_key, meshes_to_table
+from tasks.common import REMOTE_IO_RETRIES, REMOTE_IO_RETRY_DELAYS_S, jsonable, open_store
+
+__all__ = [
+    "WorldOutcome",
+    "world_keys",
+    "generate_world_artifacts",
+    "generate_worlds_plain",
+    "record_world_outcome",
+    "summarize_worlds",
+    "generate_world_task",
+    "record_world_outcome_task",
+]
+
+log = logging.getLogger(__name__)
+
+
+@dataclasses.dataclass
+class WorldOutcome:
+    """What happened to one world (one manifest row).
+
+    Attributes
+    ----------
+    world_id : str — ``world_<seed>``
+    seed : int
+    status : str — ``ok`` (computed), ``skipped`` (cached) or ``failed``
+    error : str — ``"ExceptionType: message"`` when failed
+    artifacts : dict — stage -> content key
+    timings_s : dict — step -> wall time [s]
+    n_frames : int
+    doors_visible : list[int] — visible doors per frame
+    """
+
+    world_id: str
+    seed: int
+    status: str
+    error: str = ""
+    artifacts: dict[str, str] = dataclasses.field(default_factory=dict)
+    timings_s: dict[str, float] = dataclasses.field(default_factory=dict)
+    n_frames: int = 0
+    doors_visible: list[int] = dataclasses.field(default_factory=list)
+
+    def to_dict(self) -> dict[str, Any]:
+        return dataclasses.asdict(self)
+
+
+def _configs(world_cfg, rig):
+    from sim2radar.worlds import RigConfig, WorldConfig, make_rig_config, make_world_config
+
+    if world_cfg is None:
+        world_cfg = WorldConfig()
+    elif isinstance(world_cfg, dict):
+        world_cfg = make_world_config(world_cfg)
+    if rig is None:
+        rig = RigConfig()
+    elif isinstance(rig, dict):
+        rig = make_rig_config(rig)
+    return world_cfg, rig
+
+
+def world_keys(seed: int, n_frames: int, world_cfg=None, rig=None,
+               trajectory_seed: int = 0) -> dict[str, str]:
+    """Content keys ``{"scene_meshes", "world_specs", "world_frames"}`` of one world."""
+    from sim2radar.worlds import RENDER_VERSION, STAGE_VERSION
+
+    world_cfg, rig = _configs(world_cfg, rig)
+    cfg = {"world": world_cfg.model_dump(mode="json"), "seed": int(seed)}
+    meshes = content_key(stage="scene_meshes", stage_version=STAGE_VERSION,
+                         inputs={"generator": "sim2radar.worlds"}, config=cfg)
+    specs = content_key(stage="world_specs", stage_version=STAGE_VERSION, config=cfg)
+    frames = content_key(
+        stage="world_frames", stage_version=RENDER_VERSION,
+        inputs={"scene_meshes": meshes, "world_specs": specs},
+        config={"rig": rig.model_dump(mode="json"), "n_frames": int(n_frames),
+                "trajectory_seed": int(trajectory_seed)},
+    )
+    return {"scene_meshes": meshes, "world_specs": specs, "world_frames": frames}
+
+
+def generate_world_artifacts(
+    seed: int,
+    n_frames: int,
+    store: str | os.PathLike | ArtifactStore = "out/store",
+    world_cfg=None,
+    rig=None,
+    *,
+    trajectory_seed: int = 0,
+    force: bool = False,
+) -> WorldOutcome:
+    """Generate, render and store one world (skip if its artifacts exist).
+
+    Parameters
+    ----------
+    seed : int — world seed
+    n_frames : int — frames along the trajectory
+    store : store root (path / URI) or ArtifactStore
+    world_cfg, rig : WorldConfig / RigConfig (or dicts of their fields; None = defaults)
+    trajectory_seed : int
+    force : bool — recompute even if cached
+    """
+    from sim2radar.worlds import generate_world, render_frame, trajectory
+    from sim2radar.worlds.io import frames_to_table, world_id_for, world_spec_to_table
+
+    t_start = time.perf_counter()
+    store = open_store(store)
+    world_cfg, rig = _configs(world_cfg, rig)
+    keys = world_keys(seed, n_frames, world_cfg, rig, trajectory_seed)
+    world_id = world_id_for(seed)
+    timings: dict[str, float] = {}
+    if not force and all(store.exists(stage, key) for stage, key in keys.items()):
+        table = store.read("world_frames", keys["world_frames"], columns=["door_visible"])
+        visible = [int(sum(v)) for v in table.column("door_visible").to_pylist()]
+        timings["total"] = time.perf_counter() - t_start
+        return WorldOutcome(world_id, int(seed), "skipped", artifacts=keys, timings_s=timings,
+                            n_frames=len(visible), doors_visible=visible)
+
+    t0 = time.perf_counter()
+    world = generate_world(seed, world_cfg)
+    timings["generate"] = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    frames = [render_frame(world, pose, rig)
+              for pose in trajectory(world, n_frames, seed=trajectory_seed)]
+    timings["render"] = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    common = {"seed": int(seed), "extra": {"world_id": world_id, "layout": world.layout}}
+    cfg = {"world": world_cfg.model_dump(mode="json"), "seed": int(seed)}
+    store.write("scene_meshes", keys["scene_meshes"], meshes_to_table(world.meshes),
+                stage_version=_stage_version(), provenance={**common, "config": cfg})
+    store.write("world_specs", keys["world_specs"], world_spec_to_table(world),
+                stage_version=_stage_version(), provenance={**common, "config": cfg})
+    store.write(
+        "world_frames", keys["world_frames"], frames_to_table(frames, world_id),
+        stage_version=_render_version(),
+        provenance={
+            **common,
+            "inputs": {"scene_meshes": keys["scene_meshes"], "world_specs": keys["world_specs"]},
+            "config": {"rig": rig.model_dump(mode="json"), "n_frames": int(n_frames),
+                       "trajectory_seed": int(trajectory_seed)},
+            "timings_s": {"generate": timings["generate"], "render": timings["render"],
+                          "per_frame": jsonable([f.timings_s for f in frames])},
+        },
+    )
+    timings["write"] = time.perf_counter() - t0
+    timings["total"] = time.perf_counter() - t_start
+    log.info("world %s: %d frames rendered in %.1f s", world_id, n_frames, timings["render"])
+    return WorldOutcome(world_id, int(seed), "ok", artifacts=keys, timings_s=timings,
+                        n_frames=len(frames),
+                        doors_visible=[int(f.door_visible.sum()) for f in frames])
+
+
+def _stage_version() -> int:
+    from sim2radar.worlds import STAGE_VERSION
+
+    return STAGE_VERSION
+
+
+def _render_version() -> int:
+    from sim2radar.worlds import RENDER_VERSION
+
+    return RENDER_VERSION
+
+
+def failed_world(seed: int, error: BaseException | str) -> WorldOutcome:
+    """A ``failed`` outcome for world ``seed``."""
+    from sim2radar.worlds.io import world_id_for
+
+    text = error if isinstance(error, str) else f"{type(error).__name__}: {error}"
+    return WorldOutcome(world_id_for(seed), int(seed), "failed", error=text)
+
+
+def record_world_outcome(store, dataset: str, outcome: WorldOutcome) -> dict:
+    """Upsert the outcome as the world's manifest row; returns the row."""
+    return open_store(store).manifest(dataset).upsert(
+        outcome.world_id, outcome.status, error=outcome.error, artifacts=outcome.artifacts,
+        timings_s=outcome.timings_s, source=f"sim2radar.worlds seed={outcome.seed}",
+    )
+
+
+def summarize_worlds(store, dataset: str, outcomes: list[WorldOutcome]) -> dict[str, Any]:
+    """``{"store", "dataset", "counts": {ok, skipped, failed}, "worlds": [outcome dicts]}``."""
+    st = open_store(store)
+    return {
+        "store": st.root,
+        "dataset": dataset,
+        "counts": {k: sum(o.status == k for o in outcomes) for k in ("ok", "skipped", "failed")},
+        "worlds": [o.to_dict() for o in outcomes],
+    }
+
+
+def generate_worlds_plain(seeds, n_frames: int, store="out/store", dataset: str = "worlds",
+                          world_cfg=None, rig=None, *, trajectory_seed: int = 0,
+                          force: bool = False) -> dict[str, Any]:
+    """The worlds flow without the Prefect engine: worlds one after another; failures are
+    recorded in the manifest, not raised."""
+    st = open_store(store)
+    st.manifest(dataset)
+    outcomes = []
+    for seed in seeds:
+        try:
+            outcome = generate_world_artifacts(seed, n_frames, st, world_cfg, rig,
+                                               trajectory_seed=trajectory_seed, force=force)
+        except Exception as exc:  # noqa: BLE001 - one broken world must not stop the others
+            log.error("world %s failed: %s: %s", seed, type(exc).__name__, exc)
+            outcome = failed_world(seed, exc)
+        record_world_outcome(st, dataset, outcome)
+        outcomes.append(outcome)
+    return summarize_worlds(st, dataset, outcomes)
+
+
+# ---------------------------------------------------------------------------------------------
+# Prefect tasks: rendering is deterministic -> no retries; manifest writes are storage I/O ->
+# retried. Caching is by content key inside generate_world_artifacts.
+# ---------------------------------------------------------------------------------------------
+@task(name="generate-world", cache_policy=NO_CACHE, retries=0, persist_result=False)
+def generate_world_task(seed: int, n_frames: int, store: str, world_cfg: dict, rig: dict,
+                        trajectory_seed: int = 0, force: bool = False) -> WorldOutcome:
+    """Prefect task around :func:`generate_world_artifacts`."""
+    return generate_world_artifacts(seed, n_frames, store, world_cfg, rig,
+                                    trajectory_seed=trajectory_seed, force=force)
+
+
+@task(name="record-world-manifest", cache_policy=NO_CACHE, retries=REMOTE_IO_RETRIES,
+      retry_delay_seconds=REMOTE_IO_RETRY_DELAYS_S, persist_result=False)
+def record_world_outcome_task(store: str, dataset: str, outcome: WorldOutcome) -> dict:
+    """Prefect task around :func:`record_world_outcome` (retried: storage I/O)."""
+    return record_world_outcome(store, dataset, outcome)
