@@ -163,3 +163,27 @@ def test_out_of_vocabulary_and_unknown_materials_are_recorded(frame):
     assert any("plasterboard" in f for f in scene.info["fallbacks"])
     assert {m.material for m in scene.meshes} == {"plasterboard"}
     assert (scene.material_id[scene.segment_id >= 0] == 0).all()
+
+
+def test_cli_reconstructs_an_image_with_lidar(tmp_path, frame):
+    import cv2
+    import yaml
+    from typer.testing import CliRunner
+
+    from sim2radar.cli import app
+
+    cv2.imwrite(str(tmp_path / "corridor.png"), frame.rgb[..., ::-1])
+    (tmp_path / "K.yaml").write_text(yaml.safe_dump(frame.intrinsics.to_dict()))
+    lidar = frame.lidar_points.copy()
+    lidar[0] = np.nan  # a bad row is dropped and reported
+    np.save(tmp_path / "lidar.npy", lidar)
+    runner = CliRunner()
+    args = ["reconstruct", str(tmp_path / "corridor.png"), "--intrinsics", str(tmp_path / "K.yaml"),
+            "--lidar", str(tmp_path / "lidar.npy"), "--out", str(tmp_path / "out" / "store")]
+    result = runner.invoke(app, args)
+    assert result.exit_code == 0, result.output
+    assert "dropped 1 LiDAR rows" in result.output
+    assert (tmp_path / "out" / "sheets" / "corridor.png").stat().st_size > 10_000
+    assert load_scene(tmp_path / "out" / "scenes" / "corridor" / "scene.yaml")
+    bad = runner.invoke(app, args[:3] + [str(tmp_path / "missing.yaml")] + args[4:])
+    assert bad.exit_code != 0 and "missing.yaml" in bad.output
