@@ -187,3 +187,14 @@ def test_cli_reconstructs_an_image_with_lidar(tmp_path, frame):
     assert load_scene(tmp_path / "out" / "scenes" / "corridor" / "scene.yaml")
     bad = runner.invoke(app, args[:3] + [str(tmp_path / "missing.yaml")] + args[4:])
     assert bad.exit_code != 0 and "missing.yaml" in bad.output
+
+
+def test_shipped_configs_parse():
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[2] / "configs" / "reconstruct"
+    names = {p.stem: ReconstructionConfig.from_yaml(p) for p in root.glob("*.yaml")}
+    assert {"builtin", "oracle", "production"} <= set(names)
+    assert names["builtin"].segments.name == "builtin"
+    build_backends(names["builtin"])  # all options accepted by the backends
+    assert Path(names["production"].depth.options["model_path"]).is_absolute()
