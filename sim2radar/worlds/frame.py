@@ -13,7 +13,8 @@ Frames and conventions
 * **Boxes**: rows ``x y z dx dy dz heading`` (:data:`sim2radar.vocab.BOX_FIELDS`), z the box
   centre. A door box is the tight box around the door's frame, leaves (at their current swing
   angle) and handles, aligned with the wall: ``dx`` runs along the wall (the door's width),
-  ``dy`` across it (wall thickness plus any swung-open leaf), ``dz`` the height.
+  ``dy`` across it (wall thickness plus any swung-open leaf), ``dz`` the height; headings lie
+  in [-pi/2, pi/2) (a box is unchanged by a half turn).
 
 Public API (``from sim2radar.worlds import ...``)
 -------------------------------------------------

@@ -428,7 +428,8 @@ def generate_world(seed: int, config: WorldConfig | None = None) -> World:
         lo, hi = allv.min(axis=0), allv.max(axis=0)
         cl = (lo + hi) / 2
         cw = rot @ cl + origin
-        heading = math.atan2(math.sin(yaw_u), math.cos(yaw_u))
+        # boxes are symmetric under a half turn: report headings in [-pi/2, pi/2)
+        heading = (yaw_u + math.pi / 2) % math.pi - math.pi / 2
         box = (float(cw[0]), float(cw[1]), float(cw[2]), float(hi[0] - lo[0]),
                float(hi[1] - lo[1]), float(hi[2] - lo[2]), float(heading))
         doors.append(DoorSpec(
