@@ -1,0 +1,1028 @@
+"""The factory's main job, per world: procedural world -> (reconstructed | ground-truth)
+geometry -> radar frames with door boxes -> the artifact store (plain functions + thin Prefect
+tasks). :mod:`flows.generate_dataset` composes them.
+
+Per world seed, :func:`generate_world_dataset`:
+
+1. makes sure the world's artifacts exist (``scene_meshes``, ``world_specs``, ``world_frames``
+   through :func:`tasks.worlds.generate_world_artifacts`: the same content keys as
+   ``sim2radar worlds generate``, so worlds rendered before are reused, not re-rendered);
+2. per frame and geometry computes a ``dataset_frames`` content key from (world_frames key,
+   world scene_meshes key, frame index, geometry, resolved radar config, resolved
+   reconstruction config for ``reconstructed``, run seed, :data:`DATASET_STAGE_VERSION`); an
+   existing artifact is read back (status ``skipped``), a missing one is computed:
+
+   * ``ground_truth``: the radar is simulated on the world's own meshes at the frame's
+     ``radar_to_world`` (one :class:`~sim2radar.radar.RadarScene` per world); labels are the
+     ground-truth door boxes in the radar frame whose centre is in the radar's FOV and range
+     (the world renderer's ``door_in_fov & door_in_range`` flags);
+   * ``reconstructed`` (the paper's pipeline): :func:`sim2radar.reconstruct.reconstruct` on the
+     frame's RGB + LiDAR, meshes moved into the rig's radar frame
+     (``inv(radar_to_world) @ camera_to_world``), radar simulated on them; labels are the
+     reconstructed door boxes in the radar frame (in FOV and range), the paper's pre-training
+     pseudo-labels. The ground-truth boxes are stored alongside for scoring. The reconstruction
+     itself is cached as its own ``scene_meshes`` + ``reconstruction`` artifacts
+     (:func:`sim2radar.reconstruct.artifacts.write_scene_artifacts`), so changing only the
+     radar re-simulates without re-reconstructing;
+
+3. one failing frame is recorded as ``failed`` (with its error) and the other frames finish; a
+   failing world (bad config, generator error) is recorded as ``failed`` and the other worlds
+   finish. Manifest rows: one per world (``world_000007``) and one per frame
+   (``world_000007_f002``).
+
+The ``dataset_frames`` schema is declared here (registered on import).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import logging
+import math
+import os
+import random
+import time
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pyarrow as pa
+from prefect import task
+from prefect.cache_policies import NO_CACHE
+
+from storage import (
+    ArtifactSchema,
+    ArtifactStore,
+    content_key,
+    field,
+    get_schema,
+    meshes_from_table,
+    ragged_arrays,
+    ragged_column,
+    register_schema,
+)
+from tasks.common import REMOTE_IO_RETRIES, REMOTE_IO_RETRY_DELAYS_S, jsonable, open_store
+
+__all__ = [
+    "DATASET_STAGE_VERSION",
+    "DATASET_FRAMES_SCHEMA",
+    "GEOMETRIES",
+    "DatasetSpec",
+    "FrameOutcome",
+    "WorldDatasetOutcome",
+    "DatasetFrame",
+    "resolve_spec",
+    "frame_key",
+    "frame_id_for",
+    "generate_world_dataset",
+    "failed_world_outcome",
+    "record_world_dataset",
+    "read_dataset_frame",
+    "export_openpcdet",
+    "split_worlds",
+    "summarize_dataset",
+    "generate_dataset_plain",
+    "world_bev_pngs",
+    "generate_world_dataset_task",
+    "record_world_dataset_task",
+]
+
+log = logging.getLogger(__name__)
+
+#: Bump when a ``dataset_frames`` artifact of the same inputs changes (labels, filtering,
+#: table logic): every dataset frame is recomputed, world renders and reconstructions are not.
+DATASET_STAGE_VERSION = 1
+#: Geometry modes: radar simulated on the world's meshes, or on meshes reconstructed from RGB.
+GEOMETRIES = ("ground_truth", "reconstructed")
+#: Short tags used in frame ids and artifact maps.
+_TAG = {"ground_truth": "gt", "reconstructed": "rec"}
+#: Extra margin around a ground-truth box when counting radar points "in or near" it [m].
+NEAR_BOX_MARGIN_M = 0.25
+
+_BOX7 = pa.list_(pa.float32(), 7)
+
+
+def _register() -> ArtifactSchema:
+    try:
+        return get_schema("dataset_frames")
+    except Exception:  # noqa: BLE001 - not registered yet
+        pass
+    return register_schema(ArtifactSchema(
+        stage="dataset_frames",
+        version=1,
+        row="one radar frame of one world frame and one geometry",
+        description="radar points (radar frame) + door labels + ground-truth doors + timings",
+        schema=pa.schema([
+            field("frame_id", pa.string(), doc="world_<seed>_f<index>"),
+            field("world_id", pa.string(), doc="world identifier (world_<seed>)"),
+            field("seed", pa.int64(), doc="world seed"),
+            field("frame_index", pa.int32(), doc="frame number along the world's trajectory"),
+            field("geometry", pa.string(), doc="ground_truth | reconstructed"),
+            field("radar_to_world", pa.list_(pa.float64(), 16), unit="m",
+                  doc="(4, 4) row-major radar-to-world transform"),
+            field("n_points", pa.int32(), doc="detected radar points"),
+            field("x_m", pa.list_(pa.float32()), unit="m", doc="(N,) forward"),
+            field("y_m", pa.list_(pa.float32()), unit="m", doc="(N,) left"),
+            field("z_m", pa.list_(pa.float32()), unit="m", doc="(N,) up"),
+            field("intensity_db", pa.list_(pa.float32()), unit="dB", doc="(N,) intensity"),
+            field("boxes", pa.list_(_BOX7), unit="m, rad",
+                  doc="(M, 7) training labels x y z dx dy dz heading, radar frame"),
+            field("box_labels", pa.list_(pa.string()), doc="(M,) class names"),
+            field("gt_boxes", pa.list_(_BOX7), unit="m, rad",
+                  doc="(G, 7) ground-truth doors in FOV and range, radar frame"),
+            field("gt_door_index", pa.list_(pa.int32()), doc="(G,) index into the world's doors"),
+            field("gt_points_near", pa.list_(pa.int32()),
+                  doc="(G,) radar points inside each GT box grown by NEAR_BOX_MARGIN_M"),
+            field("n_triangles", pa.int64(), doc="triangles the radar traced"),
+            field("timings_s", pa.map_(pa.string(), pa.float64()), unit="s",
+                  doc="render / reconstruct / simulate wall time of this frame"),
+            field("stats_json", pa.string(), doc="radar stats, reconstruction diagnostics (JSON)"),
+        ]),
+    ))
+
+
+DATASET_FRAMES_SCHEMA = _register()
+
+
+# ---------------------------------------------------------------------------------------------
+# Run specification
+# ---------------------------------------------------------------------------------------------
+@dataclasses.dataclass(frozen=True)
+class DatasetSpec:
+    """Resolved configuration of a dataset run (everything but the world seeds and the store).
+
+    Attributes
+    ----------
+    frames_per_world : int — frames along each world's trajectory.
+    geometries : tuple[str, ...] — subset of :data:`GEOMETRIES`.
+    radar : RadarConfig
+    reconstruction : ReconstructionConfig
+    world : WorldConfig
+    rig : RigConfig — its radar FOV/range (for the door flags) match ``radar``.
+    seed : int — run seed: trajectories and radar noise derive from it.
+    class_name : str — label class of door boxes (the detector's ``class_names``).
+    """
+
+    frames_per_world: int
+    geometries: tuple[str, ...]
+    radar: Any
+    reconstruction: Any
+    world: Any
+    rig: Any
+    seed: int = 0
+    class_name: str = "door"
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-able form (what the Prefect flow passes to its tasks)."""
+        return {
+            "frames_per_world": self.frames_per_world,
+            "geometry": list(self.geometries),
+            "radar": self.radar.to_dict(),
+            "reconstruction": self.reconstruction.to_dict(),
+            "world": self.world.model_dump(mode="json"),
+            "rig": self.rig.model_dump(mode="json"),
+            "seed": self.seed,
+            "class_name": self.class_name,
+        }
+
+
+def _geometries(geometry: str | Sequence[str]) -> tuple[str, ...]:
+    if isinstance(geometry, str):
+        geometry = list(GEOMETRIES) if geometry == "both" else [geometry]
+    out = tuple(dict.fromkeys(geometry))
+    bad = [g for g in out if g not in GEOMETRIES]
+    if bad or not out:
+        raise ValueError(
+            f"geometry: unknown mode(s) {bad or list(geometry)}; use 'ground_truth', "
+            "'reconstructed' or 'both'"
+        )
+    return out
+
+
+def _reconstruction_config(value):
+    from sim2radar.reconstruct import ReconstructionConfig
+
+    if value is None:
+        return ReconstructionConfig()
+    if isinstance(value, ReconstructionConfig):
+        return value
+    if isinstance(value, dict):
+        try:
+            return ReconstructionConfig.model_validate(value)
+        except Exception as exc:
+            raise ValueError(f"reconstruction config: {exc}") from None
+    text = os.fspath(value)
+    if Path(text).suffix in (".yaml", ".yml") or Path(text).is_file():
+        return ReconstructionConfig.from_yaml(text)
+    return ReconstructionConfig.preset(text)
+
+
+def _radar_config(value):
+    from sim2radar.radar import RadarConfig, load_radar_config
+
+    if isinstance(value, RadarConfig):
+        return value
+    if isinstance(value, dict):
+        return RadarConfig.model_validate(value)
+    return load_radar_config(value)
+
+
+def _rig_for_radar(rig, radar):
+    """``rig`` with radar FOV/range fields set so its door flags describe ``radar``."""
+    from sim2radar.worlds import radar_view
+
+    want = (float(radar.azimuth_fov_deg), float(radar.elevation_fov_deg), float(radar.max_range_m))
+    if np.allclose(radar_view(rig), want, rtol=1e-9, atol=1e-9):
+        return rig  # unchanged -> the same world_frames keys as a plain worlds run
+    return rig.model_copy(update={"radar_azimuth_fov_deg": want[0],
+                                  "radar_elevation_fov_deg": want[1],
+                                  "radar_max_range_m": want[2]})
+
+
+def resolve_spec(
+    frames_per_world: int = 4,
+    geometry: str | Sequence[str] = "reconstructed",
+    radar: Any = "ti-mmwcas",
+    reconstruction: Any = None,
+    world: Any = None,
+    rig: Any = None,
+    seed: int = 0,
+    class_name: str = "door",
+) -> DatasetSpec:
+    """Validate and resolve a run's configuration.
+
+    Parameters
+    ----------
+    frames_per_world : int >= 1
+    geometry : ``ground_truth``, ``reconstructed``, ``both`` or a list of modes
+    radar : preset name, YAML path, :class:`~sim2radar.radar.RadarConfig` or its dict
+    reconstruction : :class:`~sim2radar.reconstruct.ReconstructionConfig`, its dict, a YAML path
+        or a preset name (``builtin``, ``oracle``, ``builtin-oracle-depth``); None = built-in
+        backends with LiDAR (lidar / builtin / prior)
+    world, rig : WorldConfig / RigConfig or dicts of their fields (None = defaults)
+    seed : int — run seed
+    class_name : str — class of the door labels
+
+    Raises
+    ------
+    ValueError (incl. WorldConfigError, RadarConfigError) naming the bad field.
+    """
+    from tasks.worlds import _configs
+
+    if int(frames_per_world) < 1:
+        raise ValueError(f"frames_per_world must be >= 1, got {frames_per_world}")
+    if not class_name or any(c.isspace() for c in class_name):
+        raise ValueError(f"class_name must be a non-empty word, got {class_name!r}")
+    radar_cfg = _radar_config(radar)
+    world_cfg, rig_cfg = _configs(world, rig)
+    return DatasetSpec(
+        frames_per_world=int(frames_per_world),
+        geometries=_geometries(geometry),
+        radar=radar_cfg,
+        reconstruction=_reconstruction_config(reconstruction),
+        world=world_cfg,
+        rig=_rig_for_radar(rig_cfg, radar_cfg),
+        seed=int(seed),
+        class_name=class_name,
+    )
+
+
+def _spec(spec: DatasetSpec | dict) -> DatasetSpec:
+    if isinstance(spec, DatasetSpec):
+        return spec
+    return resolve_spec(spec["frames_per_world"], spec["geometry"], spec["radar"],
+                        spec["reconstruction"], spec["world"], spec["rig"], spec["seed"],
+                        spec.get("class_name", "door"))
+
+
+# ---------------------------------------------------------------------------------------------
+# Keys and ids
+# ---------------------------------------------------------------------------------------------
+def frame_id_for(seed: int, frame_index: int) -> str:
+    """``world_<seed 6 digits>_f<index 3 digits>`` (OpenPCDet frame id and manifest row)."""
+    from sim2radar.worlds.io import world_id_for
+
+    return f"{world_id_for(seed)}_f{int(frame_index):03d}"
+
+
+def frame_key(world_keys: dict[str, str], frame_index: int, geometry: str,
+              spec: DatasetSpec) -> str:
+    """Content key of one ``dataset_frames`` artifact."""
+    config: dict[str, Any] = {
+        "frame_index": int(frame_index),
+        "geometry": geometry,
+        "radar": spec.radar.to_dict(),
+        "seed": spec.seed,
+        "class_name": spec.class_name,
+    }
+    if geometry == "reconstructed":
+        config["reconstruction"] = spec.reconstruction.to_dict()
+    return content_key(
+        stage="dataset_frames", stage_version=DATASET_STAGE_VERSION,
+        inputs={"world_frames": world_keys["world_frames"],
+                "scene_meshes": world_keys["scene_meshes"]},
+        config=config,
+    )
+
+
+def _frame_seed(run_seed: int, world_seed: int, frame_index: int) -> int:
+    """Radar-noise seed of one frame (same for both geometries, so they compare fairly)."""
+    ss = np.random.SeedSequence([int(run_seed), int(world_seed), int(frame_index), 0x5EED])
+    return int(ss.generate_state(1)[0])
+
+
+def _reconstruction_keys(frame, camera_to_target: np.ndarray, config) -> dict[str, str]:
+    """Keys :func:`sim2radar.reconstruct.artifacts.write_scene_artifacts` gives this frame
+    (computed up front so a cached reconstruction is read instead of recomputed)."""
+    from sim2radar.reconstruct.artifacts import frame_digest
+    from sim2radar.reconstruct.pipeline import STAGE_VERSION
+
+    inputs = {"image": frame_digest(frame.rgb, frame.lidar_points)}
+    cfg = {"reconstruction": config.to_dict(),
+           "camera_to_target": np.asarray(camera_to_target).round(9).tolist()}
+    return {stage: content_key(stage=stage, stage_version=STAGE_VERSION, inputs=inputs,
+                               config=cfg)
+            for stage in ("scene_meshes", "reconstruction")}
+
+
+# ---------------------------------------------------------------------------------------------
+# Outcomes
+# ---------------------------------------------------------------------------------------------
+@dataclasses.dataclass
+class FrameOutcome:
+    """What happened to one world frame (one manifest row ``<world>_f<k>``).
+
+    Attributes
+    ----------
+    frame_id, world_id : str
+    seed, frame_index : int
+    status : ``ok`` | ``skipped`` | ``failed``
+    error : str — ``"[geometry] ExceptionType: message"`` of each failed geometry
+    artifacts : dict — ``dataset_frames/<geometry>`` (and reconstruction stages) -> key
+    timings_s : dict — ``render``, ``reconstruct``, ``simulate_<geometry>`` [s] (compute time,
+        also for cached frames: read from the artifacts)
+    n_points, n_labels : dict — geometry -> points / labelled boxes
+    n_gt_doors : int — ground-truth doors in the radar's FOV and range
+    gt_points_near : dict — geometry -> (G,) radar points near each GT door
+    comparison : dict — ``both`` geometries: ``points_ratio`` (rec / gt), ``chamfer_m``
+    """
+
+    frame_id: str
+    world_id: str
+    seed: int
+    frame_index: int
+    status: str
+    error: str = ""
+    artifacts: dict[str, str] = dataclasses.field(default_factory=dict)
+    timings_s: dict[str, float] = dataclasses.field(default_factory=dict)
+    n_points: dict[str, int] = dataclasses.field(default_factory=dict)
+    n_labels: dict[str, int] = dataclasses.field(default_factory=dict)
+    n_gt_doors: int = 0
+    gt_points_near: dict[str, list[int]] = dataclasses.field(default_factory=dict)
+    comparison: dict[str, float] = dataclasses.field(default_factory=dict)
+
+    def to_dict(self) -> dict[str, Any]:
+        return jsonable(dataclasses.asdict(self))
+
+
+@dataclasses.dataclass
+class WorldDatasetOutcome:
+    """What happened to one world (manifest row ``world_<seed>``) and its frames.
+
+    Attributes
+    ----------
+    world_id : str; seed : int
+    status : ``ok`` (something computed), ``skipped`` (all cached) or ``failed`` (the world
+        itself or any of its frames failed)
+    error : str — world-level error, or a count of failed frames
+    artifacts : dict — world stage -> key (``scene_meshes``, ``world_specs``, ``world_frames``)
+    timings_s : dict — ``world`` (generate/render or cache check), ``frames``, ``total`` [s]
+    frames : list[FrameOutcome]
+    """
+
+    world_id: str
+    seed: int
+    status: str
+    error: str = ""
+    artifacts: dict[str, str] = dataclasses.field(default_factory=dict)
+    timings_s: dict[str, float] = dataclasses.field(default_factory=dict)
+    frames: list[FrameOutcome] = dataclasses.field(default_factory=list)
+
+    def to_dict(self) -> dict[str, Any]:
+        d = jsonable(dataclasses.asdict(self))
+        d["frames"] = [f.to_dict() for f in self.frames]
+        return d
+
+
+def failed_world_outcome(seed: int, error: BaseException | str) -> WorldDatasetOutcome:
+    """A ``failed`` outcome for world ``seed``."""
+    from sim2radar.worlds.io import world_id_for
+
+    text = error if isinstance(error, str) else f"{type(error).__name__}: {error}"
+    return WorldDatasetOutcome(world_id_for(seed), int(seed), "failed", error=text)
+
+
+# ---------------------------------------------------------------------------------------------
+# One frame, one geometry
+# ---------------------------------------------------------------------------------------------
+@dataclasses.dataclass(frozen=True, eq=False)
+class DatasetFrame:
+    """One decoded ``dataset_frames`` row.
+
+    Attributes
+    ----------
+    frame_id, world_id : str; seed, frame_index : int; geometry : str
+    radar_to_world : (4, 4) float64 [m]
+    points : (N, 4) float32 — x, y, z [m] radar frame, intensity [dB]
+    boxes : (M, 7) float32 — labels ``x y z dx dy dz heading`` [m, rad], radar frame
+    box_labels : tuple[str, ...]
+    gt_boxes : (G, 7) float32 — ground-truth doors in FOV and range, radar frame
+    gt_door_index : (G,) int32; gt_points_near : (G,) int32
+    n_triangles : int; timings_s : dict [s]; stats : dict
+    """
+
+    frame_id: str
+    world_id: str
+    seed: int
+    frame_index: int
+    geometry: str
+    radar_to_world: np.ndarray
+    points: np.ndarray
+    boxes: np.ndarray
+    box_labels: tuple[str, ...]
+    gt_boxes: np.ndarray
+    gt_door_index: np.ndarray
+    gt_points_near: np.ndarray
+    n_triangles: int
+    timings_s: dict
+    stats: dict
+
+
+def _frame_table(f: DatasetFrame) -> pa.Table:
+    pts = np.asarray(f.points, np.float32).reshape(-1, 4)
+    return pa.table({
+        "frame_id": [f.frame_id],
+        "world_id": [f.world_id],
+        "seed": pa.array([f.seed], pa.int64()),
+        "frame_index": pa.array([f.frame_index], pa.int32()),
+        "geometry": [f.geometry],
+        "radar_to_world": pa.array([np.asarray(f.radar_to_world, np.float64).ravel()],
+                                   pa.list_(pa.float64(), 16)),
+        "n_points": pa.array([len(pts)], pa.int32()),
+        "x_m": ragged_column([pts[:, 0]], pa.float32()),
+        "y_m": ragged_column([pts[:, 1]], pa.float32()),
+        "z_m": ragged_column([pts[:, 2]], pa.float32()),
+        "intensity_db": ragged_column([pts[:, 3]], pa.float32()),
+        "boxes": ragged_column([np.asarray(f.boxes, np.float32).reshape(-1, 7)], pa.float32()),
+        "box_labels": pa.array([list(f.box_labels)], pa.list_(pa.string())),
+        "gt_boxes": ragged_column([np.asarray(f.gt_boxes, np.float32).reshape(-1, 7)],
+                                  pa.float32()),
+        "gt_door_index": ragged_column([np.asarray(f.gt_door_index, np.int32)], pa.int32()),
+        "gt_points_near": ragged_column([np.asarray(f.gt_points_near, np.int32)], pa.int32()),
+        "n_triangles": pa.array([int(f.n_triangles)], pa.int64()),
+        "timings_s": pa.array([list(f.timings_s.items())], pa.map_(pa.string(), pa.float64())),
+        "stats_json": [json.dumps(jsonable(f.stats), sort_keys=True)],
+    })
+
+
+def read_dataset_frame(store: str | os.PathLike | ArtifactStore, key: str) -> DatasetFrame:
+    """Read one ``dataset_frames`` artifact back."""
+    t = open_store(store).read("dataset_frames", key)
+    x, y, z, i = (ragged_arrays(t.column(c))[0] for c in ("x_m", "y_m", "z_m", "intensity_db"))
+    row = t.select(["frame_id", "world_id", "seed", "frame_index", "geometry", "box_labels",
+                    "n_triangles", "timings_s", "stats_json"]).to_pylist()[0]
+    return DatasetFrame(
+        frame_id=row["frame_id"], world_id=row["world_id"], seed=int(row["seed"]),
+        frame_index=int(row["frame_index"]), geometry=row["geometry"],
+        radar_to_world=np.asarray(t.column("radar_to_world")[0].as_py()).reshape(4, 4),
+        points=np.stack([x, y, z, i], axis=1).astype(np.float32).reshape(-1, 4),
+        boxes=ragged_arrays(t.column("boxes"))[0].reshape(-1, 7).astype(np.float32),
+        box_labels=tuple(row["box_labels"]),
+        gt_boxes=ragged_arrays(t.column("gt_boxes"))[0].reshape(-1, 7).astype(np.float32),
+        gt_door_index=np.asarray(ragged_arrays(t.column("gt_door_index"))[0], np.int32),
+        gt_points_near=np.asarray(ragged_arrays(t.column("gt_points_near"))[0], np.int32),
+        n_triangles=int(row["n_triangles"]), timings_s=dict(row["timings_s"]),
+        stats=json.loads(row["stats_json"]),
+    )
+
+
+def points_near_boxes(points: np.ndarray, boxes: np.ndarray,
+                      margin_m: float = NEAR_BOX_MARGIN_M) -> np.ndarray:
+    """Number of points inside each box grown by ``margin_m`` on every side.
+
+    Parameters
+    ----------
+    points : (N, >=3) — x, y, z [m]; boxes : (M, 7) — ``x y z dx dy dz heading`` [m, rad]
+
+    Returns
+    -------
+    (M,) int32
+    """
+    p = np.asarray(points, np.float64)[:, :3].reshape(-1, 3)
+    b = np.asarray(boxes, np.float64).reshape(-1, 7)
+    out = np.zeros(len(b), np.int32)
+    for j, (cx, cy, cz, dx, dy, dz, h) in enumerate(b):
+        d = p - (cx, cy, cz)
+        c, s = math.cos(h), math.sin(h)
+        u = d[:, 0] * c + d[:, 1] * s  # along the box's dx axis
+        v = -d[:, 0] * s + d[:, 1] * c
+        inside = ((np.abs(u) <= dx / 2 + margin_m) & (np.abs(v) <= dy / 2 + margin_m)
+                  & (np.abs(d[:, 2]) <= dz / 2 + margin_m))
+        out[j] = int(inside.sum())
+    return out
+
+
+def boxes_in_view(boxes: np.ndarray, az_fov_deg: float, el_fov_deg: float,
+                  max_range_m: float) -> np.ndarray:
+    """(M,) bool — box centre in front of the radar, inside its azimuth/elevation FOV (full
+    angles [deg]) and within ``max_range_m`` [m]; the criterion of the world renderer's
+    ``door_in_fov & door_in_range`` flags, applied to reconstructed boxes."""
+    c = np.asarray(boxes, np.float64).reshape(-1, 7)[:, :3]
+    az = np.arctan2(c[:, 1], c[:, 0])
+    el = np.arctan2(c[:, 2], np.hypot(c[:, 0], c[:, 1]))
+    return ((c[:, 0] > 0) & (np.abs(az) <= math.radians(az_fov_deg) / 2)
+            & (np.abs(el) <= math.radians(el_fov_deg) / 2)
+            & (np.linalg.norm(c, axis=1) <= max_range_m))
+
+
+def _gt_labels(frame) -> tuple[np.ndarray, np.ndarray]:
+    keep = np.asarray(frame.door_in_fov, bool) & np.asarray(frame.door_in_range, bool)
+    idx = np.flatnonzero(keep).astype(np.int32)
+    return np.asarray(frame.door_boxes_radar, np.float32).reshape(-1, 7)[idx], idx
+
+
+def _simulate(scene, radar, pose, seed):
+    from sim2radar.radar import simulate_scene_frame
+
+    return simulate_scene_frame(scene, radar, pose, seed=seed)
+
+
+def _ground_truth_frame(frame, world_id, radar_scene, spec, radar_seed) -> DatasetFrame:
+    t0 = time.perf_counter()
+    rf = _simulate(radar_scene, spec.radar, frame.radar_to_world, radar_seed)
+    sim_s = time.perf_counter() - t0
+    gt, idx = _gt_labels(frame)
+    return DatasetFrame(
+        frame_id=frame_id_for(frame.seed, frame.frame_index), world_id=world_id,
+        seed=frame.seed, frame_index=frame.frame_index, geometry="ground_truth",
+        radar_to_world=frame.radar_to_world, points=rf.points, boxes=gt,
+        box_labels=(spec.class_name,) * len(gt), gt_boxes=gt, gt_door_index=idx,
+        gt_points_near=points_near_boxes(rf.points, gt), n_triangles=radar_scene.n_triangles,
+        timings_s={"render": float(frame.timings_s.get("render_s", 0.0)), "simulate": sim_s},
+        stats={"radar": rf.stats, "radar_seed": radar_seed},
+    )
+
+
+def _reconstructed_frame(frame, world_id, store, spec, radar_seed,
+                         timings: dict) -> tuple[DatasetFrame, dict[str, str]]:
+    from sim2radar.radar import RadarScene
+    from sim2radar.reconstruct import FrameInput, reconstruct
+    from sim2radar.reconstruct.artifacts import read_reconstruction, write_scene_artifacts
+    from sim2radar.reconstruct.pipeline import STAGE_VERSION
+    from sim2radar.worlds import radar_view
+
+    fid = frame_id_for(frame.seed, frame.frame_index)
+    cam_to_radar = np.linalg.inv(frame.radar_to_world) @ frame.camera_to_world
+    rkeys = _reconstruction_keys(frame, cam_to_radar, spec.reconstruction)
+    t0 = time.perf_counter()
+    if all(store.exists(s, k) for s, k in rkeys.items()):
+        meshes = meshes_from_table(store.read("scene_meshes", rkeys["scene_meshes"]))
+        rec = read_reconstruction(store, rkeys["reconstruction"])
+        boxes = rec["door_boxes"]
+        rec_seconds = float(rec["timings_s"].get("total", 0.0))
+        info = {"fallbacks": rec["info"].get("fallbacks", []), "cached": True}
+    else:
+        scene = reconstruct(FrameInput(frame.rgb, frame.intrinsics, frame.lidar_points, name=fid),
+                            spec.reconstruction, ground_truth=frame)
+        keys = write_scene_artifacts(
+            store, scene, inputs={"image": _digest(frame)}, config=spec.reconstruction.to_dict(),
+            camera_to_target=cam_to_radar, seed=frame.seed, stage_version=STAGE_VERSION)
+        if keys != rkeys:  # the two key recipes must agree, or caching silently breaks
+            raise RuntimeError(f"{fid}: reconstruction keys {keys} differ from expected {rkeys}")
+        meshes = scene.meshes_in(cam_to_radar)
+        boxes = scene.door_boxes_in(cam_to_radar)
+        rec_seconds = float(scene.timings_s.get("total", time.perf_counter() - t0))
+        info = {"fallbacks": scene.info.get("fallbacks", []), "cached": False,
+                "n_segments": scene.n_segments}
+    timings["reconstruct"] = rec_seconds
+    if not meshes:
+        raise ValueError(f"{fid}: reconstruction produced no meshes; nothing for the radar")
+    az, el, rng = radar_view(spec.rig)
+    boxes = np.asarray(boxes, np.float32).reshape(-1, 7)
+    boxes = boxes[boxes_in_view(boxes, az, el, rng)]
+    t0 = time.perf_counter()
+    radar_scene = RadarScene(meshes)
+    rf = _simulate(radar_scene, spec.radar, None, radar_seed)
+    sim_s = time.perf_counter() - t0
+    gt, idx = _gt_labels(frame)
+    out = DatasetFrame(
+        frame_id=fid, world_id=world_id, seed=frame.seed, frame_index=frame.frame_index,
+        geometry="reconstructed", radar_to_world=frame.radar_to_world, points=rf.points,
+        boxes=boxes, box_labels=(spec.class_name,) * len(boxes), gt_boxes=gt, gt_door_index=idx,
+        gt_points_near=points_near_boxes(rf.points, gt), n_triangles=radar_scene.n_triangles,
+        timings_s={"render": float(frame.timings_s.get("render_s", 0.0)),
+                   "reconstruct": rec_seconds, "simulate": sim_s},
+        stats={"radar": rf.stats, "radar_seed": radar_seed, "reconstruction": info,
+               "reconstruction_keys": rkeys, "n_boxes_before_view_filter": int(len(boxes))},
+    )
+    return out, rkeys
+
+
+def _digest(frame) -> str:
+    from sim2radar.reconstruct.artifacts import frame_digest
+
+    return frame_digest(frame.rgb, frame.lidar_points)
+
+
+# ---------------------------------------------------------------------------------------------
+# One world
+# ---------------------------------------------------------------------------------------------
+class _WorldInputs:
+    """Lazily loaded world geometry and frames (only when some frame must be computed)."""
+
+    def __init__(self, store: ArtifactStore, keys: dict[str, str]) -> None:
+        self.store, self.keys = store, keys
+        self._frames = None
+        self._radar_scene = None
+
+    def frames(self):
+        if self._frames is None:
+            from sim2radar.worlds.io import frames_from_table
+
+            self._frames = frames_from_table(self.store.read("world_frames",
+                                                             self.keys["world_frames"]))
+        return self._frames
+
+    def radar_scene(self):
+        if self._radar_scene is None:
+            from sim2radar.radar import RadarScene
+
+            meshes = meshes_from_table(self.store.read("scene_meshes", self.keys["scene_meshes"]))
+            self._radar_scene = RadarScene(meshes)
+        return self._radar_scene
+
+
+def _fill_frame_outcome(fo: FrameOutcome, df: DatasetFrame) -> None:
+    fo.n_points[df.geometry] = int(len(df.points))
+    fo.n_labels[df.geometry] = int(len(df.boxes))
+    fo.n_gt_doors = int(len(df.gt_boxes))
+    fo.gt_points_near[df.geometry] = [int(v) for v in df.gt_points_near]
+    t = df.timings_s
+    fo.timings_s["render"] = float(t.get("render", 0.0))
+    if "reconstruct" in t:
+        fo.timings_s["reconstruct"] = float(t["reconstruct"])
+    fo.timings_s[f"simulate_{df.geometry}"] = float(t.get("simulate", 0.0))
+
+
+def _compare(gt: DatasetFrame, rec: DatasetFrame) -> dict[str, float]:
+    """Sim-vs-GT figures of one frame: points ratio (reconstructed / ground truth) and the
+    symmetric Chamfer distance [m] between the two radar point clouds."""
+    from sim2radar.evaluate.reconstruction import chamfer_distance
+
+    n_gt, n_rec = len(gt.points), len(rec.points)
+    return {
+        "points_ratio": float(n_rec / n_gt) if n_gt else float("nan"),
+        "chamfer_m": chamfer_distance(rec.points, gt.points),
+    }
+
+
+def generate_world_dataset(
+    seed: int,
+    spec: DatasetSpec | dict,
+    store: str | os.PathLike | ArtifactStore = "out/store",
+    *,
+    force: bool = False,
+    keep_frames: bool = False,
+) -> WorldDatasetOutcome:
+    """Make (or find cached) every dataset frame of world ``seed``.
+
+    Parameters
+    ----------
+    seed : int — world seed (one seed -> one world)
+    spec : DatasetSpec (or its :meth:`~DatasetSpec.to_dict`)
+    store : store root (path / URI) or ArtifactStore
+    force : bool — recompute the dataset frames (world renders and reconstructions stay cached)
+    keep_frames : bool — attach the decoded :class:`DatasetFrame` objects as
+        ``outcome.frames[i].data`` (tests, notebooks)
+
+    Returns
+    -------
+    WorldDatasetOutcome — a world that cannot be generated raises (the caller records it);
+    a failing frame is recorded in its FrameOutcome and does not raise.
+    """
+    from sim2radar.worlds.io import world_id_for
+    from tasks.worlds import generate_world_artifacts
+
+    t_start = time.perf_counter()
+    spec = _spec(spec)
+    st = open_store(store)
+    world_id = world_id_for(seed)
+    wo = generate_world_artifacts(int(seed), spec.frames_per_world, st, spec.world, spec.rig,
+                                  trajectory_seed=spec.seed)
+    keys = dict(wo.artifacts)
+    inputs = _WorldInputs(st, keys)
+    timings = {"world": time.perf_counter() - t_start}
+    computed_any = wo.status == "ok"
+    frames_out = []
+    t_frames = time.perf_counter()
+    for k in range(spec.frames_per_world):
+        fo = FrameOutcome(frame_id_for(seed, k), world_id, int(seed), k, "skipped")
+        fo.artifacts.update({f"world/{s}": v for s, v in keys.items()})
+        decoded: dict[str, DatasetFrame] = {}
+        errors = []
+        for geometry in spec.geometries:
+            key = frame_key(keys, k, geometry, spec)
+            fo.artifacts[f"dataset_frames/{geometry}"] = key
+            try:
+                if not force and st.exists("dataset_frames", key):
+                    df = read_dataset_frame(st, key)
+                    rkeys = df.stats.get("reconstruction_keys") or {}
+                else:
+                    df, rkeys = _compute_frame(inputs, k, geometry, world_id, st, spec)
+                    st.write("dataset_frames", key, _frame_table(df),
+                             stage_version=DATASET_STAGE_VERSION,
+                             provenance=_provenance(spec, keys, df, geometry, rkeys))
+                    fo.status = "ok" if fo.status != "failed" else "failed"
+                    computed_any = True
+                fo.artifacts.update({f"reconstruction/{s}": v for s, v in rkeys.items()})
+                decoded[geometry] = df
+                _fill_frame_outcome(fo, df)
+            except Exception as exc:  # noqa: BLE001 - one broken frame must not stop the rest
+                log.error("%s [%s] failed: %s: %s", fo.frame_id, geometry,
+                          type(exc).__name__, exc)
+                errors.append(f"[{geometry}] {type(exc).__name__}: {exc}")
+        if errors:
+            fo.status, fo.error = "failed", "; ".join(errors)
+        if len(decoded) == 2:
+            fo.comparison = _compare(decoded["ground_truth"], decoded["reconstructed"])
+        if keep_frames:
+            fo.data = decoded  # type: ignore[attr-defined]
+        frames_out.append(fo)
+    timings["frames"] = time.perf_counter() - t_frames
+    timings["total"] = time.perf_counter() - t_start
+    n_failed = sum(f.status == "failed" for f in frames_out)
+    status = "failed" if n_failed else ("ok" if computed_any else "skipped")
+    error = f"{n_failed} of {len(frames_out)} frame(s) failed" if n_failed else ""
+    return WorldDatasetOutcome(world_id, int(seed), status, error, keys, timings, frames_out)
+
+
+def _compute_frame(inputs: _WorldInputs, k: int, geometry: str, world_id: str,
+                   store: ArtifactStore, spec: DatasetSpec) -> tuple[DatasetFrame, dict]:
+    frame = inputs.frames()[k]
+    radar_seed = _frame_seed(spec.seed, frame.seed, k)
+    if geometry == "ground_truth":
+        return _ground_truth_frame(frame, world_id, inputs.radar_scene(), spec, radar_seed), {}
+    return _reconstructed_frame(frame, world_id, store, spec, radar_seed, {})
+
+
+def _provenance(spec, keys, df: DatasetFrame, geometry, rkeys) -> dict:
+    config = {"radar": spec.radar.to_dict(), "geometry": geometry,
+              "frame_index": df.frame_index, "class_name": spec.class_name}
+    if geometry == "reconstructed":
+        config["reconstruction"] = spec.reconstruction.to_dict()
+    return {
+        "inputs": {"world_frames": keys["world_frames"], "scene_meshes": keys["scene_meshes"],
+                   **{f"reconstruction/{s}": v for s, v in rkeys.items()}},
+        "config": config,
+        "seed": spec.seed,
+        "timings_s": dict(df.timings_s),
+        "extra": {"frame_id": df.frame_id, "world_seed": df.seed,
+                  "radar_seed": df.stats.get("radar_seed")},
+    }
+
+
+# ---------------------------------------------------------------------------------------------
+# Manifest, summary
+# ---------------------------------------------------------------------------------------------
+def record_world_dataset(store, dataset: str, outcome: WorldDatasetOutcome) -> list[dict]:
+    """Upsert the world's manifest row and one row per frame; returns the rows."""
+    m = open_store(store).manifest(dataset)
+    rows = [m.upsert(outcome.world_id, outcome.status, error=outcome.error,
+                     artifacts=outcome.artifacts, timings_s=outcome.timings_s,
+                     source=f"sim2radar.worlds seed={outcome.seed}")]
+    for f in outcome.frames:
+        rows.append(m.upsert(f.frame_id, f.status, error=f.error, artifacts=f.artifacts,
+                             timings_s=f.timings_s,
+                             source=f"sim2radar.worlds seed={f.seed} frame={f.frame_index}"))
+    return rows
+
+
+def _mean(values) -> float:
+    v = [float(x) for x in values if x is not None and math.isfinite(float(x))]
+    return float(np.mean(v)) if v else float("nan")
+
+
+def summarize_dataset(store, dataset: str, spec: DatasetSpec | dict,
+                      outcomes: list[WorldDatasetOutcome]) -> dict[str, Any]:
+    """The run summary: counts, per-geometry table and per-stage seconds.
+
+    Returns
+    -------
+    dict — ``store``, ``dataset``, ``counts`` (worlds by status), ``frame_counts`` (frames by
+    status), ``geometry`` -> {``frames``, ``points_per_frame``, ``labels_per_frame``,
+    ``gt_doors_per_frame``, ``frac_frames_with_label``, ``frac_gt_doors_with_points``},
+    ``seconds_per_frame`` -> {stage: mean [s]}, ``comparison`` (both geometries:
+    ``points_ratio``, ``chamfer_m`` means and per frame), ``worlds`` (outcome dicts).
+    """
+    spec = _spec(spec)
+    st = open_store(store)
+    frames = [f for o in outcomes for f in o.frames]
+    per_geometry = {}
+    for g in spec.geometries:
+        done = [f for f in frames if g in f.n_points]
+        near = [n for f in done for n in f.gt_points_near.get(g, [])]
+        per_geometry[g] = {
+            "frames": len(done),
+            "points_per_frame": _mean(f.n_points[g] for f in done),
+            "labels_per_frame": _mean(f.n_labels[g] for f in done),
+            "gt_doors_per_frame": _mean(f.n_gt_doors for f in done),
+            "frac_frames_with_label": _mean(f.n_labels[g] > 0 for f in done),
+            "frac_gt_doors_with_points": _mean(n > 0 for n in near),
+        }
+    stages = sorted({s for f in frames for s in f.timings_s})
+    seconds = {s: _mean(f.timings_s[s] for f in frames if s in f.timings_s) for s in stages}
+    comp = [f for f in frames if f.comparison]
+    summary: dict[str, Any] = {
+        "store": st.root,
+        "dataset": dataset,
+        "counts": {k: sum(o.status == k for o in outcomes) for k in ("ok", "skipped", "failed")},
+        "frame_counts": {k: sum(f.status == k for f in frames)
+                         for k in ("ok", "skipped", "failed")},
+        "geometry": per_geometry,
+        "seconds_per_frame": seconds,
+        "worlds": [o.to_dict() for o in outcomes],
+        "manifest": st._join("manifests", dataset),
+    }
+    if comp:
+        summary["comparison"] = {
+            "points_ratio": _mean(f.comparison["points_ratio"] for f in comp),
+            "chamfer_m": _mean(f.comparison["chamfer_m"] for f in comp),
+            "frames": {f.frame_id: f.comparison for f in comp},
+        }
+    return summary
+
+
+# ---------------------------------------------------------------------------------------------
+# OpenPCDet export
+# ---------------------------------------------------------------------------------------------
+def split_worlds(world_ids: Sequence[str], seed: int = 0,
+                 fractions: tuple[float, float, float] = (0.7, 0.15, 0.15)) -> dict[str, list]:
+    """Seeded train/val/test split of worlds (frames of one world never straddle splits).
+
+    With fewer than three worlds, every world goes to train (val/test stay empty) rather than
+    leaving train empty.
+    """
+    ids = sorted(dict.fromkeys(world_ids))
+    random.Random(int(seed)).shuffle(ids)
+    n = len(ids)
+    if n < 3:
+        return {"train": ids, "val": [], "test": []}
+    n_val = max(1, round(fractions[1] * n))
+    n_test = max(1, round(fractions[2] * n))
+    n_train = max(1, n - n_val - n_test)
+    return {"train": ids[:n_train], "val": ids[n_train:n_train + n_val],
+            "test": ids[n_train + n_val:]}
+
+
+def export_openpcdet(store, outcomes: list[WorldDatasetOutcome], export_dir: str | os.PathLike,
+                     geometry: str, *, seed: int = 0) -> dict[str, Any]:
+    """Write the frames of one geometry in OpenPCDet's custom layout with
+    :func:`sim2radar.datasets.write_dataset`.
+
+    ``points/<frame_id>.npy`` (N, 4) float32 x, y, z [m], intensity [dB];
+    ``labels/<frame_id>.txt`` ``x y z dx dy dz heading <class>``; ``ImageSets/{train,val,test}
+    .txt`` split by world (seeded, :func:`split_worlds`). Only frames whose geometry artifact
+    exists are exported.
+
+    Returns ``{"root", "frames", "splits": {name: n_frames}}``.
+    """
+    from sim2radar.datasets import Frame, write_dataset
+
+    st = open_store(store)
+    frames, world_of = [], {}
+    for o in outcomes:
+        for f in o.frames:
+            key = f.artifacts.get(f"dataset_frames/{geometry}")
+            if key is None or geometry not in f.n_points:
+                continue
+            df = read_dataset_frame(st, key)
+            frames.append(Frame(df.frame_id, df.points, df.boxes, df.box_labels))
+            world_of[df.frame_id] = df.world_id
+    worlds = split_worlds(sorted(set(world_of.values())), seed)
+    splits = {name: [fid for fid in sorted(world_of) if world_of[fid] in set(ws)]
+              for name, ws in worlds.items()}
+    root = Path(export_dir)
+    write_dataset(root, frames, splits)
+    return {"root": str(root), "frames": len(frames),
+            "splits": {k: len(v) for k, v in splits.items()}}
+
+
+def world_bev_pngs(store, outcomes: list[WorldDatasetOutcome], png_dir: str | os.PathLike,
+                   spec: DatasetSpec | dict) -> list[str]:
+    """One bird's-eye-view PNG per world and geometry: every frame's radar points and labels
+    moved into the first frame's radar frame (ground-truth doors dashed via their label)."""
+    from sim2radar.visualize import bev_png
+
+    spec = _spec(spec)
+    st = open_store(store)
+    out = []
+    for o in outcomes:
+        for g in spec.geometries:
+            dfs = [read_dataset_frame(st, f.artifacts[f"dataset_frames/{g}"])
+                   for f in o.frames if g in f.n_points]
+            if not dfs:
+                continue
+            ref_inv = np.linalg.inv(dfs[0].radar_to_world)
+            pts, boxes, labels = [], [], []
+            for df in dfs:
+                m = ref_inv @ df.radar_to_world
+                p = df.points.copy()
+                p[:, :3] = p[:, :3] @ m[:3, :3].T + m[:3, 3]
+                pts.append(p)
+                for b, lab in ((df.boxes, spec.class_name), (df.gt_boxes, "gt")):
+                    if len(b) and not (g == "ground_truth" and lab == "gt"):
+                        boxes.append(_move_boxes(b, m))
+                        labels += [lab] * len(b)
+            pts_all = np.concatenate(pts) if pts else np.zeros((0, 4), np.float32)
+            box_all = np.concatenate(boxes) if boxes else np.zeros((0, 7), np.float32)
+            path = Path(png_dir) / f"{o.world_id}_{_TAG[g]}.png"
+            xy = np.concatenate([pts_all[:, :2], box_all[:, :2], np.zeros((1, 2))])
+            lo, hi = xy.min(axis=0) - 1.0, xy.max(axis=0) + 1.0
+            bev_png(pts_all, boxes=box_all, box_labels=labels, extent_m=(lo[0], hi[0], lo[1], hi[1]),
+                    title=f"{o.world_id} [{g}]: {len(dfs)} frames, {len(pts_all)} points",
+                    path=path)
+            out.append(str(path))
+    return out
+
+
+def _move_boxes(boxes: np.ndarray, m: np.ndarray) -> np.ndarray:
+    b = np.asarray(boxes, np.float64).reshape(-1, 7).copy()
+    b[:, :3] = b[:, :3] @ m[:3, :3].T + m[:3, 3]
+    b[:, 6] += math.atan2(m[1, 0], m[0, 0])
+    return b.astype(np.float32)
+
+
+# ---------------------------------------------------------------------------------------------
+# The flow without the engine
+# ---------------------------------------------------------------------------------------------
+def generate_dataset_plain(
+    seeds: Sequence[int],
+    spec: DatasetSpec | dict,
+    store: str | os.PathLike | ArtifactStore = "out/store",
+    dataset: str = "generated",
+    *,
+    export_dir: str | os.PathLike | None = None,
+    force: bool = False,
+    on_world: Callable[[WorldDatasetOutcome], None] | None = None,
+) -> dict[str, Any]:
+    """The generate-dataset flow's semantics without the Prefect engine (notebooks, tests):
+    worlds one after another, failures recorded, not raised. Returns
+    :func:`summarize_dataset`'s dict (plus ``export`` when ``export_dir`` is given)."""
+    spec = _spec(spec)
+    st = open_store(store)
+    st.manifest(dataset)  # validates the name before any work
+    outcomes = []
+    for seed in seeds:
+        try:
+            outcome = generate_world_dataset(int(seed), spec, st, force=force)
+        except Exception as exc:  # noqa: BLE001 - one broken world must not stop the others
+            log.error("world %s failed: %s: %s", seed, type(exc).__name__, exc)
+            outcome = failed_world_outcome(seed, exc)
+        record_world_dataset(st, dataset, outcome)
+        outcomes.append(outcome)
+        if on_world is not None:
+            on_world(outcome)
+    summary = summarize_dataset(st, dataset, spec, outcomes)
+    if export_dir is not None:
+        summary["export"] = export_all(st, outcomes, export_dir, spec)
+    return summary
+
+
+def export_all(store, outcomes, export_dir, spec: DatasetSpec | dict) -> dict[str, Any]:
+    """Export every geometry of the run: straight into ``export_dir`` for one geometry, into
+    ``export_dir/<geometry>`` for ``both``."""
+    spec = _spec(spec)
+    if len(spec.geometries) == 1:
+        return {spec.geometries[0]: export_openpcdet(store, outcomes, export_dir,
+                                                     spec.geometries[0], seed=spec.seed)}
+    return {g: export_openpcdet(store, outcomes, Path(export_dir) / g, g, seed=spec.seed)
+            for g in spec.geometries}
+
+
+# ---------------------------------------------------------------------------------------------
+# Prefect tasks: the radar and reconstruction are deterministic -> no retries (fail fast with
+# the real error); manifest writes are storage I/O -> retried. Caching is by content key.
+# ---------------------------------------------------------------------------------------------
+@task(name="generate-world-dataset", cache_policy=NO_CACHE, retries=0, persist_result=False)
+def generate_world_dataset_task(seed: int, spec: dict, store: str,
+                                force: bool = False) -> WorldDatasetOutcome:
+    """Prefect task around :func:`generate_world_dataset`."""
+    return generate_world_dataset(seed, spec, store, force=force)
+
+
+@task(name="record-dataset-manifest", cache_policy=NO_CACHE, retries=REMOTE_IO_RETRIES,
+      retry_delay_seconds=REMOTE_IO_RETRY_DELAYS_S, persist_result=False)
+def record_world_dataset_task(store: str, dataset: str, outcome: WorldDatasetOutcome) -> list:
+    """Prefect task around :func:`record_world_dataset` (retried: storage I/O)."""
+    return record_world_dataset(store, dataset, outcome)
