@@ -7,8 +7,9 @@ symmetric under a half turn).
 
 Fitting (per door): principal axis of the points' ground-plane projection (PCA; for a door
 panel this is the wall direction, its normal is the wall normal), extents along it and in z from
-robust percentiles, the thickness from the points or ``thickness_m`` when only one face is seen
-(then the box is pushed ``face_to_center_m`` behind the visible face, into the wall). Door
+robust percentiles, the thickness from the points or ``thickness_m`` when only one face is seen; then the box is
+centred half a wall thickness behind the near face of the wall around the door (or
+``face_to_center_m`` behind the door face when no wall is seen). Door
 segments that are coplanar and touch along the wall (double-door leaves, a leaf and its frame)
 are merged into one box first.
 """
@@ -29,9 +30,12 @@ class DoorFitConfig:
 
     Attributes
     ----------
-    thickness_m : float [m] — minimum box thickness ``dy`` (a wall-set door seen from one side).
-    face_to_center_m : float [m] — how far behind the visible face the box centre lies when the
-        thickness comes from ``thickness_m``.
+    thickness_m : float [m] — minimum box thickness ``dy``: a door box spans the wall it is set
+        in (wall 0.10–0.20 m plus the frame's 1 cm lips in the procedural worlds).
+    face_to_center_m : float [m] — how far behind the visible door face the box centre lies when
+        no wall is seen next to the door.
+    wall_search_m : float [m] — wall points within this distance of the door plane (and within
+        3× it along the wall) locate the wall's near face.
     merge_gap_m : float [m] — door segments closer than this along the wall (and coplanar within
         ``merge_offset_m``, headings within ``merge_angle_deg``) form one door.
     merge_offset_m : float [m]
@@ -44,8 +48,9 @@ class DoorFitConfig:
         run is the door.
     """
 
-    thickness_m: float = 0.15
-    face_to_center_m: float = 0.05
+    thickness_m: float = 0.17
+    face_to_center_m: float = 0.0
+    wall_search_m: float = 0.35
     merge_gap_m: float = 0.2
     merge_offset_m: float = 0.15
     merge_angle_deg: float = 15.0
@@ -74,8 +79,8 @@ def _axes(points: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
 
 
 def fit_door_box(points_level: np.ndarray, config: DoorFitConfig = DoorFitConfig(),
-                 floor_z_m: float | None = None, pixel_angle_rad: float | None = None
-                 ) -> np.ndarray:
+                 floor_z_m: float | None = None, pixel_angle_rad: float | None = None,
+                 wall_points: np.ndarray | None = None) -> np.ndarray:
     """Fit one door box to its points.
 
     Parameters
@@ -85,6 +90,8 @@ def fit_door_box(points_level: np.ndarray, config: DoorFitConfig = DoorFitConfig
     floor_z_m : float, optional [m] — floor height in that frame, to snap the bottom to.
     pixel_angle_rad : float, optional [rad] — angular pixel pitch (≈ 1/fx); widens the gap
         that splits the points to three pixel footprints for doors seen at grazing angles.
+    wall_points : (M, 3), optional — points of wall segments (same frame); the wall plane next
+        to the door fixes the box centre (half a wall thickness behind its near face).
 
     Returns
     -------
@@ -127,10 +134,23 @@ def fit_door_box(points_level: np.ndarray, config: DoorFitConfig = DoorFitConfig
     thick = t1 - t0
     tc = 0.5 * (t0 + t1)
     if thick < config.thickness_m:
-        # one face seen: move the centre away from the viewer (origin), into the wall
+        # one face seen: the box spans the wall the door is set in. Centre it half a wall
+        # thickness behind the wall's near face when the wall around the door is seen, else
+        # ``face_to_center_m`` behind the door face (away from the viewer at t = 0).
         face = float(np.median(t))
-        away = 1.0 if face > 0 else -1.0  # the viewer (origin) has t = 0
+        away = 1.0 if face > 0 else -1.0
         tc = face + away * config.face_to_center_m
+        if wall_points is not None and len(wall_points):
+            w = np.asarray(wall_points, np.float64)
+            w = w[np.isfinite(w).all(axis=1)]
+            ws, wt = w[:, :2] @ a, w[:, :2] @ n
+            near = ((ws > s0 - config.wall_search_m * 3) & (ws < s1 + config.wall_search_m * 3)
+                    & (np.abs(wt - face) < config.wall_search_m)
+                    & (w[:, 2] > z0) & (w[:, 2] < z1 + 0.5))
+            if near.sum() >= 20:
+                wall_face = float(np.median(wt[near]))
+                if np.mean(np.abs(wt[near] - wall_face) < 0.05) > 0.5:
+                    tc = wall_face + away * config.thickness_m / 2
         thick = config.thickness_m
     sc = 0.5 * (s0 + s1)
     cxy = sc * a + tc * n
@@ -139,8 +159,8 @@ def fit_door_box(points_level: np.ndarray, config: DoorFitConfig = DoorFitConfig
 
 
 def fit_door_boxes(segment_points: list[np.ndarray], config: DoorFitConfig = DoorFitConfig(),
-                   floor_z_m: float | None = None, pixel_angle_rad: float | None = None
-                   ) -> tuple[np.ndarray, list[list[int]]]:
+                   floor_z_m: float | None = None, pixel_angle_rad: float | None = None,
+                   wall_points: np.ndarray | None = None) -> tuple[np.ndarray, list[list[int]]]:
     """Group door segments into doors and fit a box to each group.
 
     Parameters
@@ -184,7 +204,7 @@ def fit_door_boxes(segment_points: list[np.ndarray], config: DoorFitConfig = Doo
     boxes, out_groups = [], []
     for members in groups.values():
         p = np.concatenate([pts[i] for i in members])
-        boxes.append(fit_door_box(p, config, floor_z_m, pixel_angle_rad))
+        boxes.append(fit_door_box(p, config, floor_z_m, pixel_angle_rad, wall_points))
         out_groups.append(sorted(members))
     return np.stack(boxes).astype(np.float32), out_groups
 

@@ -88,8 +88,9 @@ class DoorOptions(BaseModel):
     """See :class:`sim2radar.reconstruct.doors.DoorFitConfig`."""
 
     model_config = ConfigDict(frozen=True, extra="forbid")
-    thickness_m: float = 0.15
-    face_to_center_m: float = 0.05
+    thickness_m: float = 0.17
+    face_to_center_m: float = 0.0
+    wall_search_m: float = 0.35
     merge_gap_m: float = 0.2
     merge_offset_m: float = 0.15
     merge_angle_deg: float = 15.0
@@ -445,8 +446,10 @@ def reconstruct(
     floor_pts = floor_pts[np.isfinite(floor_pts).all(axis=1)]
     floor_z = float(np.median(floor_pts[:, 2])) if len(floor_pts) >= 20 else float("nan")
     door_ids = [i for i, s in enumerate(segments.labels) if s == "door"]
+    wall_pts = pl[semantic_id == SEMANTIC_CLASSES.index("wall")]
     boxes, _ = fit_door_boxes([pl[seg == i] for i in door_ids], config.doors.to_config(),
-                              None if np.isnan(floor_z) else floor_z, 1.0 / k.fx)
+                              None if np.isnan(floor_z) else floor_z, 1.0 / k.fx,
+                              wall_pts[::max(1, len(wall_pts) // 20000)])
     timings["doors"] = time.perf_counter() - t
     timings["total"] = time.perf_counter() - t0
 

@@ -16,8 +16,8 @@ world : z up; the corridor runs along +x, floor at z = 0.
 camera : OpenCV (x right, y down, z forward), :mod:`sim2radar.camera`.
 radar : x forward, y left, z up (DESIGN.md), at the rig, 0.1 m below the camera.
 Boxes : ``x y z dx dy dz heading`` (``vocab.BOX_FIELDS``); for a door ``dx`` is its width
-    (along the wall), ``dy`` = 0.15 m (the door face plus a nominal wall thickness behind it,
-    as the worlds' boxes span the wall), ``dz`` its height, heading the wall direction.
+    (along the wall), ``dy`` = 0.17 m (a nominal 0.15 m wall behind the corridor's wall
+    plane plus 1 cm frame lips, as the worlds' boxes span the wall), ``dz`` its height, heading the wall direction.
 """
 
 from __future__ import annotations
@@ -262,10 +262,9 @@ def corridor_frame(
         center = [float(xc), yc, dh / 2]
         door_instances.append(
             add(f"door_{i}", "door", mat, colour, ("box", (center, [dw, thick, dh]))))
-        # box convention of the worlds (dy = wall thickness): the door plus a nominal 0.15 m
-        # wall behind its face
-        face = side * (cw / 2 - 0.04)
-        door_boxes.append([xc, face + side * 0.075, dh / 2, dw, 0.15, dh, 0.0])
+        # box convention of the worlds (the box spans the wall, dy = wall thickness + 2 cm): a
+        # nominal 0.15 m wall behind the corridor's wall plane
+        door_boxes.append([xc, side * (cw / 2 + 0.075), dh / 2, dw, 0.17, dh, 0.0])
 
     # one fire extinguisher (red, small) and one handrail (metal) on the walls
     ext_x = float(rng.uniform(2.2, 3.2))

@@ -94,3 +94,18 @@ def test_transform_boxes_matches_transformed_corners():
     d = np.linalg.norm(corners[:, None] - expected[None], axis=-1).min(axis=1)
     assert d.max() < 1e-4
     assert box_iou_3d(moved[None], np.array([[*moved[:6], moved[6] + math.pi]]))[0, 0] == pytest.approx(1)
+
+
+def test_box_is_centred_in_the_wall_around_a_recessed_door():
+    # wall face at y = 1.0 (seen from the origin), leaf recessed 10 cm behind it
+    door = _door_face([4.0, 1.1], 0.9, 2.0, 0.0)
+    rng = np.random.default_rng(5)
+    wall = np.column_stack([rng.uniform(1.0, 7.0, 4000), np.full(4000, 1.0),
+                            rng.uniform(-1.3, 1.4, 4000)])
+    wall = wall[np.abs(wall[:, 0] - 4.0) > 0.5]
+    cfg = DoorFitConfig(thickness_m=0.2)
+    box = fit_door_box(door, cfg, wall_points=wall)
+    assert box[1] == pytest.approx(1.1, abs=0.01)  # wall face + half the thickness
+    assert box[4] == pytest.approx(0.2)
+    no_wall = fit_door_box(door, DoorFitConfig(thickness_m=0.2, face_to_center_m=0.0))
+    assert no_wall[1] == pytest.approx(1.1, abs=0.01)  # the door face itself
