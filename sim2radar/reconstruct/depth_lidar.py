@@ -16,10 +16,17 @@ Method — first-order, edge-aware normalized convolution of inverse depth:
   weighted moments are smoothed sparse images, so the whole completion is nine O(HW) filter passes
   and one batched 3×3 solve. Colour edges stop the weights, so depth does not bleed from a door
   into the wall behind it.
-* Confidence is the local sample density seen through the same edge-aware kernel (``S(mask)``),
-  normalised by its median at the samples; pixels below ``min_confidence`` are holes. Holes are
-  filled from a pass with a weak (colour-blind) guide when that pass is confident, at half the
-  confidence; what is left stays 0 (invalid), never a guessed depth.
+* The fit runs at a few kernel widths (``n_scales``; fine widths keep creases and edges sharp,
+  coarse ones extend planes into the bands above and below a LiDAR's vertical field of view),
+  plus, with ``fill_holes``, one colour-blind pass at the coarsest width. Each pixel takes the
+  candidate with the smallest *expected relative error* ``E = (r + noise) * sqrt(g)``: ``r`` is the
+  weighted RMS residual of the local affine fit relative to the fitted inverse depth (how planar
+  the support is), ``noise`` the LiDAR's relative range noise (``lidar_noise_rel``), ``g`` the
+  leverage of the pixel in its own fit (1 at the centroid of the support, growing with the
+  squared distance when it is extrapolated; regression prediction variance). Candidates with a
+  sample density below ``min_density`` (relative to the median at the samples) do not count.
+* Pixels whose best ``E`` exceeds ``max_expected_error`` are holes: depth 0, never a guess.
+  Confidence = density × (1 − E / max_expected_error), in [0, 1].
 """
 
 from __future__ import annotations
@@ -85,22 +92,29 @@ class LidarDepthConfig:
     Attributes
     ----------
     min_points : int — fewer LiDAR points in view raise an error.
-    lambda_ : float or None — fast-global-smoother strength; None picks it from the sample spacing
-        ((2 × the 90th-percentile pixel distance to the nearest sample)^2).
+    lambda_ : float or None — fast-global-smoother strength of the finest width; None picks it
+        from the sample spacing ((2 × the median pixel distance to the nearest sample)^2).
+    n_scales, scale_factor : widths ``lambda_ * scale_factor**k`` for k < n_scales.
     sigma_color : float — colour sensitivity of the guide on 0..255 intensities (smaller = edges
         stop the weights more).
     gradient_prior_px : float [px] — ridge on the affine slopes; where the samples spread less
         than this the fit falls back to a constant (zero-order normalized convolution).
-    min_confidence : float — pixels below this confidence are holes (depth 0).
-    fill_holes : bool — fill holes from a colour-blind pass where that pass is confident.
+    lidar_noise_rel : float — relative LiDAR range noise used in the expected error.
+    max_expected_error : float — pixels with a larger expected relative error are holes.
+    min_density : float — candidates with less relative sample density are ignored.
+    fill_holes : bool — add a colour-blind candidate at the coarsest width.
     min_depth_m, max_depth_m : float [m] — valid depth range of the output.
     """
 
     min_points: int = 20
     lambda_: float | None = None
+    n_scales: int = 4
+    scale_factor: float = 4.0
     sigma_color: float = 8.0
-    gradient_prior_px: float = 2.0
-    min_confidence: float = 0.05
+    gradient_prior_px: float = 0.25
+    lidar_noise_rel: float = 0.01
+    max_expected_error: float = 0.3
+    min_density: float = 0.02
     fill_holes: bool = True
     min_depth_m: float = 0.05
     max_depth_m: float = 100.0
@@ -110,12 +124,16 @@ class LidarDepthConfig:
             raise ValueError(f"lidar depth: min_points must be >= 3, got {self.min_points}")
         if self.lambda_ is not None and self.lambda_ <= 0:
             raise ValueError(f"lidar depth: lambda_ must be > 0, got {self.lambda_}")
+        if self.n_scales < 1 or self.scale_factor <= 1:
+            raise ValueError("lidar depth: need n_scales >= 1 and scale_factor > 1")
         if self.sigma_color <= 0:
             raise ValueError(f"lidar depth: sigma_color must be > 0, got {self.sigma_color}")
-        if not 0 <= self.min_confidence < 1:
+        if not 0 <= self.min_density < 1:
             raise ValueError(
-                f"lidar depth: min_confidence must lie in [0, 1), got {self.min_confidence}"
+                f"lidar depth: min_density must lie in [0, 1), got {self.min_density}"
             )
+        if self.max_expected_error <= 0 or self.lidar_noise_rel < 0:
+            raise ValueError("lidar depth: need max_expected_error > 0 and lidar_noise_rel >= 0")
         if not 0 < self.min_depth_m < self.max_depth_m:
             raise ValueError("lidar depth: need 0 < min_depth_m < max_depth_m")
 
@@ -124,7 +142,7 @@ def _auto_lambda(mask: np.ndarray) -> float:
     import cv2
 
     dist = cv2.distanceTransform((~mask).astype(np.uint8), cv2.DIST_L2, 5)
-    gap = float(np.percentile(dist, 90))
+    gap = float(np.median(dist))
     return float(np.clip((2.0 * max(gap, 1.0)) ** 2, 4.0, 1e5))
 
 
@@ -138,7 +156,8 @@ def _first_order_nc(
 ) -> tuple[np.ndarray, np.ndarray]:
     """Edge-aware first-order normalized convolution (Knutsson & Westin 1993, eqs. 7-9).
 
-    Returns the fitted inverse depth (H, W) and the applicability density S(mask) (H, W).
+    Returns the fitted inverse depth (H, W), the applicability density S(mask) (H, W) and the
+    weighted RMS residual of the local affine fit relative to the fitted inverse depth (H, W).
     """
     import cv2
 
@@ -154,6 +173,7 @@ def _first_order_nc(
     for name, img in (
         ("1", m), ("u", m * u), ("v", m * v), ("uu", m * u * u), ("uv", m * u * v),
         ("vv", m * v * v), ("y", m * y), ("yu", m * y * u), ("yv", m * y * v),
+        ("yy", m * y * y),
     ):
         s[name] = fgs.filter(np.ascontiguousarray(img)).astype(np.float64)
     s1 = np.maximum(s["1"], 0.0)
@@ -167,19 +187,31 @@ def _first_order_nc(
     sab = s["uv"] - u0 * s["v"] - v0 * s["u"] + u0 * v0 * s1
     sya = s["yu"] - u0 * s["y"]
     syb = s["yv"] - v0 * s["y"]
-    ridge = (ridge_px / scale) ** 2 * s1 + 1e-20
-    a_mat = np.stack(
-        [
-            np.stack([s1, sa, sb], -1),
-            np.stack([sa, saa + ridge, sab], -1),
-            np.stack([sb, sab, sbb + ridge], -1),
-        ],
-        -2,
-    )
-    rhs = np.stack([s["y"], sya, syb], -1)[..., None]
-    a_mat[..., 0, 0] += 1e-20
-    coef = np.linalg.solve(a_mat.reshape(-1, 3, 3), rhs.reshape(-1, 3, 1)).reshape(h, w, 3)
-    return coef[..., 0].astype(np.float32), s1.astype(np.float32)
+    ridge = (ridge_px / scale) ** 2 * s1
+    # Closed-form inverse of the symmetric 3x3 normal matrix A = [[a, b, c], [b, d, e], [c, e, f]]
+    # (adjugate / determinant), vectorised over pixels.
+    a, b, c, d, e, f = s1, sa, sb, saa + ridge, sab, sbb + ridge
+    c00, c01, c02 = d * f - e * e, c * e - b * f, b * e - c * d
+    c11, c12, c22 = a * f - c * c, b * c - a * e, a * d - b * b
+    det = a * c00 + b * c01 + c * c02
+    good = (s1 > 1e-9 * max(float(s1.max()), 1e-30)) & (det > 0)
+    det = np.where(good, det, 1.0)
+    y0, y1, y2 = s["y"], sya, syb
+    coef0 = (c00 * y0 + c01 * y1 + c02 * y2) / det
+    coef1 = (c01 * y0 + c11 * y1 + c12 * y2) / det
+    coef2 = (c02 * y0 + c12 * y1 + c22 * y2) / det
+    # Weighted mean squared residual of the affine fit, sum w (y - c.phi)^2 / sum w
+    #   = (S(m y^2) - c.b) / S(m) since A c = b — how planar the support is.
+    res = (s["yy"] - (coef0 * y0 + coef1 * y1 + coef2 * y2)) / np.where(good, s1, 1.0)
+    rel_rms = np.sqrt(np.maximum(res, 0.0)) / np.maximum(np.abs(coef0), 1e-12)
+    # Leverage of the pixel in its own fit, S(m) (A^-1)_00: 1 at the centroid of the support,
+    # growing with the squared distance / spread when the pixel is extrapolated (the prediction
+    # variance sigma^2 x0^T (X^T W X)^-1 x0 of weighted least squares, in units of sigma^2 / S(m)).
+    leverage = np.maximum(c00 / det * s1, 1.0)
+    inv_fit = np.where(good, coef0, 0.0)
+    rel_rms = np.where(good, rel_rms, np.inf)
+    return (inv_fit.astype(np.float32), s1.astype(np.float32), rel_rms.astype(np.float32),
+            leverage.astype(np.float32))
 
 
 def complete_depth(
@@ -199,7 +231,7 @@ def complete_depth(
     -------
     depth_m : (H, W) float32 [m] — dense z-depth, 0 in holes.
     confidence : (H, W) float32 in [0, 1].
-    info : dict — ``lambda``, ``n_samples``, ``hole_fraction``, ``filled_fraction``.
+    info : dict — ``lambda``, ``n_samples``, ``hole_fraction``, ``pixels_per_candidate``.
     """
     cfg = config or LidarDepthConfig()
     sparse = np.asarray(sparse_depth_m, dtype=np.float32)
@@ -216,41 +248,42 @@ def complete_depth(
         )
     inv = np.zeros_like(sparse)
     inv[mask] = 1.0 / sparse[mask]
-    lam = cfg.lambda_ if cfg.lambda_ is not None else _auto_lambda(mask)
+    lam0 = cfg.lambda_ if cfg.lambda_ is not None else _auto_lambda(mask)
     guide = np.ascontiguousarray(rgb, dtype=np.uint8)
 
-    inv_g, dens_g = _first_order_nc(guide, inv, mask, lam, cfg.sigma_color, cfg.gradient_prior_px)
-    ref = float(np.median(dens_g[mask])) if n else 1.0
-    conf = np.clip(dens_g / max(ref, 1e-12), 0.0, 1.0)
-    inv_out = inv_g
-    filled = np.zeros(mask.shape, dtype=bool)
+    cands = [(guide, lam0 * cfg.scale_factor**k) for k in range(cfg.n_scales)]
     if cfg.fill_holes:
-        hole = conf < cfg.min_confidence
-        if hole.any():
-            grey = np.zeros_like(guide)  # colour-blind guide: plain WLS smoothing
-            inv_b, dens_b = _first_order_nc(
-                grey, inv, mask, lam, cfg.sigma_color, cfg.gradient_prior_px
-            )
-            ref_b = float(np.median(dens_b[mask]))
-            conf_b = np.clip(dens_b / max(ref_b, 1e-12), 0.0, 1.0)
-            filled = hole & (conf_b >= cfg.min_confidence)
-            inv_out = np.where(filled, inv_b, inv_out)
-            conf = np.where(filled, 0.5 * conf_b, conf)
+        cands.append((np.zeros_like(guide), cands[-1][1]))  # colour-blind: plain WLS smoothing
+    best_e = np.full(sparse.shape, np.inf, np.float32)
+    inv_out = np.zeros(sparse.shape, np.float32)
+    dens_out = np.zeros(sparse.shape, np.float32)
+    choice = np.full(sparse.shape, -1, np.int8)
+    for k, (g, lam) in enumerate(cands):
+        inv_k, dens_k, rel_k, lev_k = _first_order_nc(g, inv, mask, lam, cfg.sigma_color,
+                                                      cfg.gradient_prior_px)
+        density = np.clip(dens_k / max(float(np.median(dens_k[mask])), 1e-12), 0.0, 1.0)
+        err = (rel_k + cfg.lidar_noise_rel) * np.sqrt(lev_k)
+        better = (density >= cfg.min_density) & (inv_k > 0) & np.isfinite(err) & (err < best_e)
+        best_e = np.where(better, err, best_e)
+        inv_out = np.where(better, inv_k, inv_out)
+        dens_out = np.where(better, density, dens_out)
+        choice = np.where(better, k, choice)
     with np.errstate(divide="ignore", invalid="ignore"):
         depth = np.where(inv_out > 0, 1.0 / inv_out, 0.0).astype(np.float32)
     ok = (
         np.isfinite(depth)
-        & (conf >= cfg.min_confidence)
+        & (best_e <= cfg.max_expected_error)
         & (depth >= cfg.min_depth_m)
         & (depth <= cfg.max_depth_m)
     )
+    conf = dens_out * np.clip(1.0 - best_e / cfg.max_expected_error, 0.0, 1.0)
     depth = np.where(ok, depth, 0.0).astype(np.float32)
     conf = np.where(ok, conf, 0.0).astype(np.float32)
     info = {
-        "lambda": float(lam),
+        "lambda": float(lam0),
         "n_samples": n,
         "hole_fraction": float(1.0 - ok.mean()),
-        "filled_fraction": float((filled & ok).mean()),
+        "pixels_per_candidate": [int(((choice == k) & ok).sum()) for k in range(len(cands))],
     }
     return depth, conf, info
 
@@ -261,7 +294,7 @@ class LidarDepth:
 
     Options are the fields of :class:`LidarDepthConfig` (keyword arguments). ``estimate`` returns
     a :class:`DepthResult` whose ``info`` holds JSON-able scalars: ``n_lidar_points`` (LiDAR
-    pixels in the image), ``hole_fraction``, ``filled_fraction``, ``confidence_mean`` and the
+    pixels in the image), ``hole_fraction``, ``pixels_per_candidate``, ``confidence_mean`` and the
     filter strength ``lambda``. The per-pixel confidence map ((H, W) float32 in [0, 1], 0 in
     holes) of the last frame is ``self.last_confidence``.
     """

@@ -70,16 +70,22 @@ def test_rgb_guidance_sharpens_depth_edges(corridor):
     assert err_g < 0.5 * err_b, (err_g, err_b)
 
 
-def test_far_from_samples_is_a_hole_not_a_guess(corridor):
-    k, rgb, depth, _, pts = corridor
-    # Only the upper half of the image has LiDAR; with hole filling off the bottom rows are holes.
-    sparse = project_lidar(pts, k)
-    sparse[k.height // 2 - 10:] = 0
-    d2, conf2, info2 = complete_depth(
-        rgb, sparse, LidarDepthConfig(fill_holes=False, min_confidence=0.2, lambda_=16.0)
-    )
-    assert (d2[-5:] == 0).all() and (conf2[-5:] == 0).all()
-    assert info2["hole_fraction"] > 0.2
+def test_beyond_the_lidar_fov_extrapolate_or_leave_holes(corridor):
+    k, rgb, depth, _, _ = corridor
+    # A VLP-16-like +-15 deg LiDAR leaves the top and bottom ~12 deg of the image unsampled.
+    sparse = project_lidar(lidar_scan(elev_deg=(-15.0, 15.0)), k)
+    assert not (sparse[:8] > 0).any() and not (sparse[-8:] > 0).any()
+    results = {}
+    for max_err in (0.05, 0.3, 1.0):
+        d, conf, info = complete_depth(rgb, sparse, LidarDepthConfig(max_expected_error=max_err))
+        absrel, coverage = _absrel(d, depth)
+        assert ((d > 0) == (conf > 0)).all()
+        results[max_err] = (absrel, coverage)
+    # Stricter expected-error limits leave more holes and keep what remains more accurate.
+    assert results[0.05][1] < results[0.3][1] <= results[1.0][1]
+    assert results[0.05][0] < results[0.3][0] < 0.05
+    # With the default limit the planes are extended into most of the unsampled bands.
+    assert results[0.3][1] > 0.85
 
 
 def test_bad_lidar_inputs_give_clear_errors(corridor):
