@@ -131,7 +131,9 @@ RULES: tuple = (
     ("wood hue", lambda f: _is_wood(f) and f.coherence <= 0.3 and f.lf_contrast <= 0.05,
      {"wood": 3.0}),
     ("grout lines", lambda f: f.grout_frac > 0.03 and not _is_wood(f), {"ceramic_tile": 6.0}),
-    ("grey mottling", lambda f: f.lf_contrast > 0.027 and f.saturation < 0.2
+    # raw concrete (texture contrast 0.10-0.25); lighting and path-tracing noise alone reach
+    # ~0.1 of band-pass contrast on plain walls, so only strong mottling counts
+    ("grey mottling", lambda f: f.lf_contrast > 0.12 and f.saturation < 0.2
      and f.grout_frac < 0.03, {"concrete": 4.0}),
     ("smooth paint", lambda f: f.lf_contrast < 0.02 and f.grout_frac < 0.01,
      {"plasterboard": 1.5, "metal": 1.3}),
