@@ -77,6 +77,7 @@ __all__ = [
     "frame_id_for",
     "generate_world_dataset",
     "failed_world_outcome",
+    "outcomes_from_summary",
     "record_world_dataset",
     "read_dataset_frame",
     "export_openpcdet",
@@ -413,6 +414,15 @@ class WorldDatasetOutcome:
         d = jsonable(dataclasses.asdict(self))
         d["frames"] = [f.to_dict() for f in self.frames]
         return d
+
+
+def outcomes_from_summary(summary: dict[str, Any]) -> list[WorldDatasetOutcome]:
+    """The world outcomes of a summary dict (e.g. returned by the Prefect flow)."""
+    out = []
+    for w in summary["worlds"]:
+        frames = [FrameOutcome(**f) for f in w["frames"]]
+        out.append(WorldDatasetOutcome(**{**w, "frames": frames}))
+    return out
 
 
 def failed_world_outcome(seed: int, error: BaseException | str) -> WorldDatasetOutcome:
@@ -871,18 +881,18 @@ def split_worlds(world_ids: Sequence[str], seed: int = 0,
     """Seeded train/val/test split of worlds (frames of one world never straddle splits).
 
     With fewer than three worlds, every world goes to train (val/test stay empty) rather than
-    leaving train empty.
+    leaving train empty. Ids are sorted within each split.
     """
     ids = sorted(dict.fromkeys(world_ids))
     random.Random(int(seed)).shuffle(ids)
     n = len(ids)
     if n < 3:
-        return {"train": ids, "val": [], "test": []}
+        return {"train": sorted(ids), "val": [], "test": []}
     n_val = max(1, round(fractions[1] * n))
     n_test = max(1, round(fractions[2] * n))
     n_train = max(1, n - n_val - n_test)
-    return {"train": ids[:n_train], "val": ids[n_train:n_train + n_val],
-            "test": ids[n_train + n_val:]}
+    return {"train": sorted(ids[:n_train]), "val": sorted(ids[n_train:n_train + n_val]),
+            "test": sorted(ids[n_train + n_val:])}
 
 
 def export_openpcdet(store, outcomes: list[WorldDatasetOutcome], export_dir: str | os.PathLike,

@@ -1,1 +1,275 @@
-"""``sim2radar generate``: the factory main job (procedural worlds -> radar frames + door boxes)."""
+"""``sim2radar generate``: the factory main job (procedural worlds -> radar frames + door boxes).
+
+    sim2radar generate --worlds 4 --frames 8 --out out/store --geometry both \\
+        --export-openpcdet out/openpcdet
+
+Prefect and the flows are imported inside the command, so ``sim2radar --help`` stays fast.
+A YAML file (``--config``, e.g. ``configs/generate/default.yaml``) may hold the same settings
+(``worlds``, ``frames``, ``geometry``, ``radar``, ``reconstruction``, ``seed``, ``class_name``,
+``world:`` and ``rig:`` sections); command-line options win over it.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+from typing import Any
+
+import typer
+import yaml
+
+from sim2radar.cli._app import app
+
+__all__ = ["generate", "load_generate_config", "print_generate_summary", "run_generate"]
+
+_CONFIG_KEYS = {"worlds", "first_seed", "frames", "geometry", "radar", "reconstruction", "seed",
+                "class_name", "world", "rig", "dataset"}
+
+
+def load_generate_config(path: str | Path) -> dict[str, Any]:
+    """Read a generate YAML; relative radar/reconstruction file paths resolve against its folder.
+
+    Raises
+    ------
+    ValueError naming the file and the bad key.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise ValueError(f"{path}: config file not found")
+    try:
+        doc = yaml.safe_load(path.read_text()) or {}
+    except yaml.YAMLError as exc:
+        raise ValueError(f"{path}: invalid YAML: {exc}") from None
+    if not isinstance(doc, dict):
+        raise ValueError(f"{path}: expected a mapping of settings")
+    unknown = sorted(set(doc) - _CONFIG_KEYS)
+    if unknown:
+        raise ValueError(f"{path}: unknown key(s) {unknown}; allowed: {sorted(_CONFIG_KEYS)}")
+    for key in ("world", "rig"):
+        if doc.get(key) is not None and not isinstance(doc[key], dict):
+            raise ValueError(f"{path}: '{key}' must be a mapping of fields")
+    for key in ("radar", "reconstruction"):
+        value = doc.get(key)
+        if isinstance(value, str) and value.endswith((".yaml", ".yml")) \
+                and not Path(value).is_absolute():
+            doc[key] = str((path.parent / value).resolve())
+    return doc
+
+
+def _progress_columns():
+    from rich.progress import BarColumn, MofNCompleteColumn, TextColumn, TimeElapsedColumn
+
+    return [TextColumn("[bold]generate"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
+            TextColumn("{task.description}")]
+
+
+def run_generate(
+    seeds: list[int],
+    *,
+    frames: int,
+    store: str,
+    dataset: str = "generated",
+    geometry: str = "reconstructed",
+    radar: Any = "ti-mmwcas",
+    reconstruction: Any = None,
+    world: Any = None,
+    rig: Any = None,
+    seed: int = 0,
+    class_name: str = "door",
+    export_dir: str | None = None,
+    png_dir: Path | None = None,
+    force: bool = False,
+    strict: bool = False,
+    workers: int = 1,
+    use_prefect: bool = True,
+    show_progress: bool = True,
+    verbose: bool = False,
+) -> dict[str, Any]:
+    """Run the generate-dataset flow (or its plain loop) with a progress bar; write BEV PNGs.
+
+    Returns the flow's summary (``pngs`` added); failures are counted in it, never raised
+    (with ``strict`` the Prefect run is marked failed; the CLI exits with status 1).
+    """
+    from rich.progress import Progress
+
+    from tasks.dataset import generate_dataset_plain, resolve_spec, world_bev_pngs
+
+    spec = resolve_spec(frames, geometry, radar, reconstruction, world, rig, seed, class_name)
+    with Progress(*_progress_columns(), disable=not show_progress, transient=False) as progress:
+        bar = progress.add_task("starting" + (" Prefect" if use_prefect else ""),
+                                total=len(seeds))
+
+        def on_world(outcome) -> None:
+            pts = ",".join("/".join(str(v) for v in f.n_points.values()) or "-"
+                           for f in outcome.frames)
+            progress.update(bar, advance=1,
+                            description=f"{outcome.world_id}: {outcome.status} ({pts} pts)")
+
+        if use_prefect:
+            from sim2radar.cli.simulate import _prefect_env
+
+            _prefect_env(verbose)
+            from prefect.task_runners import ThreadPoolTaskRunner
+
+            from flows.generate_dataset import (
+                DatasetFailures,
+                generate_dataset_flow,
+                progress_callback,
+            )
+
+            runner = ThreadPoolTaskRunner(max_workers=max(1, int(workers)))
+            with progress_callback(on_world):
+                try:
+                    summary = generate_dataset_flow.with_options(task_runner=runner)(
+                        seeds=seeds, spec=spec.to_dict(), store=store, dataset=dataset,
+                        export_dir=export_dir, force=force, strict=strict)
+                except DatasetFailures as exc:  # strict: the run is marked failed in Prefect
+                    summary = exc.summary
+        else:
+            summary = generate_dataset_plain(seeds, spec, store, dataset, export_dir=export_dir,
+                                             force=force, on_world=on_world)
+    summary["pngs"] = []
+    if png_dir is not None:
+        from tasks.dataset import outcomes_from_summary
+
+        summary["pngs"] = world_bev_pngs(store, outcomes_from_summary(summary), png_dir, spec)
+    return summary
+
+
+def _fmt(v: float, spec: str = ".1f") -> str:
+    return "-" if v is None or (isinstance(v, float) and math.isnan(v)) else format(v, spec)
+
+
+def print_generate_summary(summary: dict[str, Any]) -> None:
+    """Human summary: counts, per-geometry table, seconds per stage, where things went."""
+    from rich.console import Console
+    from rich.table import Table
+
+    console = Console()
+    c, fc = summary["counts"], summary["frame_counts"]
+    console.print(
+        f"[bold]worlds: {c['ok']} computed, {c['skipped']} cached, {c['failed']} failed; "
+        f"frames: {fc['ok']} computed, {fc['skipped']} cached, {fc['failed']} failed[/bold] "
+        f"— dataset {summary['dataset']!r}"
+    )
+    for w in summary["worlds"]:
+        if w["status"] != "failed":
+            continue
+        console.print(f"  [red]✗ {w['world_id']}[/red]: {w['error']}")
+        for f in w["frames"]:
+            if f["status"] == "failed":
+                console.print(f"      [red]{f['frame_id']}[/red]: {f['error']}")
+    table = Table(title="dataset summary (means per frame)")
+    table.add_column("geometry", no_wrap=True)
+    for col in ("frames", "points", "labels", "GT doors", "frames w/ label",
+                "GT doors w/ points"):
+        table.add_column(col, justify="right")
+    for g, s in summary["geometry"].items():
+        table.add_row(g, str(s["frames"]), _fmt(s["points_per_frame"]),
+                      _fmt(s["labels_per_frame"], ".2f"), _fmt(s["gt_doors_per_frame"], ".2f"),
+                      _fmt(s["frac_frames_with_label"], ".0%"),
+                      _fmt(s["frac_gt_doors_with_points"], ".0%"))
+    console.print(table)
+    secs = summary.get("seconds_per_frame", {})
+    if secs:
+        console.print("seconds per frame: " + ", ".join(f"{k} {_fmt(v, '.2f')}"
+                                                        for k, v in secs.items()))
+    comp = summary.get("comparison")
+    if comp:
+        console.print(f"reconstructed vs ground truth: points ratio {_fmt(comp['points_ratio'], '.2f')}, "
+                      f"radar Chamfer {_fmt(comp['chamfer_m'], '.3f')} m")
+    console.print(f"store:    {summary['store']}")
+    console.print(f"manifest: {summary['manifest']}")
+    for g, e in (summary.get("export") or {}).items():
+        console.print(f"openpcdet \\[{g}]: {e['root']} ({e['frames']} frames, splits {e['splits']})")
+    if summary.get("pngs"):
+        console.print(f"pictures: {Path(summary['pngs'][0]).parent} ({len(summary['pngs'])} PNG)")
+
+
+@app.command()
+def generate(
+    worlds: int | None = typer.Option(None, "--worlds", "-n", help="Number of worlds [default 4]."),
+    frames: int | None = typer.Option(None, "--frames", "-m", help="Frames per world [default 4]."),
+    out: str = typer.Option("out/store", "--out", "-o",
+                            help="Artifact store: folder or fsspec URI (s3://…)."),
+    geometry: str | None = typer.Option(
+        None, "--geometry", "-g",
+        help="reconstructed (paper pipeline, default) | ground_truth | both."),
+    radar: str | None = typer.Option(None, "--radar", "-r",
+                                     help="Radar preset name or YAML path [ti-mmwcas]."),
+    reconstruction: str | None = typer.Option(
+        None, "--reconstruction",
+        help="Reconstruction preset (builtin, oracle, builtin-oracle-depth) or YAML path."),
+    config: Path | None = typer.Option(None, "--config", "-c",
+                                       help="Generate YAML (see configs/generate/)."),
+    first_seed: int | None = typer.Option(None, help="Seed of the first world [0]."),
+    seed: int | None = typer.Option(None, help="Run seed: trajectories, radar noise, splits [0]."),
+    dataset: str | None = typer.Option(None, help="Manifest (dataset) name [generated]."),
+    width: int | None = typer.Option(None, help="Override the camera width [px]."),
+    height: int | None = typer.Option(None, help="Override the camera height [px]."),
+    spp: int | None = typer.Option(None, help="Override RGB samples per pixel."),
+    export_openpcdet: Path | None = typer.Option(
+        None, "--export-openpcdet", help="Also write the OpenPCDet custom layout here."),
+    png_dir: Path | None = typer.Option(None, "--png-dir",
+                                        help="BEV PNGs [default: OUT/../bev for local stores]."),
+    no_png: bool = typer.Option(False, "--no-png", help="Do not write BEV PNGs."),
+    force: bool = typer.Option(False, help="Recompute dataset frames even when cached."),
+    strict: bool = typer.Option(False, help="Exit with status 1 if any world or frame failed."),
+    workers: int = typer.Option(1, help="Worlds processed concurrently (threads)."),
+    no_prefect: bool = typer.Option(False, "--no-prefect",
+                                    help="Run the plain loop without the Prefect engine."),
+    json_out: Path | None = typer.Option(None, "--json", help="Also write the summary as JSON."),
+    verbose: bool = typer.Option(False, "--verbose", "-v", help="Show Prefect's logs."),
+) -> None:
+    """Generate a radar dataset from procedural worlds: render, reconstruct (or use the
+    ground-truth geometry), simulate the radar, store points + door boxes, export.
+
+    A second run with the same inputs recomputes nothing. Failed worlds/frames are recorded in
+    the manifest; the others finish. Exit status: 0, or 1 with --strict when anything failed;
+    2 for bad arguments or configs.
+    """
+    from sim2radar.cli.simulate import _default_png_dir
+
+    try:
+        cfg = load_generate_config(config) if config is not None else {}
+        rig = dict(cfg.get("rig") or {})
+        rig.update({k: v for k, v in (("width", width), ("height", height), ("spp", spp))
+                    if v is not None})
+        n_worlds = int(worlds if worlds is not None else cfg.get("worlds", 4))
+        first = int(first_seed if first_seed is not None else cfg.get("first_seed", 0))
+        if n_worlds < 1:
+            raise ValueError(f"--worlds must be >= 1, got {n_worlds}")
+        params = dict(
+            frames=int(frames if frames is not None else cfg.get("frames", 4)),
+            geometry=geometry or cfg.get("geometry", "reconstructed"),
+            radar=radar or cfg.get("radar", "ti-mmwcas"),
+            reconstruction=reconstruction or cfg.get("reconstruction"),
+            world=cfg.get("world"), rig=rig,
+            seed=int(seed if seed is not None else cfg.get("seed", 0)),
+            class_name=cfg.get("class_name", "door"),
+        )
+        from tasks.dataset import resolve_spec
+
+        # validate every config before any work (bad field -> exit 2 with its name)
+        resolve_spec(params["frames"], params["geometry"], params["radar"],
+                     params["reconstruction"], params["world"], params["rig"], params["seed"],
+                     params["class_name"])
+    except (ValueError, FileNotFoundError) as exc:
+        typer.secho(f"error: {exc}", fg="red", err=True)
+        raise typer.Exit(2) from None
+    if png_dir is None and not no_png:
+        png_dir = _default_png_dir(out)
+    summary = run_generate(
+        list(range(first, first + n_worlds)), store=out,
+        dataset=dataset or cfg.get("dataset", "generated"),
+        export_dir=None if export_openpcdet is None else str(export_openpcdet),
+        png_dir=None if no_png else png_dir, force=force, strict=strict, workers=workers,
+        use_prefect=not no_prefect, verbose=verbose, **params,
+    )
+    print_generate_summary(summary)
+    if json_out is not None:
+        json_out.parent.mkdir(parents=True, exist_ok=True)
+        json_out.write_text(json.dumps(summary, indent=1, default=str))
+    if strict and summary["counts"]["failed"]:
+        raise typer.Exit(1)

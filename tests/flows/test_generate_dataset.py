@@ -1,0 +1,245 @@
+"""The factory's main job: procedural worlds -> radar frames with door boxes -> store + export.
+
+Tiny configs (80 x 60 px, 2 spp, a coarse radar ray grid, a short straight corridor) keep the
+whole file fast; one world is rendered once (module fixture) and everything else reuses it
+from the store, which is itself what the content keys promise.
+"""
+
+from __future__ import annotations
+
+import os
+
+import numpy as np
+import pytest
+import yaml
+
+from sim2radar.datasets import OpenPCDetDataset
+from sim2radar.radar import load_radar_config
+from sim2radar.worlds import (
+    generate_world,
+    make_rig_config,
+    make_world_config,
+    rig_extrinsics,
+    trajectory,
+)
+from storage import ArtifactStore
+from tasks import dataset as td
+
+WORLD = {"corridor_length_m": [10, 12], "layout_probs": {"straight": 1.0}}
+RIG = {"width": 80, "height": 60, "spp": 2, "lidar_azimuth_step_deg": 1.0}
+RADAR = load_radar_config("ti-mmwcas", ray_spacing_deg=0.5)
+SEED = 5
+BROKEN_SEED = -1  # world generation refuses negative seeds
+
+
+def _spec(**changes):
+    args = dict(frames_per_world=2, geometry="both", radar=RADAR, reconstruction=None,
+                world=WORLD, rig=RIG, seed=0)
+    args.update(changes)
+    return td.resolve_spec(**args)
+
+
+@pytest.fixture(scope="module")
+def run(tmp_path_factory):
+    """One plain run: world 5 (2 frames, both geometries) + a broken world, exported."""
+    root = tmp_path_factory.mktemp("generate")
+    store = ArtifactStore(root / "store")
+    summary = td.generate_dataset_plain([SEED, BROKEN_SEED], _spec(), store, "gen",
+                                        export_dir=root / "opd")
+    return {"root": root, "store": store, "summary": summary,
+            "outcomes": td.outcomes_from_summary(summary)}
+
+
+def _frames(run, geometry):
+    world = next(o for o in run["outcomes"] if o.seed == SEED)
+    return [td.read_dataset_frame(run["store"], f.artifacts[f"dataset_frames/{geometry}"])
+            for f in world.frames]
+
+
+def test_ground_truth_frames_have_points_and_door_labels_in_radar_frame(run):
+    s = run["summary"]
+    assert s["frame_counts"] == {"ok": 2, "skipped": 0, "failed": 0}
+    world = generate_world(SEED, make_world_config(WORLD))
+    poses = trajectory(world, 2, seed=0)
+    rig = make_rig_config(RIG)
+    for df, pose in zip(_frames(run, "ground_truth"), poses, strict=True):
+        assert df.geometry == "ground_truth" and df.points.shape[1] == 4 and len(df.points) > 20
+        # the radar pose is the rig's radar mount on the trajectory pose
+        radar_to_rig = rig_extrinsics(rig)["radar"]
+        assert np.allclose(df.radar_to_world, pose.rig_to_world @ radar_to_rig, atol=1e-9)
+        # labels: the world's door boxes expressed in the radar frame (independent transform)
+        inv = np.linalg.inv(df.radar_to_world)
+        centres_w = world.door_boxes_world[df.gt_door_index, :3]
+        centres_r = centres_w @ inv[:3, :3].T + inv[:3, 3]
+        assert np.allclose(df.boxes[:, :3], centres_r, atol=1e-4)
+        assert np.array_equal(df.boxes, df.gt_boxes) and set(df.box_labels) <= {"door"}
+        assert len(df.boxes) >= 1
+        # in the radar's FOV and range (ti-mmwcas: 120 deg azimuth, 9.7 m)
+        rng = np.linalg.norm(df.boxes[:, :3], axis=1)
+        az = np.degrees(np.arctan2(df.boxes[:, 1], df.boxes[:, 0]))
+        assert (rng <= RADAR.max_range_m).all() and (np.abs(az) <= 60.0).all()
+        # a door in view reflects: the nearest labelled door has radar points in or near it
+        nearest = int(np.argmin(rng))
+        near = td.points_near_boxes(df.points, df.boxes[nearest:nearest + 1])
+        assert near[0] > 0 and near[0] == df.gt_points_near[nearest]
+
+
+def test_reconstructed_frames_store_points_pseudo_labels_and_gt(run):
+    gt_frames = _frames(run, "ground_truth")
+    for df, gt in zip(_frames(run, "reconstructed"), gt_frames, strict=True):
+        assert df.geometry == "reconstructed" and len(df.points) > 10
+        assert np.allclose(df.radar_to_world, gt.radar_to_world)
+        assert np.array_equal(df.gt_boxes, gt.gt_boxes)  # GT kept alongside for scoring
+        assert df.timings_s["reconstruct"] > 0 and df.timings_s["simulate"] > 0
+        assert df.boxes.shape[1] == 7
+        assert df.stats["reconstruction_keys"]["scene_meshes"]
+        # reconstructed walls land where the real walls are: radar points of both geometries
+        # lie in the same corridor (ranges comparable, not an empty or shifted scene)
+        from sim2radar.evaluate.reconstruction import chamfer_distance
+
+        assert chamfer_distance(df.points, gt.points) < 1.0
+    comp = run["summary"]["comparison"]
+    assert 0.1 < comp["points_ratio"] < 10 and comp["chamfer_m"] < 1.0
+
+
+def test_broken_world_recorded_failed_while_others_finish(run):
+    s = run["summary"]
+    assert s["counts"] == {"ok": 1, "skipped": 0, "failed": 1}
+    rows = {r["scene_id"]: r for r in run["store"].manifest("gen").rows()}
+    broken = [r for sid, r in rows.items() if r["status"] == "failed"]
+    assert len(broken) == 1 and "seed" in broken[0]["error"]
+    assert rows["world_000005"]["status"] == "ok"
+    assert rows["world_000005_f001"]["status"] == "ok"
+    assert rows["world_000005_f001"]["artifacts"]["dataset_frames/reconstructed"]
+
+
+def test_second_run_recomputes_nothing(run, monkeypatch):
+    def boom(*a, **k):
+        raise AssertionError("recomputed a cached frame")
+
+    monkeypatch.setattr(td, "_simulate", boom)
+    monkeypatch.setattr("sim2radar.reconstruct.reconstruct", boom)
+    monkeypatch.setattr("sim2radar.worlds.render_frame", boom)
+    files = sorted(p for p in (run["root"] / "store").rglob("*.parquet")
+                   if "manifests" not in p.parts)
+    mtimes = [os.path.getmtime(p) for p in files]
+    again = td.generate_dataset_plain([SEED], _spec(), run["store"], "gen")
+    assert again["counts"]["skipped"] == 1 and again["frame_counts"]["skipped"] == 2
+    assert [os.path.getmtime(p) for p in files] == mtimes
+    assert again["geometry"]["ground_truth"]["points_per_frame"] == \
+        run["summary"]["geometry"]["ground_truth"]["points_per_frame"]
+
+
+def test_radar_change_resimulates_without_reconstructing(run, monkeypatch):
+    def boom(*a, **k):
+        raise AssertionError("reconstruction should come from the store")
+
+    monkeypatch.setattr("sim2radar.reconstruct.reconstruct", boom)
+    spec = _spec(radar=RADAR.with_updates(ray_spacing_deg=0.6), geometry="reconstructed")
+    out = td.generate_world_dataset(SEED, spec, run["store"])
+    assert out.status == "ok" and all(f.status == "ok" for f in out.frames)
+    first = next(o for o in run["outcomes"] if o.seed == SEED)
+    new_keys = [f.artifacts["dataset_frames/reconstructed"] for f in out.frames]
+    old_keys = [f.artifacts["dataset_frames/reconstructed"] for f in first.frames]
+    assert set(new_keys).isdisjoint(old_keys)  # new radar -> new dataset frames
+    for f, o in zip(out.frames, first.frames, strict=True):  # ... from the same reconstruction
+        assert f.artifacts["reconstruction/scene_meshes"] == o.artifacts["reconstruction/scene_meshes"]
+        assert f.n_points["reconstructed"] > 0
+
+
+def test_failed_frame_recorded_others_kept(run, monkeypatch):
+    import sim2radar.reconstruct as rec
+
+    real = rec.reconstruct
+
+    def flaky(frame, *a, **k):
+        if frame.name.endswith("_f001"):
+            raise rec.ReconstructionInputError(f"{frame.name}: no segments in this image")
+        return real(frame, *a, **k)
+
+    monkeypatch.setattr(rec, "reconstruct", flaky)
+    spec = _spec(reconstruction={"max_depth_m": 25.0}, geometry="reconstructed")
+    out = td.generate_world_dataset(SEED, spec, run["store"])
+    td.record_world_dataset(run["store"], "flaky", out)
+    assert out.status == "failed" and "1 of 2" in out.error
+    assert [f.status for f in out.frames] == ["ok", "failed"]
+    assert "no segments" in out.frames[1].error
+    rows = {r["scene_id"]: r for r in run["store"].manifest("flaky").rows()}
+    assert rows["world_000005_f001"]["status"] == "failed"
+    assert "ReconstructionInputError" in rows["world_000005_f001"]["error"]
+    assert rows["world_000005_f000"]["status"] == "ok"
+
+
+def test_openpcdet_export_is_readable(run):
+    exp = run["summary"]["export"]
+    assert exp["ground_truth"]["frames"] == 2 and exp["reconstructed"]["frames"] == 2
+    ds = OpenPCDetDataset(run["root"] / "opd" / "ground_truth", num_point_features=4)
+    ids = ds.split_ids("train")
+    assert ids == ["world_000005_f000", "world_000005_f001"]
+    assert ds.split_ids("val") == [] and ds.split_ids("test") == []
+    gt = _frames(run, "ground_truth")
+    for fid, df in zip(ids, gt, strict=True):
+        f = ds.frame(fid)
+        assert np.allclose(f.points, df.points, atol=1e-6)
+        assert np.allclose(f.boxes, df.boxes, atol=1e-5) and set(f.names) == {"door"}
+
+
+def test_split_worlds_is_seeded_and_disjoint():
+    ids = [f"world_{i:06d}" for i in range(10)]
+    a = td.split_worlds(ids, seed=3)
+    assert a == td.split_worlds(list(reversed(ids)), seed=3)
+    assert sorted(sum(a.values(), [])) == ids
+    assert [len(a[k]) for k in ("train", "val", "test")] == [6, 2, 2]
+    assert td.split_worlds(ids[:2], seed=3) == {"train": sorted(ids[:2]), "val": [], "test": []}
+    assert a != td.split_worlds(ids, seed=4)
+
+
+def test_bad_configs_name_the_field():
+    with pytest.raises(ValueError, match="geometry"):
+        _spec(geometry="lidar")
+    with pytest.raises(ValueError, match="corridor_width_m"):
+        _spec(world={"corridor_width_m": [3, 2]})
+    with pytest.raises(ValueError, match="frames_per_world"):
+        _spec(frames_per_world=0)
+    with pytest.raises(ValueError, match="unknown reconstruction preset"):
+        _spec(reconstruction="magic")
+
+
+def test_cli_writes_pngs_and_summary(run, tmp_path):
+    from typer.testing import CliRunner
+
+    import sim2radar.cli.generate  # noqa: F401  (registers the command)
+    from sim2radar.cli._app import app
+
+    radar_yaml = tmp_path / "radar.yaml"
+    radar_yaml.write_text(yaml.safe_dump(RADAR.model_dump(mode="json")))
+    cfg = tmp_path / "gen.yaml"
+    cfg.write_text(yaml.safe_dump({"worlds": 1, "first_seed": SEED, "frames": 2,
+                                   "geometry": "both", "radar": "radar.yaml", "world": WORLD,
+                                   "rig": RIG}))
+    out = run["root"] / "store"
+    res = CliRunner().invoke(app, ["generate", "--config", str(cfg), "--out", str(out),
+                                   "--dataset", "cli", "--no-prefect", "--png-dir",
+                                   str(tmp_path / "bev"), "--json", str(tmp_path / "s.json")])
+    assert res.exit_code == 0, res.output
+    assert "2 cached" in res.output and "dataset summary" in res.output
+    pngs = sorted(p.name for p in (tmp_path / "bev").glob("*.png"))
+    assert pngs == ["world_000005_gt.png", "world_000005_rec.png"]
+    assert (tmp_path / "bev" / pngs[0]).read_bytes()[:4] == b"\x89PNG"
+    bad = CliRunner().invoke(app, ["generate", "--geometry", "nope", "--out", str(out),
+                                   "--no-prefect"])
+    assert bad.exit_code == 2 and "geometry" in bad.output
+
+
+def test_prefect_flow_run_strict(run, prefect_server):
+    from flows.generate_dataset import DatasetFailures, generate_dataset
+
+    with pytest.raises(DatasetFailures) as info:
+        generate_dataset(seeds=[SEED, BROKEN_SEED], frames_per_world=2,
+                         store=run["root"] / "store", dataset="flow", radar=RADAR,
+                         geometry="both", world=WORLD, rig=RIG, strict=True)
+    summary = info.value.summary
+    assert summary["counts"] == {"ok": 0, "skipped": 1, "failed": 1}
+    assert summary["frame_counts"]["skipped"] == 2
+    rows = {r["scene_id"]: r["status"] for r in run["store"].manifest("flow").rows()}
+    assert rows["world_000005"] == "skipped" and "failed" in rows.values()
