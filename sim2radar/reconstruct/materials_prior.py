@@ -57,7 +57,8 @@ class AppearanceFeatures:
     saturation, value : float — median HSV saturation and value in [0, 1].
     lf_contrast : float — robust std (1.4826·MAD) of the band-pass (σ 1–5 px) luminance over
         its local mean: texture contrast with the shading removed (mottling, speckle).
-    grout_frac : float — fraction of pixels > 25 % darker than their 7×7 median (grout lines).
+    grout_frac : float — fraction of pixels on thin dark lines (grout): > 25 % darker than the
+        5×5 morphological closing of the image (black-hat), which broad shading does not reach.
     coherence : float — structure-tensor coherence of the band-passed luminance in [0, 1]
         (1 = all texture gradients in one direction: grain, brushing).
     n_px : int — pixels used.
@@ -78,12 +79,13 @@ def _image_maps(rgb: np.ndarray) -> dict[str, np.ndarray]:
     b1 = cv2.GaussianBlur(gray, (0, 0), 1.0)
     b2 = cv2.GaussianBlur(gray, (0, 0), 5.0)
     band = (b1 - b2) / b2  # local texture contrast, shading (low frequencies) removed
-    med = cv2.medianBlur(gray.astype(np.uint8), 7).astype(np.float32) + 1.0
+    # thin dark lines (grout): morphological black-hat with a 5x5 element, relative depth
+    closed = cv2.morphologyEx(gray, cv2.MORPH_CLOSE, np.ones((5, 5), np.uint8))
     gx = cv2.Sobel(band, cv2.CV_32F, 1, 0, ksize=3)
     gy = cv2.Sobel(band, cv2.CV_32F, 0, 1, ksize=3)
     return {
         "hue": hsv[..., 0] * (2 * np.pi / 256), "sat": hsv[..., 1] / 255, "val": hsv[..., 2] / 255,
-        "band": band, "dark": gray < 0.75 * med,
+        "band": band, "dark": (closed - gray) > 0.25 * closed,
         "jxx": gx * gx, "jyy": gy * gy, "jxy": gx * gy,
     }
 

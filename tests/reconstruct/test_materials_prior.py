@@ -26,7 +26,7 @@ def _patch(kind: str) -> np.ndarray:
         mod = np.where(grout, 0.45, 1.0)
     elif kind == "concrete":
         base = np.array([0.45, 0.45, 0.44])
-        mod = 1 + 0.45 * np.sin(x / 2.3) * np.sin(y / 1.7) + 0.03 * RNG.standard_normal((H, W))
+        mod = 1 + 0.5 * np.sin(x / 4.0) * np.sin(y / 3.5) + 0.03 * RNG.standard_normal((H, W))
     elif kind == "paint":
         base = np.array([0.8, 0.79, 0.75])
         mod = np.ones((H, W))
