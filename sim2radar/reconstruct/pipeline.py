@@ -450,6 +450,13 @@ def reconstruct(
     boxes, _ = fit_door_boxes([pl[seg == i] for i in door_ids], config.doors.to_config(),
                               None if np.isnan(floor_z) else floor_z, 1.0 / k.fx,
                               wall_pts[::max(1, len(wall_pts) // 20000)])
+    # door openings the segmentation measured on wall planes (e.g. open doors: no leaf pixels
+    # in the wall), kept where no fitted box lies within 0.5 m
+    openings = np.asarray(getattr(seg_be, "last_info", {}).get("door_boxes_level", []),
+                          np.float32).reshape(-1, 7)
+    for box in openings:
+        if not len(boxes) or np.min(np.linalg.norm(boxes[:, :2] - box[:2], axis=1)) > 0.5:
+            boxes = np.vstack([boxes, box[None]]).astype(np.float32)
     timings["doors"] = time.perf_counter() - t
     timings["total"] = time.perf_counter() - t0
 

@@ -201,6 +201,7 @@ class BuiltinSegments:
         door_height_m: tuple[float, float] = (1.85, 2.5),
         floor_tolerance_m: float = 0.25,
         offset_thresh_m: float = 0.015,
+        door_thickness_m: float = 0.17,
     ) -> None:
         self.normal_thresh_deg = float(normal_thresh_deg)
         self.colour_thresh = float(colour_thresh)
@@ -213,6 +214,7 @@ class BuiltinSegments:
         self.door_height_m = tuple(float(x) for x in door_height_m)
         self.floor_tolerance_m = float(floor_tolerance_m)
         self.offset_thresh_m = float(offset_thresh_m)
+        self.door_thickness_m = float(door_thickness_m)
         #: Diagnostics of the last call: up vector, floor / ceiling level, region count.
         self.last_info: dict = {}
         self._pixel_angle: float | None = None
@@ -247,6 +249,9 @@ class BuiltinSegments:
         self._pixel_angle = 1.0 / k.fx
         regions = self._merge(regions, pl, lab, valid, floor_z)
         labels, scores, info = self._label(regions, pl, frame.rgb)
+        regions, labels, scores, openings = self._wall_openings(
+            regions, labels, scores, pl, info["floor_z_m"], info["ceiling_z_m"])
+        info["door_boxes_level"] = openings
         seg, labels, scores = self._compact(regions, labels, scores)
         self.last_info = {"up_cam": up.tolist(), **info, "n_segments": len(labels)}
         if not labels:
@@ -412,6 +417,96 @@ class BuiltinSegments:
             scores.append(score)
         info = {"floor_z_m": float(floor_z), "ceiling_z_m": float(ceil_z)}
         return labels, scores, info
+
+    def _wall_openings(self, regions, labels, scores, pl, floor_z, ceil_z):
+        """Doors and windows set into walls: pixels seen *behind* a wall plane through a
+        rectangle of the wall (a recessed leaf, a window pane, or a room through an open door).
+
+        For each large wall region, every other pixel whose point lies 3 cm – 4 m behind the
+        wall plane and whose viewing ray crosses the plane inside the wall's extent is a
+        candidate; connected candidates form an opening, measured on the wall plane (width
+        along the wall, bottom and top height). Door-sized openings standing on the floor become
+        door boxes (spanning the wall: ``door_thickness_m`` behind the wall face) and their
+        recessed pixels (< 0.35 m behind) a ``door`` segment; sill-height openings a ``window``.
+
+        Returns the updated regions, labels, scores and a list of door boxes (level frame,
+        ``x y z dx dy dz heading``).
+        """
+        h, w = regions.shape
+        valid = np.isfinite(pl).all(axis=-1)
+        n_reg = int(regions.max()) + 1
+        counts = np.bincount(regions[regions >= 0], minlength=n_reg)
+        walls = [i for i in np.argsort(-counts) if labels[i] == "wall"
+                 and counts[i] > 0.01 * valid.sum()]
+        boxes: list[list[float]] = []
+        used = np.zeros((h, w), bool)
+        labels, scores = list(labels), list(scores)
+        for wi in walls[:6]:
+            mask = regions == wi
+            g = region_geometry(pl, mask, pixel_angle_rad=self._pixel_angle)
+            if g.vertical_cos > 0.2:
+                continue
+            nrm = np.array([g.normal[0], g.normal[1], 0.0])
+            nrm /= np.linalg.norm(nrm)
+            wp = pl[mask & valid]
+            d = float(np.median(wp @ nrm))  # plane n·p = d, d < 0 (normal faces the camera)
+            if d > -0.3:
+                continue
+            along = np.array([-nrm[1], nrm[0], 0.0])
+            s_w = wp @ along
+            s0, s1 = np.percentile(s_w, [0.5, 99.5])
+            npd = pl @ nrm
+            with np.errstate(invalid="ignore", divide="ignore"):
+                behind = d - npd  # > 0 behind the wall
+                q = pl * (d / npd)[..., None]  # ray crossing with the wall plane
+            sq, zq = q @ along, q[..., 2]
+            # (pixels of the wall region itself count too: a recessed leaf of a similar colour
+            # may have been merged into the wall)
+            cand = (valid & ~used & (behind > 0.04) & (behind < 4.0)
+                    & (sq > s0 + 0.02) & (sq < s1 - 0.02) & (zq > floor_z - 0.1)
+                    & (zq < g.z_max_m + 0.05))
+            cand = cv2.morphologyEx(cand.astype(np.uint8), cv2.MORPH_OPEN, np.ones((2, 2), np.uint8))
+            n_cc, cc, stats, _ = cv2.connectedComponentsWithStats(cand, connectivity=8)
+            for c in range(1, n_cc):
+                if stats[c, cv2.CC_STAT_AREA] < max(30, 0.001 * h * w):
+                    continue
+                m = cc == c
+                # the opening must be framed by this wall: wall pixels left and right of it
+                x0, x1 = stats[c, cv2.CC_STAT_LEFT], stats[c, cv2.CC_STAT_LEFT] + stats[c, cv2.CC_STAT_WIDTH]
+                rows = np.flatnonzero(m.any(axis=1))
+                mid = rows[len(rows) // 2]
+                left_wall = mask[mid, max(0, x0 - 6):x0].any() or x0 == 0
+                right_wall = mask[mid, x1:min(w, x1 + 6)].any() or x1 == w
+                if not (left_wall and right_wall):
+                    continue
+                ss, zz = sq[m], zq[m]
+                a0, a1 = np.percentile(ss, [1, 99])
+                b0, b1 = np.percentile(zz, [1, 99])
+                width, bottom, top = a1 - a0, b0 - floor_z, b1 - floor_z
+                recess = m & (behind < 0.35)
+                kind = None
+                if (bottom < 0.25 and self.door_width_m[0] <= width <= self.door_width_m[1] + 0.15
+                        and self.door_height_m[0] - 0.1 <= top <= self.door_height_m[1] + 0.1
+                        and b1 < ceil_z - 0.1):
+                    kind = "door"
+                elif 0.4 < bottom < 1.4 and 0.4 <= width <= 3.0 and 0.4 <= b1 - b0 <= 2.0:
+                    kind = "window"
+                if kind is None:
+                    continue
+                used |= m
+                if recess.sum() >= 10:
+                    regions = regions.copy()
+                    regions[recess] = len(labels)
+                    labels.append(kind)
+                    scores.append(0.7)
+                if kind == "door":
+                    th = self.door_thickness_m
+                    cxy = 0.5 * (a0 + a1) * along[:2] + (d - th / 2) * nrm[:2]
+                    heading = math.atan2(along[1], along[0])
+                    heading = (heading + math.pi / 2) % math.pi - math.pi / 2
+                    boxes.append([float(cxy[0]), float(cxy[1]), float(floor_z + top / 2),
+                                  float(width), th, float(top), float(heading)])
+        return regions, labels, scores, boxes
 
     def _vertical_label(self, g: SegmentGeometry, floor_z: float, ceil_z: float,
                         ceiling_seen: bool) -> tuple[str, float]:
