@@ -182,7 +182,8 @@ class BuiltinSegments:
     Keyword options (all optional; defaults suit 640×480 corridor images and scale with size):
     ``normal_thresh_deg`` (20), ``colour_thresh`` (ΔE 14), ``max_incidence_deg`` (84),
     ``min_region_frac`` (3e-4 of the image), ``merge_normal_deg`` (12), ``merge_offset_m``
-    (0.06), ``merge_colour_thresh`` (ΔE 12), ``door_width_m`` ((0.55, 2.0)), ``door_height_m``
+    (0.06), ``merge_colour_thresh`` (ΔE 12), ``fill_no_depth`` (True: pixels without depth join
+    the nearest region), ``door_width_m`` ((0.55, 2.0)), ``door_height_m``
     ((1.85, 2.5)), ``floor_tolerance_m`` (0.25), ``offset_thresh_m`` (0.015; plane-offset step
     between neighbours, plus 0.4 % of the depth).
     """
@@ -202,6 +203,7 @@ class BuiltinSegments:
         floor_tolerance_m: float = 0.25,
         offset_thresh_m: float = 0.015,
         door_thickness_m: float = 0.17,
+        fill_no_depth: bool = True,
     ) -> None:
         self.normal_thresh_deg = float(normal_thresh_deg)
         self.colour_thresh = float(colour_thresh)
@@ -215,6 +217,7 @@ class BuiltinSegments:
         self.floor_tolerance_m = float(floor_tolerance_m)
         self.offset_thresh_m = float(offset_thresh_m)
         self.door_thickness_m = float(door_thickness_m)
+        self.fill_no_depth = bool(fill_no_depth)
         #: Diagnostics of the last call: up vector, floor / ceiling level, region count.
         self.last_info: dict = {}
         self._pixel_angle: float | None = None
@@ -243,11 +246,15 @@ class BuiltinSegments:
         pl = points @ rot.T
 
         lab = self._lab(frame.rgb, w)
-        regions = self._regions(points, normals, lab, valid, k.fx)
+        regions = self._regions(points, normals, lab, valid, k.fx, up)
         nl = normals @ rot.T
         floor_z = self._level(pl, nl, up=True)
         self._pixel_angle = 1.0 / k.fx
         regions = self._merge(regions, pl, lab, valid, floor_z)
+        if self.fill_no_depth:
+            # pixels without depth (e.g. below the LiDAR's lowest beam) join the nearest
+            # region in the image: they get a label and material, but no 3D point
+            regions = _fill_nearest(regions, np.ones_like(valid))
         labels, scores, info = self._label(regions, pl, frame.rgb)
         regions, labels, scores, openings = self._wall_openings(
             regions, labels, scores, pl, info["floor_z_m"], info["ceiling_z_m"])
@@ -277,8 +284,18 @@ class BuiltinSegments:
         lab = cv2.cvtColor(blur.astype(np.float32) / 255.0, cv2.COLOR_RGB2LAB)
         return lab  # L in [0, 100], a/b in about [-127, 127]
 
-    def _regions(self, points, normals, lab, valid, focal_px) -> np.ndarray:
+    def _regions(self, points, normals, lab, valid, focal_px, up=None) -> np.ndarray:
         z = np.where(valid, points[..., 2], np.nan)
+        # orientation class per pixel (vertical / facing up / facing down / oblique): a hard
+        # boundary where a smoothed depth map bends gradually from a wall into the floor
+        if up is None:
+            up = np.array([0.0, -1.0, 0.0])
+        with np.errstate(invalid="ignore"):
+            nz = normals @ np.asarray(up, np.float64)
+        orient = np.full(z.shape, 3, np.int8)
+        orient[np.abs(nz) < math.sin(math.radians(30))] = 0
+        orient[nz > math.cos(math.radians(30))] = 1
+        orient[nz < -math.cos(math.radians(30))] = 2
         cos_n = math.cos(math.radians(self.normal_thresh_deg))
         jump = math.tan(math.radians(self.max_incidence_deg)) / focal_px + 0.02
 
@@ -292,7 +309,8 @@ class BuiltinSegments:
                 off = np.abs(np.sum(normals[sl_a] * points[sl_a], axis=-1)
                              - np.sum(normals[sl_b] * points[sl_b], axis=-1))
                 do = off > self.offset_thresh_m + 0.004 * np.minimum(za, zb)
-            return dj | dn | dc | do | ~(valid[sl_a] & valid[sl_b])
+            do_ = orient[sl_a] != orient[sl_b]
+            return dj | dn | dc | do | do_ | ~(valid[sl_a] & valid[sl_b])
 
         edge = np.zeros(valid.shape, bool)
         edge[:, :-1] |= broken((slice(None), slice(None, -1)), (slice(None), slice(1, None)))

@@ -81,4 +81,7 @@ def test_labels_are_in_the_vocabulary(frames):
     assert set(seg.labels) <= set(SEMANTIC_CLASSES)
     assert seg.segment_id.max() == seg.n_segments - 1
     assert len(seg.scores) == seg.n_segments
-    assert ((seg.segment_id >= 0) == (f.depth_m > 0)).all()
+    assert (seg.segment_id >= 0).all()  # every pixel, with or without depth, has a segment
+    no_fill = BuiltinSegments(fill_no_depth=False).segment(
+        FrameInput(f.rgb, f.intrinsics), DepthResult(np.where(np.arange(f.depth_m.shape[0])[:, None] > 150, 0, f.depth_m)))
+    assert (no_fill.segment_id[151:] == -1).all() and (no_fill.segment_id[:150] >= 0).all()
