@@ -98,6 +98,8 @@ DATASET_STAGE_VERSION = 1
 GEOMETRIES = ("ground_truth", "reconstructed")
 #: Short tags used in frame ids and artifact maps.
 _TAG = {"ground_truth": "gt", "reconstructed": "rec"}
+#: 3D IoU at which a label counts as matching a ground-truth door (the paper's AP threshold).
+LABEL_IOU_THRESHOLD = 0.3
 #: Extra margin around a ground-truth box when counting radar points "in or near" it [m].
 NEAR_BOX_MARGIN_M = 0.25
 
@@ -367,6 +369,8 @@ class FrameOutcome:
     n_gt_doors : int — ground-truth doors in the radar's FOV and range
     gt_points_near : dict — geometry -> (G,) radar points near each GT door
     comparison : dict — ``both`` geometries: ``points_ratio`` (rec / gt), ``chamfer_m``
+    label_match : dict — geometry -> ``tp``, ``n_pred``, ``n_gt``: labels matched one-to-one
+        to ground-truth doors in view at 3D IoU >= :data:`LABEL_IOU_THRESHOLD`
     """
 
     frame_id: str
@@ -382,6 +386,7 @@ class FrameOutcome:
     n_gt_doors: int = 0
     gt_points_near: dict[str, list[int]] = dataclasses.field(default_factory=dict)
     comparison: dict[str, float] = dataclasses.field(default_factory=dict)
+    label_match: dict[str, dict[str, int]] = dataclasses.field(default_factory=dict)
 
     def to_dict(self) -> dict[str, Any]:
         return jsonable(dataclasses.asdict(self))
@@ -584,8 +589,8 @@ def _ground_truth_frame(frame, world_id, radar_scene, spec, radar_seed) -> Datas
     )
 
 
-def _reconstructed_frame(frame, world_id, store, spec, radar_seed,
-                         timings: dict) -> tuple[DatasetFrame, dict[str, str]]:
+def _reconstructed_frame(frame, world_id, store, spec,
+                         radar_seed) -> tuple[DatasetFrame, dict[str, str]]:
     from sim2radar.radar import RadarScene
     from sim2radar.reconstruct import FrameInput, reconstruct
     from sim2radar.reconstruct.artifacts import read_reconstruction, write_scene_artifacts
@@ -615,11 +620,11 @@ def _reconstructed_frame(frame, world_id, store, spec, radar_seed,
         rec_seconds = float(scene.timings_s.get("total", time.perf_counter() - t0))
         info = {"fallbacks": scene.info.get("fallbacks", []), "cached": False,
                 "n_segments": scene.n_segments}
-    timings["reconstruct"] = rec_seconds
     if not meshes:
         raise ValueError(f"{fid}: reconstruction produced no meshes; nothing for the radar")
     az, el, rng = radar_view(spec.rig)
     boxes = np.asarray(boxes, np.float32).reshape(-1, 7)
+    n_fitted = int(len(boxes))
     boxes = boxes[boxes_in_view(boxes, az, el, rng)]
     t0 = time.perf_counter()
     radar_scene = RadarScene(meshes)
@@ -634,7 +639,7 @@ def _reconstructed_frame(frame, world_id, store, spec, radar_seed,
         timings_s={"render": float(frame.timings_s.get("render_s", 0.0)),
                    "reconstruct": rec_seconds, "simulate": sim_s},
         stats={"radar": rf.stats, "radar_seed": radar_seed, "reconstruction": info,
-               "reconstruction_keys": rkeys, "n_boxes_before_view_filter": int(len(boxes))},
+               "reconstruction_keys": rkeys, "n_boxes_fitted": n_fitted},
     )
     return out, rkeys
 
@@ -660,9 +665,23 @@ class _WorldInputs:
         if self._frames is None:
             from sim2radar.worlds.io import frames_from_table
 
-            self._frames = frames_from_table(self.store.read("world_frames",
-                                                             self.keys["world_frames"]))
+            frames = frames_from_table(self.store.read("world_frames", self.keys["world_frames"]))
+            render_s = self._render_seconds_per_frame(len(frames))
+            if render_s is not None:
+                frames = [dataclasses.replace(f, timings_s={"render_s": render_s})
+                          for f in frames]
+            self._frames = frames
         return self._frames
+
+    def _render_seconds_per_frame(self, n_frames: int) -> float | None:
+        """Mean render wall time per frame [s]: the world's total render time (recorded in
+        the ``world_frames`` provenance) / frames. (The per-frame ``render_seconds`` column
+        sums nested timers, so it over-counts.)"""
+        try:
+            prov = self.store.read_provenance("world_frames", self.keys["world_frames"])
+            return float(prov["timings_s"]["render"]) / max(1, n_frames)
+        except Exception:  # noqa: BLE001 - timings are informative only
+            return None
 
     def radar_scene(self):
         if self._radar_scene is None:
@@ -683,6 +702,11 @@ def _fill_frame_outcome(fo: FrameOutcome, df: DatasetFrame) -> None:
     if "reconstruct" in t:
         fo.timings_s["reconstruct"] = float(t["reconstruct"])
     fo.timings_s[f"simulate_{df.geometry}"] = float(t.get("simulate", 0.0))
+    from sim2radar.evaluate.reconstruction import match_boxes
+
+    m = match_boxes(df.boxes, df.gt_boxes, LABEL_IOU_THRESHOLD)
+    fo.label_match[df.geometry] = {"tp": int(m["tp"]), "n_pred": int(m["n_pred"]),
+                                   "n_gt": int(m["n_gt"])}
 
 
 def _compare(gt: DatasetFrame, rec: DatasetFrame) -> dict[str, float]:
@@ -783,7 +807,7 @@ def _compute_frame(inputs: _WorldInputs, k: int, geometry: str, world_id: str,
     radar_seed = _frame_seed(spec.seed, frame.seed, k)
     if geometry == "ground_truth":
         return _ground_truth_frame(frame, world_id, inputs.radar_scene(), spec, radar_seed), {}
-    return _reconstructed_frame(frame, world_id, store, spec, radar_seed, {})
+    return _reconstructed_frame(frame, world_id, store, spec, radar_seed)
 
 
 def _provenance(spec, keys, df: DatasetFrame, geometry, rkeys) -> dict:
@@ -823,6 +847,12 @@ def _mean(values) -> float:
     return float(np.mean(v)) if v else float("nan")
 
 
+def _ratio(frames: list[FrameOutcome], geometry: str, denominator: str) -> float:
+    tp = sum(f.label_match.get(geometry, {}).get("tp", 0) for f in frames)
+    n = sum(f.label_match.get(geometry, {}).get(denominator, 0) for f in frames)
+    return tp / n if n else float("nan")
+
+
 def summarize_dataset(store, dataset: str, spec: DatasetSpec | dict,
                       outcomes: list[WorldDatasetOutcome]) -> dict[str, Any]:
     """The run summary: counts, per-geometry table and per-stage seconds.
@@ -831,7 +861,10 @@ def summarize_dataset(store, dataset: str, spec: DatasetSpec | dict,
     -------
     dict — ``store``, ``dataset``, ``counts`` (worlds by status), ``frame_counts`` (frames by
     status), ``geometry`` -> {``frames``, ``points_per_frame``, ``labels_per_frame``,
-    ``gt_doors_per_frame``, ``frac_frames_with_label``, ``frac_gt_doors_with_points``},
+    ``gt_doors_per_frame``, ``frac_frames_with_label``, ``frac_gt_doors_with_points``,
+    ``label_recall`` / ``label_precision`` (labels vs ground-truth doors in the radar's view at
+    3D IoU >= 0.3; 1 for ground_truth by construction; GT doors outside the camera's narrower
+    view count as misses for ``reconstructed``)},
     ``seconds_per_frame`` -> {stage: mean [s]}, ``comparison`` (both geometries:
     ``points_ratio``, ``chamfer_m`` means and per frame), ``worlds`` (outcome dicts).
     """
@@ -849,6 +882,8 @@ def summarize_dataset(store, dataset: str, spec: DatasetSpec | dict,
             "gt_doors_per_frame": _mean(f.n_gt_doors for f in done),
             "frac_frames_with_label": _mean(f.n_labels[g] > 0 for f in done),
             "frac_gt_doors_with_points": _mean(n > 0 for n in near),
+            "label_recall": _ratio(done, g, "n_gt"),
+            "label_precision": _ratio(done, g, "n_pred"),
         }
     stages = sorted({s for f in frames for s in f.timings_s})
     seconds = {s: _mean(f.timings_s[s] for f in frames if s in f.timings_s) for s in stages}

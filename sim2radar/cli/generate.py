@@ -163,13 +163,14 @@ def print_generate_summary(summary: dict[str, Any]) -> None:
     table = Table(title="dataset summary (means per frame)")
     table.add_column("geometry", no_wrap=True)
     for col in ("frames", "points", "labels", "GT doors", "frames w/ label",
-                "GT doors w/ points"):
+                "GT doors w/ points", "label recall", "label precision"):
         table.add_column(col, justify="right")
     for g, s in summary["geometry"].items():
         table.add_row(g, str(s["frames"]), _fmt(s["points_per_frame"]),
                       _fmt(s["labels_per_frame"], ".2f"), _fmt(s["gt_doors_per_frame"], ".2f"),
                       _fmt(s["frac_frames_with_label"], ".0%"),
-                      _fmt(s["frac_gt_doors_with_points"], ".0%"))
+                      _fmt(s["frac_gt_doors_with_points"], ".0%"),
+                      _fmt(s["label_recall"], ".0%"), _fmt(s["label_precision"], ".0%"))
     console.print(table)
     secs = summary.get("seconds_per_frame", {})
     if secs:

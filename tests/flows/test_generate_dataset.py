@@ -59,6 +59,7 @@ def _frames(run, geometry):
 def test_ground_truth_frames_have_points_and_door_labels_in_radar_frame(run):
     s = run["summary"]
     assert s["frame_counts"] == {"ok": 2, "skipped": 0, "failed": 0}
+    assert s["geometry"]["ground_truth"]["label_recall"] == 1.0  # labels are the GT doors
     world = generate_world(SEED, make_world_config(WORLD))
     poses = trajectory(world, 2, seed=0)
     rig = make_rig_config(RIG)
