@@ -40,8 +40,10 @@ def worlds_flow(
     rig: dict | None = None,
     trajectory_seed: int = 0,
     force: bool = False,
+    radar: str | None = None,
 ) -> dict[str, Any]:
-    """Generate, render and store each world; record it in the ``dataset`` manifest.
+    """Generate, render and store each world; record it in the ``dataset`` manifest
+    (``radar``: also simulate radar point clouds per frame with that preset / YAML).
 
     Returns
     -------
@@ -52,7 +54,8 @@ def worlds_flow(
     st.manifest(dataset)
     futures = {
         generate_world_task.with_options(task_run_name=f"world-{s}").submit(
-            int(s), n_frames, store, world_cfg or {}, rig or {}, trajectory_seed, force): int(s)
+            int(s), n_frames, store, world_cfg or {}, rig or {}, trajectory_seed, force,
+            radar): int(s)
         for s in seeds
     }
     outcomes: dict[int, WorldOutcome] = {}
@@ -84,6 +87,7 @@ def run_worlds(
     trajectory_seed: int = 0,
     force: bool = False,
     workers: int = 1,
+    radar: str | None = None,
 ) -> dict[str, Any]:
     """Run :func:`worlds_flow`; configs may be pydantic models or dicts."""
 
@@ -95,4 +99,5 @@ def run_worlds(
         seeds=[int(s) for s in seeds], n_frames=int(n_frames), store=os.fspath(store),
         dataset=dataset, world_cfg=dump(world_cfg), rig=dump(rig),
         trajectory_seed=int(trajectory_seed), force=force,
+        radar=None if radar is None else str(radar),
     )

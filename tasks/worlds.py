@@ -11,6 +11,11 @@ Per world seed, :func:`generate_world_artifacts`:
 
 The world's geometry is a plain ``scene_meshes`` artifact, so the radar stage can simulate it
 directly; ``world_frames`` rows carry each frame's ``radar_to_world`` pose and door boxes.
+
+With ``radar="ti-mmwcas"`` (a preset name or YAML path) each frame is also simulated by
+:func:`sim2radar.radar.simulate_frame` on the world's ground-truth geometry at the frame's radar
+pose, into a ``radar_points`` artifact (one row per frame) labelled with the door boxes whose
+centre lies in the radar's field of view and range — a ready pre-training set.
 """
 
 from __future__ import annotations
@@ -39,6 +44,9 @@ __all__ = [
 ]
 
 log = logging.getLogger(__name__)
+
+#: Version of the radar_points produced here (bump with changes to the labelling below).
+RADAR_POINTS_STAGE_VERSION = 1
 
 
 @dataclasses.dataclass
@@ -85,8 +93,9 @@ def _configs(world_cfg, rig):
 
 
 def world_keys(seed: int, n_frames: int, world_cfg=None, rig=None,
-               trajectory_seed: int = 0) -> dict[str, str]:
-    """Content keys ``{"scene_meshes", "world_specs", "world_frames"}`` of one world."""
+               trajectory_seed: int = 0, radar=None) -> dict[str, str]:
+    """Content keys ``{"scene_meshes", "world_specs", "world_frames"}`` of one world, plus
+    ``"radar_points"`` when ``radar`` (preset name, YAML path or RadarConfig) is given."""
     from sim2radar.worlds import RENDER_VERSION, STAGE_VERSION
 
     world_cfg, rig = _configs(world_cfg, rig)
@@ -100,7 +109,17 @@ def world_keys(seed: int, n_frames: int, world_cfg=None, rig=None,
         config={"rig": rig.model_dump(mode="json"), "n_frames": int(n_frames),
                 "trajectory_seed": int(trajectory_seed)},
     )
-    return {"scene_meshes": meshes, "world_specs": specs, "world_frames": frames}
+    keys = {"scene_meshes": meshes, "world_specs": specs, "world_frames": frames}
+    if radar is not None:
+        from sim2radar.radar import RadarConfig, load_radar_config
+
+        radar_cfg = radar if isinstance(radar, RadarConfig) else load_radar_config(radar)
+        keys["radar_points"] = content_key(
+            stage="radar_points", stage_version=RADAR_POINTS_STAGE_VERSION,
+            inputs={"scene": meshes, "world_frames": frames},
+            config={"radar": radar_cfg.to_dict(), "seed": int(seed)},
+        )
+    return keys
 
 
 def generate_world_artifacts(
@@ -112,6 +131,7 @@ def generate_world_artifacts(
     *,
     trajectory_seed: int = 0,
     force: bool = False,
+    radar=None,
 ) -> WorldOutcome:
     """Generate, render and store one world (skip if its artifacts exist).
 
@@ -123,6 +143,7 @@ def generate_world_artifacts(
     world_cfg, rig : WorldConfig / RigConfig (or dicts of their fields; None = defaults)
     trajectory_seed : int
     force : bool — recompute even if cached
+    radar : str or RadarConfig, optional — also simulate radar point clouds per frame
     """
     from sim2radar.worlds import generate_world, render_frame, trajectory
     from sim2radar.worlds.io import frames_to_table, world_id_for, world_spec_to_table
@@ -130,7 +151,7 @@ def generate_world_artifacts(
     t_start = time.perf_counter()
     store = open_store(store)
     world_cfg, rig = _configs(world_cfg, rig)
-    keys = world_keys(seed, n_frames, world_cfg, rig, trajectory_seed)
+    keys = world_keys(seed, n_frames, world_cfg, rig, trajectory_seed, radar)
     world_id = world_id_for(seed)
     timings: dict[str, float] = {}
     if not force and all(store.exists(stage, key) for stage, key in keys.items()):
@@ -167,11 +188,46 @@ def generate_world_artifacts(
         },
     )
     timings["write"] = time.perf_counter() - t0
+    if radar is not None:
+        t0 = time.perf_counter()
+        _simulate_radar(world, frames, radar, store, keys, seed, world_id)
+        timings["radar"] = time.perf_counter() - t0
     timings["total"] = time.perf_counter() - t_start
     log.info("world %s: %d frames rendered in %.1f s", world_id, n_frames, timings["render"])
     return WorldOutcome(world_id, int(seed), "ok", artifacts=keys, timings_s=timings,
                         n_frames=len(frames),
                         doors_visible=[int(f.door_visible.sum()) for f in frames])
+
+
+def _simulate_radar(world, frames, radar, store, keys, seed, world_id) -> None:
+    """Radar point clouds of every frame on the world's ground-truth geometry."""
+    import numpy as np
+
+    from sim2radar.radar import RadarConfig, RadarScene, load_radar_config, simulate_frame
+    from storage import radar_frames_to_table
+
+    radar_cfg = radar if isinstance(radar, RadarConfig) else load_radar_config(radar)
+    scene = RadarScene(list(world.meshes))
+    points, seconds, boxes = [], [], []
+    for f in frames:
+        t0 = time.perf_counter()
+        frame_seed = int(np.random.SeedSequence([int(seed), f.frame_index, 77]).generate_state(1)[0])
+        result = simulate_frame(scene, radar_cfg, f.radar_to_world, seed=frame_seed)
+        seconds.append(time.perf_counter() - t0)
+        points.append(np.asarray(result.points, np.float32).reshape(-1, 4))
+        boxes.append(f.door_boxes_radar[f.door_in_fov & f.door_in_range])
+    table = radar_frames_to_table(
+        scene_id=world_id, radar_to_world=[f.radar_to_world for f in frames], points=points,
+        boxes=boxes, box_labels=[["door"] * len(b) for b in boxes], sim_seconds=seconds)
+    store.write("radar_points", keys["radar_points"], table,
+                stage_version=RADAR_POINTS_STAGE_VERSION,
+                provenance={"seed": int(seed),
+                            "inputs": {"scene": keys["scene_meshes"],
+                                       "world_frames": keys["world_frames"]},
+                            "config": {"radar": radar_cfg.to_dict(), "seed": int(seed)},
+                            "timings_s": {"simulate": float(sum(seconds))},
+                            "extra": {"world_id": world_id,
+                                      "labels": "doors with centre in radar FOV and range"}})
 
 
 def _stage_version() -> int:
@@ -215,7 +271,7 @@ def summarize_worlds(store, dataset: str, outcomes: list[WorldOutcome]) -> dict[
 
 def generate_worlds_plain(seeds, n_frames: int, store="out/store", dataset: str = "worlds",
                           world_cfg=None, rig=None, *, trajectory_seed: int = 0,
-                          force: bool = False) -> dict[str, Any]:
+                          force: bool = False, radar=None) -> dict[str, Any]:
     """The worlds flow without the Prefect engine: worlds one after another; failures are
     recorded in the manifest, not raised."""
     st = open_store(store)
@@ -224,7 +280,8 @@ def generate_worlds_plain(seeds, n_frames: int, store="out/store", dataset: str 
     for seed in seeds:
         try:
             outcome = generate_world_artifacts(seed, n_frames, st, world_cfg, rig,
-                                               trajectory_seed=trajectory_seed, force=force)
+                                               trajectory_seed=trajectory_seed, force=force,
+                                               radar=radar)
         except Exception as exc:  # noqa: BLE001 - one broken world must not stop the others
             log.error("world %s failed: %s: %s", seed, type(exc).__name__, exc)
             outcome = failed_world(seed, exc)
@@ -239,10 +296,11 @@ def generate_worlds_plain(seeds, n_frames: int, store="out/store", dataset: str 
 # ---------------------------------------------------------------------------------------------
 @task(name="generate-world", cache_policy=NO_CACHE, retries=0, persist_result=False)
 def generate_world_task(seed: int, n_frames: int, store: str, world_cfg: dict, rig: dict,
-                        trajectory_seed: int = 0, force: bool = False) -> WorldOutcome:
+                        trajectory_seed: int = 0, force: bool = False,
+                        radar: str | None = None) -> WorldOutcome:
     """Prefect task around :func:`generate_world_artifacts`."""
     return generate_world_artifacts(seed, n_frames, store, world_cfg, rig,
-                                    trajectory_seed=trajectory_seed, force=force)
+                                    trajectory_seed=trajectory_seed, force=force, radar=radar)
 
 
 @task(name="record-world-manifest", cache_policy=NO_CACHE, retries=REMOTE_IO_RETRIES,

@@ -80,20 +80,25 @@ def generate(
     height: int | None = typer.Option(None, help="Image height [px]."),
     spp: int | None = typer.Option(None, help="Samples per pixel."),
     force: bool = typer.Option(False, help="Recompute even when artifacts exist."),
+    radar: str | None = typer.Option(
+        None, "--radar", help="Also simulate radar point clouds per frame (preset or YAML)."),
     no_prefect: bool = typer.Option(False, "--no-prefect", help="Run without the Prefect engine."),
 ) -> None:
-    """Generate N worlds x M frames into the artifact store (world specs, meshes, frames),
-    with a manifest; cached by content key (a second run recomputes nothing)."""
+    """Generate N worlds x M frames into the artifact store (world specs, meshes, frames;
+    with --radar also radar point clouds), with a manifest; cached by content key (a second
+    run recomputes nothing)."""
     world_cfg, rig = _configs(config, width, height, spp)
     seeds = list(range(first_seed, first_seed + worlds))
     if no_prefect:
         from tasks.worlds import generate_worlds_plain
 
-        summary = generate_worlds_plain(seeds, frames, out, dataset, world_cfg, rig, force=force)
+        summary = generate_worlds_plain(seeds, frames, out, dataset, world_cfg, rig, force=force,
+                                        radar=radar)
     else:
         from flows.worlds import run_worlds
 
-        summary = run_worlds(seeds, frames, out, dataset, world_cfg, rig, force=force)
+        summary = run_worlds(seeds, frames, out, dataset, world_cfg, rig, force=force,
+                             radar=radar)
     typer.echo(json.dumps({k: summary[k] for k in ("store", "dataset", "counts")}, indent=1))
     if summary["counts"].get("failed"):
         for w in summary["worlds"]:

@@ -112,3 +112,23 @@ def test_flow_generates_and_then_skips(tmp_path, prefect_home):
     assert second["counts"] == {"ok": 0, "skipped": 1, "failed": 0}
     rows = ArtifactStore(store).manifest("flowds").rows()
     assert [r["status"] for r in rows] == ["skipped"] and rows[0]["attempts"] == 2
+
+
+def test_radar_point_clouds_per_frame(tmp_path):
+    from storage import radar_frames_from_table
+
+    store = ArtifactStore(tmp_path / "store")
+    out = generate_world_artifacts(6, 2, store, SHORT, SMALL_RIG, radar="ti-mmwcas")
+    assert out.status == "ok" and "radar_points" in out.artifacts
+    radar = radar_frames_from_table(store.read("radar_points", out.artifacts["radar_points"]))
+    frames = frames_from_table(store.read("world_frames", out.artifacts["world_frames"]))
+    assert len(radar) == len(frames) == 2
+    for r, f in zip(radar, frames, strict=True):
+        assert len(r.points) > 20
+        assert np.allclose(r.radar_to_world, f.radar_to_world)
+        labelled = f.door_in_fov & f.door_in_range
+        assert len(r.boxes) == labelled.sum() and set(r.box_labels) <= {"door"}
+        assert np.allclose(r.boxes, f.door_boxes_radar[labelled], atol=1e-5)
+    # without radar the keys of the other artifacts are unchanged -> cached
+    again = generate_world_artifacts(6, 2, store, SHORT, SMALL_RIG)
+    assert again.status == "skipped"
