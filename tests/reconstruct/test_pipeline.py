@@ -198,3 +198,47 @@ def test_shipped_configs_parse():
     assert names["builtin"].segments.name == "builtin"
     build_backends(names["builtin"])  # all options accepted by the backends
     assert Path(names["production"].depth.options["model_path"]).is_absolute()
+
+
+def _write_job(tmp_path, frame, name="f0"):
+    import cv2
+    import yaml
+
+    from tasks.reconstruct import ImageJob
+
+    cv2.imwrite(str(tmp_path / f"{name}.png"), frame.rgb[..., ::-1])
+    (tmp_path / "K.yaml").write_text(yaml.safe_dump(frame.intrinsics.to_dict()))
+    np.save(tmp_path / f"{name}.npy", frame.lidar_points)
+    return ImageJob(str(tmp_path / f"{name}.png"), str(tmp_path / "K.yaml"),
+                    str(tmp_path / f"{name}.npy"))
+
+
+def test_task_function_caches_by_content_key(tmp_path, frame):
+    from tasks.reconstruct import reconstruct_image, record_recon_outcome
+
+    job = _write_job(tmp_path, frame)
+    store = tmp_path / "store"
+    first = reconstruct_image(job, store)
+    assert first.status == "ok" and set(first.artifacts) == {"scene_meshes", "reconstruction"}
+    again = reconstruct_image(job, store)
+    assert again.status == "skipped" and again.artifacts == first.artifacts
+    other = reconstruct_image(job, store, {"meshing": {"stride_px": 3}})
+    assert other.status == "ok" and other.artifacts != first.artifacts
+    row = record_recon_outcome(store, "demo", first)
+    assert row["status"] == "ok" and row["artifacts"] == first.artifacts
+
+
+@pytest.mark.slow
+def test_flow_records_ok_skipped_and_failed(tmp_path, frame, monkeypatch):
+    monkeypatch.setenv("PREFECT_HOME", str(tmp_path / "prefect"))
+    from flows.reconstruct import run_reconstruction
+
+    job = _write_job(tmp_path, frame)
+    (tmp_path / "broken.png").write_bytes(b"not an image")
+    images = [job.image, str(tmp_path / "broken.png")]
+    lidar = [job.lidar, job.lidar]
+    s1 = run_reconstruction(images, job.intrinsics, lidar, store=tmp_path / "store", dataset="d")
+    assert s1["counts"] == {"ok": 1, "skipped": 0, "failed": 1}
+    assert "broken.png" in s1["frames"][1]["error"]
+    s2 = run_reconstruction(images, job.intrinsics, lidar, store=tmp_path / "store", dataset="d")
+    assert s2["counts"] == {"ok": 0, "skipped": 1, "failed": 1}

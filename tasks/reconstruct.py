@@ -1,0 +1,171 @@
+"""Reconstruction of RGB [+ LiDAR] frames into the artifact store (plain functions + Prefect tasks).
+
+Per image, :func:`reconstruct_image`:
+
+1. digests the image bytes (+ LiDAR) and keys both artifacts (``reconstruction`` and
+   ``scene_meshes``) on that digest + the resolved :class:`ReconstructionConfig`
+   (:func:`sim2radar.reconstruct.artifacts.write_scene_artifacts`);
+2. if both exist: status ``skipped`` (resume, no recompute);
+3. otherwise runs the four stages and publishes both artifacts atomically with provenance
+   (status ``ok``), plus the stage sheet PNG and a ``scene.yaml`` folder when asked.
+
+Errors propagate (the task fails; the flow records it as ``failed`` in the manifest). No retries:
+reconstruction is deterministic; the VLM backend retries its own HTTP calls.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+import time
+from pathlib import Path
+from typing import Any
+
+from prefect import task
+from prefect.cache_policies import NO_CACHE
+
+from tasks.common import REMOTE_IO_RETRIES, REMOTE_IO_RETRY_DELAYS_S, jsonable, open_store
+
+__all__ = [
+    "RECONSTRUCTION_STAGE_VERSION",
+    "ImageJob",
+    "ReconOutcome",
+    "reconstruct_image",
+    "record_recon_outcome",
+    "reconstruct_image_task",
+    "record_recon_outcome_task",
+    "failed_outcome",
+    "summarize_recon",
+]
+
+#: Bump when the reconstruction output of the same inputs changes.
+RECONSTRUCTION_STAGE_VERSION = 1
+
+
+@dataclasses.dataclass(frozen=True)
+class ImageJob:
+    """One frame to reconstruct: image file, intrinsics YAML, optional (N, 3) LiDAR ``.npy``."""
+
+    image: str
+    intrinsics: str
+    lidar: str | None = None
+
+    @property
+    def name(self) -> str:
+        return Path(self.image).stem
+
+
+@dataclasses.dataclass
+class ReconOutcome:
+    """What happened to one frame (one manifest row)."""
+
+    name: str
+    source: str
+    status: str
+    error: str = ""
+    artifacts: dict = dataclasses.field(default_factory=dict)
+    timings_s: dict = dataclasses.field(default_factory=dict)
+    summary: dict = dataclasses.field(default_factory=dict)
+
+
+def _inputs(job: ImageJob):
+    import numpy as np
+
+    from sim2radar.camera import CameraIntrinsics
+    from sim2radar.cli.reconstruct import load_image, load_lidar
+    from sim2radar.reconstruct.artifacts import frame_digest
+
+    rgb = load_image(Path(job.image))
+    k = CameraIntrinsics.from_yaml(job.intrinsics)
+    pts, note = load_lidar(Path(job.lidar)) if job.lidar else (None, "")
+    digest = frame_digest(rgb, pts)
+    digest_k = frame_digest(np.asarray([[k.fx, k.fy, k.cx, k.cy, k.width, k.height]], np.float32))
+    return rgb, k, pts, note, {"image": digest, "intrinsics": digest_k}
+
+
+def reconstruct_image(
+    job: ImageJob,
+    store,
+    config: dict | None = None,
+    *,
+    out_dir: str | None = None,
+    force: bool = False,
+) -> ReconOutcome:
+    """Reconstruct one frame into ``store`` (skips if its artifacts exist, unless ``force``).
+
+    Parameters
+    ----------
+    job : ImageJob
+    store : path/URI or :class:`storage.ArtifactStore`
+    config : dict — a :class:`ReconstructionConfig` as a dict (default: the builtin preset).
+    out_dir : str, optional — where ``sheets/<name>.png`` and ``scenes/<name>/scene.yaml`` go.
+    """
+    from sim2radar.reconstruct import FrameInput, ReconstructionConfig, reconstruct
+    from sim2radar.reconstruct.artifacts import write_scene_artifacts
+    from storage import content_key
+
+    t0 = time.perf_counter()
+    st = open_store(store)
+    cfg = ReconstructionConfig.model_validate(config or {})
+    cfg_dict = cfg.to_dict()
+    rgb, k, pts, note, inputs = _inputs(job)
+    keys = {stage: content_key(stage=stage, stage_version=RECONSTRUCTION_STAGE_VERSION,
+                               inputs=inputs,
+                               config={"reconstruction": cfg_dict, "camera_to_target": None})
+            for stage in ("scene_meshes", "reconstruction")}
+    if not force and all(st.exists(s, key) for s, key in keys.items()):
+        return ReconOutcome(job.name, job.image, "skipped", artifacts=keys,
+                            timings_s={"total": time.perf_counter() - t0})
+    if force:
+        for s, key in keys.items():
+            st.delete(s, key)
+    scene = reconstruct(FrameInput(rgb, k, pts, name=job.name), cfg)
+    if note:
+        scene.info["fallbacks"].append(note)
+    written = write_scene_artifacts(st, scene, inputs=inputs, config=cfg_dict,
+                                    stage_version=RECONSTRUCTION_STAGE_VERSION)
+    if out_dir:
+        from sim2radar.reconstruct.sheet import stage_sheet
+
+        scene.write_scene(Path(out_dir) / "scenes" / job.name)
+        stage_sheet(scene, Path(out_dir) / "sheets" / f"{job.name}.png", lidar_points=pts)
+    timings = dict(scene.timings_s)
+    timings["task_total"] = time.perf_counter() - t0
+    labels = {lbl: scene.segment_labels.count(lbl) for lbl in sorted(set(scene.segment_labels))}
+    return ReconOutcome(job.name, job.image, "ok", artifacts=written, timings_s=timings,
+                        summary=jsonable({"segments": labels, "meshes": len(scene.meshes),
+                                          "door_boxes": len(scene.door_boxes),
+                                          "fallbacks": scene.info["fallbacks"]}))
+
+
+def record_recon_outcome(store, dataset: str, outcome: ReconOutcome) -> dict:
+    """Upsert the frame's manifest row."""
+    return open_store(store).manifest(dataset).upsert(
+        outcome.name, outcome.status, error=outcome.error, artifacts=outcome.artifacts,
+        timings_s={k: float(v) for k, v in outcome.timings_s.items()}, source=outcome.source)
+
+
+@task(name="reconstruct-image", cache_policy=NO_CACHE, retries=0, persist_result=False)
+def reconstruct_image_task(job: ImageJob, store: str, config: dict | None = None,
+                           out_dir: str | None = None, force: bool = False) -> ReconOutcome:
+    """Prefect wrapper of :func:`reconstruct_image` (no retries: deterministic)."""
+    return reconstruct_image(job, store, config, out_dir=out_dir, force=force)
+
+
+@task(name="record-reconstruction", cache_policy=NO_CACHE, retries=REMOTE_IO_RETRIES,
+      retry_delay_seconds=REMOTE_IO_RETRY_DELAYS_S, persist_result=False)
+def record_recon_outcome_task(store: str, dataset: str, outcome: ReconOutcome) -> dict:
+    """Prefect wrapper of :func:`record_recon_outcome` (retried: storage I/O)."""
+    return record_recon_outcome(store, dataset, outcome)
+
+
+def failed_outcome(job: ImageJob, error: BaseException | str) -> ReconOutcome:
+    """A ``failed`` outcome with ``"Type: message"`` error text."""
+    text = f"{type(error).__name__}: {error}" if isinstance(error, BaseException) else str(error)
+    return ReconOutcome(job.name, job.image, "failed", error=text)
+
+
+def summarize_recon(outcomes: list[ReconOutcome], store, dataset: str) -> dict[str, Any]:
+    counts = {s: sum(o.status == s for o in outcomes) for s in ("ok", "skipped", "failed")}
+    return {"store": os.fspath(open_store(store).root), "dataset": dataset, "counts": counts,
+            "frames": [dataclasses.asdict(o) for o in outcomes]}
