@@ -267,7 +267,9 @@ class WorldFrame:
     door_in_range : (M,) bool — box centre within the radar's maximum range.
     seed : int — the world seed.
     frame_index : int
-    timings_s : dict[str, float] — render time per product [s].
+    timings_s : dict[str, float] — render times [s]: ``scene_s`` (Mitsuba scene build, first
+        frame of a world only), ``maps_s``, ``lidar_s``, ``rgb_s`` (of which ``path_trace_s``),
+        and ``total_s`` (the whole call; the parts are nested, do not sum them).
     """
 
     rgb: np.ndarray

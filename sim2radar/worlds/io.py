@@ -139,7 +139,7 @@ def frames_to_table(frames: list[WorldFrame], world_id: str | None = None) -> pa
         "door_visible_pixels": _ragged([f.door_visible_pixels for f in frames], pa.int32()),
         "door_in_fov": _ragged([f.door_in_fov for f in frames], pa.bool_()),
         "door_in_range": _ragged([f.door_in_range for f in frames], pa.bool_()),
-        "render_seconds": [float(sum(f.timings_s.values())) for f in frames],
+        "render_seconds": [float(f.timings_s.get("total_s", 0.0)) for f in frames],
     })
 
 
@@ -191,6 +191,6 @@ def frames_from_table(table: pa.Table) -> list[WorldFrame]:
             door_in_range=np.asarray(listed["door_in_range"][r], bool),
             seed=int(get("seed")),
             frame_index=int(get("frame_index")),
-            timings_s={"render_s": float(get("render_seconds"))},
+            timings_s={"total_s": float(get("render_seconds"))},
         ))
     return out

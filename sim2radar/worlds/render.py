@@ -255,7 +255,7 @@ def render_frame(
     if rig_to_world.shape != (4, 4):
         raise ValueError(f"pose must be a (4, 4) rig-to-world matrix, got {rig_to_world.shape}")
     timings: dict[str, float] = {}
-    t0 = time.perf_counter()
+    t_start = t0 = time.perf_counter()
     scene, lut, sem_lut, mat_lut, door_lut = _SCENES.get(world)
     timings["scene_s"] = time.perf_counter() - t0
 
@@ -335,6 +335,7 @@ def render_frame(
     in_fov = ((c[:, 0] > 0) & (np.abs(az_r) <= math.radians(az_fov_deg) / 2)
               & (np.abs(el_r) <= math.radians(el_fov_deg) / 2))
     in_range = np.linalg.norm(c, axis=1) <= max_range_m
+    timings["total_s"] = time.perf_counter() - t_start
 
     return WorldFrame(
         rgb=image,
