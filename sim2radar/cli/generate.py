@@ -91,6 +91,10 @@ def run_generate(
     Returns the flow's summary (``pngs`` added); failures are counted in it, never raised
     (with ``strict`` the Prefect run is marked failed; the CLI exits with status 1).
     """
+    if use_prefect:  # before anything imports Prefect: its settings are read at import
+        from sim2radar.cli.simulate import _prefect_env
+
+        _prefect_env(verbose)
     from rich.progress import Progress
 
     from tasks.dataset import generate_dataset_plain, resolve_spec, world_bev_pngs
@@ -107,9 +111,6 @@ def run_generate(
                             description=f"{outcome.world_id}: {outcome.status} ({pts} pts)")
 
         if use_prefect:
-            from sim2radar.cli.simulate import _prefect_env
-
-            _prefect_env(verbose)
             from prefect.task_runners import ThreadPoolTaskRunner
 
             from flows.generate_dataset import (
@@ -161,16 +162,19 @@ def print_generate_summary(summary: dict[str, Any]) -> None:
             if f["status"] == "failed":
                 console.print(f"      [red]{f['frame_id']}[/red]: {f['error']}")
     table = Table(title="dataset summary (means per frame)")
-    table.add_column("geometry", no_wrap=True)
-    for col in ("frames", "points", "labels", "GT doors", "frames w/ label",
-                "GT doors w/ points", "label recall", "label precision"):
-        table.add_column(col, justify="right")
-    for g, s in summary["geometry"].items():
-        table.add_row(g, str(s["frames"]), _fmt(s["points_per_frame"]),
-                      _fmt(s["labels_per_frame"], ".2f"), _fmt(s["gt_doors_per_frame"], ".2f"),
-                      _fmt(s["frac_frames_with_label"], ".0%"),
-                      _fmt(s["frac_gt_doors_with_points"], ".0%"),
-                      _fmt(s["label_recall"], ".0%"), _fmt(s["label_precision"], ".0%"))
+    table.add_column("")
+    geoms = list(summary["geometry"])
+    for g in geoms:
+        table.add_column(g, justify="right")
+    rows = (("frames", "frames", "d"), ("radar points", "points_per_frame", ".1f"),
+            ("door labels", "labels_per_frame", ".2f"),
+            ("GT doors in radar view", "gt_doors_per_frame", ".2f"),
+            ("frames with a label", "frac_frames_with_label", ".0%"),
+            ("GT doors with radar points", "frac_gt_doors_with_points", ".0%"),
+            ("label recall (3D IoU 0.3)", "label_recall", ".0%"),
+            ("label precision (3D IoU 0.3)", "label_precision", ".0%"))
+    for name, key, fmt in rows:
+        table.add_row(name, *(_fmt(summary["geometry"][g][key], fmt) for g in geoms))
     console.print(table)
     secs = summary.get("seconds_per_frame", {})
     if secs:
@@ -230,8 +234,10 @@ def generate(
     the manifest; the others finish. Exit status: 0, or 1 with --strict when anything failed;
     2 for bad arguments or configs.
     """
-    from sim2radar.cli.simulate import _default_png_dir
+    from sim2radar.cli.simulate import _default_png_dir, _prefect_env
 
+    if not no_prefect:
+        _prefect_env(verbose)  # before the config check below imports Prefect
     try:
         cfg = load_generate_config(config) if config is not None else {}
         rig = dict(cfg.get("rig") or {})
