@@ -148,3 +148,22 @@ def test_door_boxes_and_flags(world3):
 def test_bad_pose_is_refused(world3):
     with pytest.raises(ValueError, match="4, 4"):
         render_frame(world3, np.eye(3), SMALL_RIG)
+
+
+def test_doors_per_frame_along_trajectories():
+    """Trajectories walk past doors: most frames see a door and have one in the radar's view."""
+    from sim2radar.worlds import RigConfig, generate_world
+
+    rig = RigConfig(width=32, height=24, spp=1)
+    visible, labelled = [], []
+    for seed in range(12):
+        world = generate_world(seed)
+        for pose in trajectory(world, 2, seed=0):
+            f = render_frame(world, pose, rig, rgb=False, lidar=False)
+            visible.append(int(f.door_visible.sum()))
+            labelled.append(int((f.door_in_fov & f.door_in_range).sum()))
+            # a door seen by the camera from the rig is in the radar's (wider) azimuth FOV
+            assert not (f.door_visible & ~f.door_in_fov & (f.door_boxes_radar[:, 0] > 2)).any()
+    visible, labelled = np.array(visible), np.array(labelled)
+    assert visible.mean() >= 1.0 and (visible > 0).mean() >= 0.75
+    assert (labelled > 0).mean() >= 0.8
