@@ -665,23 +665,9 @@ class _WorldInputs:
         if self._frames is None:
             from sim2radar.worlds.io import frames_from_table
 
-            frames = frames_from_table(self.store.read("world_frames", self.keys["world_frames"]))
-            render_s = self._render_seconds_per_frame(len(frames))
-            if render_s is not None:
-                frames = [dataclasses.replace(f, timings_s={"render_s": render_s})
-                          for f in frames]
-            self._frames = frames
+            self._frames = frames_from_table(self.store.read("world_frames",
+                                                             self.keys["world_frames"]))
         return self._frames
-
-    def _render_seconds_per_frame(self, n_frames: int) -> float | None:
-        """Mean render wall time per frame [s]: the world's total render time (recorded in
-        the ``world_frames`` provenance) / frames. (The per-frame ``render_seconds`` column
-        sums nested timers, so it over-counts.)"""
-        try:
-            prov = self.store.read_provenance("world_frames", self.keys["world_frames"])
-            return float(prov["timings_s"]["render"]) / max(1, n_frames)
-        except Exception:  # noqa: BLE001 - timings are informative only
-            return None
 
     def radar_scene(self):
         if self._radar_scene is None:
