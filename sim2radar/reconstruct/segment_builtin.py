@@ -418,6 +418,7 @@ class BuiltinSegments:
         ceil_z = (max(downs, key=lambda g: g.n_px).centroid[2] if downs
                   else float(np.percentile(zs, 99)))
         tol = self.floor_tolerance_m
+        n_valid = int(np.isfinite(pl[..., 2]).sum())
         labels, scores = [], []
         for i, g in enumerate(geos):
             label, score = "clutter", 0.4
@@ -431,6 +432,15 @@ class BuiltinSegments:
                     label, score = "ceiling", 0.9
             elif g.vertical_cos < sin_v:
                 label, score = self._vertical_label(g, floor_z, ceil_z, bool(downs))
+            elif g.n_px > 0.02 * n_valid:
+                # a large surface with an oblique fitted normal (depth bent near the image
+                # border, where the LiDAR does not reach): the structure it leans towards
+                if g.vertical_cos < 0.75:
+                    label, score = "wall", 0.4
+                elif g.normal[2] > 0 and g.centroid[2] < 0:
+                    label, score = "floor", 0.4
+                elif g.normal[2] < 0 and g.centroid[2] > 0:
+                    label, score = "ceiling", 0.4
             labels.append(label)
             scores.append(score)
         info = {"floor_z_m": float(floor_z), "ceiling_z_m": float(ceil_z)}
