@@ -567,6 +567,12 @@ def _gt_labels(frame) -> tuple[np.ndarray, np.ndarray]:
     return np.asarray(frame.door_boxes_radar, np.float32).reshape(-1, 7)[idx], idx
 
 
+def _render_seconds(frame) -> float:
+    """Render wall time of a world frame [s] (``total_s`` of the renderer's timings)."""
+    t = frame.timings_s or {}
+    return float(t.get("total_s", t.get("render_s", 0.0)))
+
+
 def _simulate(scene, radar, pose, seed):
     from sim2radar.radar import simulate_scene_frame
 
@@ -584,7 +590,7 @@ def _ground_truth_frame(frame, world_id, radar_scene, spec, radar_seed) -> Datas
         radar_to_world=frame.radar_to_world, points=rf.points, boxes=gt,
         box_labels=(spec.class_name,) * len(gt), gt_boxes=gt, gt_door_index=idx,
         gt_points_near=points_near_boxes(rf.points, gt), n_triangles=radar_scene.n_triangles,
-        timings_s={"render": float(frame.timings_s.get("render_s", 0.0)), "simulate": sim_s},
+        timings_s={"render": _render_seconds(frame), "simulate": sim_s},
         stats={"radar": rf.stats, "radar_seed": radar_seed},
     )
 
@@ -636,7 +642,7 @@ def _reconstructed_frame(frame, world_id, store, spec,
         geometry="reconstructed", radar_to_world=frame.radar_to_world, points=rf.points,
         boxes=boxes, box_labels=(spec.class_name,) * len(boxes), gt_boxes=gt, gt_door_index=idx,
         gt_points_near=points_near_boxes(rf.points, gt), n_triangles=radar_scene.n_triangles,
-        timings_s={"render": float(frame.timings_s.get("render_s", 0.0)),
+        timings_s={"render": _render_seconds(frame),
                    "reconstruct": rec_seconds, "simulate": sim_s},
         stats={"radar": rf.stats, "radar_seed": radar_seed, "reconstruction": info,
                "reconstruction_keys": rkeys, "n_boxes_fitted": n_fitted},

@@ -92,6 +92,7 @@ def test_reconstructed_frames_store_points_pseudo_labels_and_gt(run):
         assert np.allclose(df.radar_to_world, gt.radar_to_world)
         assert np.array_equal(df.gt_boxes, gt.gt_boxes)  # GT kept alongside for scoring
         assert df.timings_s["reconstruct"] > 0 and df.timings_s["simulate"] > 0
+        assert df.timings_s["render"] > 0
         assert df.boxes.shape[1] == 7
         assert df.stats["reconstruction_keys"]["scene_meshes"]
         # reconstructed walls land where the real walls are: radar points of both geometries
