@@ -1,1 +1,26 @@
-"""sim2radar.datasets"""
+"""Radar datasets on disk: OpenPCDet's custom layout (IFR) and synthetic door frames."""
+
+from sim2radar.datasets.openpcdet import (
+    DatasetError,
+    Frame,
+    OpenPCDetDataset,
+    read_labels,
+    read_points,
+    write_dataset,
+    write_frame,
+    write_split,
+)
+from sim2radar.datasets.synthetic import make_door_frames, write_synthetic_dataset
+
+__all__ = [
+    "DatasetError",
+    "Frame",
+    "OpenPCDetDataset",
+    "make_door_frames",
+    "read_labels",
+    "read_points",
+    "write_dataset",
+    "write_frame",
+    "write_split",
+    "write_synthetic_dataset",
+]

@@ -90,6 +90,9 @@ class ModelConfig(_Frozen):
     #: point columns: x, y, z [m] + extra features (e.g. intensity); checked against the data
     num_point_features: int = 4
     vfe_filters: tuple[int, ...] = (64,)
+    #: BatchNorm momentum (OpenPCDet 0.01: running statistics settle over ~500 steps; short
+    #: runs of a few dozen steps need ~0.1 for eval-mode outputs to match training)
+    bn_momentum: float = 0.01
     layer_nums: tuple[int, ...] = (3, 5, 5)
     layer_strides: tuple[int, ...] = (2, 2, 2)
     num_filters: tuple[int, ...] = (64, 128, 256)

@@ -54,23 +54,25 @@ __all__ = [
 ENCODER_MODULES: tuple[str, ...] = ("vfe", "map_to_bev", "backbone_2d")
 
 
-def _bn1d(c: int) -> nn.BatchNorm1d:
-    return nn.BatchNorm1d(c, eps=1e-3, momentum=0.01)
+def _bn1d(c: int, momentum: float = 0.01) -> nn.BatchNorm1d:
+    return nn.BatchNorm1d(c, eps=1e-3, momentum=momentum)
 
 
-def _bn2d(c: int) -> nn.BatchNorm2d:
-    return nn.BatchNorm2d(c, eps=1e-3, momentum=0.01)
+def _bn2d(c: int, momentum: float = 0.01) -> nn.BatchNorm2d:
+    return nn.BatchNorm2d(c, eps=1e-3, momentum=momentum)
 
 
 class PFNLayer(nn.Module):
     """Linear (no bias) -> BatchNorm1d -> ReLU -> max over points (OpenPCDet ``PFNLayer``)."""
 
-    def __init__(self, in_channels: int, out_channels: int, last_layer: bool) -> None:
+    def __init__(
+        self, in_channels: int, out_channels: int, last_layer: bool, bn_momentum: float = 0.01
+    ) -> None:
         super().__init__()
         self.last_vfe = last_layer
         out = out_channels if last_layer else out_channels // 2
         self.linear = nn.Linear(in_channels, out, bias=False)
-        self.norm = _bn1d(out)
+        self.norm = _bn1d(out, bn_momentum)
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         """(P, M, C_in) -> (P, 1, C_out) if last layer, else (P, M, C_out)."""
@@ -98,7 +100,7 @@ class PillarVFE(nn.Module):
         self.point_cloud_range_m = cfg.point_cloud_range_m
         channels = [cfg.num_point_features + 6, *cfg.vfe_filters]
         self.pfn_layers = nn.ModuleList(
-            PFNLayer(channels[i], channels[i + 1], last_layer=i == len(channels) - 2)
+            PFNLayer(channels[i], channels[i + 1], i == len(channels) - 2, cfg.bn_momentum)
             for i in range(len(channels) - 1)
         )
         self.out_channels = channels[-1]
@@ -155,25 +157,26 @@ class BaseBEVBackbone(nn.Module):
         self.blocks = nn.ModuleList()
         self.deblocks = nn.ModuleList()
         c_in = in_channels
+        mom = cfg.bn_momentum
         for n_layers, stride, c, up, c_up in zip(
             cfg.layer_nums, cfg.layer_strides, cfg.num_filters, cfg.upsample_strides,
             cfg.num_upsample_filters, strict=True,
         ):
             layers: list[nn.Module] = [
                 nn.ZeroPad2d(1), nn.Conv2d(c_in, c, 3, stride=stride, padding=0, bias=False),
-                _bn2d(c), nn.ReLU(),
+                _bn2d(c, mom), nn.ReLU(),
             ]
             for _ in range(n_layers):
-                layers += [nn.Conv2d(c, c, 3, padding=1, bias=False), _bn2d(c), nn.ReLU()]
+                layers += [nn.Conv2d(c, c, 3, padding=1, bias=False), _bn2d(c, mom), nn.ReLU()]
             self.blocks.append(nn.Sequential(*layers))
             if up >= 1:
                 self.deblocks.append(nn.Sequential(
-                    nn.ConvTranspose2d(c, c_up, up, stride=up, bias=False), _bn2d(c_up), nn.ReLU()
+                    nn.ConvTranspose2d(c, c_up, up, stride=up, bias=False), _bn2d(c_up, mom), nn.ReLU()
                 ))
             else:
                 s = int(round(1 / up))
                 self.deblocks.append(nn.Sequential(
-                    nn.Conv2d(c, c_up, s, stride=s, bias=False), _bn2d(c_up), nn.ReLU()
+                    nn.Conv2d(c, c_up, s, stride=s, bias=False), _bn2d(c_up, mom), nn.ReLU()
                 ))
             c_in = c
         self.out_channels = sum(cfg.num_upsample_filters)
