@@ -31,7 +31,7 @@ class DoorFitConfig:
     Attributes
     ----------
     thickness_m : float [m] — minimum box thickness ``dy``: a door box spans the wall it is set
-        in (wall 0.10–0.20 m plus the frame's 1 cm lips in the procedural worlds).
+        in (procedural worlds: wall 0.10–0.20 m + the frame's 1 cm lips + handles ≈ 0.17–0.27).
     face_to_center_m : float [m] — how far behind the visible door face the box centre lies when
         no wall is seen next to the door.
     wall_search_m : float [m] — wall points within this distance of the door plane (and within
@@ -48,7 +48,7 @@ class DoorFitConfig:
         run is the door.
     """
 
-    thickness_m: float = 0.17
+    thickness_m: float = 0.22
     face_to_center_m: float = 0.0
     wall_search_m: float = 0.35
     merge_gap_m: float = 0.2

@@ -88,7 +88,7 @@ class DoorOptions(BaseModel):
     """See :class:`sim2radar.reconstruct.doors.DoorFitConfig`."""
 
     model_config = ConfigDict(frozen=True, extra="forbid")
-    thickness_m: float = 0.17
+    thickness_m: float = 0.22
     face_to_center_m: float = 0.0
     wall_search_m: float = 0.35
     merge_gap_m: float = 0.2
@@ -98,9 +98,11 @@ class DoorOptions(BaseModel):
     min_points: int = 20
     inlier_m: float = 0.04
     split_gap_m: float = 0.25
+    #: width given to a door cut by the left/right image border when less of it is seen [m]
+    nominal_width_m: float = 0.95
 
     def to_config(self) -> DoorFitConfig:
-        return DoorFitConfig(**self.model_dump())
+        return DoorFitConfig(**self.model_dump(exclude={"nominal_width_m"}))
 
 
 class ReconstructionConfig(BaseModel):
@@ -360,6 +362,33 @@ def _check_segments(frame: FrameInput, seg: Segments) -> Segments:
     return seg
 
 
+def _complete_cut_doors(boxes, groups, door_ids, seg, level_from_cam, k, nominal_width_m):
+    """Doors cut by the left/right image border are narrower than seen: widen each such box to
+    ``nominal_width_m``, growing it towards the border (out of view), never shrinking it."""
+    if not len(boxes) or nominal_width_m <= 0:
+        return boxes
+    boxes = boxes.copy()
+    cam_from_level = np.linalg.inv(level_from_cam)
+    for b, members in zip(boxes, groups, strict=True):
+        if b[3] >= nominal_width_m:
+            continue
+        mask = np.isin(seg, [door_ids[m] for m in members])
+        left, right = mask[:, :2].any(), mask[:, -2:].any()
+        if not (left or right):
+            continue
+        a = np.array([np.cos(b[6]), np.sin(b[6]), 0.0])
+        ends = np.stack([b[:3] - a * b[3] / 2, b[:3] + a * b[3] / 2])
+        cam = ends @ cam_from_level[:3, :3].T + cam_from_level[:3, 3]
+        u = k.fx * cam[:, 0] / np.maximum(cam[:, 2], 1e-6) + k.cx
+        # the end nearest the border the mask touches is the one that continues out of view
+        j = int(np.argmin(u)) if left and not right else int(np.argmax(u))
+        grow = nominal_width_m - b[3]
+        direction = -a if j == 0 else a
+        b[:3] = b[:3] + direction * grow / 2
+        b[3] = nominal_width_m
+    return boxes
+
+
 def reconstruct(
     frame: FrameInput,
     config: ReconstructionConfig | None = None,
@@ -447,9 +476,11 @@ def reconstruct(
     floor_z = float(np.median(floor_pts[:, 2])) if len(floor_pts) >= 20 else float("nan")
     door_ids = [i for i, s in enumerate(segments.labels) if s == "door"]
     wall_pts = pl[semantic_id == SEMANTIC_CLASSES.index("wall")]
-    boxes, _ = fit_door_boxes([pl[seg == i] for i in door_ids], config.doors.to_config(),
+    boxes, groups = fit_door_boxes([pl[seg == i] for i in door_ids], config.doors.to_config(),
                               None if np.isnan(floor_z) else floor_z, 1.0 / k.fx,
                               wall_pts[::max(1, len(wall_pts) // 20000)])
+    boxes = _complete_cut_doors(boxes, groups, door_ids, seg, level, k,
+                                config.doors.nominal_width_m)
     # door openings the segmentation measured on wall planes (e.g. open doors: no leaf pixels
     # in the wall), kept where no fitted box lies within 0.5 m
     openings = np.asarray(getattr(seg_be, "last_info", {}).get("door_boxes_level", []),
