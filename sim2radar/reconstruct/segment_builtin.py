@@ -202,7 +202,7 @@ class BuiltinSegments:
         door_height_m: tuple[float, float] = (1.85, 2.5),
         floor_tolerance_m: float = 0.25,
         offset_thresh_m: float = 0.015,
-        door_thickness_m: float = 0.17,
+        door_thickness_m: float = 0.22,
         fill_no_depth: bool = True,
     ) -> None:
         self.normal_thresh_deg = float(normal_thresh_deg)
