@@ -405,6 +405,8 @@ class BuiltinSegments:
                & (hsv[..., 2] > 50))
         flat = regions.ravel()
         ok = flat >= 0
+        value = np.bincount(flat[ok], hsv[..., 2].ravel()[ok] / 255.0, minlength=n) / np.maximum(
+            np.bincount(flat[ok], minlength=n), 1)
         red_frac = np.bincount(flat[ok], red.ravel()[ok], minlength=n) / np.maximum(
             np.bincount(flat[ok], minlength=n), 1)
         cos_h = math.cos(math.radians(25))
@@ -431,7 +433,8 @@ class BuiltinSegments:
                 elif g.normal[2] < 0 and g.centroid[2] > ceil_z - tol:
                     label, score = "ceiling", 0.9
             elif g.vertical_cos < sin_v:
-                label, score = self._vertical_label(g, floor_z, ceil_z, bool(downs))
+                label, score = self._vertical_label(g, floor_z, ceil_z, bool(downs),
+                                                    float(value[i]))
             elif g.n_px > 0.02 * n_valid:
                 # a large surface with an oblique fitted normal (depth bent near the image
                 # border, where the LiDAR does not reach): the structure it leans towards
@@ -537,7 +540,7 @@ class BuiltinSegments:
         return regions, labels, scores, boxes
 
     def _vertical_label(self, g: SegmentGeometry, floor_z: float, ceil_z: float,
-                        ceiling_seen: bool) -> tuple[str, float]:
+                        ceiling_seen: bool, brightness: float = 1.0) -> tuple[str, float]:
         tol = self.floor_tolerance_m
         on_floor = g.z_min_m < floor_z + tol
         below_ceiling = g.z_max_m < ceil_z - 0.1 or not ceiling_seen
@@ -553,7 +556,12 @@ class BuiltinSegments:
             return "handrail", 0.6
         if (0.4 < rel_bottom < 1.5 and below_ceiling and 0.4 <= g.width_m <= 3.0
                 and 0.4 <= g.height_m <= 1.8 and g.fill > 0.6 and g.planarity < 0.02):
-            return "window", 0.5
+            if brightness >= 0.55:  # glass shows daylight or reflections: bright
+                return "window", 0.5
+            top = g.z_max_m - floor_z
+            if h_lo <= top <= h_hi + 0.1 and w_lo <= g.width_m <= w_hi:
+                # the upper part of a door whose lower part was split off: door-height top
+                return "door", 0.4
         if g.height_m > 1.0 or g.width_m > 1.5:
             return "wall", 0.8
         return "clutter", 0.4
