@@ -144,6 +144,29 @@ def region_geometry(points_level: np.ndarray, mask: np.ndarray, max_points: int 
                            float(fill), touches)
 
 
+def _fill_columns(labels: np.ndarray) -> np.ndarray:
+    """Unlabelled pixels below the lowest (above the highest) labelled pixel of their column
+    take its label: the bands a sensor misses at the bottom / top of the image continue the
+    surface seen at their edge (floor below, ceiling above), not the nearest one sideways."""
+    out = labels.copy()
+    known = labels >= 0
+    h = labels.shape[0]
+    has = known.any(axis=0)
+    cols = np.flatnonzero(has)
+    if not len(cols):
+        return out
+    first = np.argmax(known, axis=0)
+    last = h - 1 - np.argmax(known[::-1], axis=0)
+    rows = np.arange(h)[:, None]
+    top_lab = labels[first, np.arange(labels.shape[1])]
+    bot_lab = labels[last, np.arange(labels.shape[1])]
+    above = (rows < first[None, :]) & has[None, :]
+    below = (rows > last[None, :]) & has[None, :]
+    out = np.where(above, top_lab[None, :], out)
+    out = np.where(below, bot_lab[None, :], out)
+    return out
+
+
 class _UnionFind:
     def __init__(self, n: int) -> None:
         self.parent = list(range(n))
@@ -254,7 +277,7 @@ class BuiltinSegments:
         if self.fill_no_depth:
             # pixels without depth (e.g. below the LiDAR's lowest beam) join the nearest
             # region in the image: they get a label and material, but no 3D point
-            regions = _fill_nearest(regions, np.ones_like(valid))
+            regions = _fill_nearest(_fill_columns(regions), np.ones_like(valid))
         labels, scores, info = self._label(regions, pl, frame.rgb)
         regions, labels, scores, openings = self._wall_openings(
             regions, labels, scores, pl, info["floor_z_m"], info["ceiling_z_m"])
