@@ -64,6 +64,8 @@ def make_door_frames(
     -------
     list of :class:`~sim2radar.datasets.openpcdet.Frame` with ``door`` boxes.
     """
+    if points_per_frame < 100:
+        raise ValueError(f"points_per_frame must be >= 100, got {points_per_frame}")
     if num_point_features < 4:
         raise ValueError("num_point_features must be >= 4 (x, y, z, intensity)")
     rng = np.random.default_rng(seed)
@@ -90,7 +92,9 @@ def make_door_frames(
         boxes = np.asarray(boxes)
 
         parts, intens = [], []
-        n_door_pts = rng.integers(70, 140, size=n_doors)
+        # 3.5-7 % of the frame's points per door (70-140 of 2,000), at least 8
+        n_door_pts = np.maximum(8, (rng.uniform(0.035, 0.07, n_doors) * points_per_frame)
+                                .astype(int))
         for box, n in zip(boxes, n_door_pts, strict=True):
             parts.append(_door_points(rng, box, int(n)))
             intens.append(rng.normal(0.8, 0.08, int(n)))
