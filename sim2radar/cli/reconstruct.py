@@ -1,7 +1,7 @@
 """``sim2radar reconstruct`` command (RGB [+ LiDAR] -> material-labelled scene).
 
     sim2radar reconstruct IMAGE [IMAGE ...] --intrinsics K.yaml [--lidar L.npy] --out STORE
-        [--config C.yaml | --preset builtin] [--sheet-dir DIR] [--radar ti-mmwcas]
+        [--config configs/reconstruct/production.yaml] [--sheet-dir DIR] [--radar ti-mmwcas]
 
 For every image: the four stages (depth, segments + labels, materials, 3D), then the artifacts
 (``scene_meshes`` + ``reconstruction``) in the Parquet store at ``STORE``, a scene folder
@@ -65,12 +65,13 @@ def reconstruct_cmd(
     intrinsics: Path = typer.Option(..., "--intrinsics", "-k",
                                     help="YAML with fx, fy, cx, cy, width, height (or K)."),
     lidar: list[Path] = typer.Option(None, "--lidar",
-                                     help="(N, 3) .npy LiDAR points, camera frame [m]; one per "
-                                          "image, same order."),
+                                     help="(N, 3) .npy LiDAR points in the camera frame, "
+                                          "metres; one per image, same order."),
     out: Path = typer.Option(Path("out/store"), "--out", help="Artifact store (folder or URI)."),
     config: Path = typer.Option(None, "--config", help="Reconstruction config YAML."),
     preset: str = typer.Option("builtin", "--preset",
-                               help="builtin | builtin-oracle-depth (ignored with --config)."),
+                               help="builtin (LiDAR + built-in backends); use --config for "
+                                    "moge / sam2-gdino / vlm."),
     sheet_dir: Path = typer.Option(None, "--sheet-dir",
                                    help="Where PNG sheets go (default: next to the store)."),
     radar: str = typer.Option(None, "--radar",
