@@ -397,3 +397,75 @@ WORLD_FRAMES = register_schema(
     )
 )
 # ---- end worlds ------------------------------------------------------------------------------
+
+
+# --- reconstruction (sim2radar.reconstruct; written by storage/reconstruction.py) ---------
+RECONSTRUCTION = register_schema(
+    ArtifactSchema(
+        stage="reconstruction",
+        version=1,
+        row="one reconstructed RGB frame",
+        description="per-pixel depth/segments/semantics/materials, segment labels, door boxes",
+        schema=pa.schema([
+            field("name", pa.string(), doc="frame name"),
+            field("width", pa.int32(), unit="px"),
+            field("height", pa.int32(), unit="px"),
+            field("intrinsics", pa.list_(pa.float64(), 4), unit="px", doc="fx, fy, cx, cy"),
+            field("depth_m", pa.list_(pa.float32()), unit="m", doc="(H*W,) z-depth, 0 invalid"),
+            field("segment_id", pa.list_(pa.int32()), doc="(H*W,) segment per pixel, -1 none"),
+            field("semantic_id", pa.list_(pa.uint8()), doc="(H*W,) vocab.SEMANTIC_CLASSES index"),
+            field("material_id", pa.list_(pa.uint8()), doc="(H*W,) vocab.MATERIAL_CLASSES index"),
+            field("segment_labels", pa.list_(pa.string()), doc="(S,) semantic class"),
+            field("segment_scores", pa.list_(pa.float32()), doc="(S,) label confidence"),
+            field("segment_materials", pa.list_(pa.string()), doc="(S,) material class"),
+            field("material_confidence", pa.list_(pa.float32()), doc="(S,) in [0, 1]"),
+            field("material_reasons", pa.list_(pa.string()), doc="(S,) rule / VLM reasoning"),
+            field("door_boxes", pa.list_(_BOX7_F32), unit="m, rad",
+                  doc="(M, 7) x y z dx dy dz heading in the artifact's target frame"),
+            field("camera_to_target", pa.list_(pa.float64(), 16),
+                  doc="(4, 4) row-major camera -> target frame of meshes and boxes"),
+            field("level_from_camera", pa.list_(pa.float64(), 16),
+                  doc="(4, 4) row-major camera -> level frame (x fwd, y left, z up)"),
+            field("floor_z_m", pa.float64(), unit="m", doc="floor height, level frame"),
+            field("timings_s", pa.map_(pa.string(), pa.float64()), unit="s", doc="per stage"),
+            field("info_json", pa.string(), doc="backend diagnostics and fallbacks (JSON)"),
+        ]),
+    )
+)
+
+
+# --- dataset_frames (the generate_dataset flow; tasks/dataset.py) ---------------------------
+DATASET_FRAMES = register_schema(
+    ArtifactSchema(
+        stage="dataset_frames",
+        version=1,
+        row="one radar frame of one world frame and one geometry",
+        description="radar points (radar frame) + door labels + ground-truth doors + timings",
+        schema=pa.schema([
+            field("frame_id", pa.string(), doc="world_<seed>_f<index>"),
+            field("world_id", pa.string(), doc="world identifier (world_<seed>)"),
+            field("seed", pa.int64(), doc="world seed"),
+            field("frame_index", pa.int32(), doc="frame number along the world's trajectory"),
+            field("geometry", pa.string(), doc="ground_truth | reconstructed"),
+            field("radar_to_world", pa.list_(pa.float64(), 16), unit="m",
+                  doc="(4, 4) row-major radar-to-world transform"),
+            field("n_points", pa.int32(), doc="detected radar points"),
+            field("x_m", pa.list_(pa.float32()), unit="m", doc="(N,) forward"),
+            field("y_m", pa.list_(pa.float32()), unit="m", doc="(N,) left"),
+            field("z_m", pa.list_(pa.float32()), unit="m", doc="(N,) up"),
+            field("intensity_db", pa.list_(pa.float32()), unit="dB", doc="(N,) intensity"),
+            field("boxes", pa.list_(_BOX7_F32), unit="m, rad",
+                  doc="(M, 7) training labels x y z dx dy dz heading, radar frame"),
+            field("box_labels", pa.list_(pa.string()), doc="(M,) class names"),
+            field("gt_boxes", pa.list_(_BOX7_F32), unit="m, rad",
+                  doc="(G, 7) ground-truth doors in FOV and range, radar frame"),
+            field("gt_door_index", pa.list_(pa.int32()), doc="(G,) index into the world's doors"),
+            field("gt_points_near", pa.list_(pa.int32()),
+                  doc="(G,) radar points inside each GT box grown by NEAR_BOX_MARGIN_M"),
+            field("n_triangles", pa.int64(), doc="triangles the radar traced"),
+            field("timings_s", pa.map_(pa.string(), pa.float64()), unit="s",
+                  doc="render / reconstruct / simulate wall time of this frame"),
+            field("stats_json", pa.string(), doc="radar stats, reconstruction diagnostics (JSON)"),
+        ]),
+    )
+)

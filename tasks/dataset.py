@@ -22,7 +22,7 @@ Per world seed, :func:`generate_world_dataset`:
      reconstructed door boxes in the radar frame (in FOV and range), the paper's pre-training
      pseudo-labels. The ground-truth boxes are stored alongside for scoring. The reconstruction
      itself is cached as its own ``scene_meshes`` + ``reconstruction`` artifacts
-     (:func:`sim2radar.reconstruct.artifacts.write_scene_artifacts`), so changing only the
+     (:func:`storage.reconstruction.write_scene_artifacts`), so changing only the
      radar re-simulates without re-reconstructing;
 
 3. one failing frame is recorded as ``failed`` (with its error) and the other frames finish; a
@@ -52,16 +52,13 @@ from prefect import task
 from prefect.cache_policies import NO_CACHE
 
 from storage import (
-    ArtifactSchema,
     ArtifactStore,
     content_key,
-    field,
-    get_schema,
     meshes_from_table,
     ragged_arrays,
     ragged_column,
-    register_schema,
 )
+from storage.schemas import DATASET_FRAMES as DATASET_FRAMES_SCHEMA
 from tasks.common import REMOTE_IO_RETRIES, REMOTE_IO_RETRY_DELAYS_S, jsonable, open_store
 
 __all__ = [
@@ -103,49 +100,6 @@ LABEL_IOU_THRESHOLD = 0.3
 #: Extra margin around a ground-truth box when counting radar points "in or near" it [m].
 NEAR_BOX_MARGIN_M = 0.25
 
-_BOX7 = pa.list_(pa.float32(), 7)
-
-
-def _register() -> ArtifactSchema:
-    try:
-        return get_schema("dataset_frames")
-    except Exception:  # noqa: BLE001 - not registered yet
-        pass
-    return register_schema(ArtifactSchema(
-        stage="dataset_frames",
-        version=1,
-        row="one radar frame of one world frame and one geometry",
-        description="radar points (radar frame) + door labels + ground-truth doors + timings",
-        schema=pa.schema([
-            field("frame_id", pa.string(), doc="world_<seed>_f<index>"),
-            field("world_id", pa.string(), doc="world identifier (world_<seed>)"),
-            field("seed", pa.int64(), doc="world seed"),
-            field("frame_index", pa.int32(), doc="frame number along the world's trajectory"),
-            field("geometry", pa.string(), doc="ground_truth | reconstructed"),
-            field("radar_to_world", pa.list_(pa.float64(), 16), unit="m",
-                  doc="(4, 4) row-major radar-to-world transform"),
-            field("n_points", pa.int32(), doc="detected radar points"),
-            field("x_m", pa.list_(pa.float32()), unit="m", doc="(N,) forward"),
-            field("y_m", pa.list_(pa.float32()), unit="m", doc="(N,) left"),
-            field("z_m", pa.list_(pa.float32()), unit="m", doc="(N,) up"),
-            field("intensity_db", pa.list_(pa.float32()), unit="dB", doc="(N,) intensity"),
-            field("boxes", pa.list_(_BOX7), unit="m, rad",
-                  doc="(M, 7) training labels x y z dx dy dz heading, radar frame"),
-            field("box_labels", pa.list_(pa.string()), doc="(M,) class names"),
-            field("gt_boxes", pa.list_(_BOX7), unit="m, rad",
-                  doc="(G, 7) ground-truth doors in FOV and range, radar frame"),
-            field("gt_door_index", pa.list_(pa.int32()), doc="(G,) index into the world's doors"),
-            field("gt_points_near", pa.list_(pa.int32()),
-                  doc="(G,) radar points inside each GT box grown by NEAR_BOX_MARGIN_M"),
-            field("n_triangles", pa.int64(), doc="triangles the radar traced"),
-            field("timings_s", pa.map_(pa.string(), pa.float64()), unit="s",
-                  doc="render / reconstruct / simulate wall time of this frame"),
-            field("stats_json", pa.string(), doc="radar stats, reconstruction diagnostics (JSON)"),
-        ]),
-    ))
-
-
-DATASET_FRAMES_SCHEMA = _register()
 
 
 # ---------------------------------------------------------------------------------------------
@@ -304,7 +258,7 @@ def _spec(spec: DatasetSpec | dict) -> DatasetSpec:
 # ---------------------------------------------------------------------------------------------
 def frame_id_for(seed: int, frame_index: int) -> str:
     """``world_<seed 6 digits>_f<index 3 digits>`` (OpenPCDet frame id and manifest row)."""
-    from sim2radar.worlds.io import world_id_for
+    from storage.worlds import world_id_for
 
     return f"{world_id_for(seed)}_f{int(frame_index):03d}"
 
@@ -336,10 +290,10 @@ def _frame_seed(run_seed: int, world_seed: int, frame_index: int) -> int:
 
 
 def _reconstruction_keys(frame, camera_to_target: np.ndarray, config) -> dict[str, str]:
-    """Keys :func:`sim2radar.reconstruct.artifacts.write_scene_artifacts` gives this frame
+    """Keys :func:`storage.reconstruction.write_scene_artifacts` gives this frame
     (computed up front so a cached reconstruction is read instead of recomputed)."""
-    from sim2radar.reconstruct.artifacts import frame_digest
     from sim2radar.reconstruct.pipeline import STAGE_VERSION
+    from storage.reconstruction import frame_digest
 
     inputs = {"image": frame_digest(frame.rgb, frame.lidar_points)}
     cfg = {"reconstruction": config.to_dict(),
@@ -432,7 +386,7 @@ def outcomes_from_summary(summary: dict[str, Any]) -> list[WorldDatasetOutcome]:
 
 def failed_world_outcome(seed: int, error: BaseException | str) -> WorldDatasetOutcome:
     """A ``failed`` outcome for world ``seed``."""
-    from sim2radar.worlds.io import world_id_for
+    from storage.worlds import world_id_for
 
     text = error if isinstance(error, str) else f"{type(error).__name__}: {error}"
     return WorldDatasetOutcome(world_id_for(seed), int(seed), "failed", error=text)
@@ -599,9 +553,9 @@ def _reconstructed_frame(frame, world_id, store, spec,
                          radar_seed) -> tuple[DatasetFrame, dict[str, str]]:
     from sim2radar.radar import RadarScene
     from sim2radar.reconstruct import FrameInput, reconstruct
-    from sim2radar.reconstruct.artifacts import read_reconstruction, write_scene_artifacts
     from sim2radar.reconstruct.pipeline import STAGE_VERSION
     from sim2radar.worlds import radar_view
+    from storage.reconstruction import read_reconstruction, write_scene_artifacts
 
     fid = frame_id_for(frame.seed, frame.frame_index)
     cam_to_radar = np.linalg.inv(frame.radar_to_world) @ frame.camera_to_world
@@ -651,7 +605,7 @@ def _reconstructed_frame(frame, world_id, store, spec,
 
 
 def _digest(frame) -> str:
-    from sim2radar.reconstruct.artifacts import frame_digest
+    from storage.reconstruction import frame_digest
 
     return frame_digest(frame.rgb, frame.lidar_points)
 
@@ -669,7 +623,7 @@ class _WorldInputs:
 
     def frames(self):
         if self._frames is None:
-            from sim2radar.worlds.io import frames_from_table
+            from storage.worlds import frames_from_table
 
             self._frames = frames_from_table(self.store.read("world_frames",
                                                              self.keys["world_frames"]))
@@ -737,7 +691,7 @@ def generate_world_dataset(
     WorldDatasetOutcome — a world that cannot be generated raises (the caller records it);
     a failing frame is recorded in its FrameOutcome and does not raise.
     """
-    from sim2radar.worlds.io import world_id_for
+    from storage.worlds import world_id_for
     from tasks.worlds import generate_world_artifacts
 
     t_start = time.perf_counter()

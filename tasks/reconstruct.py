@@ -4,7 +4,7 @@ Per image, :func:`reconstruct_image`:
 
 1. digests the image bytes (+ LiDAR) and keys both artifacts (``reconstruction`` and
    ``scene_meshes``) on that digest + the resolved :class:`ReconstructionConfig`
-   (:func:`sim2radar.reconstruct.artifacts.write_scene_artifacts`);
+   (:func:`storage.reconstruction.write_scene_artifacts`);
 2. if both exist: status ``skipped`` (resume, no recompute);
 3. otherwise runs the four stages and publishes both artifacts atomically with provenance
    (status ``ok``), plus the stage sheet PNG and a ``scene.yaml`` folder when asked.
@@ -73,7 +73,7 @@ def _inputs(job: ImageJob):
 
     from sim2radar.camera import CameraIntrinsics
     from sim2radar.cli.reconstruct import load_image, load_lidar
-    from sim2radar.reconstruct.artifacts import frame_digest
+    from storage.reconstruction import frame_digest
 
     rgb = load_image(Path(job.image))
     k = CameraIntrinsics.from_yaml(job.intrinsics)
@@ -101,8 +101,8 @@ def reconstruct_image(
     out_dir : str, optional — where ``sheets/<name>.png`` and ``scenes/<name>/scene.yaml`` go.
     """
     from sim2radar.reconstruct import FrameInput, ReconstructionConfig, reconstruct
-    from sim2radar.reconstruct.artifacts import write_scene_artifacts
     from storage import content_key
+    from storage.reconstruction import write_scene_artifacts
 
     t0 = time.perf_counter()
     st = open_store(store)

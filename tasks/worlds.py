@@ -146,7 +146,7 @@ def generate_world_artifacts(
     radar : str or RadarConfig, optional — also simulate radar point clouds per frame
     """
     from sim2radar.worlds import generate_world, render_frame, trajectory
-    from sim2radar.worlds.io import frames_to_table, world_id_for, world_spec_to_table
+    from storage.worlds import frames_to_table, world_id_for, world_spec_to_table
 
     t_start = time.perf_counter()
     store = open_store(store)
@@ -244,7 +244,7 @@ def _render_version() -> int:
 
 def failed_world(seed: int, error: BaseException | str) -> WorldOutcome:
     """A ``failed`` outcome for world ``seed``."""
-    from sim2radar.worlds.io import world_id_for
+    from storage.worlds import world_id_for
 
     text = error if isinstance(error, str) else f"{type(error).__name__}: {error}"
     return WorldOutcome(world_id_for(seed), int(seed), "failed", error=text)

@@ -89,9 +89,9 @@ def reconstruct_cmd(
         build_backends,
         reconstruct,
     )
-    from sim2radar.reconstruct.artifacts import frame_digest, write_scene_artifacts
     from sim2radar.reconstruct.sheet import stage_sheet
     from storage import ArtifactStore
+    from storage.reconstruction import frame_digest, write_scene_artifacts
 
     console = Console()
     try:

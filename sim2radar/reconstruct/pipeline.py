@@ -287,13 +287,6 @@ class LabeledScene:
             scene[mesh.name or f"mesh_{i}"] = m
         return scene
 
-    def to_tables(self, camera_to_target: np.ndarray | None = None) -> dict:
-        """Parquet tables: ``scene_meshes`` (meshes in the target frame) and
-        ``reconstruction`` (per-pixel maps, labels, boxes); see :mod:`.artifacts`."""
-        from sim2radar.reconstruct.artifacts import scene_to_tables
-
-        return scene_to_tables(self, camera_to_target)
-
 
 def mitsuba_xml(entries: list[dict]) -> str:
     """Mitsuba 3 scene XML referencing PLY files (one shape per mesh, BSDF id = material)."""

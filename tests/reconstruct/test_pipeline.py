@@ -89,12 +89,12 @@ def test_write_scene_is_loadable_and_mitsuba_xml(tmp_path, builtin_scene):
 
 
 def test_artifacts_round_trip_through_the_store(tmp_path, builtin_scene, frame):
-    from sim2radar.reconstruct.artifacts import (
+    from storage import ArtifactStore, meshes_from_table
+    from storage.reconstruction import (
         frame_digest,
         read_reconstruction,
         write_scene_artifacts,
     )
-    from storage import ArtifactStore, meshes_from_table
 
     store = ArtifactStore(tmp_path / "store")
     cfg = ReconstructionConfig.preset("builtin-oracle-depth").to_dict()

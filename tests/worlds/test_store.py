@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 from sim2radar.worlds import generate_world, make_world_config
-from sim2radar.worlds.io import decode_png, encode_png, frames_from_table
 from storage import ArtifactStore, meshes_from_table
+from storage.worlds import decode_png, encode_png, frames_from_table
 from tasks.worlds import generate_world_artifacts, generate_worlds_plain, world_keys
 from tests.worlds._helpers import SMALL_RIG
 

@@ -1,4 +1,4 @@
-"""Parquet artifacts of the reconstruction stage, through the project's store (:mod:`storage`).
+"""Parquet artifacts of the reconstruction stage (a :class:`~sim2radar.reconstruct.LabeledScene`).
 
 Two artifacts per frame, both keyed by ``content_key(stage, STAGE_VERSION, inputs={"image":
 digest of the RGB [+ LiDAR]}, config=resolved ReconstructionConfig + target frame)``:
@@ -6,12 +6,10 @@ digest of the RGB [+ LiDAR]}, config=resolved ReconstructionConfig + target fram
 * ``scene_meshes`` (declared in ``storage/schemas.py``): the per-segment meshes in the target
   frame (level frame by default: a radar at the camera with ``pose=None``), ready for the radar
   simulation flow.
-* ``reconstruction`` (declared here, schema v1): one row per frame with the per-pixel maps
+* ``reconstruction`` (declared in ``storage/schemas.py``): one row per frame with the per-pixel maps
   (depth, segment, semantic and material ids), segment labels/materials/confidences/reasons,
   door boxes, the level frame and timings.
 
-``storage`` is imported lazily by the callers of these functions; this module registers the
-``reconstruction`` schema when imported.
 """
 
 from __future__ import annotations
@@ -22,60 +20,13 @@ import numpy as np
 import pyarrow as pa
 
 from sim2radar.camera import CameraIntrinsics
-from storage import (
-    ArtifactSchema,
-    bytes_digest,
-    content_key,
-    field,
-    get_schema,
-    meshes_to_table,
-    register_schema,
-)
+from storage.codecs import meshes_to_table
+from storage.keys import bytes_digest, content_key
+from storage.schemas import RECONSTRUCTION as RECONSTRUCTION_SCHEMA
 
 __all__ = ["RECONSTRUCTION_SCHEMA", "scene_to_tables", "write_scene_artifacts",
            "read_reconstruction", "frame_digest"]
 
-_BOX7 = pa.list_(pa.float32(), 7)
-
-
-def _register() -> ArtifactSchema:
-    try:
-        return get_schema("reconstruction")
-    except Exception:  # noqa: BLE001 - not registered yet
-        pass
-    return register_schema(ArtifactSchema(
-        stage="reconstruction",
-        version=1,
-        row="one reconstructed RGB frame",
-        description="per-pixel depth/segments/semantics/materials, segment labels, door boxes",
-        schema=pa.schema([
-            field("name", pa.string(), doc="frame name"),
-            field("width", pa.int32(), unit="px"),
-            field("height", pa.int32(), unit="px"),
-            field("intrinsics", pa.list_(pa.float64(), 4), unit="px", doc="fx, fy, cx, cy"),
-            field("depth_m", pa.list_(pa.float32()), unit="m", doc="(H*W,) z-depth, 0 invalid"),
-            field("segment_id", pa.list_(pa.int32()), doc="(H*W,) segment per pixel, -1 none"),
-            field("semantic_id", pa.list_(pa.uint8()), doc="(H*W,) vocab.SEMANTIC_CLASSES index"),
-            field("material_id", pa.list_(pa.uint8()), doc="(H*W,) vocab.MATERIAL_CLASSES index"),
-            field("segment_labels", pa.list_(pa.string()), doc="(S,) semantic class"),
-            field("segment_scores", pa.list_(pa.float32()), doc="(S,) label confidence"),
-            field("segment_materials", pa.list_(pa.string()), doc="(S,) material class"),
-            field("material_confidence", pa.list_(pa.float32()), doc="(S,) in [0, 1]"),
-            field("material_reasons", pa.list_(pa.string()), doc="(S,) rule / VLM reasoning"),
-            field("door_boxes", pa.list_(_BOX7), unit="m, rad",
-                  doc="(M, 7) x y z dx dy dz heading in the artifact's target frame"),
-            field("camera_to_target", pa.list_(pa.float64(), 16),
-                  doc="(4, 4) row-major camera -> target frame of meshes and boxes"),
-            field("level_from_camera", pa.list_(pa.float64(), 16),
-                  doc="(4, 4) row-major camera -> level frame (x fwd, y left, z up)"),
-            field("floor_z_m", pa.float64(), unit="m", doc="floor height, level frame"),
-            field("timings_s", pa.map_(pa.string(), pa.float64()), unit="s", doc="per stage"),
-            field("info_json", pa.string(), doc="backend diagnostics and fallbacks (JSON)"),
-        ]),
-    ))
-
-
-RECONSTRUCTION_SCHEMA = _register()
 
 
 def frame_digest(rgb: np.ndarray, lidar_points: np.ndarray | None = None) -> str:

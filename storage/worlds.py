@@ -20,6 +20,7 @@ import pyarrow as pa
 
 from sim2radar.camera import CameraIntrinsics
 from sim2radar.worlds.frame import World, WorldFrame
+from storage.codecs import ragged_arrays, ragged_column
 
 __all__ = ["world_spec_to_table", "frames_to_table", "frames_from_table", "encode_png",
            "decode_png", "world_id_for"]
@@ -54,8 +55,6 @@ def decode_png(data: bytes) -> np.ndarray:
 
 
 def _ragged(arrays, value_type):
-    from storage import ragged_column
-
     return ragged_column(arrays, value_type)
 
 
@@ -146,8 +145,6 @@ def frames_to_table(frames: list[WorldFrame], world_id: str | None = None) -> pa
 def frames_from_table(table: pa.Table) -> list[WorldFrame]:
     """Decode a ``world_frames`` table back into :class:`WorldFrame` objects (depth and normals
     at their stored precision)."""
-    from storage import ragged_arrays
-
     lidar = ragged_arrays(table.column("lidar_points_cam_m"))
     ring = ragged_arrays(table.column("lidar_ring"))
     listed = {name: ragged_arrays(table.column(name)) for name in (
