@@ -10,7 +10,12 @@ from sim2radar.detect.config import DetectConfig
 
 @pytest.fixture(autouse=True)
 def _threads():
-    torch.set_num_threads(2)
+    """One intra-op thread: on a shared 2-core machine, 2 OpenMP threads contending with other
+    processes run these small models ~5x slower than one thread."""
+    before = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(before)
 
 
 def small_config(**sections) -> DetectConfig:
