@@ -30,6 +30,7 @@ __all__ = [
     "box_iou_3d",
     "match_boxes",
     "chamfer_distance",
+    "doorway_visible_fraction",
     "ReconstructionScores",
     "score_reconstruction",
     "aggregate_scores",
@@ -170,17 +171,30 @@ def box_iou_3d(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return out
 
 
-def match_boxes(pred: np.ndarray, gt: np.ndarray, iou_threshold: float = 0.3) -> dict:
+def match_boxes(pred: np.ndarray, gt: np.ndarray, iou_threshold: float = 0.3,
+                ignore: np.ndarray | None = None) -> dict:
     """Greedy one-to-one matching by descending IoU.
+
+    Parameters
+    ----------
+    pred : (N, 7), gt : (M, 7) — boxes ``x y z dx dy dz heading``.
+    iou_threshold : float — a match counts at IoU ≥ this.
+    ignore : (K, 7), optional — "don't care" ground truth (e.g. doors too little seen to be
+        required, KITTI's DontCare): a prediction not matched to ``gt`` at ≥ the threshold that
+        overlaps one of these at ≥ the threshold is neither a true nor a false positive (it is
+        dropped from ``n_pred``).
 
     Returns
     -------
     dict: ``tp`` (matched pairs at ≥ threshold), ``n_pred``, ``n_gt``, ``recall``,
-    ``precision``, ``ious`` (best IoU of each ground-truth box, 0 if unmatched).
+    ``precision``, ``ious`` (best IoU of each ground-truth box, 0 if unmatched),
+    ``n_ignored`` (predictions dropped by ``ignore``).
     """
+    pred = np.asarray(pred, np.float64).reshape(-1, 7)
     iou = box_iou_3d(pred, gt)
     n_pred, n_gt = iou.shape
     best = np.zeros(n_gt)
+    hit = np.zeros(n_pred, bool)
     used_p, used_g = set(), set()
     order = np.dstack(np.unravel_index(np.argsort(-iou, axis=None), iou.shape))[0] if iou.size else []
     for i, j in order:
@@ -191,12 +205,19 @@ def match_boxes(pred: np.ndarray, gt: np.ndarray, iou_threshold: float = 0.3) ->
         used_p.add(int(i))
         used_g.add(int(j))
         best[j] = iou[i, j]
+        hit[i] = iou[i, j] >= iou_threshold
     tp = int((best >= iou_threshold).sum())
+    n_ignored = 0
+    if ignore is not None and n_pred:
+        ig = np.asarray(ignore, np.float64).reshape(-1, 7)
+        if len(ig):
+            n_ignored = int((~hit & (box_iou_3d(pred, ig).max(axis=1) >= iou_threshold)).sum())
+    n_counted = n_pred - n_ignored
     return {
-        "tp": tp, "n_pred": n_pred, "n_gt": n_gt,
+        "tp": tp, "n_pred": n_counted, "n_gt": n_gt,
         "recall": tp / n_gt if n_gt else float("nan"),
-        "precision": tp / n_pred if n_pred else float("nan"),
-        "ious": best,
+        "precision": tp / n_counted if n_counted else float("nan"),
+        "ious": best, "n_ignored": n_ignored,
     }
 
 
@@ -216,6 +237,57 @@ def chamfer_distance(a: np.ndarray, b: np.ndarray) -> float:
     da, _ = cKDTree(b).query(a)
     db, _ = cKDTree(a).query(b)
     return float(0.5 * (da.mean() + db.mean()))
+
+
+def doorway_visible_fraction(doorway_boxes_world: np.ndarray, camera_to_world: np.ndarray,
+                             intrinsics, depth_m: np.ndarray, *, grid: tuple[int, int] = (16, 24),
+                             occlusion_tol_m: float = 0.3) -> np.ndarray:
+    """Fraction of each doorway's area that the camera sees (inside the image, not occluded).
+
+    The doorway is the rectangle in the box's mid-plane spanned by its along-wall extent ``dx``
+    and its height ``dz`` (for procedural worlds' doorway boxes: the door frame's outline in
+    the wall). It is sampled on a ``grid`` (rows × columns) of points; a point counts as seen
+    when it projects inside the image in front of the camera and the depth map there is not
+    nearer than the point by more than ``occlusion_tol_m`` (an open doorway shows the room
+    behind it, which is farther — still seen; a wall corner or prop in front hides it).
+
+    Parameters
+    ----------
+    doorway_boxes_world : (M, 7) — ``x y z dx dy dz heading`` [m, rad], world frame, z up.
+    camera_to_world : (4, 4) — OpenCV camera (x right, y down, z forward) to world.
+    intrinsics : CameraIntrinsics — ``fx fy cx cy width height``.
+    depth_m : (H, W) — z-depth of the frame [m], 0 where no surface.
+
+    Returns
+    -------
+    (M,) float64 in [0, 1].
+    """
+    boxes = np.asarray(doorway_boxes_world, np.float64).reshape(-1, 7)
+    if not len(boxes):
+        return np.zeros(0)
+    cam_from_world = np.linalg.inv(np.asarray(camera_to_world, np.float64))
+    depth = np.asarray(depth_m, np.float64)
+    h, w = depth.shape
+    nr, nc = grid
+    su = (np.arange(nc) + 0.5) / nc - 0.5
+    sz = (np.arange(nr) + 0.5) / nr - 0.5
+    uu, zz = np.meshgrid(su, sz)
+    out = np.zeros(len(boxes))
+    for i, (x, y, z, dx, _, dz, hd) in enumerate(boxes):
+        pw = np.stack([x + uu.ravel() * dx * math.cos(hd), y + uu.ravel() * dx * math.sin(hd),
+                       z + zz.ravel() * dz], axis=1)
+        pc = pw @ cam_from_world[:3, :3].T + cam_from_world[:3, 3]
+        front = pc[:, 2] > 0.05
+        zc = np.where(front, pc[:, 2], 1.0)
+        u = intrinsics.fx * pc[:, 0] / zc + intrinsics.cx
+        v = intrinsics.fy * pc[:, 1] / zc + intrinsics.cy
+        inside = front & (u >= 0) & (u < w) & (v >= 0) & (v < h)
+        ui = np.clip(u.astype(np.int64), 0, w - 1)
+        vi = np.clip(v.astype(np.int64), 0, h - 1)
+        d = depth[vi, ui]
+        seen = inside & ((d <= 0) | ~np.isfinite(d) | (d >= pc[:, 2] - occlusion_tol_m))
+        out[i] = seen.mean()
+    return out
 
 
 @dataclasses.dataclass

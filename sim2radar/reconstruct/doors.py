@@ -9,7 +9,11 @@ Fitting (per door): principal axis of the points' ground-plane projection (PCA; 
 panel this is the wall direction, its normal is the wall normal), extents along it and in z from
 robust percentiles, the thickness from the points or ``thickness_m`` when only one face is seen; then the box is
 centred half a wall thickness behind the near face of the wall around the door (or
-``face_to_center_m`` behind the door face when no wall is seen). Door
+``face_to_center_m`` behind the door face when no wall is seen). When a straight wall is seen
+next to the door, its direction sets the heading and only door points within the wall's band
+count (frame and closed leaves; an open leaf swung into the room does not): the box is the
+**doorway box** of the procedural worlds (frame outline × wall thickness, whatever the leaves'
+swing angle). Door
 segments that are coplanar and touch along the wall (double-door leaves, a leaf and its frame)
 are merged into one box first.
 """
@@ -78,6 +82,40 @@ def _axes(points: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
     return a, n, heading
 
 
+def _wall_axes(p: np.ndarray, wall_points: np.ndarray | None, config: DoorFitConfig):
+    """Axes of the wall the door is set in, from wall points within ``wall_search_m`` (in the
+    ground plane) of the door points and within its height: (along, normal, heading, near-face
+    offset along the normal) or ``None`` when no straight wall is seen there.
+
+    This makes the box a doorway box whatever the leaves do: an open leaf seen through the
+    doorway (perpendicular to the wall) would otherwise set the heading and the extents.
+    """
+    if wall_points is None or len(wall_points) < 30:
+        return None
+    from scipy.spatial import cKDTree
+
+    w = np.asarray(wall_points, np.float64)
+    w = w[np.isfinite(w).all(axis=1)]
+    z0, z1 = np.percentile(p[:, 2], [2, 98])
+    w = w[(w[:, 2] > z0) & (w[:, 2] < z1 + 0.3)]
+    if len(w) < 30:
+        return None
+    sub = p[:: max(1, len(p) // 2000)]
+    d, _ = cKDTree(sub[:, :2]).query(w[:, :2], distance_upper_bound=config.wall_search_m)
+    near = w[np.isfinite(d)]
+    if len(near) < 30:
+        return None
+    for _ in range(2):  # line fit, then refit on its inliers
+        a, n, heading = _axes(near)
+        t = near[:, :2] @ n
+        inl = np.abs(t - np.median(t)) < 0.05
+        if inl.mean() < 0.6 or inl.sum() < 30:
+            return None
+        near = near[inl]
+    a, n, heading = _axes(near)
+    return a, n, heading, float(np.median(near[:, :2] @ n))
+
+
 def fit_door_box(points_level: np.ndarray, config: DoorFitConfig = DoorFitConfig(),
                  floor_z_m: float | None = None, pixel_angle_rad: float | None = None,
                  wall_points: np.ndarray | None = None) -> np.ndarray:
@@ -101,15 +139,28 @@ def fit_door_box(points_level: np.ndarray, config: DoorFitConfig = DoorFitConfig
     p = p[np.isfinite(p).all(axis=1)]
     if len(p) < 3:
         raise ValueError(f"a door box needs >= 3 points, got {len(p)}")
-    a, n, heading = _axes(p)
-    t = p[:, :2] @ n
-    # keep the door face: points off the dominant vertical plane (jambs, wall pixels at the
-    # segment border, seen at grazing angles) would inflate the extents
-    face = np.abs(t - np.median(t)) < config.inlier_m
-    if face.sum() >= max(3, 0.5 * len(p)):
-        p = p[face]
+    wall = _wall_axes(p, wall_points, config)
+    wall_face = None
+    if wall is not None:
+        # doorway box in the wall's axes: keep the door points in the wall's band (frame,
+        # closed leaves), drop those beyond it (open leaves swung into the room)
+        a, n, heading, wall_face = wall
+        t = p[:, :2] @ n
+        away = 1.0 if wall_face > 0 else -1.0
+        rel = (t - wall_face) * away
+        band = (rel > -0.1) & (rel < config.thickness_m + 0.1)
+        if band.sum() >= 3:
+            p, t = p[band], t[band]
+    else:
         a, n, heading = _axes(p)
         t = p[:, :2] @ n
+        # keep the door face: points off the dominant vertical plane (jambs, wall pixels at
+        # the segment border, seen at grazing angles) would inflate the extents
+        face = np.abs(t - np.median(t)) < config.inlier_m
+        if face.sum() >= max(3, 0.5 * len(p)):
+            p = p[face]
+            a, n, heading = _axes(p)
+            t = p[:, :2] @ n
     s = p[:, :2] @ a
     # keep the largest run of points along the wall without a gap > split_gap_m (drops stray
     # wall columns that segmentation attached to the door)
@@ -133,7 +184,11 @@ def fit_door_box(points_level: np.ndarray, config: DoorFitConfig = DoorFitConfig
         z0 = floor_z_m
     thick = t1 - t0
     tc = 0.5 * (t0 + t1)
-    if thick < config.thickness_m:
+    if wall_face is not None:
+        away = 1.0 if wall_face > 0 else -1.0
+        tc = wall_face + away * config.thickness_m / 2
+        thick = config.thickness_m
+    elif thick < config.thickness_m:
         # one face seen: the box spans the wall the door is set in. Centre it half a wall
         # thickness behind the wall's near face when the wall around the door is seen, else
         # ``face_to_center_m`` behind the door face (away from the viewer at t = 0).

@@ -122,6 +122,270 @@ def segment_features(rgb: np.ndarray, mask: np.ndarray) -> AppearanceFeatures:
     return _features(_image_maps(np.asarray(rgb, np.uint8)), np.asarray(mask, bool))
 
 
+@dataclasses.dataclass(frozen=True)
+class SurfaceStructure:
+    """Joint-line structure of a planar segment, measured in metres on the rectified surface.
+
+    The segment's pixels are intersected with its fitted plane (so per-pixel depth noise does
+    not smear the pattern), expressed in in-plane axes (walls: along the wall and up) and binned
+    into ``cell_m`` cells; only pixels whose footprint is at most one cell are used. The line
+    map (thin dark lines: relative morphological black-hat) is then analysed per axis: the
+    projection profile across the axis is autocorrelated and its strongest peak at a lag of
+    0.1–1.3 m gives the spacing of the lines parallel to the axis.
+
+    Attributes
+    ----------
+    period_h_m, score_h : float — spacing [m] (NaN if none) and normalised autocorrelation
+        peak in [−1, 1] of lines parallel to the first axis (walls: horizontal lines — tile
+        grout, block bed joints, formwork panel joints).
+    period_v_m, score_v : float — the same for lines parallel to the second axis (walls:
+        vertical lines).
+    bond : float — running-bond score: correlation of the vertical-joint profiles of courses
+        two apart minus that of adjacent courses (blocks in running bond ≈ 1, tile grids ≈ 0).
+    line_frac : float — mean line strength over the rectified cells.
+    extent_m : float — largest side of the rectified area [m].
+    n_cells : int — cells with data (0 when the segment is not measurable).
+    """
+
+    period_h_m: float = float("nan")
+    score_h: float = 0.0
+    period_v_m: float = float("nan")
+    score_v: float = 0.0
+    bond: float = 0.0
+    line_frac: float = 0.0
+    extent_m: float = 0.0
+    n_cells: int = 0
+
+    def periodic(self, min_score: float = 0.25) -> tuple[bool, bool]:
+        return self.score_h >= min_score, self.score_v >= min_score
+
+
+def _line_strength(rgb: np.ndarray) -> np.ndarray:
+    """(H, W) float32 in [0, 1]: how much darker each pixel is than the 5×5 morphological
+    closing around it (thin dark lines: joints, grout), saturating at 30 %."""
+    gray = cv2.cvtColor(rgb, cv2.COLOR_RGB2GRAY).astype(np.float32) + 1.0
+    closed = cv2.morphologyEx(gray, cv2.MORPH_CLOSE, np.ones((5, 5), np.uint8))
+    return np.clip((closed - gray) / closed / 0.3, 0.0, 1.0)
+
+
+def _profile_period(coord: np.ndarray, value: np.ndarray, cell_m: float,
+                    lags_m: tuple[float, float] = (0.17, 1.3)) -> tuple[float, float]:
+    """Spacing [m] and normalised autocorrelation of a line-strength profile along ``coord``."""
+    idx = np.floor((coord - coord.min()) / cell_m).astype(np.int64)
+    n = int(idx.max()) + 1
+    cnt = np.bincount(idx, minlength=n).astype(np.float64)
+    tot = np.bincount(idx, value, minlength=n)
+    ok = cnt > 0
+    prof = np.where(ok, tot / np.maximum(cnt, 1), 0.0)
+    w = ok.astype(np.float64)
+    z = (prof - prof[ok].mean()) * w
+    lo = max(int(round(lags_m[0] / cell_m)), 4)
+    hi = min(int(round(lags_m[1] / cell_m)), n // 2)
+    if hi <= lo + 2:
+        return float("nan"), 0.0
+    m = 1 << int(np.ceil(np.log2(2 * n)))
+    fz, fw = np.fft.rfft(z, m), np.fft.rfft(w, m)
+    num = np.fft.irfft(fz * np.conj(fz), m)[:n]
+    den = np.fft.irfft(fw * np.conj(fw), m)[:n]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        ac = num / np.maximum(den, 1.0)
+    if ac[0] <= 1e-9:
+        return float("nan"), 0.0
+    ac = ac / ac[0]
+    ac[den < 0.3 * den[0]] = -1.0  # too little overlap to trust
+    seg = ac[lo:hi + 1]
+    # local maxima only (a slowly decaying autocorrelation is not a period)
+    peaks = [i for i in range(1, len(seg) - 1) if seg[i] >= seg[i - 1] and seg[i] >= seg[i + 1]]
+    if not peaks:
+        return float("nan"), 0.0
+    top = max(seg[i] for i in peaks)
+    if top <= 0:
+        return float("nan"), 0.0
+    # the fundamental: the shortest lag whose peak is nearly as strong as the strongest
+    # (multiples of the spacing correlate as well)
+    best = min(i for i in peaks if seg[i] >= 0.85 * top)
+    return float((lo + best) * cell_m), float(seg[best])
+
+
+def _bond(h: np.ndarray, v: np.ndarray, line: np.ndarray, period_m: float, cell_m: float) -> float:
+    """Running-bond score of cells at (h along the courses, v across) with line strength."""
+    if not np.isfinite(period_m):
+        return 0.0
+    # phase of the bed joints: where the folded profile peaks
+    ph = (v % period_m)
+    nb = max(int(round(period_m / cell_m)), 4)
+    fold = np.bincount(np.minimum((ph / period_m * nb).astype(int), nb - 1), line, minlength=nb)
+    phase = (np.argmax(fold) + 0.5) / nb * period_m
+    rel = (v - phase) % period_m
+    interior = (rel > 0.25 * period_m) & (rel < 0.75 * period_m)
+    course = np.floor((v - phase) / period_m).astype(np.int64)
+    hi = np.floor((h - h.min()) / cell_m).astype(np.int64)
+    nh = int(hi.max()) + 1
+    profiles = {}
+    for c in np.unique(course[interior]):
+        sel = interior & (course == c)
+        if sel.sum() < 20:
+            continue
+        cnt = np.bincount(hi[sel], minlength=nh)
+        tot = np.bincount(hi[sel], line[sel], minlength=nh)
+        profiles[int(c)] = (np.where(cnt > 0, tot / np.maximum(cnt, 1), np.nan))
+
+    def corr(lag):
+        vals = []
+        for c, pa in profiles.items():
+            pb = profiles.get(c + lag)
+            if pb is None:
+                continue
+            ok = np.isfinite(pa) & np.isfinite(pb)
+            if ok.sum() < 10 or pa[ok].std() < 1e-6 or pb[ok].std() < 1e-6:
+                continue
+            vals.append(np.corrcoef(pa[ok], pb[ok])[0, 1])
+        return float(np.mean(vals)) if vals else float("nan")
+
+    c1, c2 = corr(1), corr(2)
+    if not (np.isfinite(c1) and np.isfinite(c2)):
+        return 0.0
+    return c2 - c1
+
+
+def _plane_masks(points_cam: np.ndarray, normals: np.ndarray, mask: np.ndarray,
+                 max_planes: int = 3, min_px: int = 1500) -> list[np.ndarray]:
+    """Split a segment into its largest planes (e.g. both walls of a corridor in one oracle
+    instance): the most common normal direction, then the most common offset along it."""
+    out = []
+    rest = mask & np.isfinite(normals).all(axis=-1) & np.isfinite(points_cam).all(axis=-1)
+    for _ in range(max_planes):
+        if rest.sum() < min_px:
+            break
+        n = normals[rest].astype(np.float64)
+        q = np.round(n * 3).astype(np.int64)
+        keys, inv, cnt = np.unique(q, axis=0, return_inverse=True, return_counts=True)
+        n0 = n[inv.ravel() == np.argmax(cnt)].mean(axis=0)
+        n0 /= np.linalg.norm(n0)
+        cand = rest & (np.abs(np.nan_to_num(normals) @ n0) > 0.95)
+        d = np.nan_to_num(points_cam) @ n0
+        hist_d = d[cand]
+        if len(hist_d) < min_px:
+            break
+        bins = np.floor(hist_d / 0.05).astype(np.int64)
+        b, c = np.unique(bins, return_counts=True)
+        mode = (b[np.argmax(c)] + 0.5) * 0.05
+        plane = cand & (np.abs(d - mode) < 0.1)
+        if plane.sum() >= min_px:
+            out.append(plane)
+        rest = rest & ~plane & ~cand if plane.sum() < min_px else rest & ~plane
+    return out
+
+
+def surface_structure(line: np.ndarray, points_cam: np.ndarray, mask: np.ndarray, fx: float,
+                      *, normals: np.ndarray | None = None, vertical_plane: bool | None = None,
+                      cell_m: float | None = None, max_cells: int = 300) -> SurfaceStructure:
+    """Measure the joint-line structure of one segment (see :class:`SurfaceStructure`).
+
+    With ``normals`` (H, W, 3) the segment is first split into its largest planes and the
+    plane with the most measurable cells is reported; without, the segment is one plane.
+    """
+    if normals is None:
+        return _plane_structure(line, points_cam, mask, fx, vertical_plane, cell_m, max_cells)
+    best = SurfaceStructure()
+    for plane in _plane_masks(points_cam, normals, mask):
+        st = _plane_structure(line, points_cam, plane, fx, vertical_plane, cell_m, max_cells)
+        if st.n_cells > best.n_cells:
+            best = st
+    return best
+
+
+def _plane_structure(line: np.ndarray, points_cam: np.ndarray, mask: np.ndarray, fx: float,
+                     vertical_plane: bool | None = None, cell_m: float | None = None,
+                     max_cells: int = 300) -> SurfaceStructure:
+    """Measure the joint-line structure of one planar segment (see :class:`SurfaceStructure`).
+
+    Parameters
+    ----------
+    line : (H, W) float — line strength in [0, 1] (:func:`_line_strength`).
+    points_cam : (H, W, 3) float — camera-frame points [m], NaN where no depth.
+    mask : (H, W) bool — the segment.
+    fx : float [px] — focal length (pixel footprint = depth / fx / cos(incidence)).
+    vertical_plane : bool, optional — walls: axes along the wall and up (searched within ±6°
+        of the camera's up); otherwise (floors, ceilings) the in-plane angle is searched over
+        0–180°. Default: decided from the plane normal.
+    cell_m : float [m] — rectification cell size; default: the 30th percentile of the pixel
+        footprints, within 1.5–3 cm.
+    """
+    m = mask & np.isfinite(points_cam).all(axis=-1)
+    ys, xs = np.nonzero(m)
+    if len(ys) < 300:
+        return SurfaceStructure()
+    p = points_cam[ys, xs].astype(np.float64)
+    sub = p[:: max(1, len(p) // 4000)]
+    c = np.median(sub, axis=0)
+    _, _, vt = np.linalg.svd(sub - c, full_matrices=False)
+    nrm = vt[2]
+    if abs(nrm @ c) < 1e-6:
+        return SurfaceStructure()
+    ray = p / np.linalg.norm(p, axis=1, keepdims=True)
+    cos_i = np.abs(ray @ nrm)
+    # intersect each pixel's ray with the plane: coordinates free of per-pixel depth noise
+    t = (c @ nrm) / np.where(np.abs(ray @ nrm) > 1e-6, ray @ nrm, np.nan)
+    q = ray * t[:, None]
+    foot = q[:, 2] / fx / np.maximum(cos_i, 0.05)
+    if cell_m is None:
+        fin = foot[np.isfinite(foot) & (foot > 0)]
+        cell_m = float(np.clip(np.percentile(fin, 30), 0.015, 0.03)) if len(fin) else 0.015
+    keep = np.isfinite(t) & (t > 0) & (foot <= cell_m) & (np.abs((p - c) @ nrm) < 0.1)
+    if keep.sum() < 300:
+        return SurfaceStructure()
+    q, val = q[keep] - c, line[ys[keep], xs[keep]].astype(np.float64)
+    up_cam = np.array([0.0, -1.0, 0.0])
+    if vertical_plane is None:
+        vertical_plane = abs(nrm @ up_cam) < 0.5
+    if vertical_plane:
+        e2 = up_cam - (up_cam @ nrm) * nrm
+        angles = np.radians(np.arange(-6.0, 6.5, 1.0))
+    else:
+        e2 = np.cross(nrm, [1.0, 0.0, 0.0])
+        if np.linalg.norm(e2) < 0.3:
+            e2 = np.cross(nrm, [0.0, 0.0, 1.0])
+        angles = np.radians(np.arange(0.0, 180.0, 3.0))
+    e2 /= np.linalg.norm(e2)
+    e1 = np.cross(e2, nrm)
+    u0, v0 = q @ e1, q @ e2
+    # keep a window of max_cells around the median (nearest, finest part dominates anyway)
+    half = max_cells * cell_m / 2
+    win = (np.abs(u0 - np.median(u0)) < half) & (np.abs(v0 - np.median(v0)) < half)
+    u0, v0, val = u0[win], v0[win], val[win]
+    if len(val) < 300:
+        return SurfaceStructure()
+    # one sample per cell (mean), so near-range pixels do not outweigh the rest
+    iu = np.floor((u0 - u0.min()) / cell_m).astype(np.int64)
+    iv = np.floor((v0 - v0.min()) / cell_m).astype(np.int64)
+    key = iu * (int(iv.max()) + 1) + iv
+    uniq, inv, cnt = np.unique(key, return_inverse=True, return_counts=True)
+    cu = np.bincount(inv, u0) / cnt
+    cv = np.bincount(inv, v0) / cnt
+    cl = np.bincount(inv, val) / cnt
+    if len(uniq) < 200:
+        return SurfaceStructure()
+    best = None
+    for a in angles:
+        ca, sa = np.cos(a), np.sin(a)
+        h = ca * cu + sa * cv      # along the first axis
+        v = -sa * cu + ca * cv     # along the second axis
+        pv, sv = _profile_period(v, cl, cell_m)  # lines parallel to the first axis
+        ph, sh = _profile_period(h, cl, cell_m)  # lines parallel to the second axis
+        score = max(sv, sh)
+        if best is None or score > best[0]:
+            best = (score, a, pv, sv, ph, sh, h, v)
+    _, a, pv, sv, ph, sh, h, v = best
+    if not vertical_plane and sh > sv:  # first axis: the one with the stronger lines
+        pv, sv, ph, sh, h, v = ph, sh, pv, sv, v, h
+    bond = _bond(h, v, cl, pv, cell_m) if sv >= 0.25 else 0.0
+    extent = float(max(np.ptp(cu), np.ptp(cv)))
+    return SurfaceStructure(period_h_m=pv, score_h=sv, period_v_m=ph, score_v=sh,
+                            bond=float(bond), line_frac=float(cl.mean()), extent_m=extent,
+                            n_cells=len(uniq))
+
+
 def _is_wood(f: AppearanceFeatures) -> bool:
     return 12 <= f.hue_deg <= 48 and 0.3 <= f.saturation <= 0.85 and 0.1 <= f.value <= 0.8
 

@@ -11,10 +11,13 @@ Frames and conventions
 * **Radar frame**: x forward, y left, z up (OpenPCDet/KITTI-LiDAR), the frame the radar simulator
   and the detector use. **LiDAR frame**: the same axes, at the LiDAR's mount.
 * **Boxes**: rows ``x y z dx dy dz heading`` (:data:`sim2radar.vocab.BOX_FIELDS`), z the box
-  centre. A door box is the tight box around the door's frame, leaves (at their current swing
-  angle) and handles, aligned with the wall: ``dx`` runs along the wall (the door's width),
-  ``dy`` across it (wall thickness plus any swung-open leaf), ``dz`` the height; headings lie
-  in [-pi/2, pi/2) (a box is unchanged by a half turn).
+  centre. A door box is the **doorway box**: the door frame's outer width (``dx``, along the
+  wall) × its depth through the wall (``dy`` = wall thickness + the frame's 1 cm lips on both
+  faces) × the frame's height from the floor (``dz``, leaf height + head), aligned with the
+  wall and independent of the leaves' swing angle (closed, ajar and open doors of one doorway
+  have the same box — the passage a navigating robot needs). Leaves swung open and handles lie
+  partly outside it. Headings lie in [-pi/2, pi/2) (a box is unchanged by a half turn).
+  (Stage version 1 used the tight box around frame, leaves at their swing angle and handles.)
 
 Public API (``from sim2radar.worlds import ...``)
 -------------------------------------------------
@@ -126,7 +129,7 @@ class DoorSpec:
     center_world : (3,) tuple [m] — centre of the opening on the floor (z = 0) in the wall's
         mid-plane.
     wall_axis : str — ``x`` if the wall runs along world x, else ``y``.
-    box_world : (7,) tuple — ``x y z dx dy dz heading`` of the door's tight box (see module doc).
+    box_world : (7,) tuple — ``x y z dx dy dz heading`` of the doorway box (see module doc).
     leads_to : int — index of the space behind the door (a room), -1 if none.
     leaf_material : str — material of the leaves (the door's radar-relevant material).
     """

@@ -43,7 +43,7 @@ from sim2radar.worlds.geometry import (
 __all__ = ["generate_world", "STAGE_VERSION"]
 
 #: Bump when generation changes what a seed produces (part of every artifact key).
-STAGE_VERSION = 1
+STAGE_VERSION = 2  # 2: doorway door boxes; material-correlated textures
 
 _STREAMS = {"layout": 1, "rooms": 2, "doors": 3, "materials": 4, "appearance": 5, "props": 6,
             "windows": 7, "lights": 8}
@@ -423,9 +423,10 @@ def generate_world(seed: int, config: WorldConfig | None = None) -> World:
                 door_index=k, space_index=space_of_door, appearance=leaf_app)
         add(to_world(handles), "door", "door_handle", f"door_{k}_handle", prior="door_handle",
             door_index=k, space_index=space_of_door)
-        # tight box in the local frame -> world (axis-aligned in the wall's frame)
-        allv = np.concatenate([v for v, _ in frame_parts + leaves + handles])
-        lo, hi = allv.min(axis=0), allv.max(axis=0)
+        # doorway box (see frame.py): the frame's outline × its depth through the wall,
+        # independent of the leaves' swing
+        lo = np.array([-ow / 2, -dv, 0.0])
+        hi = np.array([ow / 2, dv, hd + fw])
         cl = (lo + hi) / 2
         cw = rot @ cl + origin
         # boxes are symmetric under a half turn: report headings in [-pi/2, pi/2)

@@ -74,29 +74,41 @@ def test_spaces_do_not_overlap(many_worlds):
                 assert overlap_x <= 1e-6 or overlap_y <= 1e-6, (w.seed, i, j)
 
 
-def test_every_door_box_contains_its_door_geometry(many_worlds):
-    n_doors = 0
+def test_every_door_box_is_its_doorway(many_worlds):
+    """Doorway boxes: the frame's outline × its depth, the same for every swing angle; the frame
+    and closed leaves lie inside, an open leaf reaches out of it into the room."""
+    n_doors = n_open = 0
+    fw = many_worlds[0].config.door_frame_width_m
     for w in many_worlds[:40]:
         for door in w.doors:
             n_doors += 1
             x, y, z, dx, dy, dz, heading = door.box_world
             c, s = math.cos(heading), math.sin(heading)
-            verts = np.concatenate([m.vertices for m, o in zip(w.meshes, w.objects, strict=True)
-                                    if o.door_index == door.index])
-            assert len(verts) > 0
-            rel = verts - np.array([x, y, z])
-            local = np.stack([c * rel[:, 0] + s * rel[:, 1], -s * rel[:, 0] + c * rel[:, 1],
-                              rel[:, 2]], axis=1)
+
+            def local(kind, door=door, x=x, y=y, z=z, c=c, s=s, w=w):
+                verts = np.concatenate([m.vertices for m, o in zip(w.meshes, w.objects, strict=True)
+                                        if o.door_index == door.index and o.kind == kind])
+                rel = verts - np.array([x, y, z])
+                return np.stack([c * rel[:, 0] + s * rel[:, 1], -s * rel[:, 0] + c * rel[:, 1],
+                                 rel[:, 2]], axis=1)
+
             half = np.array([dx, dy, dz]) / 2 + 1e-4
-            assert (np.abs(local) <= half).all(), (w.seed, door.index)
-            # tight: the box is not bigger than its geometry
-            assert np.allclose(np.abs(local).max(axis=0), half - 1e-4, atol=1e-3)
-            # the box spans the door: width >= clear opening, height >= leaf height
-            assert dx >= door.width_m and dz >= door.height_m
-            # an open door's box reaches into the room by about a leaf width
+            frame = local("door_frame")
+            # the frame fills the box exactly: outer width, depth through the wall, height
+            assert np.allclose(np.abs(frame).max(axis=0), half - 1e-4, atol=1e-3), (w.seed, door.index)
+            assert np.isclose(dx, door.width_m + 2 * fw, atol=1e-6)
+            assert np.isclose(dz, door.height_m + fw, atol=1e-6) and np.isclose(z, dz / 2)
+            # centred on the opening in the wall's mid-plane
+            assert np.allclose([x, y], door.center_world[:2], atol=1e-6)
+            assert 0.1 <= dy <= 0.3
+            leaves = local("door_leaf")
+            if door.state == "closed":
+                assert (np.abs(leaves) <= half).all(), (w.seed, door.index)
             if door.state == "open":
-                assert dy > 0.5 * door.width_m / len(door.swing_deg)
-    assert n_doors > 100
+                n_open += 1
+                # the open leaf swings out of the doorway box, into the room
+                assert np.abs(leaves[:, 1]).max() > half[1] + 0.3
+    assert n_doors > 100 and n_open > 5
 
 
 def _check_frequencies(counts: Counter, probs: dict, n: int, tol_sigma: float = 4.5):

@@ -121,7 +121,8 @@ def test_door_boxes_and_flags(world3):
     door = next(d for d in world3.doors if d.leads_to >= 0)
     # stand 3 m in front of a room door, looking at it
     cx, cy, _ = door.center_world
-    yaw_to_room = np.arctan2(*(np.array([door.box_world[1] - cy, door.box_world[0] - cx])))
+    room = world3.spaces[door.leads_to].rect_m
+    yaw_to_room = np.arctan2((room[2] + room[3]) / 2 - cy, (room[0] + room[1]) / 2 - cx)
     corridor = world3.spaces[0]
     if door.wall_axis == "x":
         y = corridor.rect_m[2] + 0.5 if cy > corridor.rect_m[3] - 0.1 else corridor.rect_m[3] - 0.5
