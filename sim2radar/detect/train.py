@@ -56,7 +56,8 @@ class TrainResult:
     checkpoint : path of the final checkpoint (``out_dir/last.pt``).
     out_dir : run folder (checkpoints, ``history.json``, ``config.json``).
     epochs : epochs completed; steps : optimiser steps completed.
-    history : one dict per epoch: mean ``cls``/``loc``/``dir``/``total`` loss, ``lr``, ``seconds``.
+    history : one dict per epoch: mean ``cls``/``loc``/``dir``/``total`` loss, ``lr`` (of the
+        epoch's last step), ``seconds``.
     seconds : wall time of this call [s].
     """
 
@@ -316,6 +317,7 @@ def train(
             scaler.scale(loss).backward()
             scaler.unscale_(optimizer)
             torch.nn.utils.clip_grad_norm_(model.parameters(), opt_cfg.grad_norm_clip)
+            lr_used = optimizer.param_groups[0]["lr"]
             scaler.step(optimizer)
             scaler.update()
             scheduler.step()
@@ -325,7 +327,7 @@ def train(
                 progress.update(1)
                 progress.set_postfix(epoch=epoch + 1, loss=f"{parts['total']:.3f}")
         record = {k: v / steps_per_epoch for k, v in sums.items()}
-        record.update(epoch=epoch + 1, lr=scheduler.get_last_lr()[0],
+        record.update(epoch=epoch + 1, lr=lr_used,
                       seconds=time.perf_counter() - t_epoch)
         history.append(record)
         checkpoint(epoch + 1)

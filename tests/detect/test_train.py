@@ -135,3 +135,29 @@ def test_train_and_evaluate_from_a_dataset_on_disk(tmp_path):
     bad = cfg.with_updates(model=dict(num_point_features=5))
     with pytest.raises(ValueError, match="num_point_features"):
         train(bad, out_dir=tmp_path / "bad")
+
+
+def test_one_cycle_schedule_matches_openpcdet(tmp_path):
+    """lr rises from lr/10 to lr over 40 % of the steps, then decays to lr/1e5."""
+    frames = make_door_frames(2, seed=3, points_per_frame=300)
+    cfg = small_config(optimization=dict(batch_size=1, epochs=10),
+                       model=dict(layer_nums=(0, 0, 0), num_filters=(8, 8, 8),
+                                  num_upsample_filters=(8, 8, 8)))
+    res = train(cfg, out_dir=tmp_path / "run", frames=frames)
+    lrs = [h["lr"] for h in res.history]  # lr of each epoch's last step (steps 1, 3, ..., 19)
+    peak = int(np.argmax(lrs))
+    assert lrs[peak] == pytest.approx(0.003, rel=0.05) and 3 <= peak <= 4
+    assert all(a < b for a, b in zip(lrs[:peak], lrs[1:peak + 1], strict=True))
+    assert all(a > b for a, b in zip(lrs[peak:-1], lrs[peak + 1:], strict=True))
+    assert lrs[-1] < 3e-5
+
+
+@pytest.mark.gpu
+def test_trains_and_predicts_on_cuda_with_amp(tmp_path):
+    frames = make_door_frames(4, seed=4, points_per_frame=500)
+    cfg = small_config(optimization=dict(batch_size=2, epochs=2),
+                       runtime=dict(device="cuda", amp=True, progress=False))
+    res = train(cfg, out_dir=tmp_path / "run", frames=frames)
+    model, _ = load_checkpoint(res.checkpoint, "cuda")
+    dets = predict_frames(model, frames)
+    assert len(dets) == 4 and np.isfinite(res.history[-1]["total"])
