@@ -11,6 +11,8 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import queue
+import threading
 
 import numpy as np
 
@@ -121,12 +123,16 @@ def simplify_mesh(
     """
     if target_faces <= 0 or len(faces) <= target_faces:
         return vertices, faces
+    return _on_meshlab_thread(_decimate, vertices, faces, int(target_faces))
+
+
+def _decimate(vertices: np.ndarray, faces: np.ndarray, target_faces: int):
     import pymeshlab
 
     ms = pymeshlab.MeshSet()
     ms.add_mesh(pymeshlab.Mesh(np.asarray(vertices, np.float64), np.asarray(faces, np.int32)))
     ms.meshing_decimation_quadric_edge_collapse(
-        targetfacenum=int(target_faces),
+        targetfacenum=target_faces,
         preserveboundary=False,
         boundaryweight=10.0,
         preservenormal=True,
@@ -136,6 +142,42 @@ def simplify_mesh(
     )
     out = ms.current_mesh()
     return out.vertex_matrix().astype(np.float32), out.face_matrix().astype(np.int32)
+
+
+# pymeshlab keeps per-thread state that crashes the whole process at interpreter exit
+# ("malloc_consolidate(): unaligned fastbin chunk", exit status 134) when a worker thread that
+# used it has ended -- e.g. a Prefect task-runner thread. Every pymeshlab call therefore runs on
+# one long-lived daemon thread, which never ends before the process does.
+_MESHLAB_QUEUE: queue.SimpleQueue | None = None
+_MESHLAB_LOCK = threading.Lock()
+
+
+def _meshlab_worker(jobs: queue.SimpleQueue) -> None:
+    while True:
+        fn, args, result, done = jobs.get()
+        try:
+            result.append((True, fn(*args)))
+        except BaseException as exc:  # noqa: BLE001 - re-raised in the caller's thread
+            result.append((False, exc))
+        done.set()
+
+
+def _on_meshlab_thread(fn, *args):
+    """Run ``fn(*args)`` on the dedicated pymeshlab thread and return (or raise) its result."""
+    global _MESHLAB_QUEUE
+    with _MESHLAB_LOCK:
+        if _MESHLAB_QUEUE is None:
+            _MESHLAB_QUEUE = queue.SimpleQueue()
+            threading.Thread(target=_meshlab_worker, args=(_MESHLAB_QUEUE,),
+                             name="sim2radar-pymeshlab", daemon=True).start()
+    result: list = []
+    done = threading.Event()
+    _MESHLAB_QUEUE.put((fn, args, result, done))
+    done.wait()
+    ok, value = result[0]
+    if not ok:
+        raise value
+    return value
 
 
 def _face_camera(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
