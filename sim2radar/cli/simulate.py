@@ -1,4 +1,4 @@
-"""``sim2radar simulate`` and ``sim2radar demo``: scene files -> radar point clouds in the store.
+"""``sim2radar simulate``: scene files -> radar point clouds in the store.
 
 Prefect and the flows are imported inside the commands, so ``sim2radar --help`` stays fast.
 Prefect state goes to ``./.prefect`` unless ``PREFECT_HOME`` or ``PREFECT_API_URL`` is set
@@ -177,41 +177,3 @@ def _default_png_dir(out: str) -> Path | None:
     if "://" in out and not out.startswith("file://"):
         return None
     return Path(out.removeprefix("file://")).resolve().parent / "bev"
-
-
-def run_demo(out: Path, *, radar: str = "ti-mmwcas", use_prefect: bool = True, verbose: bool = False) -> dict[str, Any]:
-    """The main job on the built-in default: simulate the demo scene(s) into ``OUT/store``,
-    pictures into ``OUT/bev``, summary into ``OUT/summary.json``.
-
-    (Extend here when the built-in default input changes, e.g. to procedural worlds.)
-    """
-    from sim2radar.scenes import demo_scene_paths
-
-    out = Path(out)
-    png_dir = out / "bev"
-    summary = run_scenes(
-        demo_scene_paths(),
-        radar=radar,
-        store=str(out / "store"),
-        dataset="demo",
-        png_dir=png_dir,
-        use_prefect=use_prefect,
-        verbose=verbose,
-    )
-    out.mkdir(parents=True, exist_ok=True)
-    (out / "summary.json").write_text(json.dumps(summary, indent=1, default=str))
-    print_summary(summary, png_dir)
-    return summary
-
-
-@app.command()
-def demo(
-    out: Path = typer.Option(Path("out"), "--out", "-o", help="Output folder (store + pictures)."),
-    radar: str = typer.Option("ti-mmwcas", "--radar", "-r", help="Radar preset name or YAML path."),
-    no_prefect: bool = typer.Option(False, "--no-prefect", help="Run without the Prefect engine."),
-    verbose: bool = typer.Option(False, "--verbose", "-v", help="Show Prefect's logs."),
-) -> None:
-    """Run the main job on the built-in default: the demo corridor -> radar points + BEV PNGs."""
-    summary = run_demo(out, radar=radar, use_prefect=not no_prefect, verbose=verbose)
-    if summary["counts"]["failed"]:
-        raise typer.Exit(1)

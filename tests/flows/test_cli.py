@@ -1,4 +1,4 @@
-"""`sim2radar demo` and `sim2radar simulate` through Typer's CliRunner."""
+"""`sim2radar demo` (procedural worlds, the main job) and `sim2radar simulate` through Typer's CliRunner."""
 
 from __future__ import annotations
 
@@ -7,26 +7,31 @@ import json
 from typer.testing import CliRunner
 
 from sim2radar.cli import app
-from storage import ArtifactStore, radar_frames_from_table
+from storage import ArtifactStore
 
 runner = CliRunner()
 
 
-def test_demo_writes_parquet_png_and_summary(prefect_server, tmp_path):
+def test_demo_runs_procedural_worlds_end_to_end(prefect_server, tmp_path):
     out = tmp_path / "out"
-    result = runner.invoke(app, ["demo", "--out", str(out)])
+    args = ["demo", "--out", str(out), "--worlds", "1", "--frames", "1",
+            "--width", "160", "--height", "120", "--spp", "4"]
+    result = runner.invoke(app, args)
     assert result.exit_code == 0, result.output
-    assert "points per frame" in result.output and str(out / "store") in result.output
+    assert str(out / "store") in result.output and "preview" in result.output
     summary = json.loads((out / "summary.json").read_text())
-    assert summary["counts"]["failed"] == 0
-    (scene,) = summary["scenes"]
+    assert summary["counts"]["failed"] == 0 and summary["frame_counts"]["failed"] == 0
+    for geometry in ("ground_truth", "reconstructed"):
+        assert summary["geometry"][geometry]["frames"] == 1
+        assert summary["geometry"][geometry]["points_per_frame"] > 20  # radar saw the corridor
+        assert (out / "openpcdet" / geometry / "ImageSets" / "train.txt").is_file()
+    # ground-truth labels are the world's doors in the radar's view
+    assert summary["geometry"]["ground_truth"]["label_recall"] == 1.0
+    pngs = sorted((out / "bev").glob("*.png")) + [out / "preview_world0.png"]
+    assert len(pngs) >= 3 and all(p.read_bytes()[:4] == b"\x89PNG" for p in pngs)
     store = ArtifactStore(out / "store")
-    frames = radar_frames_from_table(store.read("radar_points", scene["artifacts"]["radar_points"]))
-    assert len(frames) == 3 and all(len(f.points) > 20 for f in frames)
-    assert all(len(f.boxes) == 3 and f.box_labels == ["door"] * 3 for f in frames)
-    pngs = sorted((out / "bev").glob("*.png"))
-    assert len(pngs) == 3 and all(p.read_bytes()[:4] == b"\x89PNG" for p in pngs)
-    assert store.manifest("demo").counts()["ok"] == 1
+    assert store.manifest("demo").counts()["failed"] == 0
+    assert store.keys("dataset_frames")
 
 
 def test_simulate_exit_codes_and_outputs(plate_scene, broken_scenes, tmp_path):
