@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import contextlib
 import json
+import logging
 import math
 import os
 import time
@@ -45,6 +46,7 @@ __all__ = [
 ]
 
 CHECKPOINT_VERSION = 1
+log = logging.getLogger(__name__)
 
 
 @dataclass(frozen=True)
@@ -253,6 +255,12 @@ def train(
         max_momentum=opt_cfg.moms[0], div_factor=opt_cfg.div_factor,
         final_div_factor=opt_cfg.final_div_factor,
     )
+    if (1 - mcfg.bn_momentum) ** total_steps > 0.05:
+        log.warning(
+            "BatchNorm running statistics will not settle in %d steps with model.bn_momentum="
+            "%g (eval-mode scores will be too low); use more epochs or bn_momentum >= %.2f",
+            total_steps, mcfg.bn_momentum, min(1.0, 3.0 / total_steps),
+        )
     scaler = torch.amp.GradScaler("cuda", enabled=rt.amp and dev.type == "cuda")
 
     start_epoch, history = 0, []
