@@ -12,8 +12,13 @@ with the same inputs recomputes nothing (every frame ``skipped`` by content key)
 world or frame is recorded as ``failed`` with its error and the others finish; ``strict=True``
 raises :class:`DatasetFailures` at the end (after everything is recorded and exported).
 
-Worlds run one at a time by default (Mitsuba already uses every core for one frame);
-``workers > 1`` uses a thread pool.
+Task runner (:func:`tasks.runners.task_runner`): worlds run one at a time by default (Mitsuba
+already uses every core for one frame); ``workers > 1`` uses a thread pool; ``dask_address`` =
+a Dask scheduler address (``tcp://host:8786``) or ``"local"`` (a LocalCluster of ``workers``
+single-threaded processes) fans worlds out over Dask (``pip install 'sim2radar[dask]'``). A
+world task receives only its seed, the spec as a dict and the store path/URI; the frames it
+makes go to the store and only a small outcome comes back, so everything pickles and each
+worker process selects its own Mitsuba variant.
 """
 
 from __future__ import annotations
@@ -37,8 +42,10 @@ from tasks.dataset import (
     resolve_spec,
     summarize_dataset,
 )
+from tasks.runners import task_runner
 
-__all__ = ["generate_dataset_flow", "generate_dataset", "DatasetFailures", "progress_callback"]
+__all__ = ["generate_dataset_flow", "generate_dataset", "generate_dataset_job", "DatasetFailures",
+           "progress_callback"]
 
 _PROGRESS: list[Callable[[WorldDatasetOutcome], None]] = []
 
@@ -153,6 +160,7 @@ def generate_dataset(
     force: bool = False,
     strict: bool = False,
     workers: int = 1,
+    dask_address: str | None = None,
 ) -> dict[str, Any]:
     """Run :func:`generate_dataset_flow` on worlds ``first_seed .. first_seed + n_worlds - 1``
     (or explicit ``seeds``).
@@ -165,7 +173,8 @@ def generate_dataset(
         prior (built-in backends, no weights)
     world, rig : WorldConfig / RigConfig or dicts (None = defaults)
     seed : run seed (trajectories, radar noise, splits)
-    workers : worlds in parallel (threads)
+    workers : worlds in parallel (threads, or LocalCluster processes with ``dask_address="local"``)
+    dask_address : None (threads), ``"local"`` or a Dask scheduler address ``tcp://host:8786``
 
     Configs are validated here, before the flow starts, so a bad field fails fast with its name.
     """
@@ -175,9 +184,46 @@ def generate_dataset(
                                   else range(int(first_seed), int(first_seed) + int(n_worlds)))]
     if not seed_list:
         raise ValueError("no worlds to generate: n_worlds must be >= 1")
-    runner = ThreadPoolTaskRunner(max_workers=max(1, int(workers)))
+    runner = task_runner(workers, dask_address)
     return generate_dataset_flow.with_options(task_runner=runner)(
         seeds=seed_list, spec=spec.to_dict(), store=os.fspath(store), dataset=dataset,
         export_dir=None if export_dir is None else os.fspath(export_dir), force=force,
         strict=strict,
+    )
+
+
+@flow(name="generate-dataset-job", log_prints=False)
+def generate_dataset_job(
+    n_worlds: int = 4,
+    frames_per_world: int = 4,
+    store: str = "out/store",
+    dataset: str = "generated",
+    radar: str | dict = "ti-mmwcas",
+    geometry: str | list[str] = "reconstructed",
+    reconstruction: str | dict | None = None,
+    world: dict | None = None,
+    rig: dict | None = None,
+    seed: int = 0,
+    export_dir: str | None = None,
+    first_seed: int = 0,
+    class_name: str = "door",
+    force: bool = False,
+    strict: bool = False,
+    workers: int = 1,
+    dask_address: str | None = None,
+) -> dict[str, Any]:
+    """Deployment entry point (see ``deploy/prefect.yaml``): worlds ``first_seed ..
+    first_seed + n_worlds - 1`` through :func:`generate_dataset` as a subflow on the chosen
+    task runner (threads, or Dask with ``dask_address`` = scheduler address or ``"local"``).
+
+    Parameters are JSON values (Prefect validates them): ``radar`` a preset name, YAML path or
+    RadarConfig fields; ``reconstruction`` a preset name, YAML path, fields or None (built-in
+    backends); ``world`` / ``rig`` dicts of WorldConfig / RigConfig fields. Relative paths
+    resolve against the worker's working directory.
+    """
+    return generate_dataset(
+        n_worlds=n_worlds, frames_per_world=frames_per_world, store=store, dataset=dataset,
+        radar=radar, geometry=geometry, reconstruction=reconstruction, world=world, rig=rig,
+        seed=seed, export_dir=export_dir, first_seed=first_seed, class_name=class_name,
+        force=force, strict=strict, workers=workers, dask_address=dask_address,
     )

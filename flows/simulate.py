@@ -14,9 +14,11 @@ batch job that should keep what succeeded — unless ``strict=True``, which rais
 :class:`SceneFailures` after every scene has been recorded (Prefect marks the run failed). The
 CLI maps this to its exit code: 0 by default, 1 with ``--strict`` when any scene failed.
 
-Task runner: scenes run one at a time by default (``workers=1``: Mitsuba/Dr.Jit already uses
-every core for one frame). ``workers>1`` uses a thread pool; ``dask_address`` (or
-``"local"``) uses ``prefect_dask.DaskTaskRunner`` when ``prefect-dask`` is installed.
+Task runner (:func:`tasks.runners.task_runner`): scenes run one at a time by default
+(``workers=1``: Mitsuba/Dr.Jit already uses every core for one frame). ``workers>1`` uses a
+thread pool; ``dask_address`` = a scheduler address (``tcp://host:8786``) or ``"local"`` (a
+LocalCluster of ``workers`` processes) uses ``prefect_dask.DaskTaskRunner`` (``pip install
+'sim2radar[dask]'``). Tasks receive paths/URIs and plain values only, so they pickle.
 """
 
 from __future__ import annotations
@@ -40,6 +42,7 @@ from tasks.radar import (
     simulate_scene_task,
     summarize,
 )
+from tasks.runners import task_runner
 
 __all__ = [
     "simulate_flow",
@@ -156,21 +159,6 @@ def simulate_flow(
     return summary
 
 
-def _task_runner(workers: int, dask_address: str | None):
-    if dask_address:
-        try:
-            from prefect_dask import DaskTaskRunner
-        except ImportError as exc:
-            raise ImportError(
-                "dask_address needs prefect-dask: pip install 'sim2radar[dask]' "
-                "(prefect-dask, distributed)"
-            ) from exc
-        if dask_address == "local":
-            return DaskTaskRunner(cluster_kwargs={"n_workers": max(1, workers), "threads_per_worker": 1})
-        return DaskTaskRunner(address=dask_address)
-    return ThreadPoolTaskRunner(max_workers=max(1, int(workers)))
-
-
 def run_simulation(
     scenes: Sequence[str | os.PathLike],
     radar: str = "ti-mmwcas",
@@ -185,7 +173,7 @@ def run_simulation(
     dask_address: str | None = None,
 ) -> dict[str, Any]:
     """Run :func:`simulate_flow` with a chosen task runner (see the module docstring)."""
-    runner = _task_runner(workers, dask_address)
+    runner = task_runner(workers, dask_address)
     return simulate_flow.with_options(task_runner=runner)(
         scenes=[str(s) for s in scenes],
         radar=str(radar),

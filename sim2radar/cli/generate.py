@@ -82,15 +82,22 @@ def run_generate(
     force: bool = False,
     strict: bool = False,
     workers: int = 1,
+    dask_address: str | None = None,
     use_prefect: bool = True,
     show_progress: bool = True,
     verbose: bool = False,
 ) -> dict[str, Any]:
     """Run the generate-dataset flow (or its plain loop) with a progress bar; write BEV PNGs.
 
+    ``workers`` worlds run concurrently (threads); ``dask_address`` (a scheduler address such as
+    ``tcp://127.0.0.1:8786``, or ``"local"`` for a LocalCluster of ``workers`` processes) runs
+    them on Dask instead (needs ``prefect-dask``; not with ``use_prefect=False``).
+
     Returns the flow's summary (``pngs`` added); failures are counted in it, never raised
     (with ``strict`` the Prefect run is marked failed; the CLI exits with status 1).
     """
+    if dask_address and not use_prefect:
+        raise ValueError("--dask needs the Prefect engine: drop --no-prefect")
     if use_prefect:  # before anything imports Prefect: its settings are read at import
         from sim2radar.cli.simulate import _prefect_env
 
@@ -111,15 +118,14 @@ def run_generate(
                             description=f"{outcome.world_id}: {outcome.status} ({pts} pts)")
 
         if use_prefect:
-            from prefect.task_runners import ThreadPoolTaskRunner
-
             from flows.generate_dataset import (
                 DatasetFailures,
                 generate_dataset_flow,
                 progress_callback,
             )
+            from tasks.runners import task_runner
 
-            runner = ThreadPoolTaskRunner(max_workers=max(1, int(workers)))
+            runner = task_runner(workers, dask_address)
             with progress_callback(on_world):
                 try:
                     summary = generate_dataset_flow.with_options(task_runner=runner)(
@@ -221,7 +227,11 @@ def generate(
     no_png: bool = typer.Option(False, "--no-png", help="Do not write BEV PNGs."),
     force: bool = typer.Option(False, help="Recompute dataset frames even when cached."),
     strict: bool = typer.Option(False, help="Exit with status 1 if any world or frame failed."),
-    workers: int = typer.Option(1, help="Worlds processed concurrently (threads)."),
+    workers: int = typer.Option(1, help="Worlds processed concurrently (threads, or processes "
+                                "with --dask local)."),
+    dask: str | None = typer.Option(
+        None, "--dask", help="Run worlds on Dask: scheduler address (tcp://127.0.0.1:8786) or "
+        "'local' (LocalCluster of --workers processes); needs prefect-dask."),
     no_prefect: bool = typer.Option(False, "--no-prefect",
                                     help="Run the plain loop without the Prefect engine."),
     json_out: Path | None = typer.Option(None, "--json", help="Also write the summary as JSON."),
@@ -247,6 +257,14 @@ def generate(
         first = int(first_seed if first_seed is not None else cfg.get("first_seed", 0))
         if n_worlds < 1:
             raise ValueError(f"--worlds must be >= 1, got {n_worlds}")
+        if workers < 1:
+            raise ValueError(f"--workers must be >= 1, got {workers}")
+        if dask and no_prefect:
+            raise ValueError("--dask needs the Prefect engine: drop --no-prefect")
+        if dask:
+            from tasks.runners import task_runner
+
+            task_runner(workers, dask)  # prefect-dask installed, address well-formed
         params = dict(
             frames=int(frames if frames is not None else cfg.get("frames", 4)),
             geometry=geometry or cfg.get("geometry", "reconstructed"),
@@ -262,7 +280,7 @@ def generate(
         resolve_spec(params["frames"], params["geometry"], params["radar"],
                      params["reconstruction"], params["world"], params["rig"], params["seed"],
                      params["class_name"])
-    except (ValueError, FileNotFoundError) as exc:
+    except (ValueError, FileNotFoundError, ImportError) as exc:
         typer.secho(f"error: {exc}", fg="red", err=True)
         raise typer.Exit(2) from None
     if png_dir is None and not no_png:
@@ -272,7 +290,7 @@ def generate(
         dataset=dataset or cfg.get("dataset", "generated"),
         export_dir=None if export_openpcdet is None else str(export_openpcdet),
         png_dir=None if no_png else png_dir, force=force, strict=strict, workers=workers,
-        use_prefect=not no_prefect, verbose=verbose, **params,
+        dask_address=dask, use_prefect=not no_prefect, verbose=verbose, **params,
     )
     print_generate_summary(summary)
     if json_out is not None:
