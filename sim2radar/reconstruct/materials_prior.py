@@ -7,8 +7,13 @@ features measured on the segment's pixels then multiply the prior by likelihood 
 (:data:`RULES`), and the posterior's arg-max is the label:
 
 * wood: hue 15–45°, saturation 0.3–0.8, and an oriented grain (structure-tensor coherence);
-* ceramic tile: thin dark grout lines (pixels much darker than their neighbourhood);
-* raw concrete: grey (low saturation) with strong low-frequency mottling;
+* joint lines measured in metres on the surface (walls, floors, ceilings with depth; see
+  :func:`surface_structure`): concrete-block masonry shows bed joints every 0.2 m with head
+  joints staggered course to course (running bond); poured concrete shows formwork panel joints
+  0.6 / 1.2 m apart; ceramic tiles a regular grout grid (0.25–0.6 m); suspended ceilings a
+  dense dark 0.6 m T-bar grid; plasterboard and vinyl are smooth; concrete slabs mottled;
+* image-space fallbacks when the surface is too far or small to rectify: grout lines (pixels
+  much darker than their neighbourhood), strong grey mottling (concrete);
 * brushed metal: grey with strongly oriented streaks;
 * plastic: saturated, untextured colour on clutter / floors.
 
@@ -22,6 +27,7 @@ import dataclasses
 import cv2
 import numpy as np
 
+from sim2radar.reconstruct.backproject import normals_from_points, points_from_depth
 from sim2radar.reconstruct.types import (
     MATERIAL_BACKENDS,
     DepthResult,
@@ -31,7 +37,8 @@ from sim2radar.reconstruct.types import (
 )
 from sim2radar.vocab import MATERIAL_CLASSES, SEMANTIC_CLASSES
 
-__all__ = ["PRIORS", "AppearanceFeatures", "segment_features", "PriorMaterials"]
+__all__ = ["PRIORS", "RULES", "AppearanceFeatures", "SurfaceStructure", "segment_features",
+           "surface_structure", "PriorMaterials"]
 
 #: P(material | semantic label) — plausible building-practice priors for indoor corridors.
 PRIORS: dict[str, dict[str, float]] = {
@@ -62,6 +69,8 @@ class AppearanceFeatures:
     coherence : float — structure-tensor coherence of the band-passed luminance in [0, 1]
         (1 = all texture gradients in one direction: grain, brushing).
     n_px : int — pixels used.
+    structure : SurfaceStructure, optional — joint-line structure in metres (walls, floors,
+        ceilings with depth; ``None`` when not measured).
     """
 
     hue_deg: float
@@ -71,6 +80,7 @@ class AppearanceFeatures:
     grout_frac: float
     coherence: float
     n_px: int
+    structure: SurfaceStructure | None = None
 
 
 def _image_maps(rgb: np.ndarray) -> dict[str, np.ndarray]:
@@ -143,6 +153,8 @@ class SurfaceStructure:
     bond : float — running-bond score: correlation of the vertical-joint profiles of courses
         two apart minus that of adjacent courses (blocks in running bond ≈ 1, tile grids ≈ 0).
     line_frac : float — mean line strength over the rectified cells.
+    mottling : float — robust relative std of the cells' luminance about its 0.2 m-scale local
+        mean (albedo blotches of raw concrete; shading varies more slowly).
     extent_m : float — largest side of the rectified area [m].
     n_cells : int — cells with data (0 when the segment is not measurable).
     """
@@ -153,6 +165,7 @@ class SurfaceStructure:
     score_v: float = 0.0
     bond: float = 0.0
     line_frac: float = 0.0
+    mottling: float = 0.0
     extent_m: float = 0.0
     n_cells: int = 0
 
@@ -160,12 +173,18 @@ class SurfaceStructure:
         return self.score_h >= min_score, self.score_v >= min_score
 
 
+#: Relative darkening below which a pixel is not on a line (denoised render noise ~1 %,
+#: sensor noise ~1-2 %).
+LINE_NOISE_FLOOR = 0.04
+
+
 def _line_strength(rgb: np.ndarray) -> np.ndarray:
-    """(H, W) float32 in [0, 1]: how much darker each pixel is than the 5×5 morphological
-    closing around it (thin dark lines: joints, grout), saturating at 30 %."""
+    """(H, W) float32 ≥ 0: relative darkening of each pixel below the 5×5 morphological
+    closing around it (thin dark lines: joints, grout). :func:`surface_structure` turns it into
+    a line strength in [0, 1] above a per-surface noise floor."""
     gray = cv2.cvtColor(rgb, cv2.COLOR_RGB2GRAY).astype(np.float32) + 1.0
     closed = cv2.morphologyEx(gray, cv2.MORPH_CLOSE, np.ones((5, 5), np.uint8))
-    return np.clip((closed - gray) / closed / 0.3, 0.0, 1.0)
+    return (closed - gray) / closed
 
 
 def _profile_period(coord: np.ndarray, value: np.ndarray, cell_m: float,
@@ -203,7 +222,7 @@ def _profile_period(coord: np.ndarray, value: np.ndarray, cell_m: float,
         return float("nan"), 0.0
     # the fundamental: the shortest lag whose peak is nearly as strong as the strongest
     # (multiples of the spacing correlate as well)
-    best = min(i for i in peaks if seg[i] >= 0.85 * top)
+    best = min(i for i in peaks if seg[i] >= 0.55 * top)
     return float((lo + best) * cell_m), float(seg[best])
 
 
@@ -278,31 +297,56 @@ def _plane_masks(points_cam: np.ndarray, normals: np.ndarray, mask: np.ndarray,
 
 
 def surface_structure(line: np.ndarray, points_cam: np.ndarray, mask: np.ndarray, fx: float,
-                      *, normals: np.ndarray | None = None, vertical_plane: bool | None = None,
-                      cell_m: float | None = None, max_cells: int = 300) -> SurfaceStructure:
+                      *, normals: np.ndarray | None = None, gray: np.ndarray | None = None,
+                      vertical_plane: bool | None = None, cell_m: float | None = None,
+                      max_cells: int = 300) -> SurfaceStructure:
     """Measure the joint-line structure of one segment (see :class:`SurfaceStructure`).
 
     With ``normals`` (H, W, 3) the segment is first split into its largest planes and the
     plane with the most measurable cells is reported; without, the segment is one plane.
+    The mask is eroded by 3 px first: object borders (shadowed corners, door edges) are dark
+    lines that belong to no surface texture.
     """
+    eroded = cv2.erode(np.asarray(mask, np.uint8), np.ones((7, 7), np.uint8)).astype(bool)
+    if eroded.sum() >= 300:
+        mask = eroded
     if normals is None:
-        return _plane_structure(line, points_cam, mask, fx, vertical_plane, cell_m, max_cells)
+        return _plane_structure(line, points_cam, mask, fx, gray, vertical_plane, cell_m,
+                                max_cells)
     best = SurfaceStructure()
     for plane in _plane_masks(points_cam, normals, mask):
-        st = _plane_structure(line, points_cam, plane, fx, vertical_plane, cell_m, max_cells)
+        st = _plane_structure(line, points_cam, plane, fx, gray, vertical_plane, cell_m,
+                              max_cells)
         if st.n_cells > best.n_cells:
             best = st
     return best
 
 
+def _mottling(iu: np.ndarray, iv: np.ndarray, lum: np.ndarray, cell_m: float) -> float:
+    """Robust relative std of cell luminance about its 0.2 m Gaussian local mean."""
+    nu, nv = int(iu.max()) + 1, int(iv.max()) + 1
+    g = np.zeros((nu, nv), np.float32)
+    w = np.zeros((nu, nv), np.float32)
+    np.add.at(g, (iu, iv), lum)
+    np.add.at(w, (iu, iv), 1.0)
+    sigma = 0.2 / cell_m
+    gs = cv2.GaussianBlur(g, (0, 0), sigma)
+    ws = cv2.GaussianBlur(w, (0, 0), sigma)
+    ok = (w > 0) & (ws > 0.3)
+    if ok.sum() < 100:
+        return 0.0
+    r = (g[ok] / w[ok]) / (gs[ok] / ws[ok]) - 1.0
+    return float(1.4826 * np.median(np.abs(r - np.median(r))))
+
+
 def _plane_structure(line: np.ndarray, points_cam: np.ndarray, mask: np.ndarray, fx: float,
-                     vertical_plane: bool | None = None, cell_m: float | None = None,
-                     max_cells: int = 300) -> SurfaceStructure:
+                     gray: np.ndarray | None = None, vertical_plane: bool | None = None,
+                     cell_m: float | None = None, max_cells: int = 300) -> SurfaceStructure:
     """Measure the joint-line structure of one planar segment (see :class:`SurfaceStructure`).
 
     Parameters
     ----------
-    line : (H, W) float — line strength in [0, 1] (:func:`_line_strength`).
+    line : (H, W) float — relative darkening below the local closing (:func:`_line_strength`).
     points_cam : (H, W, 3) float — camera-frame points [m], NaN where no depth.
     mask : (H, W) bool — the segment.
     fx : float [px] — focal length (pixel footprint = depth / fx / cos(incidence)).
@@ -336,6 +380,13 @@ def _plane_structure(line: np.ndarray, points_cam: np.ndarray, mask: np.ndarray,
     if keep.sum() < 300:
         return SurfaceStructure()
     q, val = q[keep] - c, line[ys[keep], xs[keep]].astype(np.float64)
+    # line strength in [0, 1]: darkening above the noise floor of this surface (twice the
+    # median darkening — joints are a minority of pixels — and at least LINE_NOISE_FLOOR),
+    # full strength 25 % above it
+    floor = max(LINE_NOISE_FLOOR, 2.0 * float(np.median(val)))
+    val = np.clip((val - floor) / 0.25, 0.0, 1.0)
+    lum = (gray[ys[keep], xs[keep]].astype(np.float64) if gray is not None
+           else np.ones(len(val)))
     up_cam = np.array([0.0, -1.0, 0.0])
     if vertical_plane is None:
         vertical_plane = abs(nrm @ up_cam) < 0.5
@@ -353,7 +404,7 @@ def _plane_structure(line: np.ndarray, points_cam: np.ndarray, mask: np.ndarray,
     # keep a window of max_cells around the median (nearest, finest part dominates anyway)
     half = max_cells * cell_m / 2
     win = (np.abs(u0 - np.median(u0)) < half) & (np.abs(v0 - np.median(v0)) < half)
-    u0, v0, val = u0[win], v0[win], val[win]
+    u0, v0, val, lum = u0[win], v0[win], val[win], lum[win]
     if len(val) < 300:
         return SurfaceStructure()
     # one sample per cell (mean), so near-range pixels do not outweigh the rest
@@ -366,6 +417,7 @@ def _plane_structure(line: np.ndarray, points_cam: np.ndarray, mask: np.ndarray,
     cl = np.bincount(inv, val) / cnt
     if len(uniq) < 200:
         return SurfaceStructure()
+    mott = _mottling(iu, iv, lum, cell_m) if gray is not None else 0.0
     best = None
     for a in angles:
         ca, sa = np.cos(a), np.sin(a)
@@ -379,35 +431,133 @@ def _plane_structure(line: np.ndarray, points_cam: np.ndarray, mask: np.ndarray,
     _, a, pv, sv, ph, sh, h, v = best
     if not vertical_plane and sh > sv:  # first axis: the one with the stronger lines
         pv, sv, ph, sh, h, v = ph, sh, pv, sv, v, h
-    bond = _bond(h, v, cl, pv, cell_m) if sv >= 0.25 else 0.0
+    # running bond: head joints staggered across the bed joints (either axis may carry them)
+    bond = max(_bond(h, v, cl, pv, cell_m) if sv >= 0.25 else 0.0,
+               _bond(v, h, cl, ph, cell_m) if sh >= 0.25 else 0.0)
     extent = float(max(np.ptp(cu), np.ptp(cv)))
     return SurfaceStructure(period_h_m=pv, score_h=sv, period_v_m=ph, score_v=sh,
-                            bond=float(bond), line_frac=float(cl.mean()), extent_m=extent,
-                            n_cells=len(uniq))
+                            bond=float(bond), line_frac=float(cl.mean()), mottling=mott,
+                            extent_m=extent, n_cells=len(uniq))
 
 
 def _is_wood(f: AppearanceFeatures) -> bool:
     return 12 <= f.hue_deg <= 48 and 0.3 <= f.saturation <= 0.85 and 0.1 <= f.value <= 0.8
 
 
-#: (name, test, {material: likelihood ratio}) — applied in order; each that fires multiplies.
+def _measured(f: AppearanceFeatures) -> bool:
+    return f.structure is not None and f.structure.n_cells >= 300
+
+
+def _score(f: AppearanceFeatures) -> float:
+    return max(f.structure.score_h, f.structure.score_v)
+
+
+def _within(p: float, lo: float, hi: float) -> bool:
+    return bool(np.isfinite(p) and lo <= p <= hi)
+
+
+def _lines(f: AppearanceFeatures, at_least: float) -> bool:
+    return _measured(f) and f.structure.line_frac >= at_least
+
+
+def _running_bond(f: AppearanceFeatures) -> bool:
+    return _measured(f) and _score(f) >= 0.5 and f.structure.bond >= 0.3
+
+
+def _block_courses(f: AppearanceFeatures) -> bool:
+    """Horizontal bed joints every 0.2 m (concrete-block courses)."""
+    st = f.structure
+    return _lines(f, 0.01) and st.score_h >= 0.6 and _within(st.period_h_m, 0.17, 0.23)
+
+
+def _formwork(f: AppearanceFeatures) -> bool:
+    """Horizontal formwork panel joints 0.6 m (or 1.2 m) apart."""
+    st = f.structure
+    return (_lines(f, 0.01) and st.score_h >= 0.25 and st.bond < 0.3
+            and (_within(st.period_h_m, 0.55, 0.72) or _within(st.period_h_m, 1.1, 1.3)))
+
+
+def _tile_grid_wall(f: AppearanceFeatures) -> bool:
+    st = f.structure
+    return (_lines(f, 0.02) and not (_running_bond(f) or _block_courses(f) or _formwork(f))
+            and ((st.score_h >= 0.7 and _within(st.period_h_m, 0.24, 0.4))
+                 or (st.score_v >= 0.7 and _within(st.period_v_m, 0.24, 0.4))))
+
+
+def _ceiling_grid(f: AppearanceFeatures) -> bool:
+    """Suspended ceiling: a square 0.6 m grid (both directions), or a dense dark T-bar grid
+    where only one direction is resolved (grazing views)."""
+    st = f.structure
+    square = (st.score_h >= 0.5 and st.score_v >= 0.5 and _within(st.period_h_m, 0.55, 0.72)
+              and _within(st.period_v_m, 0.55, 0.72))
+    dense = (_lines(f, 0.08) and _score(f) >= 0.5
+             and (_within(st.period_h_m, 0.55, 0.72) or _within(st.period_v_m, 0.55, 0.72)))
+    return _lines(f, 0.01) and (square or dense)
+
+
+def _soffit(f: AppearanceFeatures) -> bool:
+    """Concrete slab soffit: joint lines / mottling, or formwork joints, but no ceiling grid."""
+    return (not _ceiling_grid(f)
+            and (_lines(f, 0.02) or (_formwork(f) and f.structure.score_h >= 0.5)))
+
+
+def _floor_grid(f: AppearanceFeatures) -> bool:
+    return _lines(f, 0.02) and _score(f) >= 0.75
+
+
+#: (name, test, {material: likelihood ratio}, labels or None) — applied in order; each rule that
+#: fires (and applies to the segment's label) multiplies. The joint-line rules use the
+#: rectified :class:`SurfaceStructure` (walls, floors, ceilings; thresholds on the line
+#: fraction separate joints from render/sensor noise, measured on procedural-world renders);
+#: the image-space rules stand in when it could not be measured (too far, small, no depth).
 RULES: tuple = (
     ("wood hue + grain", lambda f: _is_wood(f) and (f.coherence > 0.3 or f.lf_contrast > 0.05),
-     {"wood": 8.0}),
+     {"wood": 8.0}, None),
     ("wood hue", lambda f: _is_wood(f) and f.coherence <= 0.3 and f.lf_contrast <= 0.05,
-     {"wood": 3.0}),
-    ("grout lines", lambda f: f.grout_frac > 0.03 and not _is_wood(f), {"ceramic_tile": 6.0}),
+     {"wood": 3.0}, None),
+    # walls
+    ("running-bond joints (block masonry)", _running_bond,
+     {"concrete": 10.0, "ceramic_tile": 0.3}, ("wall", "unknown")),
+    ("0.2 m block courses", lambda f: _block_courses(f) and not _running_bond(f),
+     {"concrete": 6.0, "ceramic_tile": 0.3}, ("wall", "unknown")),
+    ("formwork panel joints", lambda f: _formwork(f) and not _block_courses(f),
+     {"concrete": 5.0}, ("wall", "unknown")),
+    ("tile grout grid", _tile_grid_wall, {"ceramic_tile": 8.0}, ("wall", "unknown")),
+    ("irregular joint lines", lambda f: _lines(f, 0.02) and not (
+        _running_bond(f) or _block_courses(f) or _formwork(f) or _tile_grid_wall(f)),
+     {"concrete": 2.0}, ("wall", "unknown")),
+    ("smooth paint, no joints", lambda f: _measured(f) and f.structure.line_frac < 0.01,
+     {"plasterboard": 3.0, "concrete": 0.5, "ceramic_tile": 0.3}, ("wall", "unknown")),
+    # floors
+    ("floor grout grid", _floor_grid, {"ceramic_tile": 8.0}, ("floor",)),
+    ("mottled slab, no grid", lambda f: _measured(f) and not _floor_grid(f)
+     and f.structure.line_frac >= 0.004, {"concrete": 4.0, "ceramic_tile": 0.3}, ("floor",)),
+    ("smooth sheet floor, no grid", lambda f: _measured(f) and f.structure.line_frac < 0.004,
+     {"plastic": 6.0, "ceramic_tile": 0.3}, ("floor",)),
+    # ceilings
+    ("suspended-ceiling grid", _ceiling_grid, {"plasterboard": 6.0, "concrete": 0.5},
+     ("ceiling",)),
+    ("concrete soffit (formwork joints, mottling)", lambda f: _soffit(f), {"concrete": 5.0},
+     ("ceiling",)),
+    ("smooth ceiling", lambda f: _measured(f) and f.structure.line_frac < 0.02
+     and not _soffit(f), {"plasterboard": 2.0}, ("ceiling",)),
+    # image-space fallbacks (no measurable structure)
+    ("grout lines", lambda f: not _measured(f) and f.grout_frac > 0.03 and not _is_wood(f),
+     {"ceramic_tile": 6.0}, None),
     # raw concrete (texture contrast 0.10-0.25); lighting and path-tracing noise alone reach
     # ~0.1 of band-pass contrast on plain walls, so only strong mottling counts
-    ("grey mottling", lambda f: f.lf_contrast > 0.12 and f.saturation < 0.2
-     and f.grout_frac < 0.03, {"concrete": 4.0}),
-    ("smooth paint", lambda f: f.lf_contrast < 0.02 and f.grout_frac < 0.01,
-     {"plasterboard": 1.5, "metal": 1.3}),
+    ("grey mottling", lambda f: not _measured(f) and f.lf_contrast > 0.12 and f.saturation < 0.2
+     and f.grout_frac < 0.03, {"concrete": 4.0}, None),
+    ("smooth paint", lambda f: not _measured(f) and f.lf_contrast < 0.02 and f.grout_frac < 0.01,
+     {"plasterboard": 1.5, "metal": 1.3}, None),
     ("brushed streaks", lambda f: f.coherence > 0.6 and f.saturation < 0.15
-     and f.lf_contrast > 0.02, {"metal": 2.0}),
+     and f.lf_contrast > 0.02, {"metal": 2.0}, None),
     ("saturated plain colour", lambda f: f.saturation > 0.45 and f.lf_contrast < 0.03
-     and not _is_wood(f), {"plastic": 2.0}),
+     and not _is_wood(f), {"plastic": 2.0}, None),
 )
+
+#: Labels whose segments get the rectified joint-line measurement.
+STRUCTURE_LABELS = ("wall", "floor", "ceiling")
 
 
 @MATERIAL_BACKENDS.register("prior")
@@ -419,9 +569,12 @@ class PriorMaterials:
     priors : dict, optional — ``{label: {material: probability}}`` overriding :data:`PRIORS`
         per label (each row must use ``vocab.MATERIAL_CLASSES`` names).
     use_rules : bool — False gives the prior's arg-max only.
+    use_structure : bool — measure the rectified joint-line structure of wall / floor /
+        ceiling segments from the depth (False: image-space rules only).
     """
 
-    def __init__(self, priors: dict | None = None, *, use_rules: bool = True) -> None:
+    def __init__(self, priors: dict | None = None, *, use_rules: bool = True,
+                 use_structure: bool = True) -> None:
         table = {k: dict(v) for k, v in PRIORS.items()}
         for label, row in (priors or {}).items():
             if label not in SEMANTIC_CLASSES:
@@ -435,13 +588,16 @@ class PriorMaterials:
             table[label] = {k: float(v) for k, v in row.items()}
         self.priors = table
         self.use_rules = bool(use_rules)
+        self.use_structure = bool(use_structure)
 
     def posterior(self, label: str, features: AppearanceFeatures) -> tuple[dict[str, float], list[str]]:
         """Normalised material distribution for one segment and the names of the rules that fired."""
         post = dict(self.priors.get(label, self.priors["unknown"]))
         fired = []
         if self.use_rules:
-            for name, test, ratios in RULES:
+            for name, test, ratios, labels in RULES:
+                if labels is not None and label not in labels:
+                    continue
                 if test(features):
                     fired.append(name)
                     for mat, r in ratios.items():
@@ -452,9 +608,22 @@ class PriorMaterials:
 
     def label(self, frame: FrameInput, depth: DepthResult, segments: Segments) -> list[MaterialLabel]:
         maps = _image_maps(frame.rgb)
+        points = normals = line = gray = None
+        if self.use_structure and any(lab in STRUCTURE_LABELS for lab in segments.labels):
+            d = np.asarray(depth.depth_m, np.float32)
+            if d.shape == frame.rgb.shape[:2] and np.isfinite(d).any() and (d > 0).any():
+                points = points_from_depth(d, frame.intrinsics)
+                normals = normals_from_points(points, max(1, round(frame.intrinsics.width / 320)))
+                line = _line_strength(frame.rgb)
+                gray = cv2.cvtColor(frame.rgb, cv2.COLOR_RGB2GRAY).astype(np.float32) + 1.0
         out = []
         for k, label in enumerate(segments.labels):
-            feats = _features(maps, segments.segment_id == k)
+            mask = segments.segment_id == k
+            feats = _features(maps, mask)
+            if points is not None and label in STRUCTURE_LABELS:
+                st = surface_structure(line, points, mask, frame.intrinsics.fx, normals=normals,
+                                       gray=gray)
+                feats = dataclasses.replace(feats, structure=st)
             post, fired = self.posterior(label, feats)
             mat = max(post, key=post.get)
             reason = (
@@ -462,5 +631,10 @@ class PriorMaterials:
                 f"sat {feats.saturation:.2f}, mottling {feats.lf_contrast:.3f}, "
                 f"grout {feats.grout_frac:.3f}, coherence {feats.coherence:.2f}"
             )
+            st = feats.structure
+            if st is not None and st.n_cells:
+                reason += (f"; joints: lines {st.line_frac:.3f}, spacing {st.period_h_m:.2f} m "
+                           f"(score {st.score_h:.2f}) / {st.period_v_m:.2f} m "
+                           f"(score {st.score_v:.2f}), bond {st.bond:.2f}")
             out.append(MaterialLabel(mat, float(post[mat]), reason))
         return out

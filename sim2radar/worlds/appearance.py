@@ -114,7 +114,7 @@ def sample_appearance(
     if material == "plasterboard":
         if kind == "ceiling" and u() < 0.6:  # suspended ceiling boards on a 0.6 m grid
             return Appearance(_jitter(rng, _pick(rng, _PAINTS[:3] + [(0.85, 0.85, 0.83)]), 0.04),
-                              u(0.8, 0.95), 0.0, "ceiling_grid", CEILING_GRID_M, u(0.25, 0.4),
+                              u(0.8, 0.95), 0.0, "ceiling_grid", CEILING_GRID_M, u(0.35, 0.5),
                               0.0, seed)
         # smooth paint (a faint orange-peel roller texture at most)
         tex = "plain" if u() < 0.7 else "speckle"
@@ -123,15 +123,16 @@ def sample_appearance(
     if material == "concrete":
         painted = u() < 0.4
         color = _jitter(rng, _pick(rng, _PAINTS if painted else _GREYS))
-        if floor:  # slab: mottling and aggregate speckle (sealed / painted: weaker)
+        if floor:  # slab: blotchy mottling and aggregate speckle (sealed / painted: weaker)
             return Appearance(color, u(0.45, 0.7) if painted else u(0.8, 1.0), 0.0, "mottled",
-                              u(1.0, 2.0), u(0.08, 0.14) if painted else u(0.14, 0.28), 0.0, seed)
+                              u(0.8, 1.5), u(0.15, 0.22) if painted else u(0.22, 0.35), 0.0,
+                              seed)
         if kind != "ceiling" and u() < 0.55:  # concrete-block masonry, running bond
             return Appearance(color, u(0.75, 0.95), 0.0, "blocks", BLOCK_PERIOD_M,
                               u(0.25, 0.35) if painted else u(0.35, 0.5), 0.0, seed)
         # poured concrete: formwork panel joints, tie holes, mottling
         return Appearance(color, u(0.8, 1.0), 0.0, "formwork", FORMWORK_PERIOD_M,
-                          u(0.15, 0.22) if painted else u(0.2, 0.32), 0.0, seed)
+                          u(0.25, 0.32) if painted else u(0.3, 0.42), 0.0, seed)
     if material == "ceramic_tile":
         scale = u(0.3, 0.6) if floor else u(0.25, 0.33)
         return Appearance(_jitter(rng, _pick(rng, _TILES)), u(0.15, 0.45), 0.0, "tiles",
@@ -142,7 +143,7 @@ def sample_appearance(
     if material == "plastic":
         if floor:  # vinyl sheet flooring: fine chip speckle with a sheen, welded seams unseen
             return Appearance(_jitter(rng, _pick(rng, _PLASTICS + _TILES)), u(0.3, 0.5), 0.0,
-                              "speckle", u(0.6, 1.2), u(0.05, 0.12), 0.0, seed)
+                              "speckle", u(0.6, 1.2), u(0.03, 0.07), 0.0, seed)
         return Appearance(_jitter(rng, _pick(rng, _PLASTICS)), u(0.3, 0.6), 0.0, "plain", 1.0,
                           0.0, 0.0, seed)
     return Appearance(_jitter(rng, _pick(rng, _PAINTS)), 0.8, 0.0, "plain", 1.0, 0.0, 0.0, seed)
@@ -211,7 +212,7 @@ def texture_image(app: Appearance, size: int | None = None) -> np.ndarray | None
         mod = np.where(np.maximum(bed, head) > 0, -1.0, mod)
     elif app.texture == "formwork":
         # 1.2 m x 0.6 m panels: thin joints, tie holes, per-panel tone, mottling
-        joint = 0.015 / FORMWORK_PERIOD_M
+        joint = 0.02 / FORMWORK_PERIOD_M
         panel = (y * 2).astype(int) % 2
         mod = (rng.uniform(-0.15, 0.15, 2)[panel] + 0.7 * _periodic_noise(rng, size, 1.3)
                + 0.15 * rng.uniform(-1, 1, (size, size)))
@@ -219,7 +220,7 @@ def texture_image(app: Appearance, size: int | None = None) -> np.ndarray | None
         ties = np.zeros((size, size))
         for cx in (0.25, 0.75):
             for cy in (0.25, 0.75):
-                ties = np.maximum(ties, (np.hypot(x - cx, (y - cy) / 1.0) < 0.012 / 1.2))
+                ties = np.maximum(ties, (np.hypot(x - cx, y - cy) < 0.015 / FORMWORK_PERIOD_M))
         mod = np.where((lines > 0) | (ties > 0), -1.2, mod)
     elif app.texture == "ceiling_grid":
         # 0.6 m boards in a grid of exposed T-bars (the bevelled board edges read as dark lines)
