@@ -64,14 +64,11 @@ class CameraIntrinsics:
     @classmethod
     def from_yaml(cls, path: str | Path) -> CameraIntrinsics:
         """Read ``fx, fy, cx, cy, width, height`` (or ``K: 3x3`` + ``width, height``) from YAML."""
-        import yaml
+        from sim2radar.configio import read_yaml_mapping
 
         path = Path(path)
-        if not path.is_file():
-            raise FileNotFoundError(f"{path}: intrinsics file not found")
-        doc = yaml.safe_load(path.read_text()) or {}
-        if not isinstance(doc, dict):
-            raise ValueError(f"{path}: expected a mapping with fx, fy, cx, cy, width, height")
+        doc = read_yaml_mapping(path, what="intrinsics file", missing_error=FileNotFoundError,
+                                expect="a mapping with fx, fy, cx, cy, width, height")
         try:
             if "K" in doc:
                 return cls.from_matrix(np.asarray(doc["K"]), int(doc["width"]), int(doc["height"]))

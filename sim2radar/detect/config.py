@@ -23,8 +23,9 @@ import math
 from pathlib import Path
 from typing import Any
 
-import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
+
+from sim2radar.configio import read_yaml_mapping
 
 __all__ = [
     "AnchorConfig",
@@ -277,14 +278,8 @@ def load_config(path: str | Path, **overrides: Any) -> DetectConfig:
     FileNotFoundError, ValueError — naming the file and the offending field.
     """
     path = Path(path)
-    if not path.is_file():
-        raise FileNotFoundError(f"detector config {path} does not exist")
-    try:
-        raw = yaml.safe_load(path.read_text()) or {}
-    except yaml.YAMLError as exc:
-        raise ValueError(f"{path}: not valid YAML: {exc}") from exc
-    if not isinstance(raw, dict):
-        raise ValueError(f"{path}: top level must be a mapping of sections, got {type(raw).__name__}")
+    raw = read_yaml_mapping(path, what="detector config", missing_error=FileNotFoundError,
+                            expect="a mapping of sections")
     try:
         cfg = DetectConfig.model_validate(raw)
     except ValidationError as exc:

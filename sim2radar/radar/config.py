@@ -25,9 +25,9 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
+from sim2radar.configio import read_yaml_mapping
 from sim2radar.constants import SPEED_OF_LIGHT_M_S
 from sim2radar.em import get_material
 
@@ -419,12 +419,7 @@ def load_radar_config(name_or_path: str | Path | RadarConfig, **overrides: Any) 
             f"radar config {text!r} is neither a preset nor a file; "
             f"presets: {', '.join(preset_names())}"
         )
-    try:
-        doc = yaml.safe_load(path.read_text())
-    except yaml.YAMLError as exc:
-        raise RadarConfigError(f"{path}: invalid YAML: {exc}") from exc
-    if not isinstance(doc, dict):
-        raise RadarConfigError(f"{path}: expected a mapping of radar fields")
+    doc = read_yaml_mapping(path, error=RadarConfigError, expect="a mapping of radar fields")
     doc = {**doc, **overrides}
     try:
         return RadarConfig.model_validate(doc)

@@ -27,6 +27,7 @@ import yaml
 from pydantic import BaseModel, ConfigDict, Field, field_validator
 
 from sim2radar.camera import CameraIntrinsics
+from sim2radar.configio import read_yaml_mapping
 from sim2radar.mesh import MaterialMesh, save_ply
 from sim2radar.reconstruct.backproject import (
     estimate_up,
@@ -137,11 +138,9 @@ class ReconstructionConfig(BaseModel):
     def from_yaml(cls, path: str | Path) -> ReconstructionConfig:
         """Load a YAML config; relative ``*path*`` options resolve against the file's folder."""
         path = Path(path)
-        if not path.is_file():
-            raise FileNotFoundError(f"{path}: reconstruction config not found")
-        doc = yaml.safe_load(path.read_text()) or {}
-        if not isinstance(doc, dict):
-            raise ValueError(f"{path}: expected a mapping (depth, segments, materials, ...)")
+        doc = read_yaml_mapping(path, what="reconstruction config",
+                                missing_error=FileNotFoundError,
+                                expect="a mapping (depth, segments, materials, ...)")
         for stage in ("depth", "segments", "materials"):
             spec = doc.get(stage)
             if isinstance(spec, str):

@@ -20,9 +20,9 @@ import math
 from pathlib import Path
 from typing import Any
 
-import yaml
 from pydantic import BaseModel, ConfigDict, ValidationError, field_validator, model_validator
 
+from sim2radar.configio import read_yaml_mapping
 from sim2radar.vocab import MATERIAL_CLASSES
 
 __all__ = [
@@ -385,14 +385,8 @@ def make_rig_config(values: dict[str, Any] | None = None, *, source: str = "") -
 def load_worlds_config(path: str | Path) -> tuple[WorldConfig, RigConfig]:
     """Read ``world:`` and ``rig:`` sections from a YAML file (both optional)."""
     path = Path(path)
-    if not path.is_file():
-        raise WorldConfigError(f"{path}: config file not found")
-    try:
-        doc = yaml.safe_load(path.read_text()) or {}
-    except yaml.YAMLError as exc:
-        raise WorldConfigError(f"{path}: invalid YAML: {exc}") from None
-    if not isinstance(doc, dict):
-        raise WorldConfigError(f"{path}: expected a mapping with 'world' and/or 'rig' sections")
+    doc = read_yaml_mapping(path, error=WorldConfigError,
+                            expect="a mapping with 'world' and/or 'rig' sections")
     unknown = sorted(set(doc) - {"world", "rig"})
     if unknown:
         raise WorldConfigError(f"{path}: unknown section(s) {unknown}; allowed: world, rig")
