@@ -1,5 +1,5 @@
 """deploy/prefect.yaml is consistent with the code: entrypoints load, parameters validate,
-schedules parse; scene expansion for deployments."""
+schedules parse, the generate deployments' configs resolve; scene expansion for deployments."""
 
 from __future__ import annotations
 
@@ -26,9 +26,44 @@ def test_deployments_point_at_real_flows_with_valid_parameters(monkeypatch):
         for sched in dep.get("schedules", []) or []:
             CronSchedule(cron=sched["cron"], timezone=sched.get("timezone"))
         assert dep["work_pool"]["name"]
-    assert "nightly-radar" in names
+    assert {"nightly-radar", "radar-on-demand", "nightly-generate", "generate-on-demand"} <= names
     nightly = next(d for d in doc["deployments"] if d["name"] == "nightly-radar")
     assert nightly["schedules"][0]["cron"] == "0 2 * * *"
+
+
+def _deployment(name):
+    doc = yaml.safe_load((REPO / "deploy" / "prefect.yaml").read_text())
+    return next(d for d in doc["deployments"] if d["name"] == name)
+
+
+def test_generate_deployments_resolve_to_the_factory_job(monkeypatch):
+    from prefect.client.schemas.schedules import CronSchedule
+    from prefect.flows import load_flow_from_entrypoint
+
+    from tasks.dataset import resolve_spec
+
+    monkeypatch.chdir(REPO)
+    nightly = _deployment("nightly-generate")
+    flow = load_flow_from_entrypoint(nightly["entrypoint"])
+    assert flow.name == "generate-dataset-job"
+    params = flow.validate_parameters(nightly["parameters"])
+    assert params["n_worlds"] == 8 and params["frames_per_world"] == 8
+    assert params["geometry"] == "reconstructed" and params["export_dir"]
+    assert params["dask_address"] is None and params["workers"] == 1
+    sched = CronSchedule(cron=nightly["schedules"][0]["cron"], timezone="UTC")
+    assert sched.cron == "0 3 * * *"  # after nightly-radar (02:00)
+    # the configs named in the parameters resolve (preset names, radar preset, world/rig)
+    spec = resolve_spec(params["frames_per_world"], params["geometry"], params["radar"],
+                        params["reconstruction"], params["world"], params["rig"],
+                        params["seed"])
+    assert spec.geometries == ("reconstructed",) and spec.frames_per_world == 8
+    assert spec.reconstruction.depth.name == "lidar"  # built-in backends, no weights
+    on_demand = _deployment("generate-on-demand")
+    assert not on_demand.get("schedules")
+    load_flow_from_entrypoint(on_demand["entrypoint"]).validate_parameters(
+        on_demand["parameters"] | {"dask_address": "tcp://127.0.0.1:8786", "workers": 2})
+    with pytest.raises(Exception, match="n_worlds"):
+        flow.validate_parameters({"n_worlds": "many"})
 
 
 def test_expand_scenes_folders_globs_and_files(tmp_path):
