@@ -30,6 +30,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
+from sim2radar.boxes import boxes_to_frame
 from sim2radar.mesh import MaterialMesh, MeshFileError, load_scene
 
 __all__ = [
@@ -37,7 +38,6 @@ __all__ = [
     "load_scene_file",
     "scene_digest",
     "pose_matrix",
-    "boxes_to_frame",
     "check_materials",
     "DEMO_DIR",
     "demo_scene_paths",
@@ -86,7 +86,7 @@ class Scene:
 
     def boxes_in_radar(self, frame_index: int) -> np.ndarray:
         """(M, 7) float32 boxes in the radar frame of ``frame_index`` [m, rad]."""
-        return boxes_to_frame(self.boxes_world, self.radar_poses[frame_index])
+        return boxes_to_frame(self.boxes_world, self.radar_poses[frame_index], period="full")
 
 
 def pose_matrix(
@@ -109,29 +109,6 @@ def pose_matrix(
     m[:3, :3] = rz @ ry @ rx
     m[:3, 3] = p
     return m
-
-
-def boxes_to_frame(boxes_world: np.ndarray, radar_to_world: np.ndarray) -> np.ndarray:
-    """Express world-frame boxes in the radar frame.
-
-    Parameters
-    ----------
-    boxes_world : (M, 7) — x y z dx dy dz heading, world frame [m, rad]
-    radar_to_world : (4, 4) — radar pose [m]
-
-    Returns
-    -------
-    (M, 7) float32 — the same boxes in the radar frame. Centres are exact for any pose; the
-    heading subtracts the radar's yaw, which is exact when the radar has no roll/pitch (boxes
-    stay upright in ``BOX_FIELDS``) and a small-angle approximation otherwise.
-    """
-    b = np.asarray(boxes_world, dtype=np.float64).reshape(-1, 7)
-    m = np.asarray(radar_to_world, dtype=np.float64)
-    rot, t = m[:3, :3], m[:3, 3]
-    centres = (b[:, :3] - t) @ rot  # R^T (c - t), row-vector form
-    yaw = np.arctan2(rot[1, 0], rot[0, 0])
-    heading = np.mod(b[:, 6] - yaw + np.pi, 2 * np.pi) - np.pi
-    return np.concatenate([centres, b[:, 3:6], heading[:, None]], axis=1).astype(np.float32)
 
 
 def check_materials(meshes, where: str) -> None:

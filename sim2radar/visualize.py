@@ -16,18 +16,15 @@ from pathlib import Path
 
 import numpy as np
 
+from sim2radar.boxes import box_corners
+
 __all__ = ["bev_png", "box_corners_xy"]
 
 
 def box_corners_xy(boxes: np.ndarray) -> np.ndarray:
     """(M, 4, 2) corner x, y [m] of boxes ``x y z dx dy dz heading`` (counter-clockwise)."""
-    b = np.asarray(boxes, dtype=np.float64).reshape(-1, 7)
-    half = np.array([[1, 1], [-1, 1], [-1, -1], [1, -1]], dtype=np.float64) * 0.5
-    local = half[None] * b[:, None, 3:5]  # (M, 4, 2) along (dx, dy)
-    c, s = np.cos(b[:, 6])[:, None], np.sin(b[:, 6])[:, None]
-    x = local[..., 0] * c - local[..., 1] * s + b[:, None, 0]
-    y = local[..., 0] * s + local[..., 1] * c + b[:, None, 1]
-    return np.stack([x, y], axis=-1)
+    # bottom corners of sim2radar.boxes.box_corners: (+,+), (-,+), (-,-), (+,-) in (dx, dy)
+    return box_corners(boxes)[:, [6, 2, 0, 4], :2]
 
 
 def bev_png(

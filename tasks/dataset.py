@@ -51,6 +51,7 @@ import pyarrow as pa
 from prefect import task
 from prefect.cache_policies import NO_CACHE
 
+from sim2radar.boxes import boxes_in_view, points_in_boxes, transform_boxes
 from storage import (
     ArtifactStore,
     content_key,
@@ -478,41 +479,8 @@ def read_dataset_frame(store: str | os.PathLike | ArtifactStore, key: str) -> Da
 
 def points_near_boxes(points: np.ndarray, boxes: np.ndarray,
                       margin_m: float = NEAR_BOX_MARGIN_M) -> np.ndarray:
-    """Number of points inside each box grown by ``margin_m`` on every side.
-
-    Parameters
-    ----------
-    points : (N, >=3) — x, y, z [m]; boxes : (M, 7) — ``x y z dx dy dz heading`` [m, rad]
-
-    Returns
-    -------
-    (M,) int32
-    """
-    p = np.asarray(points, np.float64)[:, :3].reshape(-1, 3)
-    b = np.asarray(boxes, np.float64).reshape(-1, 7)
-    out = np.zeros(len(b), np.int32)
-    for j, (cx, cy, cz, dx, dy, dz, h) in enumerate(b):
-        d = p - (cx, cy, cz)
-        c, s = math.cos(h), math.sin(h)
-        u = d[:, 0] * c + d[:, 1] * s  # along the box's dx axis
-        v = -d[:, 0] * s + d[:, 1] * c
-        inside = ((np.abs(u) <= dx / 2 + margin_m) & (np.abs(v) <= dy / 2 + margin_m)
-                  & (np.abs(d[:, 2]) <= dz / 2 + margin_m))
-        out[j] = int(inside.sum())
-    return out
-
-
-def boxes_in_view(boxes: np.ndarray, az_fov_deg: float, el_fov_deg: float,
-                  max_range_m: float) -> np.ndarray:
-    """(M,) bool — box centre in front of the radar, inside its azimuth/elevation FOV (full
-    angles [deg]) and within ``max_range_m`` [m]; the criterion of the world renderer's
-    ``door_in_fov & door_in_range`` flags, applied to reconstructed boxes."""
-    c = np.asarray(boxes, np.float64).reshape(-1, 7)[:, :3]
-    az = np.arctan2(c[:, 1], c[:, 0])
-    el = np.arctan2(c[:, 2], np.hypot(c[:, 0], c[:, 1]))
-    return ((c[:, 0] > 0) & (np.abs(az) <= math.radians(az_fov_deg) / 2)
-            & (np.abs(el) <= math.radians(el_fov_deg) / 2)
-            & (np.linalg.norm(c, axis=1) <= max_range_m))
+    """(M,) int32 — radar points inside each box grown by ``margin_m`` [m] on every side."""
+    return points_in_boxes(points, boxes, margin_m).sum(axis=0).astype(np.int32)
 
 
 def _gt_labels(frame) -> tuple[np.ndarray, np.ndarray]:
@@ -933,7 +901,7 @@ def world_bev_pngs(store, outcomes: list[WorldDatasetOutcome], png_dir: str | os
                 pts.append(p)
                 for b, lab in ((df.boxes, spec.class_name), (df.gt_boxes, "gt")):
                     if len(b) and not (g == "ground_truth" and lab == "gt"):
-                        boxes.append(_move_boxes(b, m))
+                        boxes.append(transform_boxes(b, m, period="full"))
                         labels += [lab] * len(b)
             pts_all = np.concatenate(pts) if pts else np.zeros((0, 4), np.float32)
             box_all = np.concatenate(boxes) if boxes else np.zeros((0, 7), np.float32)
@@ -945,13 +913,6 @@ def world_bev_pngs(store, outcomes: list[WorldDatasetOutcome], png_dir: str | os
                     path=path)
             out.append(str(path))
     return out
-
-
-def _move_boxes(boxes: np.ndarray, m: np.ndarray) -> np.ndarray:
-    b = np.asarray(boxes, np.float64).reshape(-1, 7).copy()
-    b[:, :3] = b[:, :3] @ m[:3, :3].T + m[:3, 3]
-    b[:, 6] += math.atan2(m[1, 0], m[0, 0])
-    return b.astype(np.float32)
 
 
 # ---------------------------------------------------------------------------------------------

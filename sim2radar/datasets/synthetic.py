@@ -14,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
+from sim2radar.boxes import points_in_boxes
 from sim2radar.datasets.openpcdet import Frame, OpenPCDetDataset, write_dataset
 
 __all__ = ["make_door_frames", "write_synthetic_dataset"]
@@ -29,16 +30,6 @@ def _door_points(rng, box: np.ndarray, n: int) -> np.ndarray:
     u[edge] = np.sign(u[edge]) * dx / 2 * rng.uniform(0.85, 1.0, edge.sum())
     c, s = np.cos(h), np.sin(h)
     return np.column_stack([x + u * c - v * s, y + u * s + v * c, z + w])
-
-
-def _inside(points: np.ndarray, boxes: np.ndarray) -> np.ndarray:
-    mask = np.zeros(len(points), dtype=bool)
-    for x, y, z, dx, dy, dz, h in boxes:
-        d = points[:, :3] - [x, y, z]
-        lx = d[:, 0] * np.cos(h) + d[:, 1] * np.sin(h)
-        ly = -d[:, 0] * np.sin(h) + d[:, 1] * np.cos(h)
-        mask |= (np.abs(lx) <= dx / 2) & (np.abs(ly) <= dy / 2) & (np.abs(d[:, 2]) <= dz / 2)
-    return mask
 
 
 def make_door_frames(
@@ -104,7 +95,7 @@ def make_door_frames(
         lat = rng.choice([-half_w, half_w], n_wall) + rng.normal(0, 0.03, n_wall)
         wx, wy = to_radar(a, lat)
         wall = np.column_stack([wx, wy, rng.uniform(floor, floor + 2.6, n_wall)])
-        wall = wall[~_inside(wall, boxes)]
+        wall = wall[~points_in_boxes(wall, boxes).any(axis=1)]
         parts.append(wall)
         intens.append(rng.normal(0.3, 0.08, len(wall)))
         fa, fl = rng.uniform(0.3, 6.0, n_floor), rng.uniform(-half_w, half_w, n_floor)

@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from sim2radar.boxes import box_corners, points_in_boxes
 from sim2radar.datasets.openpcdet import Frame
 from sim2radar.detect.config import AugmentConfig
 from sim2radar.evaluate.iou import bev_iou
@@ -31,30 +32,7 @@ __all__ = [
 ]
 
 
-def points_in_boxes(points: np.ndarray, boxes: np.ndarray) -> np.ndarray:
-    """(N, M) mask: point n lies inside rotated box m (boundaries included).
-
-    points : (N, 3+) [m]; boxes : (M, 7) [m, rad].
-    """
-    if len(boxes) == 0 or len(points) == 0:
-        return np.zeros((len(points), len(boxes)), dtype=bool)
-    d = points[:, None, :3] - boxes[None, :, :3]
-    c, s = np.cos(boxes[:, 6]), np.sin(boxes[:, 6])
-    lx = d[..., 0] * c + d[..., 1] * s
-    ly = -d[..., 0] * s + d[..., 1] * c
-    return ((np.abs(lx) <= boxes[:, 3] / 2) & (np.abs(ly) <= boxes[:, 4] / 2)
-            & (np.abs(d[..., 2]) <= boxes[:, 5] / 2))
-
-
-def box_corners_3d(boxes: np.ndarray) -> np.ndarray:
-    """(M, 8, 3) corners of (M, 7) boxes [m]."""
-    signs = np.array([[sx, sy, sz] for sx in (0.5, -0.5) for sy in (0.5, -0.5)
-                      for sz in (0.5, -0.5)])
-    local = signs[None] * boxes[:, None, 3:6]
-    c, s = np.cos(boxes[:, 6])[:, None], np.sin(boxes[:, 6])[:, None]
-    x = local[..., 0] * c - local[..., 1] * s
-    y = local[..., 0] * s + local[..., 1] * c
-    return np.stack([x, y, local[..., 2]], axis=-1) + boxes[:, None, :3]
+box_corners_3d = box_corners  # OpenPCDet's name
 
 
 def boxes_in_range(boxes: np.ndarray, point_cloud_range_m: Sequence[float]) -> np.ndarray:
