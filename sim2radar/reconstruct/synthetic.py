@@ -27,6 +27,7 @@ import math
 
 import numpy as np
 
+from sim2radar.boxes import boxes_to_frame
 from sim2radar.camera import CameraIntrinsics
 from sim2radar.mesh import MaterialMesh, box_mesh
 from sim2radar.vocab import material_id, semantic_id
@@ -161,16 +162,6 @@ def _texture(hit_world: np.ndarray, inst: np.ndarray, materials: list[str],
 def _rot_z(angle_rad: float) -> np.ndarray:
     c, s = math.cos(angle_rad), math.sin(angle_rad)
     return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
-
-
-def _boxes_to(boxes_world: np.ndarray, frame_to_world: np.ndarray) -> np.ndarray:
-    """Re-express yaw-only boxes in a z-up frame related to the world by a yaw + translation."""
-    inv = np.linalg.inv(frame_to_world)
-    out = boxes_world.astype(np.float64).copy()
-    out[:, :3] = boxes_world[:, :3] @ inv[:3, :3].T + inv[:3, 3]
-    out[:, 6] = boxes_world[:, 6] + math.atan2(inv[1, 0], inv[0, 0])
-    out[:, 6] = (out[:, 6] + np.pi) % (2 * np.pi) - np.pi
-    return out.astype(np.float32)
 
 
 def corridor_frame(
@@ -329,7 +320,7 @@ def corridor_frame(
         rgb=rgb, depth_m=depth, normals=normals, instance_id=inst, semantic_id=semantic,
         material_id=material, lidar_points=lidar, intrinsics=intr,
         camera_to_world=camera_to_world, radar_to_world=radar_to_world,
-        door_boxes_world=boxes_w, door_boxes_radar=_boxes_to(boxes_w, radar_to_world),
+        door_boxes_world=boxes_w, door_boxes_radar=boxes_to_frame(boxes_w, radar_to_world),
         door_visible=np.array([(inst == i).mean() >= 0.002 for i in door_instances], bool),
         meshes=meshes, objects=objects, seed=seed,
     )

@@ -21,6 +21,7 @@ import weakref
 
 import numpy as np
 
+from sim2radar.boxes import boxes_to_frame
 from sim2radar.camera import CameraIntrinsics
 from sim2radar.hardware import mitsuba_variant
 from sim2radar.vocab import material_id, semantic_id
@@ -33,7 +34,6 @@ __all__ = [
     "rig_extrinsics",
     "camera_rays",
     "cast_rays",
-    "boxes_to_frame",
     "RENDER_VERSION",
 ]
 
@@ -202,24 +202,6 @@ def cast_rays(world: World, origins: np.ndarray, directions: np.ndarray) -> dict
     n = np.asarray(si.n, dtype=np.float64).reshape(3, -1).T
     n = np.where(valid[:, None], n, 0.0)
     return {"t": t, "instance": inst, "normal": n}
-
-
-def _half_turn(angle_rad):
-    """Wrap box headings to [-pi/2, pi/2): a box is unchanged by a half turn."""
-    return np.mod(np.asarray(angle_rad) + np.pi / 2, np.pi) - np.pi / 2
-
-
-def boxes_to_frame(boxes_world: np.ndarray, sensor_to_world: np.ndarray) -> np.ndarray:
-    """Express (M, 7) world boxes in a sensor frame whose rotation is a yaw (z-up) [m, rad].
-
-    Headings come back wrapped to [-pi/2, pi/2) (boxes are symmetric under a half turn).
-    """
-    b = np.asarray(boxes_world, dtype=np.float64).reshape(-1, 7)
-    inv = np.linalg.inv(sensor_to_world)
-    c = b[:, :3] @ inv[:3, :3].T + inv[:3, 3]
-    yaw = math.atan2(sensor_to_world[1, 0], sensor_to_world[0, 0])
-    heading = _half_turn(b[:, 6] - yaw)
-    return np.concatenate([c, b[:, 3:6], heading[:, None]], axis=1)
 
 
 def _tonemap(linear: np.ndarray) -> np.ndarray:
