@@ -75,6 +75,19 @@ def progress_callback(fn: Callable[[WorldDatasetOutcome], None]):
         _PROGRESS.remove(fn)
 
 
+def _notify_progress(outcome: WorldDatasetOutcome) -> None:
+    """Call the registered progress callbacks (in the flow process).
+
+    The flow body calls this module-level function instead of reading ``_PROGRESS`` itself:
+    a task runner that ships the flow run context to other processes (Dask) pickles the flow
+    function *by value*, with the globals it names; a callback in ``_PROGRESS`` (a closure over
+    a Rich progress bar, with locks) would not pickle, while a module function pickles by
+    reference.
+    """
+    for fn in list(_PROGRESS):
+        fn(outcome)
+
+
 @flow(name="generate-dataset", task_runner=ThreadPoolTaskRunner(max_workers=1), log_prints=False)
 def generate_dataset_flow(
     seeds: list[int],
@@ -127,8 +140,7 @@ def generate_dataset_flow(
             logger.info("%s: %s, %d frames", outcome.world_id, outcome.status,
                         len(outcome.frames))
         outcomes[seed] = outcome
-        for fn in list(_PROGRESS):
-            fn(outcome)
+        _notify_progress(outcome)
     ordered = [outcomes[int(s)] for s in seeds]
     summary = summarize_dataset(st, dataset, spec, ordered)
     if export_dir is not None:

@@ -76,6 +76,19 @@ def progress_callback(fn: Callable[[SceneOutcome], None]):
         _PROGRESS.remove(fn)
 
 
+def _notify_progress(outcome: SceneOutcome) -> None:
+    """Call the registered progress callbacks (in the flow process).
+
+    The flow body calls this module-level function instead of reading ``_PROGRESS`` itself:
+    a task runner that ships the flow run context to other processes (Dask) pickles the flow
+    function *by value*, with the globals it names; a callback in ``_PROGRESS`` (a closure over
+    a Rich progress bar, with locks) would not pickle, while a module function pickles by
+    reference.
+    """
+    for fn in list(_PROGRESS):
+        fn(outcome)
+
+
 def _check_unique_ids(scenes: Sequence[str]) -> None:
     from tasks.common import scene_id_for
 
@@ -149,8 +162,7 @@ def simulate_flow(
         else:
             logger.info("scene %s: ok, points per frame %s", outcome.scene_id, outcome.n_points)
         outcomes[path] = outcome
-        for fn in list(_PROGRESS):
-            fn(outcome)
+        _notify_progress(outcome)
     summary = summarize(st, dataset, radar, [outcomes[s] for s in scenes])
     counts = summary["counts"]
     logger.info("simulate-radar: %s into %s (dataset %s)", counts, st.root, dataset)

@@ -25,6 +25,14 @@ What crosses to a Dask worker is pickled: the tasks receive plain values only (s
 store paths/URIs, specs as dicts, seeds) and return small dataclasses; arrays travel through
 the artifact store, never through Dask.
 
+Dask's own spill folder on each worker is called ``storage`` and sits in the worker's local
+directory, which Dask puts first on the worker's ``sys.path``: on a worker that cannot see a
+regular ``storage`` package earlier (the repository root on ``sys.path``), ``import storage``
+would find that folder instead of sim2radar's :mod:`storage`. The local cluster therefore runs
+without a memory limit (no spill folder; tasks return small outcomes), and for an external
+scheduler :func:`check_dask_workers` probes every worker first and says how to start them
+(``PYTHONPATH=$PWD dask worker ...`` from the repository root, or ``--memory-limit 0``).
+
 ``prefect-dask`` and ``distributed`` are optional (``pip install 'sim2radar[dask]'``); asking
 for Dask without them raises :class:`ImportError` saying what to install.
 """
@@ -33,7 +41,8 @@ from __future__ import annotations
 
 from typing import Any
 
-__all__ = ["task_runner", "dask_available", "local_cluster_kwargs", "LOCAL"]
+__all__ = ["task_runner", "dask_available", "local_cluster_kwargs", "check_dask_workers",
+           "LOCAL"]
 
 #: The ``dask_address`` value that starts a temporary local cluster.
 LOCAL = "local"
@@ -59,7 +68,8 @@ def local_cluster_kwargs(workers: int) -> dict[str, Any]:
 
     ``workers`` processes with one thread each (a Mitsuba frame is already multi-threaded,
     and one task per process keeps each Dr.Jit/pymeshlab state private), on loopback only,
-    without the Bokeh dashboard.
+    without the Bokeh dashboard, and without a memory limit: no spill folder named
+    ``storage`` that could shadow sim2radar's :mod:`storage` package (module docstring).
     """
     return {
         "n_workers": max(1, int(workers)),
@@ -67,7 +77,82 @@ def local_cluster_kwargs(workers: int) -> dict[str, Any]:
         "processes": True,
         "host": "127.0.0.1",
         "dashboard_address": None,
+        "memory_limit": 0,
     }
+
+
+_PACKAGES = ("sim2radar", "tasks", "storage")
+
+
+def _probe_packages() -> dict[str, str]:
+    """Where each package of the project is imported from, or the import error (runs on a
+    Dask worker)."""
+    import importlib
+
+    out = {}
+    for name in ("sim2radar", "tasks", "storage"):
+        try:
+            mod = importlib.import_module(name)
+            out[name] = getattr(mod, "__file__", None) or "namespace " + str(list(mod.__path__))
+        except Exception as exc:  # noqa: BLE001 - reported back to the caller
+            out[name] = f"ImportError: {type(exc).__name__}: {exc}"
+    return out
+
+
+def _worker_problems(address: str, probes: dict[str, dict[str, str]]) -> list[str]:
+    """Human-readable problems in ``{worker: _probe_packages()}``; empty when all is well."""
+    problems = []
+    for worker, found in sorted(probes.items()):
+        for name in _PACKAGES:
+            where = found.get(name, "missing")
+            if where.startswith("namespace") and name == "storage":
+                problems.append(
+                    f"{worker}: `import storage` finds Dask's spill folder ({where}), not "
+                    "sim2radar's storage package: start the workers from the repository root "
+                    f"with `PYTHONPATH=$PWD dask worker {address} ...` (or `--memory-limit 0`)")
+            elif not where.endswith("__init__.py"):
+                problems.append(f"{worker}: cannot import {name} ({where}): the workers need "
+                                "the same sim2radar checkout/venv as the flow")
+    return problems
+
+
+def check_dask_workers(address: str, timeout_s: float = 10.0) -> dict[str, dict[str, str]]:
+    """Connect to the scheduler at ``address`` and check each worker imports the project.
+
+    Returns
+    -------
+    dict — worker address -> {package: file it was imported from}
+
+    Raises
+    ------
+    ConnectionError
+        No scheduler answers at ``address`` within ``timeout_s`` [s].
+    RuntimeError
+        A worker imports ``storage`` from Dask's spill folder or lacks a package (the message
+        says how to start the workers).
+    """
+    import distributed
+
+    try:
+        client = distributed.Client(address, timeout=timeout_s, set_as_default=False)
+    except (OSError, TimeoutError) as exc:
+        raise ConnectionError(
+            f"no Dask scheduler at {address} ({exc}); start one with `dask scheduler --host "
+            "127.0.0.1` and workers with `PYTHONPATH=$PWD dask worker ADDRESS` from the "
+            "repository root"
+        ) from exc
+    with client:
+        try:
+            probes = client.run(_probe_packages) if client.scheduler_info()["workers"] else {}
+        except Exception as exc:  # noqa: BLE001 - e.g. the workers cannot import `tasks`
+            raise RuntimeError(
+                f"Dask workers at {address} cannot run sim2radar code ({type(exc).__name__}: "
+                f"{exc}); start them with the same checkout/venv: `PYTHONPATH=$PWD dask worker "
+                f"{address}` from the repository root") from exc
+    problems = _worker_problems(address, probes)
+    if problems:
+        raise RuntimeError("Dask workers cannot run sim2radar tasks:\n" + "\n".join(problems))
+    return probes
 
 
 def _check_address(dask_address: str) -> str:
@@ -82,7 +167,7 @@ def _check_address(dask_address: str) -> str:
     return address
 
 
-def task_runner(workers: int = 1, dask_address: str | None = None):
+def task_runner(workers: int = 1, dask_address: str | None = None, *, check: bool = True):
     """The Prefect task runner for ``workers`` and ``dask_address`` (see the module docstring).
 
     Parameters
@@ -91,6 +176,7 @@ def task_runner(workers: int = 1, dask_address: str | None = None):
         (``dask_address="local"``); ignored for an external scheduler (its workers decide).
     dask_address : None (thread pool), ``"local"`` or a Dask scheduler address
         (``tcp://host:8786``).
+    check : for a scheduler address, probe its workers first (:func:`check_dask_workers`).
 
     Returns
     -------
@@ -102,6 +188,8 @@ def task_runner(workers: int = 1, dask_address: str | None = None):
         ``workers < 1`` or an address that is not an address.
     ImportError
         Dask asked for but ``prefect-dask``/``distributed`` are not installed.
+    ConnectionError, RuntimeError
+        See :func:`check_dask_workers`.
     """
     if int(workers) < 1:
         raise ValueError(f"workers must be >= 1, got {workers}")
@@ -121,4 +209,6 @@ def task_runner(workers: int = 1, dask_address: str | None = None):
     if address == LOCAL:
         return DaskTaskRunner(cluster_class="distributed.LocalCluster",
                               cluster_kwargs=local_cluster_kwargs(workers))
+    if check:
+        check_dask_workers(address)
     return DaskTaskRunner(address=address)
