@@ -25,6 +25,9 @@ import math
 
 import numpy as np
 
+from sim2radar.boxes import box_corners as _box_corners
+from sim2radar.boxes import transform_boxes
+
 __all__ = ["DoorFitConfig", "fit_door_box", "fit_door_boxes", "transform_boxes", "box_corners"]
 
 
@@ -34,8 +37,9 @@ class DoorFitConfig:
 
     Attributes
     ----------
-    thickness_m : float [m] — minimum box thickness ``dy``: a door box spans the wall it is set
-        in (procedural worlds: wall 0.10–0.20 m + the frame's 1 cm lips + handles ≈ 0.17–0.27).
+    thickness_m : float [m] — box thickness ``dy`` when the doorway's depth is not seen: a
+        door box is the doorway box, wall + 2 cm deep (procedural worlds: wall 0.10–0.20 m, so
+        0.12–0.22 m; 0.17 m is the mean, ``sim2radar/worlds/frame.py``).
     face_to_center_m : float [m] — how far behind the visible door face the box centre lies when
         no wall is seen next to the door.
     wall_search_m : float [m] — wall points within this distance of the door plane (and within
@@ -52,7 +56,7 @@ class DoorFitConfig:
         run is the door.
     """
 
-    thickness_m: float = 0.22
+    thickness_m: float = 0.17
     face_to_center_m: float = 0.0
     wall_search_m: float = 0.35
     merge_gap_m: float = 0.2
@@ -264,24 +268,8 @@ def fit_door_boxes(segment_points: list[np.ndarray], config: DoorFitConfig = Doo
     return np.stack(boxes).astype(np.float32), out_groups
 
 
-def transform_boxes(boxes: np.ndarray, matrix: np.ndarray) -> np.ndarray:
-    """Re-express boxes in another z-up frame.
-
-    ``matrix`` (4, 4) maps the boxes' frame to the target frame. The centre is transformed
-    exactly; the heading is rotated by the transform's yaw (its rotation is assumed to be about
-    z, which holds between level, world and radar frames up to the gravity-estimate error).
-    """
-    b = np.asarray(boxes, dtype=np.float64).reshape(-1, 7).copy()
-    m = np.asarray(matrix, dtype=np.float64)
-    b[:, :3] = b[:, :3] @ m[:3, :3].T + m[:3, 3]
-    b[:, 6] = _wrap_half(b[:, 6] + math.atan2(m[1, 0], m[0, 0]))
-    return b.astype(np.float32)
-
-
 def box_corners(box: np.ndarray) -> np.ndarray:
-    """(8, 3) corners of one ``x y z dx dy dz heading`` box."""
-    x, y, z, dx, dy, dz, h = (float(v) for v in box)
-    c = np.array([[sx, sy, sz] for sx in (-.5, .5) for sy in (-.5, .5) for sz in (-.5, .5)])
-    c = c * [dx, dy, dz]
-    rot = np.array([[math.cos(h), -math.sin(h), 0], [math.sin(h), math.cos(h), 0], [0, 0, 1]])
-    return c @ rot.T + [x, y, z]
+    """Corners of ``x y z dx dy dz heading`` boxes: (8, 3) for one (7,) box, (M, 8, 3) for
+    (M, 7) boxes (:func:`sim2radar.boxes.box_corners`, same corner order)."""
+    corners = _box_corners(box)
+    return corners[0] if np.ndim(box) == 1 else corners

@@ -86,10 +86,14 @@ class MeshingOptions(BaseModel):
 
 
 class DoorOptions(BaseModel):
-    """See :class:`sim2radar.reconstruct.doors.DoorFitConfig`."""
+    """See :class:`sim2radar.reconstruct.doors.DoorFitConfig`.
+
+    ``thickness_m`` (0.17 m) is the mean depth of the procedural worlds' doorway boxes (wall
+    0.10–0.20 m + 2 cm, ``sim2radar/worlds/frame.py``): the box depth when it is not measured.
+    """
 
     model_config = ConfigDict(frozen=True, extra="forbid")
-    thickness_m: float = 0.22
+    thickness_m: float = 0.17
     face_to_center_m: float = 0.0
     wall_search_m: float = 0.35
     merge_gap_m: float = 0.2

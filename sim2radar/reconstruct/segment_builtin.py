@@ -225,8 +225,9 @@ class BuiltinSegments:
         door_height_m: tuple[float, float] = (1.85, 2.5),
         floor_tolerance_m: float = 0.25,
         offset_thresh_m: float = 0.015,
-        door_thickness_m: float = 0.22,
+        door_thickness_m: float = 0.17,
         fill_no_depth: bool = True,
+        below_floor_m: float = 0.08,
     ) -> None:
         self.normal_thresh_deg = float(normal_thresh_deg)
         self.colour_thresh = float(colour_thresh)
@@ -241,6 +242,7 @@ class BuiltinSegments:
         self.offset_thresh_m = float(offset_thresh_m)
         self.door_thickness_m = float(door_thickness_m)
         self.fill_no_depth = bool(fill_no_depth)
+        self.below_floor_m = float(below_floor_m)
         #: Diagnostics of the last call: up vector, floor / ceiling level, region count.
         self.last_info: dict = {}
         self._pixel_angle: float | None = None
@@ -279,6 +281,9 @@ class BuiltinSegments:
             # region in the image: they get a label and material, but no 3D point
             regions = _fill_nearest(_fill_columns(regions), np.ones_like(valid))
         labels, scores, info = self._label(regions, pl, frame.rgb)
+        rays = points_from_depth(np.ones(frame.shape, np.float32), k) @ rot.T
+        regions, labels, scores = self._below_floor(regions, labels, scores, pl, rays,
+                                                    info["floor_z_m"], info["ceiling_z_m"])
         regions, labels, scores, openings = self._wall_openings(
             regions, labels, scores, pl, info["floor_z_m"], info["ceiling_z_m"])
         info["door_boxes_level"] = openings
@@ -471,6 +476,73 @@ class BuiltinSegments:
             scores.append(score)
         info = {"floor_z_m": float(floor_z), "ceiling_z_m": float(ceil_z)}
         return labels, scores, info
+
+    def _below_floor(self, regions, labels, scores, pl, rays, floor_z, ceil_z):
+        """Pixels that can only be floor (ceiling) by the room's geometry join the floor
+        (ceiling) region.
+
+        * A measured point more than ``below_floor_m`` (+ 1 % of its range) below the floor
+          level (above the ceiling) is impossible in a room: the depth there was extrapolated
+          from a wall (LiDAR completion fills the band under the lowest beam from the nearest
+          beams), and the pixel sees the floor (ceiling) in front of that wall.
+        * With ``fill_no_depth``, a pixel without depth below the lowest (above the highest)
+          measured pixel of its column whose viewing ray points down (up) sees the floor
+          (ceiling).
+
+        Either way the ray must cross the floor (ceiling) plane in front of every large wall
+        plane; otherwise it sees that wall. ``rays`` (H, W, 3) are the level-frame viewing directions (camera z = 1).
+        """
+        valid = np.isfinite(pl).all(axis=-1)
+        h = valid.shape[0]
+        rng = np.linalg.norm(np.where(valid[..., None], pl, 0), axis=-1)
+        tol = self.below_floor_m + 0.01 * rng
+        with np.errstate(invalid="ignore"):
+            floor_px = valid & (pl[..., 2] < floor_z - tol)
+            ceil_px = valid & (pl[..., 2] > ceil_z + tol)
+        rows = np.arange(h)[:, None]
+        has = valid.any(axis=0)
+        first = np.where(has, np.argmax(valid, axis=0), h)
+        last = np.where(has, h - 1 - np.argmax(valid[::-1], axis=0), -1)
+        if self.fill_no_depth:
+            floor_px |= ~valid & (rows > last[None, :]) & (rays[..., 2] < -0.02)
+            ceil_px |= ~valid & (rows < first[None, :]) & (rays[..., 2] > 0.02)
+        # the ray must reach the floor (ceiling) plane in front of every large wall plane:
+        # otherwise the pixel sees the wall's lower (upper) part
+        n_reg = len(labels)
+        cnt = np.bincount(regions[regions >= 0], minlength=n_reg)
+        walls = [i for i in np.argsort(-cnt)[:8] if labels[i] == "wall"
+                 and cnt[i] > 0.01 * valid.sum()]
+        for px, level in ((floor_px, floor_z), (ceil_px, ceil_z)):
+            with np.errstate(invalid="ignore", divide="ignore"):
+                t = level / rays[..., 2]
+            q = rays * t[..., None]
+            for wi in walls:
+                g = region_geometry(pl, regions == wi, pixel_angle_rad=self._pixel_angle)
+                if g.vertical_cos > 0.2:
+                    continue
+                nrm = np.array([g.normal[0], g.normal[1], 0.0])
+                nrm /= np.linalg.norm(nrm)
+                wp = pl[(regions == wi) & valid]
+                d = float(np.median(wp @ nrm))
+                if d > -0.3:
+                    continue
+                with np.errstate(invalid="ignore"):
+                    px &= ~(q @ nrm < d - 0.05)
+        labels, scores = list(labels), list(scores)
+        regions = regions.copy()
+        for px, name in ((floor_px, "floor"), (ceil_px, "ceiling")):
+            if px.sum() < 10:
+                continue
+            ids = [i for i, lab in enumerate(labels) if lab == name]
+            if ids:
+                cnt = np.bincount(regions[regions >= 0], minlength=len(labels))
+                target = max(ids, key=lambda i: cnt[i])
+            else:
+                target = len(labels)
+                labels.append(name)
+                scores.append(0.6)
+            regions[px] = target
+        return regions, labels, scores
 
     def _wall_openings(self, regions, labels, scores, pl, floor_z, ceil_z):
         """Doors and windows set into walls: pixels seen *behind* a wall plane through a

@@ -85,3 +85,19 @@ def test_labels_are_in_the_vocabulary(frames):
     no_fill = BuiltinSegments(fill_no_depth=False).segment(
         FrameInput(f.rgb, f.intrinsics), DepthResult(np.where(np.arange(f.depth_m.shape[0])[:, None] > 150, 0, f.depth_m)))
     assert (no_fill.segment_id[151:] == -1).all() and (no_fill.segment_id[:150] >= 0).all()
+
+
+@pytest.mark.parametrize("corruption", ["missing", "extrapolated"])
+def test_floor_band_without_true_depth_is_floor(frames, corruption):
+    # LiDAR-completed depth: no depth under the lowest beam, or depth extrapolated from the
+    # walls (points below the floor). Both bands see the floor.
+    f = frames[0]
+    band = np.arange(f.depth_m.shape[0])[:, None] >= 150
+    bad = np.where(band, 0.0 if corruption == "missing" else 3.0 * f.depth_m, f.depth_m)
+    seg = BuiltinSegments().segment(FrameInput(f.rgb, f.intrinsics), DepthResult(bad))
+    gt_floor = (f.semantic_id == semantic_id("floor")) & band
+    assert gt_floor.sum() > 500
+    pred_floor = _semantic(seg) == semantic_id("floor")
+    assert (pred_floor & gt_floor).sum() / gt_floor.sum() > 0.9
+    # the walls in the band (their rays meet the floor plane behind the wall) stay walls
+    assert (pred_floor & band & ~gt_floor).sum() < 0.05 * (band & ~gt_floor).sum()
