@@ -54,6 +54,9 @@ class DoorFitConfig:
         before measuring extents (when at least half the points remain).
     split_gap_m : float [m] — a gap this wide along the wall splits the points; the largest
         run is the door.
+    min_top_m : float [m] — with a known floor, a box whose top is lower than this above the
+        floor is raised to it (the upper part of a door lost by segmentation; doorways are
+        2.06–2.26 m high in the procedural worlds). 0 disables it.
     """
 
     thickness_m: float = 0.17
@@ -66,6 +69,7 @@ class DoorFitConfig:
     min_points: int = 20
     inlier_m: float = 0.04
     split_gap_m: float = 0.25
+    min_top_m: float = 0.0
 
 
 def _wrap_half(angle: float | np.ndarray):
@@ -186,6 +190,8 @@ def fit_door_box(points_level: np.ndarray, config: DoorFitConfig = DoorFitConfig
     z0, z1 = np.percentile(p[:, 2], [1, 99])
     if floor_z_m is not None and 0 < z0 - floor_z_m < config.snap_to_floor_m:
         z0 = floor_z_m
+    if floor_z_m is not None and z0 - floor_z_m < config.snap_to_floor_m:
+        z1 = max(z1, floor_z_m + config.min_top_m)
     thick = t1 - t0
     tc = 0.5 * (t0 + t1)
     if wall_face is not None:

@@ -99,10 +99,11 @@ class DoorOptions(BaseModel):
     merge_gap_m: float = 0.2
     merge_offset_m: float = 0.15
     merge_angle_deg: float = 15.0
-    snap_to_floor_m: float = 0.3
+    snap_to_floor_m: float = 0.8
     min_points: int = 20
     inlier_m: float = 0.04
     split_gap_m: float = 0.25
+    min_top_m: float = 2.0
     #: width given to a door cut by the left/right image border when less of it is seen [m]
     nominal_width_m: float = 0.95
 

@@ -228,6 +228,7 @@ class BuiltinSegments:
         door_thickness_m: float = 0.17,
         fill_no_depth: bool = True,
         below_floor_m: float = 0.08,
+        door_partial: bool = True,
     ) -> None:
         self.normal_thresh_deg = float(normal_thresh_deg)
         self.colour_thresh = float(colour_thresh)
@@ -243,6 +244,7 @@ class BuiltinSegments:
         self.door_thickness_m = float(door_thickness_m)
         self.fill_no_depth = bool(fill_no_depth)
         self.below_floor_m = float(below_floor_m)
+        self.door_partial = bool(door_partial)
         #: Diagnostics of the last call: up vector, floor / ceiling level, region count.
         self.last_info: dict = {}
         self._pixel_angle: float | None = None
@@ -647,6 +649,13 @@ class BuiltinSegments:
         if (on_floor and below_ceiling and w_lo <= g.width_m <= w_hi
                 and h_lo <= g.height_m <= h_hi and g.fill > 0.5):
             return "door", float(min(0.9, 0.5 + 0.4 * g.fill))
+        if (self.door_partial and g.z_min_m < floor_z + 0.6 and below_ceiling
+                and 0.3 <= g.width_m <= w_hi and 1.1 <= g.height_m <= h_hi
+                and g.z_max_m - floor_z <= h_hi + 0.1 and g.fill > 0.6 and g.planarity < 0.03):
+            # a door fragment: LiDAR completion smears the leaf's lower / upper band into the
+            # wall or floor; tall, narrow, planar and near the floor (its box is completed to
+            # the floor and the doorway height by the door fit)
+            return "door", 0.4
         if (g.width_m > 0.8 and g.height_m < 0.2 and 0.6 < rel_bottom < 1.2):
             return "handrail", 0.6
         if (0.4 < rel_bottom < 1.5 and below_ceiling and 0.4 <= g.width_m <= 3.0

@@ -109,3 +109,26 @@ def test_box_is_centred_in_the_wall_around_a_recessed_door():
     assert box[4] == pytest.approx(0.2)
     no_wall = fit_door_box(door, DoorFitConfig(thickness_m=0.2, face_to_center_m=0.0))
     assert no_wall[1] == pytest.approx(1.1, abs=0.01)  # the door face itself
+
+
+def test_a_door_fragment_near_the_floor_is_completed_to_the_doorway_height():
+    # only 0.5-1.6 m above the floor seen (LiDAR-completed depth lost the rest)
+    frag = _door_face([3.0, 1.0], 0.9, 1.1, 0.0, floor_z=-0.8)
+    cfg = DoorFitConfig(snap_to_floor_m=0.8, min_top_m=2.0)
+    box = fit_door_box(frag, cfg, floor_z_m=-1.3)
+    assert box[2] - box[5] / 2 == pytest.approx(-1.3, abs=0.02)  # bottom on the floor
+    assert box[2] + box[5] / 2 == pytest.approx(0.7, abs=0.02)  # top 2.0 m above it
+    # a tall region whose bottom is far above the floor (a window, a sign) is left alone
+    high = _door_face([3.0, 1.0], 0.9, 0.8, 0.0, floor_z=0.0)
+    box = fit_door_box(high, cfg, floor_z_m=-1.3)
+    assert box[5] == pytest.approx(0.8, abs=0.03)
+    # default config (min_top_m 0): heights as measured
+    assert fit_door_box(frag, floor_z_m=-1.3)[5] == pytest.approx(1.1, abs=0.03)
+
+
+def test_box_corners_single_and_batched():
+    box = np.array([1.0, 2.0, 0.5, 0.9, 0.17, 2.1, 0.3])
+    one, many = box_corners(box), box_corners(np.stack([box, box]))
+    assert one.shape == (8, 3) and many.shape == (2, 8, 3)
+    assert np.allclose(many[1], one)
+    assert np.allclose(one.mean(axis=0), box[:3])
