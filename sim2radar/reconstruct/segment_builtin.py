@@ -20,6 +20,13 @@ No learned weights. The method, step by step:
    ending below the ceiling; ``window`` when a wall-set rectangle with a sill; ``handrail`` when
    long, thin and at hand height; small red regions ``fire_extinguisher``; remaining large
    vertical regions ``wall``; the rest ``clutter``.
+6. Floor and ceiling by room geometry: points below the floor level (above the ceiling) —
+   depth a LiDAR completion extrapolated from a wall into the band under its lowest beam — and
+   pixels without depth under the lowest (over the highest) measured pixel of their column
+   are floor (ceiling) when their viewing ray meets that plane in front of every wall plane.
+7. Wall openings: pixels seen behind a wall plane through a rectangle of it are doors (bottom
+   near the floor, door height) or windows (with a sill); their doorway boxes are measured on
+   the wall plane.
 """
 
 from __future__ import annotations
@@ -208,7 +215,11 @@ class BuiltinSegments:
     (0.06), ``merge_colour_thresh`` (ΔE 12), ``fill_no_depth`` (True: pixels without depth join
     the nearest region), ``door_width_m`` ((0.55, 2.0)), ``door_height_m``
     ((1.85, 2.5)), ``floor_tolerance_m`` (0.25), ``offset_thresh_m`` (0.015; plane-offset step
-    between neighbours, plus 0.4 % of the depth).
+    between neighbours, plus 0.4 % of the depth), ``door_thickness_m`` (0.17; depth of the
+    doorway boxes measured from wall openings), ``below_floor_m`` (0.08; points this far below
+    the floor / above the ceiling are floor / ceiling), ``door_partial`` (True: tall planar
+    fragments standing near the floor are doors), ``door_bottom_max_m`` (0.6; an opening of
+    door height whose bottom is lower than this is a door, higher a window).
     """
 
     def __init__(
@@ -229,6 +240,7 @@ class BuiltinSegments:
         fill_no_depth: bool = True,
         below_floor_m: float = 0.08,
         door_partial: bool = True,
+        door_bottom_max_m: float = 0.6,
     ) -> None:
         self.normal_thresh_deg = float(normal_thresh_deg)
         self.colour_thresh = float(colour_thresh)
@@ -245,6 +257,7 @@ class BuiltinSegments:
         self.fill_no_depth = bool(fill_no_depth)
         self.below_floor_m = float(below_floor_m)
         self.door_partial = bool(door_partial)
+        self.door_bottom_max_m = float(door_bottom_max_m)
         #: Diagnostics of the last call: up vector, floor / ceiling level, region count.
         self.last_info: dict = {}
         self._pixel_angle: float | None = None
@@ -613,11 +626,16 @@ class BuiltinSegments:
                 width, bottom, top = a1 - a0, b0 - floor_z, b1 - floor_z
                 recess = m & (behind < 0.35)
                 kind = None
-                if (bottom < 0.25 and self.door_width_m[0] <= width <= self.door_width_m[1] + 0.15
+                # doors stand on the floor, windows have a sill (>= 0.8 m in the procedural
+                # worlds); LiDAR-completed depth often loses an opening's lowest band, so a
+                # door-height opening whose bottom is below ``door_bottom_max_m`` is a door
+                if (bottom < self.door_bottom_max_m
+                        and self.door_width_m[0] <= width <= self.door_width_m[1] + 0.15
                         and self.door_height_m[0] - 0.1 <= top <= self.door_height_m[1] + 0.1
                         and b1 < ceil_z - 0.1):
                     kind = "door"
-                elif 0.4 < bottom < 1.4 and 0.4 <= width <= 3.0 and 0.4 <= b1 - b0 <= 2.0:
+                elif (max(0.4, self.door_bottom_max_m) < bottom < 1.4 and 0.4 <= width <= 3.0
+                      and 0.4 <= b1 - b0 <= 2.0):
                     kind = "window"
                 if kind is None:
                     continue
