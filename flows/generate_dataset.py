@@ -23,6 +23,7 @@ worker process selects its own Mitsuba variant.
 
 from __future__ import annotations
 
+import importlib
 import os
 from collections.abc import Callable, Sequence
 from contextlib import contextmanager
@@ -233,7 +234,11 @@ def generate_dataset_job(
     backends); ``world`` / ``rig`` dicts of WorldConfig / RigConfig fields. Relative paths
     resolve against the worker's working directory.
     """
-    return generate_dataset(
+    # Prefect loads a deployment's entrypoint file as a top-level module ("generate_dataset");
+    # objects from that copy would pickle by reference to a module Dask's scheduler and workers
+    # cannot import. Run the package's copy of the flow instead (the same code).
+    package = importlib.import_module("flows.generate_dataset")
+    return package.generate_dataset(
         n_worlds=n_worlds, frames_per_world=frames_per_world, store=store, dataset=dataset,
         radar=radar, geometry=geometry, reconstruction=reconstruction, world=world, rig=rig,
         seed=seed, export_dir=export_dir, first_seed=first_seed, class_name=class_name,

@@ -23,6 +23,7 @@ LocalCluster of ``workers`` processes) uses ``prefect_dask.DaskTaskRunner`` (``p
 
 from __future__ import annotations
 
+import importlib
 import os
 from collections.abc import Callable, Sequence
 from contextlib import contextmanager
@@ -213,7 +214,11 @@ def simulate_dataset(
     """Deployment entry point (see ``deploy/prefect.yaml``): expand scene files / folders /
     globs and run :func:`simulate_flow` as a subflow on the chosen task runner (threads, or
     Dask with ``dask_address`` = scheduler address or ``"local"``)."""
-    return run_simulation(
+    # Prefect loads a deployment's entrypoint file as a top-level module ("simulate"); objects
+    # from that copy would pickle by reference to a module Dask's scheduler and workers cannot
+    # import. Run the package's copy of the flow instead (the same code).
+    package = importlib.import_module("flows.simulate")
+    return package.run_simulation(
         expand_scenes(scenes),
         radar=radar,
         store=store,

@@ -10,12 +10,15 @@ from __future__ import annotations
 
 import os
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
+from prefect.flows import load_flow_from_entrypoint
 
 from tests.flows._scenes import RADAR_POSITION, RADAR_YAW_DEG, write_scene
 
+REPO = Path(__file__).resolve().parents[2]
 WORLD = {"corridor_length_m": [10, 12], "layout_probs": {"straight": 1.0}}
 RIG = {"width": 80, "height": 60, "spp": 2, "lidar_azimuth_step_deg": 1.0}
 BROKEN_SEED = -1  # world generation refuses negative seeds
@@ -134,9 +137,12 @@ def test_simulate_flow_on_dask_matches_threads(cluster, prefect_server, tmp_path
     strongest = pd[0][np.argmax(pd[0][:, 3])]
     assert abs(np.linalg.norm(strongest[:3]) - 2.0) < 0.1
 
+    # second run through the deployment entrypoint (Prefect loads the file as a module of its
+    # own; what reaches the workers must still unpickle there)
     before = _parquet_mtimes(dask_root)
-    again = run_simulation(scenes, store=dask_root, dataset="d",
-                           dask_address=cluster.scheduler_address)
+    job = load_flow_from_entrypoint(f"{REPO}/flows/simulate.py:simulate_dataset")
+    again = job(scenes=[str(s) for s in scenes], store=str(dask_root), dataset="d",
+                dask_address=cluster.scheduler_address)
     assert again["counts"] == {"ok": 0, "skipped": 1, "failed": 1}
     assert _parquet_mtimes(dask_root) == before
     rows = {r["scene_id"]: r for r in ArtifactStore(dask_root).manifest("d").rows()}
@@ -181,9 +187,12 @@ def test_generate_flow_on_dask_matches_threads(cluster, prefect_server, tmp_path
     ids += OpenPCDetDataset(dask_root / "opd" / "ground_truth").split_ids("test")
     assert sorted(ids) == ["world_000005_f000", "world_000006_f000"]
 
+    # second run through the deployment entrypoint (as `prefect deploy` runs it): all cached
     before = _parquet_mtimes(dask_root / "store")
-    again = generate_dataset(store=dask_root / "store", dask_address=cluster.scheduler_address,
-                             **args)
-    assert again["counts"] == {"ok": 0, "skipped": 2, "failed": 1}
+    job = load_flow_from_entrypoint(f"{REPO}/flows/generate_dataset.py:generate_dataset_job")
+    again = job(first_seed=5, n_worlds=2, frames_per_world=1, store=str(dask_root / "store"),
+                dataset="g", radar=radar.model_dump(mode="json"), geometry="both",
+                world=WORLD, rig=RIG, dask_address=cluster.scheduler_address)
+    assert again["counts"] == {"ok": 0, "skipped": 2, "failed": 0}
     assert again["frame_counts"]["skipped"] == 2
     assert _parquet_mtimes(dask_root / "store") == before
