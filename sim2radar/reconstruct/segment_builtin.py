@@ -241,6 +241,7 @@ class BuiltinSegments:
         below_floor_m: float = 0.08,
         door_partial: bool = True,
         door_bottom_max_m: float = 0.6,
+        grow_colour: float = 15.0,
     ) -> None:
         self.normal_thresh_deg = float(normal_thresh_deg)
         self.colour_thresh = float(colour_thresh)
@@ -258,6 +259,7 @@ class BuiltinSegments:
         self.below_floor_m = float(below_floor_m)
         self.door_partial = bool(door_partial)
         self.door_bottom_max_m = float(door_bottom_max_m)
+        self.grow_colour = float(grow_colour)
         #: Diagnostics of the last call: up vector, floor / ceiling level, region count.
         self.last_info: dict = {}
         self._pixel_angle: float | None = None
@@ -296,6 +298,9 @@ class BuiltinSegments:
             # region in the image: they get a label and material, but no 3D point
             regions = _fill_nearest(_fill_columns(regions), np.ones_like(valid))
         labels, scores, info = self._label(regions, pl, frame.rgb)
+        if self.door_partial:
+            regions, labels, scores = self._grow_doors(regions, labels, scores, pl, lab,
+                                                       info["floor_z_m"], info["ceiling_z_m"])
         rays = points_from_depth(np.ones(frame.shape, np.float32), k) @ rot.T
         regions, labels, scores = self._below_floor(regions, labels, scores, pl, rays,
                                                     info["floor_z_m"], info["ceiling_z_m"])
@@ -491,6 +496,69 @@ class BuiltinSegments:
             scores.append(score)
         info = {"floor_z_m": float(floor_z), "ceiling_z_m": float(ceil_z)}
         return labels, scores, info
+
+    def _grow_doors(self, regions, labels, scores, pl, lab, floor_z, ceil_z):
+        """Complete door leaves from their lower fragment by colour.
+
+        LiDAR-completed depth blurs a leaf into its wall, so often only the leaf's lower part
+        survives as a region (labelled clutter or a small wall) and its upper part joins the
+        wall. For each vertical fragment standing on the floor (bottom within
+        ``door_bottom_max_m``) whose mean colour differs from its wall's (ΔE > ``grow_colour``),
+        the pixels within its image columns that are connected to it and of its colour
+        (ΔE < ``grow_colour``) are taken; if that grown region is a door (door width, top at
+        door height, below the ceiling) it becomes a ``door`` region."""
+        n = len(labels)
+        flat = regions.ravel()
+        ok = flat >= 0
+        cnt = np.bincount(flat[ok], minlength=n).astype(np.float64)
+        n_valid = int(np.isfinite(pl[..., 2]).sum())
+        col = np.stack([np.bincount(flat[ok], lab[..., c].ravel()[ok], minlength=n)
+                        for c in range(3)], 1) / np.maximum(cnt, 1)[:, None]
+        big_wall = np.array([lbl == "wall" and cnt[i] >= 0.02 * n_valid
+                             for i, lbl in enumerate(labels)], bool)
+        labels, scores = list(labels), list(scores)
+        regions = regions.copy()
+        h, w = regions.shape
+        taken = np.zeros((h, w), bool)
+        for i in np.argsort(-cnt):
+            i = int(i)
+            if cnt[i] < 100 or labels[i] not in ("clutter", "wall", "window") or big_wall[i]:
+                continue
+            mask = regions == i
+            if (mask & taken).any():
+                continue
+            g = region_geometry(pl, mask, max_points=1500, pixel_angle_rad=self._pixel_angle)
+            if (g.vertical_cos > 0.3 or g.z_min_m > floor_z + self.door_bottom_max_m
+                    or g.width_m > self.door_width_m[1]):
+                continue
+            ys, xs = np.nonzero(mask)
+            x0, x1 = xs.min(), xs.max() + 1
+            close = np.linalg.norm(lab - col[i], axis=-1) < self.grow_colour
+            allowed = np.zeros((h, w), bool)
+            allowed[:, x0:x1] = True
+            grow = close & allowed & (regions >= 0) & ~taken
+            grow &= np.isin(regions, np.flatnonzero(
+                [labels[j] in ("wall", "clutter", "window", "door") for j in range(n)]))
+            grow |= mask
+            ncc, cc = cv2.connectedComponents(grow.astype(np.uint8), connectivity=4)
+            ids = np.unique(cc[mask])
+            grown = np.isin(cc, ids[ids > 0])
+            # the wall the grown pixels came from must differ in colour from the leaf
+            donors = np.unique(regions[grown & ~mask])
+            if any(big_wall[j] and np.linalg.norm(col[j] - col[i]) < self.grow_colour
+                   for j in donors):
+                continue
+            gg = region_geometry(pl, grown, pixel_angle_rad=self._pixel_angle)
+            top = gg.z_max_m - floor_z
+            if (gg.vertical_cos < 0.3 and gg.z_min_m < floor_z + self.door_bottom_max_m
+                    and self.door_height_m[0] - 0.1 <= top <= self.door_height_m[1] + 0.1
+                    and self.door_width_m[0] <= gg.width_m <= self.door_width_m[1]
+                    and gg.z_max_m < ceil_z - 0.1):
+                regions[grown] = i
+                labels[i] = "door"
+                scores[i] = 0.5
+                taken |= grown
+        return regions, labels, scores
 
     def _below_floor(self, regions, labels, scores, pl, rays, floor_z, ceil_z):
         """Pixels that can only be floor (ceiling) by the room's geometry join the floor
