@@ -56,7 +56,9 @@ class DoorFitConfig:
         run is the door.
     min_top_m : float [m] — with a known floor, a box whose top is lower than this above the
         floor is raised to it (the upper part of a door lost by segmentation; doorways are
-        2.06–2.26 m high in the procedural worlds). 0 disables it.
+        2.06–2.26 m high in the procedural worlds), and a box whose top lies at doorway height
+        (``min_top_m`` − 0.25 to + 0.6 above the floor) is extended down to the floor (its lower
+        part lost). 0 disables both.
     """
 
     thickness_m: float = 0.17
@@ -192,6 +194,11 @@ def fit_door_box(points_level: np.ndarray, config: DoorFitConfig = DoorFitConfig
         z0 = floor_z_m
     if floor_z_m is not None and z0 - floor_z_m < config.snap_to_floor_m:
         z1 = max(z1, floor_z_m + config.min_top_m)
+    if (floor_z_m is not None and config.min_top_m > 0
+            and config.min_top_m - 0.25 <= z1 - floor_z_m <= config.min_top_m + 0.6):
+        # the top of a door at doorway height: doors stand on the floor, so the bottom
+        # (hidden, or split off by segmentation) is the floor
+        z0 = min(z0, floor_z_m)
     thick = t1 - t0
     tc = 0.5 * (t0 + t1)
     if wall_face is not None:

@@ -479,11 +479,13 @@ def reconstruct(
     boxes = _complete_cut_doors(boxes, groups, door_ids, seg, level, k,
                                 config.doors.nominal_width_m)
     # door openings the segmentation measured on wall planes (e.g. open doors: no leaf pixels
-    # in the wall), kept where no fitted box lies within 0.5 m
+    # in the wall), kept where no fitted box lies within 0.5 m or overlaps it along the wall
     openings = np.asarray(getattr(seg_be, "last_info", {}).get("door_boxes_level", []),
                           np.float32).reshape(-1, 7)
     for box in openings:
-        if not len(boxes) or np.min(np.linalg.norm(boxes[:, :2] - box[:2], axis=1)) > 0.5:
+        near = (np.linalg.norm(boxes[:, :2] - box[:2], axis=1)
+                - np.maximum(0.5, 0.5 * (boxes[:, 3] + box[3]))) if len(boxes) else [1.0]
+        if np.min(near) > 0:
             boxes = np.vstack([boxes, box[None]]).astype(np.float32)
     timings["doors"] = time.perf_counter() - t
     timings["total"] = time.perf_counter() - t0

@@ -122,6 +122,11 @@ def test_a_door_fragment_near_the_floor_is_completed_to_the_doorway_height():
     high = _door_face([3.0, 1.0], 0.9, 0.8, 0.0, floor_z=0.0)
     box = fit_door_box(high, cfg, floor_z_m=-1.3)
     assert box[5] == pytest.approx(0.8, abs=0.03)
+    # only the upper part seen (top at doorway height): the box reaches down to the floor
+    upper = _door_face([3.0, 1.0], 0.9, 0.9, 0.0, floor_z=-0.15)  # top 2.05 m above the floor
+    box = fit_door_box(upper, cfg, floor_z_m=-1.3)
+    assert box[2] - box[5] / 2 == pytest.approx(-1.3, abs=0.02)
+    assert box[5] == pytest.approx(2.05, abs=0.03)
     # default config (min_top_m 0): heights as measured
     assert fit_door_box(frag, floor_z_m=-1.3)[5] == pytest.approx(1.1, abs=0.03)
 
