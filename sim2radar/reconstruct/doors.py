@@ -28,7 +28,8 @@ import numpy as np
 from sim2radar.boxes import box_corners as _box_corners
 from sim2radar.boxes import transform_boxes
 
-__all__ = ["DoorFitConfig", "fit_door_box", "fit_door_boxes", "transform_boxes", "box_corners"]
+__all__ = ["DoorFitConfig", "fit_door_box", "fit_door_boxes", "dedupe_boxes", "transform_boxes",
+           "box_corners"]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -279,6 +280,39 @@ def fit_door_boxes(segment_points: list[np.ndarray], config: DoorFitConfig = Doo
         boxes.append(fit_door_box(p, config, floor_z_m, pixel_angle_rad, wall_points))
         out_groups.append(sorted(members))
     return np.stack(boxes).astype(np.float32), out_groups
+
+
+def dedupe_boxes(boxes: np.ndarray, max_angle_deg: float = 15.0,
+                 max_offset_m: float = 0.3) -> np.ndarray:
+    """Drop door boxes that duplicate a wider one: near-parallel (headings within
+    ``max_angle_deg``), in the same wall (centres within ``max_offset_m`` across it) and
+    overlapping it along the wall. Two fragments of one doorway (e.g. a leaf fit and a
+    wall-opening measurement) would otherwise count once as a hit and once as a false alarm.
+
+    Parameters
+    ----------
+    boxes : (M, 7) ``x y z dx dy dz heading`` [m, rad].
+
+    Returns
+    -------
+    (K, 7) float32, K <= M, in input order.
+    """
+    b = np.asarray(boxes, np.float32).reshape(-1, 7)
+    keep = np.ones(len(b), bool)
+    order = np.argsort(-b[:, 3], kind="stable")  # widest first
+    cos_m = math.cos(math.radians(max_angle_deg))
+    for ii, i in enumerate(order):
+        if not keep[i]:
+            continue
+        a = np.array([math.cos(b[i, 6]), math.sin(b[i, 6])])
+        n = np.array([-a[1], a[0]])
+        for j in order[ii + 1:]:
+            if not keep[j] or abs(math.cos(float(b[i, 6] - b[j, 6]))) < cos_m:
+                continue
+            d = b[j, :2] - b[i, :2]
+            if abs(d @ n) <= max_offset_m and abs(d @ a) < 0.5 * (b[i, 3] + b[j, 3]):
+                keep[j] = False
+    return b[keep]
 
 
 def box_corners(box: np.ndarray) -> np.ndarray:

@@ -35,7 +35,12 @@ from sim2radar.reconstruct.backproject import (
     normals_from_points,
     points_from_depth,
 )
-from sim2radar.reconstruct.doors import DoorFitConfig, fit_door_boxes, transform_boxes
+from sim2radar.reconstruct.doors import (
+    DoorFitConfig,
+    dedupe_boxes,
+    fit_door_boxes,
+    transform_boxes,
+)
 from sim2radar.reconstruct.meshing import MeshingConfig, segment_meshes
 from sim2radar.reconstruct.types import (
     DEPTH_BACKENDS,
@@ -487,6 +492,7 @@ def reconstruct(
                 - np.maximum(0.5, 0.5 * (boxes[:, 3] + box[3]))) if len(boxes) else [1.0]
         if np.min(near) > 0:
             boxes = np.vstack([boxes, box[None]]).astype(np.float32)
+    boxes = dedupe_boxes(boxes)
     timings["doors"] = time.perf_counter() - t
     timings["total"] = time.perf_counter() - t0
 

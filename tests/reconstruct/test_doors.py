@@ -11,6 +11,7 @@ from sim2radar.evaluate.reconstruction import box_iou_3d
 from sim2radar.reconstruct.doors import (
     DoorFitConfig,
     box_corners,
+    dedupe_boxes,
     fit_door_box,
     fit_door_boxes,
     transform_boxes,
@@ -137,3 +138,15 @@ def test_box_corners_single_and_batched():
     assert one.shape == (8, 3) and many.shape == (2, 8, 3)
     assert np.allclose(many[1], one)
     assert np.allclose(one.mean(axis=0), box[:3])
+
+
+def test_dedupe_keeps_the_wider_of_overlapping_boxes_in_one_wall():
+    door = [2.66, 0.95, 0.0, 0.94, 0.17, 2.0, 0.0]
+    fragment = [3.23, 0.94, 0.0, 0.39, 0.17, 2.0, 0.05]  # overlaps the door along the wall
+    neighbour = [3.9, 0.95, 0.0, 0.9, 0.17, 2.0, 0.0]  # next door along the wall
+    opposite = [2.7, -0.95, 0.0, 0.9, 0.17, 2.0, 0.0]  # facing wall
+    out = dedupe_boxes(np.array([fragment, door, neighbour, opposite]))
+    assert out.shape == (3, 7)
+    assert not np.any(np.isclose(out[:, 3], 0.39))
+    assert np.allclose(out[0], door)  # input order kept
+    assert dedupe_boxes(np.zeros((0, 7))).shape == (0, 7)
