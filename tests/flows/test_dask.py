@@ -90,7 +90,7 @@ def test_task_runner_choice_and_errors(monkeypatch):
     assert local.cluster_kwargs["n_workers"] == 2 and local.cluster_kwargs["processes"] is True
     assert local.cluster_kwargs["threads_per_worker"] == 1
     assert local.cluster_kwargs["host"] == "127.0.0.1"
-    remote = task_runner(1, "tcp://127.0.0.1:8786")
+    remote = task_runner(1, "tcp://127.0.0.1:8786", check=False)
     assert remote.address == "tcp://127.0.0.1:8786" and remote.duplicate() == remote
     with pytest.raises(ValueError, match="workers"):
         task_runner(0)
@@ -100,6 +100,26 @@ def test_task_runner_choice_and_errors(monkeypatch):
     with pytest.raises(ImportError, match=r"sim2radar\[dask\]"):
         task_runner(2, "local")
     assert isinstance(task_runner(1, None), ThreadPoolTaskRunner)  # threads need nothing
+
+
+def test_workers_are_probed_before_use(cluster):
+    from tasks.runners import _worker_problems, check_dask_workers, task_runner
+
+    probes = check_dask_workers(cluster.scheduler_address)
+    assert len(probes) == 2
+    for found in probes.values():  # the real packages, not Dask's spill folder "storage"
+        assert found["storage"] == str(REPO / "storage" / "__init__.py")
+        assert found["tasks"] == str(REPO / "tasks" / "__init__.py")
+    assert task_runner(1, cluster.scheduler_address).address == cluster.scheduler_address
+    spill = {"w1": {"sim2radar": "/x/sim2radar/__init__.py", "tasks": "/x/tasks/__init__.py",
+                    "storage": "namespace ['/tmp/dask-scratch-space/worker-1/storage']"}}
+    (problem,) = _worker_problems("tcp://h:8786", spill)
+    assert "spill folder" in problem and "PYTHONPATH=$PWD dask worker tcp://h:8786" in problem
+    missing = {"w2": {"sim2radar": "ImportError: ModuleNotFoundError: No module named 'sim2radar'",
+                      "tasks": "/x/tasks/__init__.py", "storage": "/x/storage/__init__.py"}}
+    assert "cannot import sim2radar" in _worker_problems("tcp://h:8786", missing)[0]
+    with pytest.raises(ConnectionError, match="no Dask scheduler at tcp://127.0.0.1:9"):
+        check_dask_workers("tcp://127.0.0.1:9", timeout_s=1)
 
 
 def test_simulate_flow_on_dask_matches_threads(cluster, prefect_server, tmp_path,
