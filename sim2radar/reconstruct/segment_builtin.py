@@ -218,7 +218,7 @@ class BuiltinSegments:
     between neighbours, plus 0.4 % of the depth), ``door_thickness_m`` (0.17; depth of the
     doorway boxes measured from wall openings), ``below_floor_m`` (0.08; points this far below
     the floor / above the ceiling are floor / ceiling), ``door_partial`` (True: tall planar
-    fragments standing near the floor are doors), ``door_bottom_max_m`` (0.6; an opening of
+    fragments standing near the floor are doors), ``door_bottom_max_m`` (0.75; an opening of
     door height whose bottom is lower than this is a door, higher a window).
     """
 
@@ -240,7 +240,7 @@ class BuiltinSegments:
         fill_no_depth: bool = True,
         below_floor_m: float = 0.08,
         door_partial: bool = True,
-        door_bottom_max_m: float = 0.6,
+        door_bottom_max_m: float = 0.75,
         grow_colour: float = 15.0,
     ) -> None:
         self.normal_thresh_deg = float(normal_thresh_deg)
