@@ -101,3 +101,34 @@ def test_floor_band_without_true_depth_is_floor(frames, corruption):
     assert (pred_floor & gt_floor).sum() / gt_floor.sum() > 0.9
     # the walls in the band (their rays meet the floor plane behind the wall) stay walls
     assert (pred_floor & band & ~gt_floor).sum() < 0.05 * (band & ~gt_floor).sum()
+
+
+def _wall_with_door_fragment(door_lab):
+    """A wall 4 m ahead (level frame, rows span z 1.5 .. -1.3, the floor level), a 0.75 m wide
+    door leaf up to 2.1 m above the floor; only its part below z = -0.3 is its own region."""
+    h, w = 120, 160
+    y = np.linspace(2.0, -2.0, w)
+    z = np.linspace(1.5, -1.3, h)
+    pl = np.stack(np.broadcast_arrays(np.full((h, w), 4.0), y[None, :], z[:, None]), -1)
+    pl = pl.astype(np.float32)
+    door = (np.abs(y[None, :] - 0.0) < 0.375) & (z[:, None] < 0.8)
+    regions = np.zeros((h, w), np.int64)
+    regions[door & (z[:, None] < -0.3)] = 1
+    lab = np.zeros((h, w, 3), np.float32)
+    lab[...] = (60.0, 0.0, 0.0)
+    lab[door] = door_lab
+    return regions, pl, lab, door
+
+
+def test_door_leaf_is_grown_from_its_lower_fragment_by_colour():
+    regions, pl, lab, door = _wall_with_door_fragment((30.0, 30.0, 20.0))
+    seg = BuiltinSegments()
+    out, labels, _ = seg._grow_doors(regions, ["wall", "clutter"], [0.8, 0.4], pl, lab,
+                                     -1.3, 1.5)
+    assert labels[1] == "door"
+    assert _iou(out == 1, door) > 0.95  # the upper leaf joined, the wall around it did not
+    # a fragment of the wall's own colour is not grown (it would swallow the wall column)
+    regions, pl, lab, door = _wall_with_door_fragment((60.0, 0.0, 0.0))
+    out, labels, _ = seg._grow_doors(regions, ["wall", "clutter"], [0.8, 0.4], pl, lab,
+                                     -1.3, 1.5)
+    assert labels[1] == "clutter" and (out == 1).sum() == (regions == 1).sum()
