@@ -172,6 +172,7 @@ def test_simulate_flow_on_dask_matches_threads(cluster, prefect_server, tmp_path
 def test_generate_flow_on_dask_matches_threads(cluster, prefect_server, tmp_path):
     from flows.generate_dataset import generate_dataset
     from sim2radar.datasets import OpenPCDetDataset
+    from sim2radar.evaluate.reconstruction import chamfer_distance
     from sim2radar.radar import load_radar_config
     from storage import ArtifactStore
     from tasks import dataset as td
@@ -196,8 +197,14 @@ def test_generate_flow_on_dask_matches_threads(cluster, prefect_server, tmp_path
             a = td.read_dataset_frame(dask_root / "store", fd[0].artifacts[f"dataset_frames/{g}"])
             b = td.read_dataset_frame(thread_root / "store",
                                       ft[0].artifacts[f"dataset_frames/{g}"])
-            assert len(a.points) > 10 and _same_points(a.points, b.points)
-            assert np.array_equal(a.boxes, b.boxes)
+            assert len(a.points) > 10 and np.array_equal(a.gt_boxes, b.gt_boxes)
+            if g == "ground_truth":  # same meshes -> the same cloud and labels
+                assert _same_points(a.points, b.points) and np.array_equal(a.boxes, b.boxes)
+            else:  # reconstructed from a render in another process: float32 summation order
+                # may move a segment boundary, so compare clouds and pseudo-labels loosely
+                assert chamfer_distance(a.points, b.points) < 0.05
+                assert 0.9 < len(a.points) / len(b.points) < 1.1
+                assert abs(len(a.boxes) - len(b.boxes)) <= 1
     rows = {r["scene_id"]: r["status"] for r in ArtifactStore(dask_root / "store")
             .manifest("g").rows()}
     assert rows["world_000005_f000"] == "ok" and rows["world_000006"] == "ok"
