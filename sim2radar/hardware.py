@@ -1,7 +1,9 @@
 """The one place that picks hardware: the Mitsuba variant and the torch device.
 
 Order of preference is CUDA -> LLVM (CPU, vectorised JIT) -> scalar (CPU, ~25x slower).
-``SIM2RADAR_MITSUBA_VARIANT`` and ``SIM2RADAR_TORCH_DEVICE`` override the choice.
+``SIM2RADAR_MITSUBA_VARIANT`` and ``SIM2RADAR_TORCH_DEVICE`` override the choice;
+``SIM2RADAR_DRJIT_THREADS`` caps Dr.Jit's CPU worker threads per process (e.g. one Dask worker
+per core on a shared machine; default: all cores).
 """
 
 from __future__ import annotations
@@ -52,6 +54,7 @@ def mitsuba_variant(prefer: str | None = None) -> str:
     except ImportError as exc:  # pragma: no cover - mitsuba is a hard dependency
         raise ImportError("mitsuba is not installed: run `make setup`") from exc
 
+    _apply_drjit_threads()
     forced = prefer or os.environ.get("SIM2RADAR_MITSUBA_VARIANT")
     if forced:
         if forced not in mi.variants():
@@ -79,6 +82,25 @@ def mitsuba_variant(prefer: str | None = None) -> str:
                 log.info("mitsuba variant: %s", variant)
             return variant
     raise RuntimeError("no Mitsuba variant works on this machine")
+
+
+def _apply_drjit_threads() -> None:
+    """Honour ``SIM2RADAR_DRJIT_THREADS`` (a positive integer) for Dr.Jit's CPU thread pool."""
+    value = os.environ.get("SIM2RADAR_DRJIT_THREADS")
+    if not value:
+        return
+    try:
+        n = int(value)
+        if n < 1:
+            raise ValueError
+    except ValueError:
+        raise ValueError(
+            f"SIM2RADAR_DRJIT_THREADS must be a positive integer, got {value!r}"
+        ) from None
+    import drjit as dr
+
+    dr.set_thread_count(n)
+    log.info("drjit: %d CPU threads", n)
 
 
 def torch_device(prefer: str | None = None):
