@@ -26,13 +26,13 @@ from __future__ import annotations
 import importlib
 import os
 from collections.abc import Callable, Sequence
-from contextlib import contextmanager
 from typing import Any
 
 from prefect import flow, get_run_logger
 from prefect.futures import as_completed
 from prefect.task_runners import ThreadPoolTaskRunner
 
+from flows import _progress
 from storage import ArtifactStore
 from tasks.dataset import (
     WorldDatasetOutcome,
@@ -48,7 +48,6 @@ from tasks.runners import task_runner
 __all__ = ["generate_dataset_flow", "generate_dataset", "generate_dataset_job", "DatasetFailures",
            "progress_callback"]
 
-_PROGRESS: list[Callable[[WorldDatasetOutcome], None]] = []
 
 
 class DatasetFailures(RuntimeError):
@@ -66,27 +65,13 @@ class DatasetFailures(RuntimeError):
         self.summary = summary
 
 
-@contextmanager
 def progress_callback(fn: Callable[[WorldDatasetOutcome], None]):
-    """Call ``fn(outcome)`` in the flow process after each world finishes (progress bars)."""
-    _PROGRESS.append(fn)
-    try:
-        yield
-    finally:
-        _PROGRESS.remove(fn)
+    """Context manager: call ``fn(outcome)`` in this process after each world finishes."""
+    return _progress.listen("generate_dataset", fn)
 
 
 def _notify_progress(outcome: WorldDatasetOutcome) -> None:
-    """Call the registered progress callbacks (in the flow process).
-
-    The flow body calls this module-level function instead of reading ``_PROGRESS`` itself:
-    a task runner that ships the flow run context to other processes (Dask) pickles the flow
-    function *by value*, with the globals it names; a callback in ``_PROGRESS`` (a closure over
-    a Rich progress bar, with locks) would not pickle, while a module function pickles by
-    reference.
-    """
-    for fn in list(_PROGRESS):
-        fn(outcome)
+    _progress.notify("generate_dataset", outcome)
 
 
 @flow(name="generate-dataset", task_runner=ThreadPoolTaskRunner(max_workers=1), log_prints=False)

@@ -26,7 +26,6 @@ from __future__ import annotations
 import importlib
 import os
 from collections.abc import Callable, Sequence
-from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
@@ -34,6 +33,7 @@ from prefect import flow, get_run_logger
 from prefect.futures import as_completed
 from prefect.task_runners import ThreadPoolTaskRunner
 
+from flows import _progress
 from storage import ArtifactStore
 from tasks.common import expand_scenes
 from tasks.radar import (
@@ -54,7 +54,6 @@ __all__ = [
     "progress_callback",
 ]
 
-_PROGRESS: list[Callable[[SceneOutcome], None]] = []
 
 
 class SceneFailures(RuntimeError):
@@ -67,27 +66,13 @@ class SceneFailures(RuntimeError):
         self.summary = summary
 
 
-@contextmanager
 def progress_callback(fn: Callable[[SceneOutcome], None]):
-    """Call ``fn(outcome)`` in the flow process after each scene finishes (progress bars)."""
-    _PROGRESS.append(fn)
-    try:
-        yield
-    finally:
-        _PROGRESS.remove(fn)
+    """Context manager: call ``fn(outcome)`` in this process after each scene finishes."""
+    return _progress.listen("simulate", fn)
 
 
 def _notify_progress(outcome: SceneOutcome) -> None:
-    """Call the registered progress callbacks (in the flow process).
-
-    The flow body calls this module-level function instead of reading ``_PROGRESS`` itself:
-    a task runner that ships the flow run context to other processes (Dask) pickles the flow
-    function *by value*, with the globals it names; a callback in ``_PROGRESS`` (a closure over
-    a Rich progress bar, with locks) would not pickle, while a module function pickles by
-    reference.
-    """
-    for fn in list(_PROGRESS):
-        fn(outcome)
+    _progress.notify("simulate", outcome)
 
 
 def _check_unique_ids(scenes: Sequence[str]) -> None:
