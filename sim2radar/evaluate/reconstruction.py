@@ -19,6 +19,7 @@ import math
 
 import numpy as np
 
+from sim2radar.evaluate.iou import iou_3d
 from sim2radar.vocab import MATERIAL_CLASSES, SEMANTIC_CLASSES
 
 __all__ = [
@@ -132,43 +133,14 @@ def material_counts(pred_mat: np.ndarray, gt_mat: np.ndarray) -> MaterialCounts:
     return MaterialCounts(np.bincount(g[p == g], minlength=n)[:n], np.bincount(g, minlength=n)[:n])
 
 
-def _bev_polygon(box: np.ndarray):
-    from shapely.geometry import Polygon
-
-    x, y, _, dx, dy, _, h = (float(v) for v in box[:7])
-    c, s = math.cos(h), math.sin(h)
-    corners = [(x + c * u - s * v, y + s * u + c * v)
-               for u, v in ((dx / 2, dy / 2), (-dx / 2, dy / 2), (-dx / 2, -dy / 2), (dx / 2, -dy / 2))]
-    return Polygon(corners)
-
-
 def box_iou_3d(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """3D IoU matrix of rotated boxes (rotation about z only).
-
-    Parameters
-    ----------
-    a : (N, 7), b : (M, 7) — ``x y z dx dy dz heading`` [m, rad], z the box centre.
-
-    Returns
-    -------
-    (N, M) float64 — intersection volume / union volume.
-    """
+    """(N, M) float64 3D IoU of rotated boxes ``x y z dx dy dz heading`` (rotation about z;
+    z the box centre) — the detector's KITTI-protocol IoU, :func:`sim2radar.evaluate.iou.iou_3d`."""
     a = np.asarray(a, np.float64).reshape(-1, 7)
     b = np.asarray(b, np.float64).reshape(-1, 7)
-    out = np.zeros((len(a), len(b)))
     if not len(a) or not len(b):
-        return out
-    pa = [_bev_polygon(x) for x in a]
-    pb = [_bev_polygon(x) for x in b]
-    for i, (bi, pi) in enumerate(zip(a, pa, strict=True)):
-        for j, (bj, pj) in enumerate(zip(b, pb, strict=True)):
-            zo = min(bi[2] + bi[5] / 2, bj[2] + bj[5] / 2) - max(bi[2] - bi[5] / 2, bj[2] - bj[5] / 2)
-            if zo <= 0:
-                continue
-            inter = pi.intersection(pj).area * zo
-            union = bi[3] * bi[4] * bi[5] + bj[3] * bj[4] * bj[5] - inter
-            out[i, j] = inter / union if union > 0 else 0.0
-    return out
+        return np.zeros((len(a), len(b)))
+    return np.asarray(iou_3d(a, b), dtype=np.float64)
 
 
 def match_boxes(pred: np.ndarray, gt: np.ndarray, iou_threshold: float = 0.3,
