@@ -19,12 +19,13 @@ from __future__ import annotations
 import dataclasses
 import logging
 import time
+import typing
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import yaml
-from pydantic import BaseModel, ConfigDict, Field, field_validator
+from pydantic import BaseModel, ConfigDict, Field, create_model, field_validator
 
 from sim2radar.camera import CameraIntrinsics
 from sim2radar.configio import read_yaml_mapping
@@ -76,44 +77,44 @@ class BackendSpec(BaseModel):
     options: dict[str, Any] = Field(default_factory=dict)
 
 
-class MeshingOptions(BaseModel):
-    """See :class:`sim2radar.reconstruct.meshing.MeshingConfig`."""
+def _options_model(name: str, config_cls: type, doc: str, *, exclude_from_config=(),
+                   **overrides: tuple[Any, Any] | Any) -> type[BaseModel]:
+    """A frozen, extra-forbidding pydantic model with the fields of the library dataclass
+    ``config_cls`` (same names, types and defaults; ``overrides`` replace a default, or add a
+    field as ``(type, default)``), and ``to_config()`` returning the dataclass."""
+    hints = typing.get_type_hints(config_cls)
+    fields: dict[str, Any] = {f.name: (hints[f.name], f.default)
+                              for f in dataclasses.fields(config_cls)}
+    for key, value in overrides.items():
+        fields[key] = value if isinstance(value, tuple) else (fields[key][0], value)
+    skip = set(exclude_from_config)
 
-    model_config = ConfigDict(frozen=True, extra="forbid")
-    stride_px: int = 2
-    max_incidence_deg: float = 84.0
-    min_jump_rel: float = 0.02
-    target_faces: int = 400
-    min_faces: int = 2
+    def to_config(self):
+        return config_cls(**self.model_dump(exclude=skip))
 
-    def to_config(self) -> MeshingConfig:
-        return MeshingConfig(**self.model_dump())
+    model = create_model(name, __config__=ConfigDict(frozen=True, extra="forbid"),
+                         __doc__=doc, **fields)
+    model.to_config = to_config
+    return model
 
 
-class DoorOptions(BaseModel):
-    """See :class:`sim2radar.reconstruct.doors.DoorFitConfig`.
+MeshingOptions = _options_model(
+    "MeshingOptions", MeshingConfig,
+    "Meshing options in a config; fields and defaults of "
+    ":class:`sim2radar.reconstruct.meshing.MeshingConfig`.")
+
+DoorOptions = _options_model(
+    "DoorOptions", DoorFitConfig,
+    """Door-fitting options in a config; fields of :class:`sim2radar.reconstruct.doors.DoorFitConfig`
+    with the pipeline's defaults: boxes snap to a floor within 0.8 m and get a 2.0 m doorway top.
 
     ``thickness_m`` (0.17 m) is the mean depth of the procedural worlds' doorway boxes (wall
     0.10–0.20 m + 2 cm, ``sim2radar/worlds/frame.py``): the box depth when it is not measured.
-    """
-
-    model_config = ConfigDict(frozen=True, extra="forbid")
-    thickness_m: float = 0.17
-    face_to_center_m: float = 0.0
-    wall_search_m: float = 0.35
-    merge_gap_m: float = 0.2
-    merge_offset_m: float = 0.15
-    merge_angle_deg: float = 15.0
-    snap_to_floor_m: float = 0.8
-    min_points: int = 20
-    inlier_m: float = 0.04
-    split_gap_m: float = 0.25
-    min_top_m: float = 2.0
-    #: width given to a door cut by the left/right image border when less of it is seen [m]
-    nominal_width_m: float = 0.95
-
-    def to_config(self) -> DoorFitConfig:
-        return DoorFitConfig(**self.model_dump(exclude={"nominal_width_m"}))
+    ``nominal_width_m`` (0.95 m) is the width given to a door cut by the left/right image border
+    when less of it is seen.""",
+    exclude_from_config=("nominal_width_m",),
+    snap_to_floor_m=0.8, min_top_m=2.0, nominal_width_m=(float, 0.95),
+)
 
 
 class ReconstructionConfig(BaseModel):
