@@ -44,6 +44,13 @@ def _as_tensor(boxes, dtype=None) -> tuple[torch.Tensor, bool]:
     return t, was_numpy
 
 
+def _as_pair(boxes_a, boxes_b) -> tuple[torch.Tensor, torch.Tensor, bool]:
+    """Both box sets as tensors of ``boxes_a``'s dtype and device; True if ``boxes_a`` was NumPy."""
+    a, was_numpy = _as_tensor(boxes_a)
+    b, _ = _as_tensor(boxes_b, dtype=a.dtype)
+    return a, b.to(a.device), was_numpy
+
+
 def box_corners_bev(boxes: torch.Tensor) -> torch.Tensor:
     """BEV corners of rotated boxes, counter-clockwise.
 
@@ -160,9 +167,7 @@ def bev_iou(boxes_a, boxes_b):
     -------
     (N, M) IoU in [0, 1]; NumPy (float64) if ``boxes_a`` is NumPy, else a tensor.
     """
-    a, was_numpy = _as_tensor(boxes_a)
-    b, _ = _as_tensor(boxes_b, dtype=a.dtype)
-    b = b.to(a.device)
+    a, b, was_numpy = _as_pair(boxes_a, boxes_b)
     inter = _pairwise_intersection(a[:, :7], b[:, :7])
     area_a = a[:, 3] * a[:, 4]
     area_b = b[:, 3] * b[:, 4]
@@ -185,9 +190,7 @@ def iou_3d(boxes_a, boxes_b):
     -------
     (N, M) IoU in [0, 1]; NumPy (float64) if ``boxes_a`` is NumPy, else a tensor.
     """
-    a, was_numpy = _as_tensor(boxes_a)
-    b, _ = _as_tensor(boxes_b, dtype=a.dtype)
-    b = b.to(a.device)
+    a, b, was_numpy = _as_pair(boxes_a, boxes_b)
     inter_bev = _pairwise_intersection(a[:, :7], b[:, :7])
     top = torch.minimum((a[:, 2] + a[:, 5] / 2)[:, None], (b[:, 2] + b[:, 5] / 2)[None, :])
     bottom = torch.maximum((a[:, 2] - a[:, 5] / 2)[:, None], (b[:, 2] - b[:, 5] / 2)[None, :])
