@@ -40,7 +40,6 @@ import json
 import logging
 import math
 import os
-import random
 import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
@@ -52,6 +51,7 @@ from prefect import task
 from prefect.cache_policies import NO_CACHE
 
 from sim2radar.boxes import boxes_in_view, points_in_boxes, transform_boxes
+from sim2radar.datasets.splits import split_groups as split_worlds
 from storage import (
     ArtifactStore,
     content_key,
@@ -825,25 +825,6 @@ def summarize_dataset(store, dataset: str, spec: DatasetSpec | dict,
 # ---------------------------------------------------------------------------------------------
 # OpenPCDet export
 # ---------------------------------------------------------------------------------------------
-def split_worlds(world_ids: Sequence[str], seed: int = 0,
-                 fractions: tuple[float, float, float] = (0.7, 0.15, 0.15)) -> dict[str, list]:
-    """Seeded train/val/test split of worlds (frames of one world never straddle splits).
-
-    With fewer than three worlds, every world goes to train (val/test stay empty) rather than
-    leaving train empty. Ids are sorted within each split.
-    """
-    ids = sorted(dict.fromkeys(world_ids))
-    random.Random(int(seed)).shuffle(ids)
-    n = len(ids)
-    if n < 3:
-        return {"train": sorted(ids), "val": [], "test": []}
-    n_val = max(1, round(fractions[1] * n))
-    n_test = max(1, round(fractions[2] * n))
-    n_train = max(1, n - n_val - n_test)
-    return {"train": sorted(ids[:n_train]), "val": sorted(ids[n_train:n_train + n_val]),
-            "test": sorted(ids[n_train + n_val:])}
-
-
 def export_openpcdet(store, outcomes: list[WorldDatasetOutcome], export_dir: str | os.PathLike,
                      geometry: str, *, seed: int = 0) -> dict[str, Any]:
     """Write the frames of one geometry in OpenPCDet's custom layout with

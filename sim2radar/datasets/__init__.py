@@ -10,6 +10,7 @@ from sim2radar.datasets.openpcdet import (
     write_frame,
     write_split,
 )
+from sim2radar.datasets.splits import split_groups
 from sim2radar.datasets.synthetic import make_door_frames, write_synthetic_dataset
 
 __all__ = [
@@ -19,6 +20,7 @@ __all__ = [
     "make_door_frames",
     "read_labels",
     "read_points",
+    "split_groups",
     "write_dataset",
     "write_frame",
     "write_split",
