@@ -12,6 +12,8 @@ from pathlib import Path
 
 import pytest
 
+import sim2radar.radar as radar_mod
+
 _PREFECT_HOME = tempfile.mkdtemp(prefix="sim2radar-prefect-home-")
 os.environ.setdefault("PREFECT_HOME", _PREFECT_HOME)
 os.environ.setdefault("PREFECT_SERVER_ANALYTICS_ENABLED", "false")
@@ -57,3 +59,17 @@ def prefect_server():
         server_startup_timeout=120
     ):
         yield
+
+
+@pytest.fixture
+def count_sim(monkeypatch):
+    """Count calls of the real simulate_frame."""
+    calls = {"n": 0}
+    real = radar_mod.simulate_frame
+
+    def counting(*args, **kwargs):
+        calls["n"] += 1
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(radar_mod, "simulate_frame", counting)
+    return calls

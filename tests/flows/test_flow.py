@@ -4,21 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-import sim2radar.radar as radar_mod
 from storage import ArtifactStore
-
-
-@pytest.fixture
-def count_sim(monkeypatch):
-    calls = {"n": 0}
-    real = radar_mod.simulate_frame
-
-    def counting(*args, **kwargs):
-        calls["n"] += 1
-        return real(*args, **kwargs)
-
-    monkeypatch.setattr(radar_mod, "simulate_frame", counting)
-    return calls
 
 
 def test_flow_runs_twice_second_computes_nothing_and_failures_are_recorded(

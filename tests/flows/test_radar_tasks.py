@@ -9,25 +9,10 @@ import numpy as np
 import pytest
 import yaml
 
-import sim2radar.radar as radar_mod
 from sim2radar.radar import load_radar_config
 from storage import ArtifactStore, canonical_json, meshes_from_table, radar_frames_from_table
 from tasks.radar import scene_keys, simulate_scene, simulate_scenes_plain
 from tests.flows._scenes import PLATE_RANGE_M, write_scene
-
-
-@pytest.fixture
-def count_sim(monkeypatch):
-    """Count calls of the real simulate_frame."""
-    calls = {"n": 0}
-    real = radar_mod.simulate_frame
-
-    def counting(*args, **kwargs):
-        calls["n"] += 1
-        return real(*args, **kwargs)
-
-    monkeypatch.setattr(radar_mod, "simulate_frame", counting)
-    return calls
 
 
 def test_plate_lands_3m_ahead_in_the_radar_frame_and_round_trips(plate_scene, tmp_path, count_sim):
