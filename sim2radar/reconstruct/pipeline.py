@@ -35,6 +35,7 @@ from sim2radar.reconstruct.backproject import (
     level_from_camera,
     normals_from_points,
     points_from_depth,
+    vertical_line_planes,
 )
 from sim2radar.reconstruct.doors import (
     DoorFitConfig,
@@ -450,7 +451,12 @@ def reconstruct(
     k = frame.intrinsics
     points = points_from_depth(depth.depth_m, k)
     step = max(1, round(k.width / 200))
-    up = estimate_up(normals_from_points(points, step_px=step))
+    # the segmentation's gravity estimate when it made one (its labels and door boxes are in
+    # that level frame), else normals + the image's vertical lines
+    seg_up = getattr(seg_be, "last_info", {}).get("up_cam")
+    up = (np.asarray(seg_up, np.float64) if seg_up is not None else
+          estimate_up(normals_from_points(points, step_px=step),
+                      line_planes=vertical_line_planes(frame.rgb, k)))
     level = level_from_camera(up)
     seg = segments.segment_id
     sem_lut = np.array([SEMANTIC_CLASSES.index(s) for s in segments.labels] + [0], np.uint8)
@@ -484,15 +490,16 @@ def reconstruct(
                               wall_pts[::max(1, len(wall_pts) // 20000)])
     boxes = _complete_cut_doors(boxes, groups, door_ids, seg, level, k,
                                 config.doors.nominal_width_m)
-    # door openings the segmentation measured on wall planes (e.g. open doors: no leaf pixels
-    # in the wall), kept where no fitted box lies within 0.5 m or overlaps it along the wall
-    openings = np.asarray(getattr(seg_be, "last_info", {}).get("door_boxes_level", []),
+    # doorways the segmentation measured on wall planes (door frames on the rectified wall,
+    # openings seen through it) take precedence; a box fitted to door pixels is kept where no
+    # measured one lies within 0.5 m or overlaps it along the wall
+    measured = np.asarray(getattr(seg_be, "last_info", {}).get("door_boxes_level", []),
                           np.float32).reshape(-1, 7)
-    for box in openings:
-        near = (np.linalg.norm(boxes[:, :2] - box[:2], axis=1)
-                - np.maximum(0.5, 0.5 * (boxes[:, 3] + box[3]))) if len(boxes) else [1.0]
-        if np.min(near) > 0:
-            boxes = np.vstack([boxes, box[None]]).astype(np.float32)
+    if len(measured):
+        kept = [b for b in boxes
+                if np.min(np.linalg.norm(measured[:, :2] - b[:2], axis=1)
+                          - np.maximum(0.5, 0.5 * (measured[:, 3] + b[3]))) > 0]
+        boxes = np.vstack([measured, *[b[None] for b in kept]]).astype(np.float32)
     boxes = dedupe_boxes(boxes)
     timings["doors"] = time.perf_counter() - t
     timings["total"] = time.perf_counter() - t0

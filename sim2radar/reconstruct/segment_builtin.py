@@ -42,7 +42,9 @@ from sim2radar.reconstruct.backproject import (
     level_from_camera,
     normals_from_points,
     points_from_depth,
+    vertical_line_planes,
 )
+from sim2radar.reconstruct.facade import FacadeConfig, WallPlane, find_facade_doors
 from sim2radar.reconstruct.types import (
     SEGMENT_BACKENDS,
     DepthResult,
@@ -242,6 +244,8 @@ class BuiltinSegments:
         door_partial: bool = True,
         door_bottom_max_m: float = 0.75,
         grow_colour: float = 15.0,
+        facade: bool = True,
+        facade_options: dict | None = None,
     ) -> None:
         self.normal_thresh_deg = float(normal_thresh_deg)
         self.colour_thresh = float(colour_thresh)
@@ -260,6 +264,8 @@ class BuiltinSegments:
         self.door_partial = bool(door_partial)
         self.door_bottom_max_m = float(door_bottom_max_m)
         self.grow_colour = float(grow_colour)
+        self.facade = bool(facade)
+        self.facade_config = FacadeConfig(**(facade_options or {}))
         #: Diagnostics of the last call: up vector, floor / ceiling level, region count.
         self.last_info: dict = {}
         self._pixel_angle: float | None = None
@@ -283,7 +289,7 @@ class BuiltinSegments:
         step = max(1, round(w / 200))
         normals = normals_from_points(points, step_px=step)
         normals = self._smooth_normals(normals, valid, step)
-        up = estimate_up(normals)
+        up = estimate_up(normals, line_planes=vertical_line_planes(frame.rgb, k))
         rot = level_from_camera(up)[:3, :3]
         pl = points @ rot.T
 
@@ -306,6 +312,11 @@ class BuiltinSegments:
                                                     info["floor_z_m"], info["ceiling_z_m"])
         regions, labels, scores, openings = self._wall_openings(
             regions, labels, scores, pl, info["floor_z_m"], info["ceiling_z_m"])
+        if self.facade:
+            regions, labels, scores, found = self._facade_doors(
+                regions, labels, scores, pl, rot, k, frame.rgb, info["floor_z_m"],
+                info["ceiling_z_m"])
+            openings = found + openings
         info["door_boxes_level"] = openings
         seg, labels, scores = self._compact(regions, labels, scores)
         self.last_info = {"up_cam": up.tolist(), **info, "n_segments": len(labels)}
@@ -720,6 +731,66 @@ class BuiltinSegments:
                     heading = (heading + math.pi / 2) % math.pi - math.pi / 2
                     boxes.append([float(cxy[0]), float(cxy[1]), float(floor_z + top / 2),
                                   float(width), th, float(top), float(heading)])
+        return regions, labels, scores, boxes
+
+    def _wall_planes(self, regions, labels, pl) -> list[WallPlane]:
+        """Planes of the large vertical ``wall`` regions (coplanar ones merged), with the
+        along-wall extent of their pixels widened by 1.2 m (a door may split its wall)."""
+        valid = np.isfinite(pl).all(axis=-1)
+        counts = np.bincount(regions[regions >= 0], minlength=len(labels))
+        planes: list[tuple[WallPlane, int]] = []
+        for wi in np.argsort(-counts)[:10]:
+            if labels[wi] != "wall" or counts[wi] < 0.01 * valid.sum():
+                continue
+            mask = (regions == wi) & valid
+            g = region_geometry(pl, mask, pixel_angle_rad=self._pixel_angle)
+            if g.vertical_cos > 0.2:
+                continue
+            nrm = np.array([g.normal[0], g.normal[1], 0.0])
+            nrm /= np.linalg.norm(nrm)
+            wp = pl[mask]
+            d = float(np.median(wp @ nrm))
+            if d > -0.3:
+                continue
+            along = np.array([-nrm[1], nrm[0], 0.0])
+            s0, s1 = np.percentile(wp @ along, [1, 99])
+            dup = False
+            for j, (q, cnt) in enumerate(planes):
+                if q.normal @ nrm > math.cos(math.radians(10)) and abs(q.offset_m - d) < 0.1:
+                    lo, hi = q.s_range_m
+                    planes[j] = (WallPlane(q.normal, q.offset_m, (min(lo, s0 - 1.2),
+                                                                  max(hi, s1 + 1.2))), cnt)
+                    dup = True
+                    break
+            if not dup:
+                planes.append((WallPlane(nrm, d, (float(s0) - 1.2, float(s1) + 1.2)),
+                               int(counts[wi])))
+        return [p for p, _ in planes]
+
+    def _facade_doors(self, regions, labels, scores, pl, rot, k, rgb, floor_z, ceil_z):
+        """Doorways found by their frames on the rectified wall planes
+        (:mod:`sim2radar.reconstruct.facade`); their pixels become ``door`` segments."""
+        lab = cv2.cvtColor(cv2.GaussianBlur(rgb, (0, 0), 0.8).astype(np.float32) / 255.0,
+                           cv2.COLOR_RGB2LAB)[..., 0]
+        grad = (cv2.Sobel(lab, cv2.CV_32F, 1, 0, ksize=3) / 8.0,
+                cv2.Sobel(lab, cv2.CV_32F, 0, 1, ksize=3) / 8.0)
+        boxes: list[list[float]] = []
+        labels, scores = list(labels), list(scores)
+        regions = regions.copy()
+        self.last_facade = []
+        for plane in self._wall_planes(regions, labels, pl):
+            for door in find_facade_doors(plane, floor_z, ceil_z, rot, k, pl, grad,
+                                          self.facade_config):
+                self.last_facade.append(door)
+                boxes.append([float(x) for x in door.box_level])
+                m = door.mask & (regions >= 0)
+                keep = np.isin(regions, [i for i, lbl in enumerate(labels)
+                                         if lbl in ("wall", "clutter", "window", "door")])
+                m &= keep
+                if m.sum() >= 10:
+                    regions[m] = len(labels)
+                    labels.append("door")
+                    scores.append(0.6 + 0.3 * door.score)
         return regions, labels, scores, boxes
 
     def _vertical_label(self, g: SegmentGeometry, floor_z: float, ceil_z: float,
