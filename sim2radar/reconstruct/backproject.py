@@ -188,7 +188,7 @@ def estimate_up(normals: np.ndarray, max_tilt_deg: float = 30.0,
     if lp is not None and len(lp) >= 10:
         # the lines overrule the normals only when they disagree with them: LiDAR-completed
         # normals are precise where the beams are and extrapolated elsewhere
-        near = np.abs(lp @ up) < np.sin(np.radians(max_tilt_deg / 3))
+        near = np.abs(lp @ up) < np.sin(np.radians(max_tilt_deg))
         if near.sum() >= 10 and np.median(np.abs(lp[near] @ up)) > np.sin(np.radians(LINE_CHECK_DEG)):
             up = _up_from_votes(n, lp, max_tilt_deg)
     return up / np.linalg.norm(up)

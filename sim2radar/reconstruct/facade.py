@@ -60,6 +60,10 @@ class FacadeConfig:
     lintel_cover : float — fraction of the span's seen lintel cells with a horizontal edge.
     min_seen : float — fraction of the doorway's cells that must be seen (on or behind the plane).
     thickness_m : float [m] — doorway box depth behind the wall face.
+    nominal_top_m : float [m] — doorway top assumed when the lintel is out of view (above the
+        image; procedural worlds: 2.06–2.26 m).
+    min_post_seen_m : float [m] — with the lintel out of view, both posts must be seen at least
+        this high.
     """
 
     cell_m: float = 0.02
@@ -73,6 +77,8 @@ class FacadeConfig:
     lintel_cover: float = 0.45
     min_seen: float = 0.5
     thickness_m: float = 0.17
+    nominal_top_m: float = 2.16
+    min_post_seen_m: float = 1.3
 
 
 @dataclasses.dataclass(frozen=True)
@@ -97,8 +103,8 @@ class FacadeDoor:
     Attributes
     ----------
     box_level : (7,) float64 — ``x y z dx dy dz heading`` in the level frame [m, rad].
-    s_m : (float, float) [m] — post positions along the wall.
-    top_m : float [m] — lintel height above the floor.
+    s_m : (float, float) [m] — the frame's outer edges along the wall (the doorway's ends).
+    top_m : float [m] — doorway top (lintel) height above the floor.
     score : float — mean of post and lintel coverage, in [0, 1].
     mask : (H, W) bool — image pixels of the doorway (seen, not occluded).
     """
@@ -213,37 +219,49 @@ def find_facade_doors(plane: WallPlane, floor_z: float, ceil_z: float, level_rot
     if above_hi - above_lo >= 5:
         above = _runs_cover(ve[above_lo:above_hi], on[above_lo:above_hi])
         post[above > config.above_cover_max] = 0.0
-    # posts: local maxima of the coverage over ±6 cm
-    win = max(1, int(round(0.06 / c)))
-    pk = (post >= config.post_cover) & (post == _max_filter_1d(post, win))
-    cols = np.flatnonzero(pk)
+    # posts: runs of columns with enough coverage (a frame's two edges, widened by the ±2-cell
+    # dilation, make one run); a run's outer ends, less the dilation, are the frame's edges
+    runs = _runs(post >= config.post_cover)
     doors: list[tuple[float, int, int, int]] = []
     wmin, wmax = (int(round(x / c)) for x in config.door_width_m)
     tz = range(iz(config.top_m[0]), min(iz(config.top_m[1]), len(r.z) - 1) + 1)
-    for ia, ja in enumerate(cols):
-        for jb in cols[ia + 1:]:
+    for ia, (a0, a1) in enumerate(runs):
+        for b0, b1 in runs[ia + 1:]:
+            ja, jb = min(a0 + 2, a1), max(b1 - 2, b0)  # outer frame edges
             if jb - ja < wmin:
                 continue
             if jb - ja > wmax:
                 break
-            span = slice(ja + 2, jb - 1)
-            best = (0.0, -1)
-            for t in tz:
+            span = slice(a1 + 1, b0)
+            if span.stop - span.start < 3:
+                continue
+            covs = np.full(len(tz), -1.0)
+            for i, t in enumerate(tz):
                 rows = slice(max(0, t - 1), t + 2)
                 lint = he[rows, span].any(0)
                 vis = visible[rows, span].any(0)
-                if vis.sum() < 0.5 * (jb - ja):
+                if vis.sum() >= 0.5 * (span.stop - span.start):
+                    covs[i] = float((lint & vis).sum() / max(vis.sum(), 1))
+            best = (0.0, -1)
+            if covs.max() >= 0:
+                # the lintel's edges, dilated, make a plateau of rows: its centre is the top
+                near = np.flatnonzero(covs >= 0.9 * covs.max())
+                best = (float(covs.max()), tz[int(round(near.mean()))])
+            if best[1] < 0:
+                # the lintel is out of view (above the image): posts seen up to the image edge
+                # with door height assumed, when they are seen at least ``min_post_seen_m`` high
+                top_seen = visible[:, [ja, jb]].all(1)
+                seen_h = c * np.flatnonzero(top_seen).max() if top_seen.any() else 0.0
+                if seen_h < config.min_post_seen_m or r.seen[iz(config.nominal_top_m), ja:jb].any():
                     continue
-                cov = float((lint & vis).sum() / max(vis.sum(), 1))
-                if cov > best[0]:
-                    best = (cov, t)
-            if best[0] < config.lintel_cover:
+                best = (0.5 * config.lintel_cover, iz(config.nominal_top_m))
+            elif best[0] < config.lintel_cover:
                 continue
             t = best[1]
             inside = visible[:t, ja:jb + 1]
             if inside.mean() < config.min_seen:
                 continue
-            score = (post[ja] + post[jb] + best[0]) / 3.0
+            score = (post[a0:a1 + 1].max() + post[b0:b1 + 1].max() + best[0]) / 3.0
             doors.append((score, int(ja), int(jb), int(t)))
     doors.sort(reverse=True)
     chosen: list[tuple[float, int, int, int]] = []
@@ -273,7 +291,9 @@ def find_facade_doors(plane: WallPlane, floor_z: float, ceil_z: float, level_rot
     return out
 
 
-def _max_filter_1d(x: np.ndarray, half: int) -> np.ndarray:
-    pad = np.pad(x, half, mode="constant", constant_values=-np.inf)
-    win = np.lib.stride_tricks.sliding_window_view(pad, 2 * half + 1)
-    return win.max(-1)
+def _runs(flags: np.ndarray) -> list[tuple[int, int]]:
+    """(first, last) indices of the runs of True in a 1-D bool array, in order."""
+    f = np.concatenate([[False], flags.astype(bool), [False]])
+    d = np.diff(f.astype(np.int8))
+    return list(zip(np.flatnonzero(d == 1).tolist(), (np.flatnonzero(d == -1) - 1).tolist(),
+                    strict=True))

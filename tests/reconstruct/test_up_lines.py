@@ -113,19 +113,10 @@ def test_no_lines_in_a_blank_image():
     np.testing.assert_allclose(estimate_up(n, line_planes=m), estimate_up(n))
 
 
-ROLL_GATE_BUG = (
-    "backproject.estimate_up: the gate that decides whether the lines overrule the normals "
-    "keeps only lines with |m·up_normals| < sin(max_tilt_deg/3) = sin 10°. With the normals' up "
-    "rolled 15° about the optical axis every vertical line's m is ~sin 15° off it, so no line "
-    "is 'near', `near.sum() >= 10` fails and the lines are ignored: up stays 14.8° off, "
-    "although `_up_from_votes(n, lines)` recovers it to 0.01°. Lines are silently dropped "
-    "exactly when the disagreement is largest (roll errors above ~11°).")
-
-
 @pytest.mark.parametrize("error_deg, axis", [
     (15.0, 0),
     (8.0, 2),
-    pytest.param(15.0, 2, marks=pytest.mark.xfail(strict=True, reason=ROLL_GATE_BUG)),
+    (15.0, 2),
 ], ids=["pitch-15", "roll-8", "roll-15"])
 def test_lines_correct_up_from_extrapolated_floor_normals(error_deg, axis):
     """Floor normals turned by 8–15° (in pitch or roll; the correct wall normals too few to
