@@ -3,8 +3,9 @@
     python -m benchmarks reconstruct
     SIM2RADAR_BENCH_WORLDS=5 SIM2RADAR_BENCH_FRAMES=4 SIM2RADAR_BENCH_WIDTH=320 python -m benchmarks reconstruct
     SIM2RADAR_BENCH_COMBOS=oracle,builtin python -m benchmarks reconstruct   # a subset
+    SIM2RADAR_BENCH_SEED=5000 python -m benchmarks reconstruct   # other worlds (held out)
 
-Frames: ``WORLDS`` procedural worlds (seeds 1000, 1001, ...) × ``FRAMES`` rig poses each, rendered
+Frames: ``WORLDS`` procedural worlds (seeds ``SEED``, ``SEED`` + 1, ...; default 1000) × ``FRAMES`` rig poses each, rendered
 by :mod:`sim2radar.worlds` at ``WIDTH`` × 3/4·``WIDTH`` (the analytic corridor of
 :mod:`sim2radar.reconstruct.synthetic` when the worlds are unavailable). For every available
 backend combination: depth AbsRel and δ<1.25, mIoU, material accuracy (pixel-weighted), door
@@ -36,7 +37,7 @@ MIN_DOORWAY_FRACTION = 0.3
 TARGETS = {"abs_rel": ("<=", 0.05), "material_acc": (">=", 0.80), "door_recall@0.3": (">=", 0.70)}
 
 
-def _frames(n_worlds: int, n_frames: int, width: int):
+def _frames(n_worlds: int, n_frames: int, width: int, seed0: int = 1000):
     """[(frame, world meshes (world frame))], source description."""
     try:
         from sim2radar.worlds import RigConfig, generate_world, render_frame, trajectory
@@ -48,10 +49,11 @@ def _frames(n_worlds: int, n_frames: int, width: int):
     rig = RigConfig(width=width, height=width * 3 // 4, spp=int(os.environ.get("SIM2RADAR_BENCH_SPP", 8)))
     out = []
     for w in range(n_worlds):
-        world = generate_world(1000 + w)
-        for pose in trajectory(world, n_frames, seed=1000 + w):
+        world = generate_world(seed0 + w)
+        for pose in trajectory(world, n_frames, seed=seed0 + w):
             out.append((render_frame(world, pose, rig), list(world.meshes), world))
-    return out, f"procedural worlds seeds 1000..{999 + n_worlds}, {n_frames} poses each, spp {rig.spp}"
+    return out, (f"procedural worlds seeds {seed0}..{seed0 + n_worlds - 1}, {n_frames} poses each, "
+                 f"spp {rig.spp}")
 
 
 def _in_camera_fov(points: np.ndarray, hfov_rad: float, radar_from_camera: np.ndarray) -> np.ndarray:
@@ -138,7 +140,8 @@ def main() -> dict:
     n_frames = int(os.environ.get("SIM2RADAR_BENCH_FRAMES", 4))
     width = int(os.environ.get("SIM2RADAR_BENCH_WIDTH", 320))
     t0 = time.perf_counter()
-    frames, source = _frames(n_worlds, n_frames, width)
+    seed0 = int(os.environ.get("SIM2RADAR_BENCH_SEED", 1000))
+    frames, source = _frames(n_worlds, n_frames, width, seed0)
     t_render = time.perf_counter() - t0
     print(f"frames: {len(frames)} ({source}), {width}x{width * 3 // 4}, rendered in {t_render:.0f} s")
 
