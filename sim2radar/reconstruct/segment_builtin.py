@@ -3,7 +3,8 @@
 No learned weights. The method, step by step:
 
 1. Back-project the (metric, e.g. LiDAR-completed) depth; normals from the point-grid gradients.
-2. Gravity from the dominant horizontal planes (``backproject.estimate_up``; a roughly level
+2. Gravity from the horizontal and vertical planes, checked against the image's near-vertical
+   line segments (``backproject.estimate_up`` + ``vertical_line_planes``; a roughly level
    camera is assumed), giving a level frame: x forward, y left, z up, origin at the camera.
 3. Edges between neighbouring pixels where the normal turns by more than ``normal_thresh_deg``,
    the depth jumps (relative jump above the largest a continuous surface at
@@ -27,6 +28,11 @@ No learned weights. The method, step by step:
 7. Wall openings: pixels seen behind a wall plane through a rectangle of it are doors (bottom
    near the floor, door height) or windows (with a sill); their doorway boxes are measured on
    the wall plane.
+8. Door frames on the rectified wall planes (:mod:`sim2radar.reconstruct.facade`): two posts
+   0.85–2 m apart standing on the floor, joined by a lintel at door height, found from oriented
+   image edges whatever the leaf's colour or swing; their doorway boxes come first and their
+   pixels become ``door`` segments (``facade=False`` turns this off, ``facade_options`` sets
+   :class:`~sim2radar.reconstruct.facade.FacadeConfig`).
 """
 
 from __future__ import annotations
@@ -221,7 +227,10 @@ class BuiltinSegments:
     doorway boxes measured from wall openings), ``below_floor_m`` (0.08; points this far below
     the floor / above the ceiling are floor / ceiling), ``door_partial`` (True: tall planar
     fragments standing near the floor are doors), ``door_bottom_max_m`` (0.75; an opening of
-    door height whose bottom is lower than this is a door, higher a window).
+    door height whose bottom is lower than this is a door, higher a window), ``grow_colour``
+    (ΔE 15; colour step that bounds a door leaf grown from its lower fragment), ``facade``
+    (True: door frames on rectified wall planes, step 8) and ``facade_options`` (a dict of
+    :class:`~sim2radar.reconstruct.facade.FacadeConfig` fields).
     """
 
     def __init__(
@@ -265,7 +274,13 @@ class BuiltinSegments:
         self.door_bottom_max_m = float(door_bottom_max_m)
         self.grow_colour = float(grow_colour)
         self.facade = bool(facade)
-        self.facade_config = FacadeConfig(**(facade_options or {}))
+        known = {f.name for f in dataclasses.fields(FacadeConfig)}
+        unknown = sorted(set(facade_options or {}) - known)
+        if unknown:
+            raise ValueError(f"segments.options.facade_options: unknown field(s) {unknown}; "
+                             f"known: {sorted(known)}")
+        self.facade_config = FacadeConfig(**{
+            key: tuple(v) if isinstance(v, list) else v for key, v in (facade_options or {}).items()})
         #: Diagnostics of the last call: up vector, floor / ceiling level, region count.
         self.last_info: dict = {}
         self._pixel_angle: float | None = None

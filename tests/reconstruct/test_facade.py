@@ -332,3 +332,15 @@ def test_raster_edge_strengths_follow_the_wall_axes_at_an_oblique_view():
     v_at_h = r.vedge[iz - 1:iz + 2, cols].max(0)
     assert (h_at_h > 4.0).all()
     assert (h_at_h > 2.0 * v_at_h).all()
+
+
+def test_builtin_segments_take_facade_options_and_name_unknown_fields():
+    """``facade_options`` from a YAML config (lists) become a FacadeConfig; a misspelt field is
+    an error that names the option and lists the known fields."""
+    from sim2radar.reconstruct.segment_builtin import BuiltinSegments
+
+    seg = BuiltinSegments(facade_options={"door_width_m": [0.8, 1.9], "lintel_cover": 0.5})
+    assert seg.facade_config.door_width_m == (0.8, 1.9)
+    assert seg.facade_config.lintel_cover == 0.5
+    with pytest.raises(ValueError, match=r"facade_options.*'post_cov'.*post_cover"):
+        BuiltinSegments(facade_options={"post_cov": 0.5})
