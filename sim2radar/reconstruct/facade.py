@@ -40,6 +40,8 @@ import math
 import cv2
 import numpy as np
 
+from sim2radar.camera import project
+
 __all__ = ["FacadeConfig", "FacadeDoor", "WallPlane", "find_facade_doors", "wall_raster"]
 
 
@@ -128,12 +130,10 @@ class _Raster:
 
 
 def _project(p_level: np.ndarray, cam_from_level: np.ndarray, k) -> tuple[np.ndarray, np.ndarray]:
+    """Pixel coordinates (…, 2) of level-frame points and their camera z (…)."""
     pc = p_level @ cam_from_level.T
-    zc = pc[..., 2]
-    with np.errstate(divide="ignore", invalid="ignore"):
-        u = k.fx * pc[..., 0] / zc + k.cx
-        v = k.fy * pc[..., 1] / zc + k.cy
-    return np.stack([u, v], -1), zc
+    uv, _ = project(pc, k)
+    return uv.reshape(*pc.shape[:-1], 2), pc[..., 2]
 
 
 def wall_raster(plane: WallPlane, floor_z: float, height_m: float, level_rot: np.ndarray, k,

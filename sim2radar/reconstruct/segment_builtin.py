@@ -626,15 +626,10 @@ class BuiltinSegments:
                 t = level / rays[..., 2]
             q = rays * t[..., None]
             for wi in walls:
-                g = region_geometry(pl, regions == wi, pixel_angle_rad=self._pixel_angle)
-                if g.vertical_cos > 0.2:
+                plane = self._wall_plane(pl, regions == wi)
+                if plane is None:
                     continue
-                nrm = np.array([g.normal[0], g.normal[1], 0.0])
-                nrm /= np.linalg.norm(nrm)
-                wp = pl[(regions == wi) & valid]
-                d = float(np.median(wp @ nrm))
-                if d > -0.3:
-                    continue
+                nrm, d, _, _ = plane
                 with np.errstate(invalid="ignore"):
                     px &= ~(q @ nrm < d - 0.05)
         labels, scores = list(labels), list(scores)
@@ -678,15 +673,10 @@ class BuiltinSegments:
         labels, scores = list(labels), list(scores)
         for wi in walls[:6]:
             mask = regions == wi
-            g = region_geometry(pl, mask, pixel_angle_rad=self._pixel_angle)
-            if g.vertical_cos > 0.2:
+            plane = self._wall_plane(pl, mask)
+            if plane is None:
                 continue
-            nrm = np.array([g.normal[0], g.normal[1], 0.0])
-            nrm /= np.linalg.norm(nrm)
-            wp = pl[mask & valid]
-            d = float(np.median(wp @ nrm))  # plane n·p = d, d < 0 (normal faces the camera)
-            if d > -0.3:
-                continue
+            nrm, d, g, wp = plane
             along = np.array([-nrm[1], nrm[0], 0.0])
             s_w = wp @ along
             s0, s1 = np.percentile(s_w, [0.5, 99.5])
@@ -748,6 +738,19 @@ class BuiltinSegments:
                                   float(width), th, float(top), float(heading)])
         return regions, labels, scores, boxes
 
+    def _wall_plane(self, pl, mask):
+        """Vertical plane ``nrm · p = d`` of a wall region (``nrm`` horizontal, facing the
+        camera, ``d`` the median offset of its points), its geometry and its valid points; None
+        when the region is not vertical or lies within 0.3 m of the camera."""
+        g = region_geometry(pl, mask, pixel_angle_rad=self._pixel_angle)
+        if g.vertical_cos > 0.2:
+            return None
+        nrm = np.array([g.normal[0], g.normal[1], 0.0])
+        nrm /= np.linalg.norm(nrm)
+        wp = pl[mask & np.isfinite(pl).all(axis=-1)]
+        d = float(np.median(wp @ nrm))
+        return None if d > -0.3 else (nrm, d, g, wp)
+
     def _wall_planes(self, regions, labels, pl) -> list[WallPlane]:
         """Planes of the large vertical ``wall`` regions (coplanar ones merged), with the
         along-wall extent of their pixels widened by 1.2 m (a door may split its wall)."""
@@ -757,16 +760,10 @@ class BuiltinSegments:
         for wi in np.argsort(-counts)[:10]:
             if labels[wi] != "wall" or counts[wi] < 0.01 * valid.sum():
                 continue
-            mask = (regions == wi) & valid
-            g = region_geometry(pl, mask, pixel_angle_rad=self._pixel_angle)
-            if g.vertical_cos > 0.2:
+            plane = self._wall_plane(pl, regions == wi)
+            if plane is None:
                 continue
-            nrm = np.array([g.normal[0], g.normal[1], 0.0])
-            nrm /= np.linalg.norm(nrm)
-            wp = pl[mask]
-            d = float(np.median(wp @ nrm))
-            if d > -0.3:
-                continue
+            nrm, d, _, wp = plane
             along = np.array([-nrm[1], nrm[0], 0.0])
             s0, s1 = np.percentile(wp @ along, [1, 99])
             dup = False
