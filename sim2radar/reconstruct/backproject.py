@@ -10,6 +10,8 @@ level  : origin at the camera centre, x forward (optical axis projected on the h
 
 from __future__ import annotations
 
+import dataclasses
+
 import cv2
 import numpy as np
 
@@ -20,6 +22,8 @@ __all__ = [
     "normals_from_points",
     "estimate_up",
     "vertical_line_planes",
+    "FloorPlane",
+    "lidar_floor",
     "level_from_camera",
     "transform_points",
 ]
@@ -198,6 +202,104 @@ def estimate_up(normals: np.ndarray, max_tilt_deg: float = 30.0,
             if r0 > np.sin(np.radians(LINE_CHECK_DEG)) and r0 > 2.0 * r1:
                 up = joint
     return up / np.linalg.norm(up)
+
+
+@dataclasses.dataclass(frozen=True)
+class FloorPlane:
+    """The floor plane ``normal · p = -height_m`` fitted to LiDAR returns (camera frame).
+
+    Attributes
+    ----------
+    normal : (3,) float64 — unit floor normal, camera frame, pointing up (into the room).
+    height_m : float [m] — camera height above the floor (> 0).
+    inliers : (M, 3) float32 — the LiDAR returns on the plane [m], camera frame.
+    spread_m : float [m] — the inliers' smaller horizontal extent (2nd principal axis,
+        5th–95th percentile): below ``min_spread_m`` the normal is not used, only the height.
+    tilt_fixed : bool — the normal is well conditioned and can serve as gravity's up.
+    """
+
+    normal: np.ndarray
+    height_m: float
+    inliers: np.ndarray
+    spread_m: float
+    tilt_fixed: bool
+
+
+def lidar_floor(points_cam: np.ndarray, up_cam: np.ndarray, *, max_tilt_deg: float = 8.0,
+                tol_m: float = 0.03, min_inliers: int = 20, min_spread_m: float = 1.0,
+                max_under: float = 0.02,
+                iterations: int = 300, seed: int = 0) -> FloorPlane | None:
+    """The floor under the camera from raw LiDAR returns (camera frame), by RANSAC.
+
+    LiDAR-completed depth is extrapolated wherever the beams do not reach — below the lowest
+    beam, the floor's depth is often filled from the wall behind it — but the raw returns of
+    the lowest beams are floor points measured to centimetres, in a ring round the sensor.
+    Candidates lie more than 0.3 m below the camera along ``up_cam`` (the normals' estimate);
+    planes through three of them whose normal is within ``max_tilt_deg`` of ``up_cam`` are
+    scored by their inliers (``tol_m`` + 0.3 % of range). The floor bounds the free space from
+    below, so a plane with more than ``max_under`` of the candidates under it is rejected (a
+    plane through the band one beam draws on the walls, or a table top). The best plane is
+    refit to its inliers by least squares. Deterministic (``seed``).
+
+    Returns None with fewer than ``min_inliers`` returns on the best plane.
+    """
+    p = np.asarray(points_cam, np.float64).reshape(-1, 3)
+    p = p[np.isfinite(p).all(axis=1)]
+    up = np.asarray(up_cam, np.float64) / np.linalg.norm(up_cam)
+    p = p[p @ up < -0.3]
+    if len(p) < min_inliers:
+        return None
+    rng_m = np.linalg.norm(p, axis=1)
+    tol = tol_m + 0.003 * rng_m
+    # hypotheses from the lowest return in each 2° of azimuth round ``up`` (the floor where a
+    # beam reaches it): the floor may be a few percent of all returns
+    e1 = np.cross(up, [1.0, 0.0, 0.0] if abs(up[0]) < 0.9 else [0.0, 0.0, 1.0])
+    e1 /= np.linalg.norm(e1)
+    e2 = np.cross(up, e1)
+    az = np.floor((np.degrees(np.arctan2(p @ e2, p @ e1)) + 180.0) / 2.0).astype(np.int64)
+    order = np.lexsort((p @ up, az))
+    first = np.r_[True, az[order][1:] != az[order][:-1]]
+    low = order[first]
+    if len(low) < 3:
+        return None
+    gen = np.random.default_rng(seed)
+    idx = low[gen.integers(0, len(low), size=(iterations, 3))]
+    a, b, c = p[idx[:, 0]], p[idx[:, 1]], p[idx[:, 2]]
+    nrm = np.cross(b - a, c - a)
+    norm = np.linalg.norm(nrm, axis=1)
+    ok = norm > 1e-9
+    nrm[ok] /= norm[ok, None]
+    nrm *= np.where(nrm @ up < 0, -1.0, 1.0)[:, None]
+    ok &= nrm @ up > np.cos(np.radians(max_tilt_deg))
+    if not ok.any():
+        return None
+    nrm, off = nrm[ok], np.einsum("ij,ij->i", nrm[ok], a[ok])  # plane: n·p = off (< 0)
+    res = p @ nrm.T - off[None, :]
+    support = (np.abs(res) < tol[:, None]).sum(axis=0)
+    # the floor bounds the free space from below: (almost) no return lies under it, while a
+    # plane through the bands that one beam draws on the walls has the floor's returns below
+    under = (res < -tol[:, None]).sum(axis=0)
+    support[under > max(3, max_under * len(p))] = 0
+    k = int(np.argmax(support))
+    if support[k] < min_inliers:
+        return None
+    inl = p[np.abs(res[:, k]) < tol]
+    for _ in range(2):  # least-squares refit on the inliers
+        cen = inl.mean(axis=0)
+        _, _, vt = np.linalg.svd(inl - cen, full_matrices=False)
+        n = vt[2] if vt[2] @ up > 0 else -vt[2]
+        d = float(n @ cen)
+        inl = p[np.abs(p @ n - d) < tol]
+        if len(inl) < min_inliers:
+            return None
+    if n @ up < np.cos(np.radians(max_tilt_deg)):
+        return None
+    # horizontal spread of the inliers: a short arc of one ring does not fix the tilt
+    q = inl - inl.mean(axis=0)
+    q = q - np.outer(q @ n, n)
+    _, _, vt = np.linalg.svd(q, full_matrices=False)
+    spread = float(np.subtract(*np.percentile(q @ vt[1], [95, 5])))
+    return FloorPlane(n, -d, inl.astype(np.float32), spread, spread >= min_spread_m)
 
 
 def level_from_camera(up_cam: np.ndarray) -> np.ndarray:

@@ -27,6 +27,9 @@ facing the camera):
    with a lintel row (strong horizontal edges along most of the span at ``top_m``) are door
    hypotheses, scored by post and lintel coverage and chosen greedily without overlap.
    Behind-the-plane cells between the posts (recess or opening) add evidence.
+4. A doorway cut by the left or right image border shows one post only: a post whose lintel
+   runs from it to the border, and not past it on its other side, is a doorway of
+   ``nominal_width_m`` (scored below a pair, so a two-post doorway wins an overlap).
 
 Returns doorway boxes ``x y z dx dy dz heading`` in the level frame (``dx`` along the wall, the
 box spanning ``thickness_m`` behind the wall face) and the image pixels of each doorway.
@@ -66,6 +69,10 @@ class FacadeConfig:
         image; procedural worlds: 2.06–2.26 m).
     min_post_seen_m : float [m] — with the lintel out of view, both posts must be seen at least
         this high.
+    border_doors : bool — also look for doorways cut by the left or right image border (one
+        post and a lintel that runs from it to the border).
+    nominal_width_m : float [m] — width given to such a doorway when less of it is seen
+        (procedural worlds: single doors 0.92–1.12 m between the frame's outer edges).
     """
 
     cell_m: float = 0.02
@@ -81,6 +88,8 @@ class FacadeConfig:
     thickness_m: float = 0.17
     nominal_top_m: float = 2.16
     min_post_seen_m: float = 1.3
+    border_doors: bool = True
+    nominal_width_m: float = 1.0
 
 
 @dataclasses.dataclass(frozen=True)
@@ -263,6 +272,8 @@ def find_facade_doors(plane: WallPlane, floor_z: float, ceil_z: float, level_rot
                 continue
             score = (post[a0:a1 + 1].max() + post[b0:b1 + 1].max() + best[0]) / 3.0
             doors.append((score, int(ja), int(jb), int(t)))
+    if config.border_doors:
+        doors += _border_doors(r, runs, post, he, visible, config)
     doors.sort(reverse=True)
     chosen: list[tuple[float, int, int, int]] = []
     for d in doors:
@@ -274,7 +285,9 @@ def find_facade_doors(plane: WallPlane, floor_z: float, ceil_z: float, level_rot
     a = plane.along
     heading = (math.atan2(a[1], a[0]) + math.pi / 2) % math.pi - math.pi / 2
     for score, ja, jb, t in chosen:
-        sa, sb = r.s[ja], r.s[jb]
+        # a doorway cut by the image border runs past the raster's last seen column
+        sa, sb = r.s[0] + c * ja, r.s[0] + c * jb
+        ja, jb = max(ja, 0), min(jb, len(r.s) - 1)
         top = float(r.z[t] + c / 2)
         th = config.thickness_m
         cxy = 0.5 * (sa + sb) * a[:2] + (plane.offset_m - th / 2) * n[:2]
@@ -288,6 +301,72 @@ def find_facade_doors(plane: WallPlane, floor_z: float, ceil_z: float, level_rot
             poly = cv2.convexHull(uv.astype(np.float32)).astype(np.int32)
             cv2.fillConvexPoly(mask, poly, 1)
         out.append(FacadeDoor(box, (float(sa), float(sb)), top, float(score), mask.astype(bool)))
+    return out
+
+
+def _border_doors(r: _Raster, runs: list[tuple[int, int]], post: np.ndarray, he: np.ndarray,
+                  visible: np.ndarray, config: FacadeConfig) -> list[tuple[float, int, int, int]]:
+    """Doorways cut by the left or right image border: one post, and a lintel from it to
+    the border (see :func:`find_facade_doors`).
+
+    The wall beyond the last seen column is out of the image, so the second post is not
+    seen; the doorway is ``nominal_width_m`` wide (or reaches 0.1 m past the border when more
+    than that is seen). The lintel edge must cover the seen span and must stop at the post (a
+    line that runs on past it — a dado rail, a cabinet top — is no lintel). Scored below a
+    two-post doorway of the same coverage, so a found pair wins an overlap."""
+    c = config.cell_m
+    nz, ns = visible.shape
+    iz = lambda zz: int(np.clip(round(zz / c), 0, nz))  # noqa: E731
+    lo_z, hi_z = iz(0.25), iz(config.top_m[0] - 0.1)
+    in_image = r.seen[lo_z:hi_z].mean(0) > 0.5
+    tz = range(iz(config.top_m[0]), min(iz(config.top_m[1]), nz - 1) + 1)
+    wmin, wmax = (int(round(x / c)) for x in config.door_width_m)
+    nominal = int(round(config.nominal_width_m / c))
+    out = []
+    for k, (a0, a1) in enumerate(runs):
+        for side in (+1, -1):
+            j_post = min(a0 + 2, a1) if side > 0 else max(a1 - 2, a0)  # the frame's outer edge
+            start = a1 + 1 if side > 0 else a0 - 1
+            if not (0 <= start < ns) or not in_image[start]:
+                continue
+            # the seen span from the post to the image border
+            step = np.arange(start, ns) if side > 0 else np.arange(start, -1, -1)
+            off = np.flatnonzero(~in_image[step])
+            if not len(off):
+                continue
+            j_end = int(step[off[0] - 1]) if off[0] > 0 else start
+            if side > 0 and any(b0 <= j_end for b0, _ in runs[k + 1:]):
+                continue  # another post before the border: a pair, or no door
+            if side < 0 and any(b1 >= j_end for _, b1 in runs[:k]):
+                continue
+            lo, hi = sorted((start, j_end))
+            seen_w = abs(j_end - j_post)
+            if hi - lo < 10 or seen_w > wmax:
+                continue
+            span = slice(lo, hi + 1)
+            if visible[:iz(config.top_m[0]), span].mean() < config.min_seen:
+                continue
+            covs = np.full(len(tz), -1.0)
+            for i, t in enumerate(tz):
+                rows = slice(max(0, t - 1), t + 2)
+                vis = visible[rows, span].any(0)
+                if vis.sum() >= 0.5 * (hi - lo + 1):
+                    covs[i] = float((he[rows, span].any(0) & vis).sum() / max(vis.sum(), 1))
+            if covs.max() < config.lintel_cover:
+                continue
+            near = np.flatnonzero(covs >= 0.9 * covs.max())
+            t = tz[int(round(near.mean()))]
+            # the lintel stops at the post: little horizontal edge 4–30 cm outside it
+            rows = slice(max(0, t - 1), t + 2)
+            o0, o1 = (j_post - 15, j_post - 2) if side > 0 else (j_post + 3, j_post + 16)
+            o0, o1 = max(0, o0), min(ns, o1)
+            vis_out = visible[rows, o0:o1].any(0)
+            if vis_out.sum() < 5 or (he[rows, o0:o1].any(0) & vis_out).mean() > 0.3:
+                continue
+            width = max(nominal, seen_w + int(round(0.1 / c)), wmin)
+            ja, jb = (j_post, j_post + width) if side > 0 else (j_post - width, j_post)
+            score = 0.8 * (post[a0:a1 + 1].max() + covs.max()) / 2.0
+            out.append((float(score), int(ja), int(jb), int(t)))
     return out
 
 

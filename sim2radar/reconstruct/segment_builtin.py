@@ -6,6 +6,9 @@ No learned weights. The method, step by step:
 2. Gravity from the horizontal and vertical planes, checked against the image's near-vertical
    line segments (``backproject.estimate_up`` + ``vertical_line_planes``; a roughly level
    camera is assumed), giving a level frame: x forward, y left, z up, origin at the camera.
+   With LiDAR (``lidar_floor``), the floor plane fitted to the raw returns of the lowest beams
+   (``backproject.lidar_floor``) fixes up and the floor level when its returns lie on
+   up-facing surfaces of the depth map (not where those beams hit the walls first).
 3. Edges between neighbouring pixels where the normal turns by more than ``normal_thresh_deg``,
    the depth jumps (relative jump above the largest a continuous surface at
    ``max_incidence_deg`` could make), the local plane offset n·p steps (a door a few cm proud
@@ -20,7 +23,10 @@ No learned weights. The method, step by step:
    ``door`` when door-sized (``door_width_m`` × ``door_height_m``), standing on the floor and
    ending below the ceiling; ``window`` when a wall-set rectangle with a sill; ``handrail`` when
    long, thin and at hand height; small red regions ``fire_extinguisher``; remaining large
-   vertical regions ``wall``; the rest ``clutter``.
+   vertical regions ``wall``; the rest ``clutter``. A region cut by the top *and* a side
+   border has neither its height nor its width measured, so the size rules do not make it a
+   door. Vertical regions standing ``proud_m`` in front of a large wall below door height are
+   furniture (``clutter``): a door is flush with its wall or set into it.
 6. Floor and ceiling by room geometry: points below the floor level (above the ceiling) —
    depth a LiDAR completion extrapolated from a wall into the band under its lowest beam — and
    pixels without depth under the lowest (over the highest) measured pixel of their column
@@ -32,7 +38,8 @@ No learned weights. The method, step by step:
    0.85–2 m apart standing on the floor, joined by a lintel at door height, found from oriented
    image edges whatever the leaf's colour or swing; their doorway boxes come first and their
    pixels become ``door`` segments (``facade=False`` turns this off, ``facade_options`` sets
-   :class:`~sim2radar.reconstruct.facade.FacadeConfig`).
+   :class:`~sim2radar.reconstruct.facade.FacadeConfig`). A doorway cut by the image border is
+   found from its one seen post and a lintel running from it to the border.
 """
 
 from __future__ import annotations
@@ -43,9 +50,12 @@ import math
 import cv2
 import numpy as np
 
+from sim2radar.camera import project
 from sim2radar.reconstruct.backproject import (
+    FloorPlane,
     estimate_up,
     level_from_camera,
+    lidar_floor,
     normals_from_points,
     points_from_depth,
     vertical_line_planes,
@@ -75,7 +85,8 @@ class SegmentGeometry:
     width_m : float [m] — horizontal extent along the plane (1st–99th percentile).
     z_min_m, z_max_m : float [m] — vertical extent (1st / 99th percentile).
     fill : float — pixel count over the area of the region's convex hull in the image.
-    touches_border : bool — the region reaches the image border.
+    borders : str — the image borders the region reaches: any of ``t`` (top), ``b`` (bottom),
+        ``l`` (left), ``r`` (right); its extent is cut on those sides.
     """
 
     n_px: int
@@ -86,7 +97,12 @@ class SegmentGeometry:
     z_min_m: float
     z_max_m: float
     fill: float
-    touches_border: bool
+    borders: str
+
+    @property
+    def touches_border(self) -> bool:
+        """The region reaches the image border (it is partly out of view)."""
+        return bool(self.borders)
 
     @property
     def height_m(self) -> float:
@@ -119,7 +135,8 @@ def region_geometry(points_level: np.ndarray, mask: np.ndarray, max_points: int 
     pts = points_level[mask]
     pts = pts[np.isfinite(pts).all(axis=1)].astype(np.float64)
     h, w = mask.shape
-    touches = bool(mask[0].any() or mask[-1].any() or mask[:, 0].any() or mask[:, -1].any())
+    touches = "".join(side for side, edge in (("t", mask[0]), ("b", mask[-1]), ("l", mask[:, 0]),
+                                              ("r", mask[:, -1])) if edge.any())
     if len(pts) < 3:
         c = pts.mean(axis=0) if len(pts) else np.zeros(3)
         return SegmentGeometry(len(pts), c, np.array([1.0, 0, 0]), 0.0, 0.0, 0.0, 0.0, 0.0,
@@ -228,7 +245,9 @@ class BuiltinSegments:
     the floor / above the ceiling are floor / ceiling), ``door_partial`` (True: tall planar
     fragments standing near the floor are doors), ``door_bottom_max_m`` (0.75; an opening of
     door height whose bottom is lower than this is a door, higher a window), ``grow_colour``
-    (ΔE 15; colour step that bounds a door leaf grown from its lower fragment), ``facade``
+    (ΔE 15; colour step that bounds a door leaf grown from its lower fragment), ``proud_m``
+    ((0.12, 0.7); a vertical region this far in front of a large wall is furniture),
+    ``lidar_floor`` (True: floor plane and up from the raw LiDAR returns when given), ``facade``
     (True: door frames on rectified wall planes, step 8) and ``facade_options`` (a dict of
     :class:`~sim2radar.reconstruct.facade.FacadeConfig` fields).
     """
@@ -253,6 +272,8 @@ class BuiltinSegments:
         door_partial: bool = True,
         door_bottom_max_m: float = 0.75,
         grow_colour: float = 15.0,
+        proud_m: tuple[float, float] = (0.12, 0.7),
+        lidar_floor: bool = True,
         facade: bool = True,
         facade_options: dict | None = None,
     ) -> None:
@@ -273,6 +294,8 @@ class BuiltinSegments:
         self.door_partial = bool(door_partial)
         self.door_bottom_max_m = float(door_bottom_max_m)
         self.grow_colour = float(grow_colour)
+        self.proud_m = tuple(float(x) for x in proud_m)
+        self.lidar_floor = bool(lidar_floor)
         self.facade = bool(facade)
         known = {f.name for f in dataclasses.fields(FacadeConfig)}
         unknown = sorted(set(facade_options or {}) - known)
@@ -305,23 +328,33 @@ class BuiltinSegments:
         normals = normals_from_points(points, step_px=step)
         normals = self._smooth_normals(normals, valid, step)
         up = estimate_up(normals, line_planes=vertical_line_planes(frame.rgb, k))
+        floor = None
+        if self.lidar_floor and frame.lidar_points is not None and len(frame.lidar_points):
+            # the raw returns of the lowest beams measure the floor to centimetres
+            floor = self._checked_floor(lidar_floor(frame.lidar_points, up), normals, k)
+            if floor is not None and floor.tilt_fixed:
+                up = floor.normal
         rot = level_from_camera(up)[:3, :3]
         pl = points @ rot.T
 
         lab = self._lab(frame.rgb, w)
         regions = self._regions(points, normals, lab, valid, k.fx, up)
         nl = normals @ rot.T
-        floor_z = self._level(pl, nl, up=True)
+        floor_z = self._level(pl, nl, up=True) if floor is None else -floor.height_m
         self._pixel_angle = 1.0 / k.fx
         regions = self._merge(regions, pl, lab, valid, floor_z)
         if self.fill_no_depth:
             # pixels without depth (e.g. below the LiDAR's lowest beam) join the nearest
             # region in the image: they get a label and material, but no 3D point
             regions = _fill_nearest(_fill_columns(regions), np.ones_like(valid))
-        labels, scores, info = self._label(regions, pl, frame.rgb)
+        labels, scores, info = self._label(regions, pl, frame.rgb,
+                                           None if floor is None else -floor.height_m)
+        labels, scores, proud = self._proud_of_walls(regions, labels, scores, pl,
+                                                     info["floor_z_m"])
         if self.door_partial:
             regions, labels, scores = self._grow_doors(regions, labels, scores, pl, lab,
-                                                       info["floor_z_m"], info["ceiling_z_m"])
+                                                       info["floor_z_m"], info["ceiling_z_m"],
+                                                       skip=proud)
         rays = points_from_depth(np.ones(frame.shape, np.float32), k) @ rot.T
         regions, labels, scores = self._below_floor(regions, labels, scores, pl, rays,
                                                     info["floor_z_m"], info["ceiling_z_m"])
@@ -340,6 +373,22 @@ class BuiltinSegments:
         return Segments(seg, tuple(labels), np.asarray(scores, np.float32))
 
     # -- steps ------------------------------------------------------------------------------
+    @staticmethod
+    def _checked_floor(floor: FloorPlane | None, normals: np.ndarray, k) -> FloorPlane | None:
+        """The LiDAR floor plane if its returns lie on surfaces that face up in the depth
+        map: where the lowest beam hits the walls before the floor, the plane through those
+        hits is as free of returns below it as a floor, but its points are on walls."""
+        if floor is None:
+            return None
+        uv, ok = project(floor.inliers, k)
+        if ok.sum() < 10:
+            return None
+        n = normals[uv[ok, 1].astype(np.int64), uv[ok, 0].astype(np.int64)]
+        n = n[np.isfinite(n).all(axis=1)]
+        if len(n) < 10 or np.mean(n @ floor.normal > math.cos(math.radians(25))) < 0.5:
+            return None
+        return floor
+
     @staticmethod
     def _smooth_normals(normals: np.ndarray, valid: np.ndarray, step: int) -> np.ndarray:
         n = np.where(np.isfinite(normals), normals, 0).astype(np.float32)
@@ -470,7 +519,7 @@ class BuiltinSegments:
             regions = np.where(regions >= 0, new[np.clip(regions, 0, None)], -1)
         return regions
 
-    def _label(self, regions, pl, rgb):
+    def _label(self, regions, pl, rgb, floor_z_known=None):
         n = int(regions.max()) + 1
         geos = [region_geometry(pl, regions == i, pixel_angle_rad=self._pixel_angle)
                 for i in range(n)]
@@ -489,8 +538,12 @@ class BuiltinSegments:
         ups = [g for g in geos if g.vertical_cos > cos_h and g.normal[2] > 0 and g.centroid[2] < -0.3]
         downs = [g for g in geos if g.vertical_cos > cos_h and g.normal[2] < 0 and g.centroid[2] > 0.2]
         zs = pl[..., 2][np.isfinite(pl[..., 2])]
-        floor_z = (max(ups, key=lambda g: g.n_px).centroid[2] if ups
-                   else float(np.percentile(zs, 1)))
+        if floor_z_known is not None:
+            floor_z = floor_z_known
+        elif ups:
+            floor_z = max(ups, key=lambda g: g.n_px).centroid[2]
+        else:
+            floor_z = float(np.percentile(zs, 1))
         ceil_z = (max(downs, key=lambda g: g.n_px).centroid[2] if downs
                   else float(np.percentile(zs, 99)))
         tol = self.floor_tolerance_m
@@ -523,7 +576,52 @@ class BuiltinSegments:
         info = {"floor_z_m": float(floor_z), "ceiling_z_m": float(ceil_z)}
         return labels, scores, info
 
-    def _grow_doors(self, regions, labels, scores, pl, lab, floor_z, ceil_z):
+    def _proud_of_walls(self, regions, labels, scores, pl, floor_z):
+        """Furniture standing against a wall: vertical regions ``proud_m`` in front of a large
+        wall plane become ``clutter``.
+
+        A door leaf is flush with its wall or set into it, and a window is set into it; a cabinet
+        or a radiator stands 0.1–0.6 m in front of it. A door/wall/window region of fewer
+        pixels than the wall, with at least 80 % of its points within the wall's extent, whose
+        median distance in front of the plane is within ``proud_m`` and whose 10th percentile
+        is more than 3 cm, is that furniture — unless its top is at door height (an open leaf
+        swung out of its doorway stands proud too, up to the lintel). Returns the labels, the
+        scores and the region ids turned to clutter (the door growing step skips them)."""
+        lo, hi = self.proud_m
+        valid = np.isfinite(pl).all(axis=-1)
+        counts = np.bincount(regions[regions >= 0], minlength=len(labels))
+        walls = []
+        for wi in np.argsort(-counts)[:8]:
+            if labels[wi] != "wall" or counts[wi] < 0.02 * valid.sum():
+                continue
+            plane = self._wall_plane(pl, regions == wi)
+            if plane is not None:
+                nrm, d, _, wp = plane
+                along = np.array([-nrm[1], nrm[0], 0.0])
+                walls.append((int(wi), nrm, d, along, np.percentile(wp @ along, [1, 99])))
+        labels, scores = list(labels), list(scores)
+        proud: set[int] = set()
+        wall_ids = {w[0] for w in walls}
+        for i, lbl in enumerate(labels):
+            if lbl not in ("door", "wall", "window") or i in wall_ids or counts[i] < 100:
+                continue
+            pts = pl[(regions == i) & valid]
+            if len(pts) < 50 or np.percentile(pts[:, 2], 99) - floor_z >= self.door_height_m[0]:
+                continue
+            for wi, nrm, d, along, (s0, s1) in walls:
+                if counts[i] >= counts[wi]:
+                    continue
+                sa = pts @ along
+                if ((sa > s0 - 0.1) & (sa < s1 + 0.1)).mean() < 0.8:
+                    continue
+                f10, f50 = np.percentile(pts @ nrm - d, [10, 50])
+                if lo <= f50 <= hi and f10 > 0.03:
+                    labels[i], scores[i] = "clutter", 0.5
+                    proud.add(i)
+                    break
+        return labels, scores, proud
+
+    def _grow_doors(self, regions, labels, scores, pl, lab, floor_z, ceil_z, skip=frozenset()):
         """Complete door leaves from their lower fragment by colour.
 
         LiDAR-completed depth blurs a leaf into its wall, so often only the leaf's lower part
@@ -548,7 +646,8 @@ class BuiltinSegments:
         taken = np.zeros((h, w), bool)
         for i in np.argsort(-cnt):
             i = int(i)
-            if cnt[i] < 100 or labels[i] not in ("clutter", "wall", "window") or big_wall[i]:
+            if (cnt[i] < 100 or labels[i] not in ("clutter", "wall", "window") or big_wall[i]
+                    or i in skip):
                 continue
             mask = regions == i
             if (mask & taken).any():
@@ -815,10 +914,14 @@ class BuiltinSegments:
         if g.touches_border:  # partly out of view: accept narrower / shorter rectangles
             w_lo, h_lo = 0.25, h_lo * 0.8
         rel_bottom = g.z_min_m - floor_z
-        if (on_floor and below_ceiling and w_lo <= g.width_m <= w_hi
+        # cut by the top border and by a side border, neither the height nor the width is
+        # seen: a wall close to the camera fills the same corner of the image, so the size
+        # rules below have no evidence of a door (the facade search still finds its frame)
+        sized = not ("t" in g.borders and ("l" in g.borders or "r" in g.borders))
+        if (sized and on_floor and below_ceiling and w_lo <= g.width_m <= w_hi
                 and h_lo <= g.height_m <= h_hi and g.fill > 0.5):
             return "door", float(min(0.9, 0.5 + 0.4 * g.fill))
-        if (self.door_partial and g.z_min_m < floor_z + 0.6 and below_ceiling
+        if (sized and self.door_partial and g.z_min_m < floor_z + 0.6 and below_ceiling
                 and 0.3 <= g.width_m <= w_hi and 1.1 <= g.height_m <= h_hi
                 and g.z_max_m - floor_z <= h_hi + 0.1 and g.fill > 0.6 and g.planarity < 0.03):
             # a door fragment: LiDAR completion smears the leaf's lower / upper band into the
@@ -832,7 +935,7 @@ class BuiltinSegments:
             if brightness >= 0.55:  # glass shows daylight or reflections: bright
                 return "window", 0.5
             top = g.z_max_m - floor_z
-            if h_lo <= top <= h_hi + 0.1 and w_lo <= g.width_m <= w_hi:
+            if sized and h_lo <= top <= h_hi + 0.1 and w_lo <= g.width_m <= w_hi:
                 # the upper part of a door whose lower part was split off: door-height top
                 return "door", 0.4
         if g.height_m > 1.0 or g.width_m > 1.5:

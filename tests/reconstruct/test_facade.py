@@ -206,6 +206,39 @@ def test_door_posts_are_located_along_the_wall(case):
     assert door.box_level[:2] @ plane.along[:2] == pytest.approx(0.5 * (sa + sb), abs=0.03)
 
 
+def test_door_cut_by_the_image_border_is_found_from_one_post_and_its_lintel():
+    """A doorway at s = 2.3–3.3 m on the wall 4 m ahead leaves the image at s ≈ 2.8 m (70°
+    field of view): one post and half the lintel are seen. It is found with its seen end within
+    4 cm and its nominal width (``nominal_width_m``), running past the border; without the
+    border hypothesis (``border_doors=False``) it is not."""
+    lum, pts = _render(K_FRONT, [_wall(FRONT, _frame(2.3, 3.3))])
+    grad = _grad(lum)
+    half = 4.0 * math.tan(math.radians(35.0))
+    assert 2.3 < half < 3.3 - 0.3
+    cfg = FacadeConfig()
+    (door,) = _doors(FRONT, K_FRONT, pts, grad, cfg)
+    assert door.s_m[0] == pytest.approx(2.3, abs=0.04)
+    assert door.s_m[1] - door.s_m[0] == pytest.approx(cfg.nominal_width_m, abs=0.03)
+    assert door.s_m[1] > half
+    assert door.top_m == pytest.approx(TOP_M, abs=0.08)
+    assert door.mask.any()
+    assert _doors(FRONT, K_FRONT, pts, grad,
+                  dataclasses.replace(cfg, border_doors=False)) == []
+
+
+def test_border_door_needs_a_lintel_that_stops_at_its_post():
+    """The same post with a horizontal line at door height that runs along the whole wall (a
+    rail, a paint line) is no doorway: a lintel stops at its posts."""
+
+    def paint(s, h):
+        post = (s >= 2.3) & (s <= 2.3 + POST_M) & (h >= 0) & (h <= TOP_M)
+        rail = (h >= TOP_M - POST_M) & (h <= TOP_M)
+        return np.where(post | rail, FRAME_L, WALL_L)
+
+    lum, pts = _render(K_FRONT, [_wall(FRONT, paint)])
+    assert _doors(FRONT, K_FRONT, pts, _grad(lum)) == []
+
+
 # -- no door ----------------------------------------------------------------------------------
 
 

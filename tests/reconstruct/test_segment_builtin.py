@@ -132,3 +132,57 @@ def test_door_leaf_is_grown_from_its_lower_fragment_by_colour():
     out, labels, _ = seg._grow_doors(regions, ["wall", "clutter"], [0.8, 0.4], pl, lab,
                                      -1.3, 1.5)
     assert labels[1] == "clutter" and (out == 1).sum() == (regions == 1).sum()
+
+
+def _geometry(borders: str, width_m=1.0, z_min=-1.25, z_max=0.6):
+    from sim2radar.reconstruct.segment_builtin import SegmentGeometry
+
+    return SegmentGeometry(50_000, np.array([3.0, 0.0, -0.3]), np.array([-1.0, 0.0, 0.0]),
+                           0.01, width_m, z_min, z_max, 0.95, borders)
+
+
+def test_rectangle_cut_by_the_top_and_a_side_border_is_no_door():
+    """A 1 m wide, 1.85 m tall vertical rectangle on the floor is a door when only the top
+    and bottom borders cut it (its width is seen); cut by the top and the left border, neither
+    its height nor its width is measured — a wall near the camera fills that corner too — so
+    the size rules do not call it a door."""
+    seg = BuiltinSegments()
+    floor_z, ceil_z = -1.25, 1.55
+    assert seg._vertical_label(_geometry("tb"), floor_z, ceil_z, True)[0] == "door"
+    assert seg._vertical_label(_geometry(""), floor_z, ceil_z, True)[0] == "door"
+    for borders in ("tl", "tr", "tbl"):
+        assert seg._vertical_label(_geometry(borders), floor_z, ceil_z, True)[0] == "wall"
+
+
+def _wall_with_block(front_m: float, top_m: float):
+    """A wall 4 m ahead (level frame, rows span z 1.5 .. -1.3, the floor level) and a 0.8 m
+    wide block on the floor ``front_m`` in front of it, ``top_m`` tall (region 1)."""
+    h, w = 120, 160
+    y = np.linspace(2.0, -2.0, w)
+    z = np.linspace(1.5, -1.3, h)
+    x = np.full((h, w), 4.0)
+    block = (np.abs(y[None, :]) < 0.4) & (z[:, None] < -1.3 + top_m)
+    x[block] = 4.0 - front_m
+    pl = np.stack(np.broadcast_arrays(x, y[None, :], z[:, None]), -1).astype(np.float32)
+    regions = block.astype(np.int64)
+    return regions, pl
+
+
+@pytest.mark.parametrize(("front_m", "top_m", "label"), [
+    (0.4, 1.5, "clutter"),   # a cabinet 0.4 m proud of the wall
+    (0.2, 0.6, "clutter"),   # a radiator or a bin 0.2 m proud
+    (0.06, 1.5, "door"),     # 6 cm proud (below proud_m): a leaf, a frame, a panel
+    (0.0, 1.9, "door"),      # flush with the wall: a closed leaf
+    (0.4, 2.1, "door"),      # proud but up to door height: an open leaf swung out
+    (1.5, 1.5, "door"),      # far in front: another wall's surface, not furniture on this one
+])
+def test_furniture_standing_proud_of_a_wall_is_clutter(front_m, top_m, label):
+    """A door-labelled block standing 0.12–0.7 m (``proud_m``) in front of a large wall and
+    below door height is furniture; flush with the wall, reaching door height, or far in front
+    of the wall it keeps its label."""
+    seg = BuiltinSegments()
+    regions, pl = _wall_with_block(front_m, top_m)
+    labels, _, proud = seg._proud_of_walls(regions, ["wall", "door"], [0.8, 0.5], pl, -1.3)
+    assert labels[1] == label
+    assert (1 in proud) == (label == "clutter")
+    assert labels[0] == "wall"
