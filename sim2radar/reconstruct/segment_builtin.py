@@ -247,6 +247,7 @@ class BuiltinSegments:
     door height whose bottom is lower than this is a door, higher a window), ``grow_colour``
     (ΔE 15; colour step that bounds a door leaf grown from its lower fragment), ``proud_m``
     ((0.12, 0.7); a vertical region this far in front of a large wall is furniture),
+    ``proud_split`` (True: such pixels inside a wall's own region are split off too),
     ``lidar_floor`` (True: floor plane and up from the raw LiDAR returns when given), ``facade``
     (True: door frames on rectified wall planes, step 8) and ``facade_options`` (a dict of
     :class:`~sim2radar.reconstruct.facade.FacadeConfig` fields).
@@ -273,6 +274,7 @@ class BuiltinSegments:
         door_bottom_max_m: float = 0.75,
         grow_colour: float = 15.0,
         proud_m: tuple[float, float] = (0.12, 0.7),
+        proud_split: bool = True,
         lidar_floor: bool = True,
         facade: bool = True,
         facade_options: dict | None = None,
@@ -295,6 +297,7 @@ class BuiltinSegments:
         self.door_bottom_max_m = float(door_bottom_max_m)
         self.grow_colour = float(grow_colour)
         self.proud_m = tuple(float(x) for x in proud_m)
+        self.proud_split = bool(proud_split)
         self.lidar_floor = bool(lidar_floor)
         self.facade = bool(facade)
         known = {f.name for f in dataclasses.fields(FacadeConfig)}
@@ -349,8 +352,8 @@ class BuiltinSegments:
             regions = _fill_nearest(_fill_columns(regions), np.ones_like(valid))
         labels, scores, info = self._label(regions, pl, frame.rgb,
                                            None if floor is None else -floor.height_m)
-        labels, scores, proud = self._proud_of_walls(regions, labels, scores, pl,
-                                                     info["floor_z_m"])
+        regions, labels, scores, proud = self._proud_of_walls(regions, labels, scores, pl,
+                                                              info["floor_z_m"])
         if self.door_partial:
             regions, labels, scores = self._grow_doors(regions, labels, scores, pl, lab,
                                                        info["floor_z_m"], info["ceiling_z_m"],
@@ -585,8 +588,12 @@ class BuiltinSegments:
         pixels than the wall, with at least 80 % of its points within the wall's extent, whose
         median distance in front of the plane is within ``proud_m`` and whose 10th percentile
         is more than 3 cm, is that furniture — unless its top is at door height (an open leaf
-        swung out of its doorway stands proud too, up to the lintel). Returns the labels, the
-        scores and the region ids turned to clutter (the door growing step skips them)."""
+        swung out of its doorway stands proud too, up to the lintel). With ``proud_split``,
+        pixels of a large wall region itself that stand proud of its plane (furniture or an
+        open leaf that the depth completion blended into the wall) are split off as their own
+        regions, of at least 0.2 % of the image: ``clutter`` below door height, ``door`` when
+        door-sized up to door height. Returns the regions, labels, scores and the region ids
+        turned to clutter (the door growing step skips them)."""
         lo, hi = self.proud_m
         valid = np.isfinite(pl).all(axis=-1)
         counts = np.bincount(regions[regions >= 0], minlength=len(labels))
@@ -602,6 +609,35 @@ class BuiltinSegments:
         labels, scores = list(labels), list(scores)
         proud: set[int] = set()
         wall_ids = {w[0] for w in walls}
+        if self.proud_split:
+            # furniture merged into its wall's region (a completion that blends the two):
+            # connected pixels of the wall region standing proud of its plane
+            h, w = regions.shape
+            regions = regions.copy()
+            for wi, nrm, d, _, _ in walls:
+                with np.errstate(invalid="ignore"):
+                    front = pl @ nrm - d
+                blob = (regions == wi) & valid & (front > lo) & (front < hi)
+                blob = cv2.morphologyEx(blob.astype(np.uint8), cv2.MORPH_OPEN,
+                                        np.ones((5, 5), np.uint8))
+                n_cc, cc, stats, _ = cv2.connectedComponentsWithStats(blob, connectivity=4)
+                for c in range(1, n_cc):
+                    if stats[c, cv2.CC_STAT_AREA] < 0.002 * h * w:
+                        continue
+                    blob_c = cc == c
+                    regions[blob_c] = len(labels)
+                    if np.percentile(pl[..., 2][blob_c], 99) - floor_z >= self.door_height_m[0]:
+                        # up to door height: an open leaf swung out of its doorway when it is
+                        # door-sized; either way no longer part of the wall's plane
+                        g = region_geometry(pl, blob_c, pixel_angle_rad=self._pixel_angle)
+                        label, score = self._vertical_label(g, floor_z, np.inf, False)
+                        labels.append("door" if label == "door" else "clutter")
+                        scores.append(score if label == "door" else 0.4)
+                        continue
+                    proud.add(len(labels))
+                    labels.append("clutter")
+                    scores.append(0.5)
+            counts = np.bincount(regions[regions >= 0], minlength=len(labels))
         for i, lbl in enumerate(labels):
             if lbl not in ("door", "wall", "window") or i in wall_ids or counts[i] < 100:
                 continue
@@ -619,7 +655,7 @@ class BuiltinSegments:
                     labels[i], scores[i] = "clutter", 0.5
                     proud.add(i)
                     break
-        return labels, scores, proud
+        return regions, labels, scores, proud
 
     def _grow_doors(self, regions, labels, scores, pl, lab, floor_z, ceil_z, skip=frozenset()):
         """Complete door leaves from their lower fragment by colour.

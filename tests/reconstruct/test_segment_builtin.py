@@ -182,7 +182,23 @@ def test_furniture_standing_proud_of_a_wall_is_clutter(front_m, top_m, label):
     of the wall it keeps its label."""
     seg = BuiltinSegments()
     regions, pl = _wall_with_block(front_m, top_m)
-    labels, _, proud = seg._proud_of_walls(regions, ["wall", "door"], [0.8, 0.5], pl, -1.3)
+    _, labels, _, proud = seg._proud_of_walls(regions, ["wall", "door"], [0.8, 0.5], pl, -1.3)
     assert labels[1] == label
     assert (1 in proud) == (label == "clutter")
     assert labels[0] == "wall"
+
+
+def test_furniture_blended_into_its_wall_region_is_split_off():
+    """A cabinet 0.4 m proud of the wall whose pixels the depth completion merged into the
+    wall's region is split off as a ``clutter`` region (``proud_split``); the wall keeps the
+    rest. With ``proud_split=False`` the region is left whole."""
+    regions, pl = _wall_with_block(0.4, 1.5)
+    block = regions == 1
+    merged = np.zeros_like(regions)
+    out, labels, _, proud = BuiltinSegments()._proud_of_walls(merged, ["wall"], [0.8], pl, -1.3)
+    assert len(labels) == 2 and labels[1] == "clutter" and 1 in proud
+    assert _iou(out == 1, block) > 0.9
+    assert ((out == 0) & ~block).sum() == (~block).sum()
+    out, labels, _, _ = BuiltinSegments(proud_split=False)._proud_of_walls(
+        merged, ["wall"], [0.8], pl, -1.3)
+    assert labels == ["wall"] and (out == 0).all()
