@@ -261,9 +261,12 @@ def find_facade_doors(plane: WallPlane, floor_z: float, ceil_z: float, level_rot
                 # with door height assumed, when they are seen at least ``min_post_seen_m`` high
                 top_seen = visible[:, [ja, jb]].all(1)
                 seen_h = c * np.flatnonzero(top_seen).max() if top_seen.any() else 0.0
-                if seen_h < config.min_post_seen_m or r.seen[iz(config.nominal_top_m), ja:jb].any():
+                t_nom = iz(config.nominal_top_m)
+                if t_nom >= len(r.z):  # a room lower than a door: no doorway of that height
                     continue
-                best = (0.5 * config.lintel_cover, iz(config.nominal_top_m))
+                if seen_h < config.min_post_seen_m or r.seen[t_nom, ja:jb].any():
+                    continue
+                best = (0.5 * config.lintel_cover, t_nom)
             elif best[0] < config.lintel_cover:
                 continue
             t = best[1]

@@ -377,3 +377,17 @@ def test_builtin_segments_take_facade_options_and_name_unknown_fields():
     assert seg.facade_config.lintel_cover == 0.5
     with pytest.raises(ValueError, match=r"facade_options.*'post_cov'.*post_cover"):
         BuiltinSegments(facade_options={"post_cov": 0.5})
+
+
+def test_room_lower_than_the_nominal_door_top_is_searched_without_error():
+    """Posts seen up to the image's top edge, below the lintel, ask for the nominal door top
+    (``nominal_top_m``, 2.16 m); in a room whose ceiling is 2.0 m above the floor the wall
+    raster ends below it. That is no doorway of door height, not an index error (found on a
+    benchmark frame). The camera looks 1.5 m at the wall with its principal point near the
+    image top, so the wall is seen from the floor up to 1.65 m only."""
+    k = CameraIntrinsics(300.0, 300.0, 320.0, 50.0, 640, 480)
+    plane = WallPlane(np.array([-1.0, 0.0, 0.0]), -1.5, (-2.0, 2.0))
+    lum, pts = _render(k, [_wall(plane, _frame(-0.5, 0.5))])
+    low_ceiling = FLOOR_Z + 2.0
+    assert low_ceiling - FLOOR_Z < FacadeConfig().nominal_top_m
+    assert find_facade_doors(plane, FLOOR_Z, low_ceiling, ROT, k, pts, _grad(lum)) == []
