@@ -331,27 +331,28 @@ class BuiltinSegments:
         normals = normals_from_points(points, step_px=step)
         normals = self._smooth_normals(normals, valid, step)
         up = estimate_up(normals, line_planes=vertical_line_planes(frame.rgb, k))
-        floor = None
+        floor, floor_z_lidar = None, None
         if self.lidar_floor and frame.lidar_points is not None and len(frame.lidar_points):
             # the raw returns of the lowest beams measure the floor to centimetres
             floor = self._checked_floor(lidar_floor(frame.lidar_points, up), normals, k)
-            if floor is not None and floor.tilt_fixed:
-                up = floor.normal
+            if floor is not None:
+                floor_z_lidar = -floor.height_m
+                if floor.tilt_fixed:
+                    up = floor.normal
         rot = level_from_camera(up)[:3, :3]
         pl = points @ rot.T
 
         lab = self._lab(frame.rgb, w)
         regions = self._regions(points, normals, lab, valid, k.fx, up)
         nl = normals @ rot.T
-        floor_z = self._level(pl, nl, up=True) if floor is None else -floor.height_m
+        floor_z = self._level(pl, nl, up=True) if floor_z_lidar is None else floor_z_lidar
         self._pixel_angle = 1.0 / k.fx
         regions = self._merge(regions, pl, lab, valid, floor_z)
         if self.fill_no_depth:
             # pixels without depth (e.g. below the LiDAR's lowest beam) join the nearest
             # region in the image: they get a label and material, but no 3D point
             regions = _fill_nearest(_fill_columns(regions), np.ones_like(valid))
-        labels, scores, info = self._label(regions, pl, frame.rgb,
-                                           None if floor is None else -floor.height_m)
+        labels, scores, info = self._label(regions, pl, frame.rgb, floor_z_lidar)
         regions, labels, scores, proud = self._proud_of_walls(regions, labels, scores, pl,
                                                               info["floor_z_m"])
         if self.door_partial:
@@ -598,14 +599,9 @@ class BuiltinSegments:
         valid = np.isfinite(pl).all(axis=-1)
         counts = np.bincount(regions[regions >= 0], minlength=len(labels))
         walls = []
-        for wi in np.argsort(-counts)[:8]:
-            if labels[wi] != "wall" or counts[wi] < 0.02 * valid.sum():
-                continue
-            plane = self._wall_plane(pl, regions == wi)
-            if plane is not None:
-                nrm, d, _, wp = plane
-                along = np.array([-nrm[1], nrm[0], 0.0])
-                walls.append((int(wi), nrm, d, along, np.percentile(wp @ along, [1, 99])))
+        for wi, (nrm, d, _, wp) in self._large_walls(regions, labels, pl, 0.02, 8):
+            along = np.array([-nrm[1], nrm[0], 0.0])
+            walls.append((wi, nrm, d, along, np.percentile(wp @ along, [1, 99])))
         labels, scores = list(labels), list(scores)
         proud: set[int] = set()
         wall_ids = {w[0] for w in walls}
@@ -752,19 +748,12 @@ class BuiltinSegments:
             ceil_px |= ~valid & (rows < first[None, :]) & (rays[..., 2] > 0.02)
         # the ray must reach the floor (ceiling) plane in front of every large wall plane:
         # otherwise the pixel sees the wall's lower (upper) part
-        n_reg = len(labels)
-        cnt = np.bincount(regions[regions >= 0], minlength=n_reg)
-        walls = [i for i in np.argsort(-cnt)[:8] if labels[i] == "wall"
-                 and cnt[i] > 0.01 * valid.sum()]
+        walls = self._large_walls(regions, labels, pl, 0.01, 8)
         for px, level in ((floor_px, floor_z), (ceil_px, ceil_z)):
             with np.errstate(invalid="ignore", divide="ignore"):
                 t = level / rays[..., 2]
             q = rays * t[..., None]
-            for wi in walls:
-                plane = self._wall_plane(pl, regions == wi)
-                if plane is None:
-                    continue
-                nrm, d, _, _ = plane
+            for _, (nrm, d, _, _) in walls:
                 with np.errstate(invalid="ignore"):
                     px &= ~(q @ nrm < d - 0.05)
         labels, scores = list(labels), list(scores)
@@ -886,33 +875,37 @@ class BuiltinSegments:
         d = float(np.median(wp @ nrm))
         return None if d > -0.3 else (nrm, d, g, wp)
 
+    def _large_walls(self, regions, labels, pl, min_frac: float, top: int):
+        """``(region id, (nrm, d, geometry, points))`` of the ``wall`` regions among the
+        ``top`` largest regions that hold at least ``min_frac`` of the valid pixels and have a
+        vertical plane (:meth:`_wall_plane`), largest first."""
+        n_valid = int(np.isfinite(pl).all(axis=-1).sum())
+        counts = np.bincount(regions[regions >= 0], minlength=len(labels))
+        out = []
+        for wi in np.argsort(-counts)[:top]:
+            if labels[wi] != "wall" or counts[wi] < min_frac * n_valid:
+                continue
+            plane = self._wall_plane(pl, regions == wi)
+            if plane is not None:
+                out.append((int(wi), plane))
+        return out
+
     def _wall_planes(self, regions, labels, pl) -> list[WallPlane]:
         """Planes of the large vertical ``wall`` regions (coplanar ones merged), with the
         along-wall extent of their pixels widened by 1.2 m (a door may split its wall)."""
-        valid = np.isfinite(pl).all(axis=-1)
-        counts = np.bincount(regions[regions >= 0], minlength=len(labels))
-        planes: list[tuple[WallPlane, int]] = []
-        for wi in np.argsort(-counts)[:10]:
-            if labels[wi] != "wall" or counts[wi] < 0.01 * valid.sum():
-                continue
-            plane = self._wall_plane(pl, regions == wi)
-            if plane is None:
-                continue
-            nrm, d, _, wp = plane
+        planes: list[WallPlane] = []
+        for _, (nrm, d, _, wp) in self._large_walls(regions, labels, pl, 0.01, 10):
             along = np.array([-nrm[1], nrm[0], 0.0])
             s0, s1 = np.percentile(wp @ along, [1, 99])
-            dup = False
-            for j, (q, cnt) in enumerate(planes):
+            for j, q in enumerate(planes):
                 if q.normal @ nrm > math.cos(math.radians(10)) and abs(q.offset_m - d) < 0.1:
                     lo, hi = q.s_range_m
-                    planes[j] = (WallPlane(q.normal, q.offset_m, (min(lo, s0 - 1.2),
-                                                                  max(hi, s1 + 1.2))), cnt)
-                    dup = True
+                    planes[j] = WallPlane(q.normal, q.offset_m,
+                                          (min(lo, s0 - 1.2), max(hi, s1 + 1.2)))
                     break
-            if not dup:
-                planes.append((WallPlane(nrm, d, (float(s0) - 1.2, float(s1) + 1.2)),
-                               int(counts[wi])))
-        return [p for p, _ in planes]
+            else:
+                planes.append(WallPlane(nrm, d, (float(s0) - 1.2, float(s1) + 1.2)))
+        return planes
 
     def _facade_doors(self, regions, labels, scores, pl, rot, k, rgb, floor_z, ceil_z):
         """Doorways found by their frames on the rectified wall planes
