@@ -244,18 +244,7 @@ def find_facade_doors(plane: WallPlane, floor_z: float, ceil_z: float, level_rot
             span = slice(a1 + 1, b0)
             if span.stop - span.start < 3:
                 continue
-            covs = np.full(len(tz), -1.0)
-            for i, t in enumerate(tz):
-                rows = slice(max(0, t - 1), t + 2)
-                lint = he[rows, span].any(0)
-                vis = visible[rows, span].any(0)
-                if vis.sum() >= 0.5 * (span.stop - span.start):
-                    covs[i] = float((lint & vis).sum() / max(vis.sum(), 1))
-            best = (0.0, -1)
-            if covs.max() >= 0:
-                # the lintel's edges, dilated, make a plateau of rows: its centre is the top
-                near = np.flatnonzero(covs >= 0.9 * covs.max())
-                best = (float(covs.max()), tz[int(round(near.mean()))])
+            best = _lintel(he, visible, span, tz)
             if best[1] < 0:
                 # the lintel is out of view (above the image): posts seen up to the image edge
                 # with door height assumed, when they are seen at least ``min_post_seen_m`` high
@@ -276,7 +265,7 @@ def find_facade_doors(plane: WallPlane, floor_z: float, ceil_z: float, level_rot
             score = (post[a0:a1 + 1].max() + post[b0:b1 + 1].max() + best[0]) / 3.0
             doors.append((score, int(ja), int(jb), int(t)))
     if config.border_doors:
-        doors += _border_doors(r, runs, post, he, visible, config)
+        doors += _border_doors(r, runs, post, he, visible, tz, config)
     doors.sort(reverse=True)
     chosen: list[tuple[float, int, int, int]] = []
     for d in doors:
@@ -307,8 +296,26 @@ def find_facade_doors(plane: WallPlane, floor_z: float, ceil_z: float, level_rot
     return out
 
 
+def _lintel(he: np.ndarray, visible: np.ndarray, span: slice, tz: range) -> tuple[float, int]:
+    """Best lintel row over the columns ``span``: ``(coverage, row)`` — the fraction of the
+    seen columns with a horizontal edge in rows ``row`` ± 1, for the rows ``tz`` where at least
+    half the span is seen; ``(0.0, -1)`` when no row in ``tz`` is (the lintel out of view)."""
+    covs = np.full(len(tz), -1.0)
+    for i, t in enumerate(tz):
+        rows = slice(max(0, t - 1), t + 2)
+        vis = visible[rows, span].any(0)
+        if vis.sum() >= 0.5 * (span.stop - span.start):
+            covs[i] = float((he[rows, span].any(0) & vis).sum() / max(vis.sum(), 1))
+    if covs.max() < 0:
+        return 0.0, -1
+    # the lintel's edges, dilated, make a plateau of rows: its centre is the top
+    near = np.flatnonzero(covs >= 0.9 * covs.max())
+    return float(covs.max()), tz[int(round(near.mean()))]
+
+
 def _border_doors(r: _Raster, runs: list[tuple[int, int]], post: np.ndarray, he: np.ndarray,
-                  visible: np.ndarray, config: FacadeConfig) -> list[tuple[float, int, int, int]]:
+                  visible: np.ndarray, tz: range,
+                  config: FacadeConfig) -> list[tuple[float, int, int, int]]:
     """Doorways cut by the left or right image border: one post, and a lintel from it to
     the border (see :func:`find_facade_doors`).
 
@@ -322,7 +329,6 @@ def _border_doors(r: _Raster, runs: list[tuple[int, int]], post: np.ndarray, he:
     iz = lambda zz: int(np.clip(round(zz / c), 0, nz))  # noqa: E731
     lo_z, hi_z = iz(0.25), iz(config.top_m[0] - 0.1)
     in_image = r.seen[lo_z:hi_z].mean(0) > 0.5
-    tz = range(iz(config.top_m[0]), min(iz(config.top_m[1]), nz - 1) + 1)
     wmin, wmax = (int(round(x / c)) for x in config.door_width_m)
     nominal = int(round(config.nominal_width_m / c))
     out = []
@@ -349,16 +355,9 @@ def _border_doors(r: _Raster, runs: list[tuple[int, int]], post: np.ndarray, he:
             span = slice(lo, hi + 1)
             if visible[:iz(config.top_m[0]), span].mean() < config.min_seen:
                 continue
-            covs = np.full(len(tz), -1.0)
-            for i, t in enumerate(tz):
-                rows = slice(max(0, t - 1), t + 2)
-                vis = visible[rows, span].any(0)
-                if vis.sum() >= 0.5 * (hi - lo + 1):
-                    covs[i] = float((he[rows, span].any(0) & vis).sum() / max(vis.sum(), 1))
-            if covs.max() < config.lintel_cover:
+            cover, t = _lintel(he, visible, span, tz)
+            if cover < config.lintel_cover:
                 continue
-            near = np.flatnonzero(covs >= 0.9 * covs.max())
-            t = tz[int(round(near.mean()))]
             # the lintel stops at the post: little horizontal edge 4–30 cm outside it
             rows = slice(max(0, t - 1), t + 2)
             o0, o1 = (j_post - 15, j_post - 2) if side > 0 else (j_post + 3, j_post + 16)
@@ -368,7 +367,7 @@ def _border_doors(r: _Raster, runs: list[tuple[int, int]], post: np.ndarray, he:
                 continue
             width = max(nominal, seen_w + int(round(0.1 / c)), wmin)
             ja, jb = (j_post, j_post + width) if side > 0 else (j_post - width, j_post)
-            score = 0.8 * (post[a0:a1 + 1].max() + covs.max()) / 2.0
+            score = 0.8 * (post[a0:a1 + 1].max() + cover) / 2.0
             out.append((float(score), int(ja), int(jb), int(t)))
     return out
 
