@@ -64,6 +64,15 @@ def _raycast(dirs: np.ndarray, with_cabinet: bool = True) -> tuple[np.ndarray, n
     return t, face
 
 
+def rotation_deg(axis: int, deg: float) -> np.ndarray:
+    """(3, 3) rotation by ``deg`` about camera axis ``axis`` (0: x right, 2: z forward)."""
+    c, s = np.cos(np.radians(deg)), np.sin(np.radians(deg))
+    i, j = [a for a in range(3) if a != axis]
+    r = np.eye(3)
+    r[i, i], r[i, j], r[j, i], r[j, j] = c, -s, s, c
+    return r
+
+
 def corridor_intrinsics(width: int = 96, height: int = 72, hfov_deg: float = 70.0):
     return CameraIntrinsics.from_fov(width, height, hfov_deg)
 

@@ -17,22 +17,15 @@ import pytest
 from sim2radar.camera import CameraIntrinsics
 from sim2radar.reconstruct.backproject import FloorPlane, lidar_floor
 from sim2radar.reconstruct.segment_builtin import BuiltinSegments
+from tests.reconstruct._models import rotation_deg
 
 HEIGHT = 1.25
-
-
-def _rot(axis: int, deg: float) -> np.ndarray:
-    c, s = math.cos(math.radians(deg)), math.sin(math.radians(deg))
-    i, j = [k for k in range(3) if k != axis]
-    m = np.eye(3)
-    m[i, i], m[i, j], m[j, i], m[j, j] = c, -s, s, c
-    return m
 
 
 def _world_to_camera(pitch_deg: float, roll_deg: float) -> np.ndarray:
     """World (x along the corridor, y left, z up) to the OpenCV camera frame, tilted."""
     base = np.array([[0.0, -1.0, 0.0], [0.0, 0.0, -1.0], [1.0, 0.0, 0.0]])
-    return _rot(2, roll_deg) @ _rot(0, pitch_deg) @ base
+    return rotation_deg(2, roll_deg) @ rotation_deg(0, pitch_deg) @ base
 
 
 def _corridor_returns(pitch_deg=4.0, roll_deg=-3.0, extra=None):

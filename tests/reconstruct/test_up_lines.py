@@ -18,6 +18,7 @@ import pytest
 
 from sim2radar.camera import CameraIntrinsics
 from sim2radar.reconstruct.backproject import estimate_up, level_from_camera, vertical_line_planes
+from tests.reconstruct._models import rotation_deg
 
 K = CameraIntrinsics.from_fov(640, 480, 70.0)
 POSTS_XY = [(3.0, 1.2), (3.5, -0.8), (4.0, 0.3), (2.6, -1.4), (5.0, 2.0), (4.5, -2.2),
@@ -25,17 +26,8 @@ POSTS_XY = [(3.0, 1.2), (3.5, -0.8), (4.0, 0.3), (2.6, -1.4), (5.0, 2.0), (4.5, 
 FLOOR_Z, CEIL_Z = -1.4, 1.3
 
 
-def _rot(axis: int, deg: float) -> np.ndarray:
-    """Rotation by ``deg`` about camera axis ``axis`` (0: x right, 2: z forward)."""
-    c, s = math.cos(math.radians(deg)), math.sin(math.radians(deg))
-    i, j = [a for a in range(3) if a != axis]
-    r = np.eye(3)
-    r[i, i], r[i, j], r[j, i], r[j, j] = c, -s, s, c
-    return r
-
-
 # world up in the camera frame of a camera pitched 8° down, then rolled 3°
-UP = _rot(2, 3.0) @ np.array([0.0, -math.cos(math.radians(8)), -math.sin(math.radians(8))])
+UP = rotation_deg(2, 3.0) @ np.array([0.0, -math.cos(math.radians(8)), -math.sin(math.radians(8))])
 LEVEL = level_from_camera(UP)[:3, :3]  # camera → level; rows: forward, left, up
 
 
@@ -76,7 +68,7 @@ def _normals(floor_error_deg: float = 0.0, error_axis: int = 0, seed: int = 0) -
     ``error_axis``, as LiDAR-completed depth extrapolated below the beams gives) and of a front
     wall and two side walls (1500 + 2 × 750, correct: ⊥ up), with 0.01 rad noise."""
     rng = np.random.default_rng(seed)
-    floor = np.tile(_rot(error_axis, floor_error_deg) @ UP, (4000, 1))
+    floor = np.tile(rotation_deg(error_axis, floor_error_deg) @ UP, (4000, 1))
     fwd, left = LEVEL[0], LEVEL[1]
     walls = np.concatenate([np.tile(-fwd, (1500, 1)), np.tile(-left, (750, 1)),
                             np.tile(left, (750, 1))])
