@@ -4,6 +4,11 @@
     SIM2RADAR_BENCH_WORLDS=5 SIM2RADAR_BENCH_FRAMES=4 SIM2RADAR_BENCH_WIDTH=320 python -m benchmarks reconstruct
     SIM2RADAR_BENCH_COMBOS=oracle,builtin python -m benchmarks reconstruct   # a subset
     SIM2RADAR_BENCH_SEED=5000 python -m benchmarks reconstruct   # other worlds (held out)
+    SIM2RADAR_BENCH_RIG_HEIGHT=0 python -m benchmarks reconstruct   # no rig camera height
+
+The ``lidar`` depth backend gets the rig's camera height (``camera_height_m``, calibration, as
+``sim2radar generate`` passes it) for the floor under the lowest beam where no return measures
+it; ``SIM2RADAR_BENCH_RIG_HEIGHT=0`` leaves it out.
 
 Frames: ``WORLDS`` procedural worlds (seeds ``SEED``, ``SEED`` + 1, ...; default 1000) × ``FRAMES`` rig poses each, rendered
 by :mod:`sim2radar.worlds` at ``WIDTH`` × 3/4·``WIDTH`` (the analytic corridor of
@@ -172,10 +177,18 @@ def main() -> dict:
         radar_range_m = radar_view(RigConfig())[2]
     except Exception:  # noqa: BLE001 - the analytic fallback has no rig config
         pass
+    rig_height_m = None
+    if os.environ.get("SIM2RADAR_BENCH_RIG_HEIGHT", "1") != "0" and frames and frames[0][2]:
+        from sim2radar.worlds.config import RigConfig
+
+        rig_height_m = float(RigConfig().camera_position_m[2])
     only = [c for c in os.environ.get("SIM2RADAR_BENCH_COMBOS", "").split(",") if c]
     for combo in only or COMBOS:
         cfg = (ReconstructionConfig.model_validate(_EXTRA[combo]) if combo in _EXTRA
                else ReconstructionConfig.preset(combo))
+        if cfg.depth.name == "lidar" and rig_height_m is not None:
+            cfg = ReconstructionConfig.model_validate({**cfg.to_dict(), "depth": {
+                "name": "lidar", "options": {"camera_height_m": rig_height_m}}})
         scores = []
         new_vis = {"tp": 0, "n_gt": 0, "n_pred": 0}
         failures = 0

@@ -24,6 +24,7 @@ from typing import Any
 from prefect import task
 from prefect.cache_policies import NO_CACHE
 
+from sim2radar.reconstruct.pipeline import STAGE_VERSION
 from tasks.common import REMOTE_IO_RETRIES, REMOTE_IO_RETRY_DELAYS_S, jsonable, open_store
 
 __all__ = [
@@ -38,8 +39,9 @@ __all__ = [
     "summarize_recon",
 ]
 
-#: Bump when the reconstruction output of the same inputs changes.
-RECONSTRUCTION_STAGE_VERSION = 1
+#: The reconstruction output's version (bumped in the pipeline when the output of the same
+#: inputs changes).
+RECONSTRUCTION_STAGE_VERSION = STAGE_VERSION
 
 
 @dataclasses.dataclass(frozen=True)

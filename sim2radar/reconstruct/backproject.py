@@ -15,15 +15,19 @@ import dataclasses
 import cv2
 import numpy as np
 
-from sim2radar.camera import CameraIntrinsics, back_project
+from sim2radar.camera import CameraIntrinsics, back_project, project
 
 __all__ = [
     "points_from_depth",
     "normals_from_points",
     "estimate_up",
     "vertical_line_planes",
+    "smooth_normals",
     "FloorPlane",
     "lidar_floor",
+    "checked_floor",
+    "find_floor",
+    "extend_to_floor",
     "level_from_camera",
     "transform_points",
 ]
@@ -85,6 +89,19 @@ def normals_from_points(points: np.ndarray, step_px: int = 2) -> np.ndarray:
     flip = np.sum(n * p, axis=-1) > 0
     n[flip] *= -1
     return n.astype(np.float32)
+
+
+def smooth_normals(normals: np.ndarray, valid: np.ndarray, step_px: int) -> np.ndarray:
+    """Box-filter unit normals over (2·step_px + 1)² pixels and renormalise; NaN where
+    ``valid`` (H, W) is False or the neighbourhood's normals cancel."""
+    n = np.where(np.isfinite(normals), normals, 0).astype(np.float32)
+    k = 2 * int(step_px) + 1
+    n = cv2.blur(n, (k, k))
+    norm = np.linalg.norm(n, axis=-1, keepdims=True)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        n = n / norm
+    n[~valid | (norm[..., 0] < 1e-6)] = np.nan
+    return n
 
 
 def vertical_line_planes(rgb: np.ndarray, intrinsics: CameraIntrinsics,
@@ -206,16 +223,19 @@ def estimate_up(normals: np.ndarray, max_tilt_deg: float = 30.0,
 
 @dataclasses.dataclass(frozen=True)
 class FloorPlane:
-    """The floor plane ``normal · p = -height_m`` fitted to LiDAR returns (camera frame).
+    """The floor plane ``normal · p = -height_m`` in the camera frame.
 
     Attributes
     ----------
     normal : (3,) float64 — unit floor normal, camera frame, pointing up (into the room).
     height_m : float [m] — camera height above the floor (> 0).
-    inliers : (M, 3) float32 — the LiDAR returns on the plane [m], camera frame.
+    inliers : (M, 3) float32 — the LiDAR returns on the plane [m], camera frame (none for a
+        plane from the rig's mounting height).
     spread_m : float [m] — the inliers' smaller horizontal extent (2nd principal axis,
         5th–95th percentile): below ``min_spread_m`` the normal is not used, only the height.
-    tilt_fixed : bool — the normal is well conditioned and can serve as gravity's up.
+    tilt_fixed : bool — the normal is measured (well conditioned) and can serve as gravity's up.
+    source : str — ``"lidar"`` (fitted to the returns) or ``"rig"`` (the rig's camera height
+        along the image's estimated up).
     """
 
     normal: np.ndarray
@@ -223,6 +243,19 @@ class FloorPlane:
     inliers: np.ndarray
     spread_m: float
     tilt_fixed: bool
+    source: str = "lidar"
+
+    def to_info(self) -> dict:
+        """JSON-able summary (``DepthResult.info["floor"]``); :meth:`from_info` reads it back."""
+        return {"normal": [float(x) for x in self.normal], "height_m": float(self.height_m),
+                "tilt_fixed": bool(self.tilt_fixed), "source": self.source,
+                "n_returns": int(len(self.inliers))}
+
+    @classmethod
+    def from_info(cls, info: dict) -> FloorPlane:
+        return cls(np.asarray(info["normal"], np.float64), float(info["height_m"]),
+                   np.zeros((0, 3), np.float32), 0.0, bool(info["tilt_fixed"]),
+                   str(info.get("source", "lidar")))
 
 
 def lidar_floor(points_cam: np.ndarray, up_cam: np.ndarray, *, max_tilt_deg: float = 8.0,
@@ -300,6 +333,106 @@ def lidar_floor(points_cam: np.ndarray, up_cam: np.ndarray, *, max_tilt_deg: flo
     _, _, vt = np.linalg.svd(q, full_matrices=False)
     spread = float(np.subtract(*np.percentile(q @ vt[1], [95, 5])))
     return FloorPlane(n, -d, inl.astype(np.float32), spread, spread >= min_spread_m)
+
+
+def checked_floor(floor: FloorPlane | None, normals: np.ndarray,
+                  intrinsics: CameraIntrinsics) -> FloorPlane | None:
+    """``floor`` if its returns in view lie on surfaces that face up in the depth map's
+    ``normals`` (H, W, 3), else None: where the lowest beam hits the walls before the floor,
+    the plane through those hits is as free of returns below it as a floor, but its points are
+    on walls. Fewer than 10 returns in view cannot be checked and give None."""
+    if floor is None:
+        return None
+    uv, ok = project(floor.inliers, intrinsics)
+    if ok.sum() < 10:
+        return None
+    n = normals[uv[ok, 1].astype(np.int64), uv[ok, 0].astype(np.int64)]
+    n = n[np.isfinite(n).all(axis=1)]
+    if len(n) < 10 or np.mean(n @ floor.normal > np.cos(np.radians(25))) < 0.5:
+        return None
+    return floor
+
+
+def find_floor(normals: np.ndarray, up_cam: np.ndarray, intrinsics: CameraIntrinsics,
+               lidar_points: np.ndarray | None = None,
+               camera_height_m: float | None = None) -> FloorPlane | None:
+    """The floor under the camera: from the LiDAR returns when they measure it, else from the
+    rig's camera height, else None.
+
+    The returns in front of the camera (z > 0.05 m, where the depth map can check them) are
+    fitted by :func:`lidar_floor` and checked by :func:`checked_floor`; a plane whose tilt is not
+    fixed by its returns keeps ``up_cam`` as its normal. Without such a plane, a known mounting
+    height ``camera_height_m`` [m] gives the plane ``up_cam · p = −camera_height_m`` (source
+    ``"rig"``): below a LiDAR's lowest beam (e.g. facing a near wall) the floor has no returns
+    at all, but a rig's camera height is calibration, like its intrinsics.
+    """
+    up = np.asarray(up_cam, np.float64) / np.linalg.norm(up_cam)
+    if lidar_points is not None and len(lidar_points):
+        pts = np.asarray(lidar_points, np.float64).reshape(-1, 3)
+        floor = checked_floor(lidar_floor(pts[pts[:, 2] > 0.05], up), normals, intrinsics)
+        if floor is not None:
+            if not floor.tilt_fixed:
+                floor = dataclasses.replace(floor, normal=up)
+            return floor
+    if camera_height_m is not None:
+        return FloorPlane(up, float(camera_height_m), np.zeros((0, 3), np.float32), 0.0, False,
+                          "rig")
+    return None
+
+
+def extend_to_floor(depth_m: np.ndarray, intrinsics: CameraIntrinsics, floor: FloorPlane,
+                    *, snap_m: float = 0.03) -> tuple[np.ndarray, np.ndarray]:
+    """Complete a depth map below the lowest measured pixel of each column with the floor.
+
+    LiDAR-completed depth has no depth under the lowest beam (the near floor, the feet of near
+    walls and furniture) and extrapolates there wrongly. Two rules fix it:
+
+    * A point below the floor plane (or within ``snap_m`` + 0.5 % of its depth above it) is
+      impossible or floor: the viewing ray meets the floor first, so the pixel gets the depth
+      of the ray's intersection with the floor.
+    * A pixel without depth below its column's lowest measured pixel sees, going down the
+      column, the vertical surface seen at that lowest pixel continued down to the floor, then
+      the floor: it gets the nearer of the two intersections — of its ray with that surface (a
+      vertical cylinder about up through the lowest pixel's point: a vertical plane's depth
+      does not change down an image column of a level camera) and with the floor plane.
+
+    Parameters
+    ----------
+    depth_m : (H, W) float — z-depth [m], 0 where unknown.
+    intrinsics : CameraIntrinsics
+    floor : FloorPlane — camera frame.
+
+    Returns
+    -------
+    depth : (H, W) float32 [m]; filled : (H, W) bool — pixels whose depth this set.
+    """
+    depth = np.asarray(depth_m, np.float32)
+    h, w = depth.shape
+    up = np.asarray(floor.normal, np.float64)
+    rays = points_from_depth(np.ones((h, w), np.float32), intrinsics).astype(np.float64)
+    down = rays @ up  # < 0: the ray descends
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t_floor = np.where(down < -1e-3, -floor.height_m / down, np.inf)  # z-depth (ray z = 1)
+    valid = np.isfinite(depth) & (depth > 0)
+    height = (depth * down) + floor.height_m  # height of each point above the floor
+    snap = valid & np.isfinite(t_floor) & (height < snap_m + 0.005 * depth)
+    rows = np.arange(h)[:, None]
+    has = valid.any(axis=0)
+    last = np.where(has, h - 1 - np.argmax(valid[::-1], axis=0), -1)
+    below = ~valid & (rows > last[None, :])
+    # horizontal distance of each column's lowest point, and of each ray per unit z
+    cols = np.arange(w)
+    p_last = rays[np.clip(last, 0, h - 1), cols] * np.where(has, depth[np.clip(last, 0, h - 1),
+                                                                       cols], np.nan)[:, None]
+    rho = np.linalg.norm(p_last - np.outer(p_last @ up, up), axis=1)
+    ray_h = np.linalg.norm(rays - down[..., None] * up, axis=-1)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t_wall = np.where(has[None, :], rho[None, :] / ray_h, np.inf)
+    t_below = np.minimum(np.nan_to_num(t_wall, nan=np.inf), t_floor)
+    fill = below & (t_below < 1e4)
+    out = np.where(snap, t_floor, depth)
+    out = np.where(fill, t_below, out).astype(np.float32)
+    return out, snap | fill
 
 
 def level_from_camera(up_cam: np.ndarray) -> np.ndarray:

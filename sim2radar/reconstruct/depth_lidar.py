@@ -37,6 +37,16 @@ import logging
 import numpy as np
 
 from sim2radar.camera import CameraIntrinsics, project
+from sim2radar.reconstruct.backproject import (
+    FloorPlane,
+    estimate_up,
+    extend_to_floor,
+    find_floor,
+    normals_from_points,
+    points_from_depth,
+    smooth_normals,
+    vertical_line_planes,
+)
 from sim2radar.reconstruct.types import (
     DEPTH_BACKENDS,
     DepthResult,
@@ -104,6 +114,11 @@ class LidarDepthConfig:
     min_density : float — candidates with less relative sample density are ignored.
     fill_holes : bool — add a colour-blind candidate at the coarsest width.
     min_depth_m, max_depth_m : float [m] — valid depth range of the output.
+    floor_fill : bool — below each column's lowest measured pixel, continue the surface seen
+        there down to the floor and then the floor (``backproject.extend_to_floor``), with the
+        floor plane from the LiDAR returns or, where none lie on it, from ``camera_height_m``.
+    camera_height_m : float or None [m] — the rig's camera height above the floor
+        (calibration); None: only a floor the LiDAR measures is used.
     """
 
     min_points: int = 20
@@ -118,8 +133,14 @@ class LidarDepthConfig:
     fill_holes: bool = True
     min_depth_m: float = 0.05
     max_depth_m: float = 100.0
+    floor_fill: bool = True
+    camera_height_m: float | None = None
 
     def __post_init__(self) -> None:
+        if self.camera_height_m is not None and not (
+                np.isfinite(self.camera_height_m) and 0 < self.camera_height_m < 10):
+            raise ValueError("lidar depth: camera_height_m must be the camera's height above "
+                             f"the floor in metres (0, 10), got {self.camera_height_m}")
         if self.min_points < 3:
             raise ValueError(f"lidar depth: min_points must be >= 3, got {self.min_points}")
         if self.lambda_ is not None and self.lambda_ <= 0:
@@ -288,14 +309,19 @@ def complete_depth(
     return depth, conf, info
 
 
+#: Confidence given to pixels whose depth comes from the floor plane / surface extension.
+FLOOR_FILL_CONFIDENCE = 0.3
+
+
 @DEPTH_BACKENDS.register("lidar")
 class LidarDepth:
     """Stage 1 backend ``lidar``: RGB-guided completion of the frame's sparse LiDAR.
 
     Options are the fields of :class:`LidarDepthConfig` (keyword arguments). ``estimate`` returns
-    a :class:`DepthResult` whose ``info`` holds JSON-able scalars: ``n_lidar_points`` (LiDAR
-    pixels in the image), ``hole_fraction``, ``pixels_per_candidate``, ``confidence_mean`` and the
-    filter strength ``lambda``. The per-pixel confidence map ((H, W) float32 in [0, 1], 0 in
+    a :class:`DepthResult` whose ``info`` holds JSON-able values: ``n_lidar_points`` (LiDAR
+    pixels in the image), ``hole_fraction``, ``pixels_per_candidate``, ``confidence_mean``, the
+    filter strength ``lambda`` and, with ``floor_fill``, ``floor`` (``FloorPlane.to_info()`` or
+    None; the builtin segmenter takes its floor and up from it) and ``floor_filled_fraction``. The per-pixel confidence map ((H, W) float32 in [0, 1], 0 in
     holes) of the last frame is ``self.last_confidence``.
     """
 
@@ -306,6 +332,19 @@ class LidarDepth:
             known = ", ".join(f.name for f in dataclasses.fields(LidarDepthConfig))
             raise ValueError(f"lidar depth backend: {exc}; known options: {known}") from None
         self.last_confidence: np.ndarray | None = None
+
+    def _floor(self, frame: FrameInput, depth_m: np.ndarray) -> FloorPlane | None:
+        """The floor plane (``backproject.find_floor``), with up from the completed depth's
+        normals checked against the image's vertical lines."""
+        k = frame.intrinsics
+        points = points_from_depth(depth_m, k)
+        valid = np.isfinite(points).all(axis=-1)
+        if valid.sum() < 16:
+            return None
+        step = max(1, round(k.width / 200))
+        normals = smooth_normals(normals_from_points(points, step_px=step), valid, step)
+        up = estimate_up(normals, line_planes=vertical_line_planes(frame.rgb, k))
+        return find_floor(normals, up, k, frame.lidar_points, self.config.camera_height_m)
 
     def estimate(self, frame: FrameInput) -> DepthResult:
         if frame.lidar_points is None:
@@ -329,6 +368,17 @@ class LidarDepth:
             depth, conf, info = complete_depth(frame.rgb, sparse, self.config)
         except ReconstructionInputError as exc:
             raise ReconstructionInputError(f"{frame.name}: {exc}") from None
+        if self.config.floor_fill:
+            floor = self._floor(frame, depth)
+            info["floor"] = None if floor is None else floor.to_info()
+            filled = np.zeros(depth.shape, bool)
+            if floor is not None:
+                depth, filled = extend_to_floor(depth, frame.intrinsics, floor)
+                depth = np.where((depth >= self.config.min_depth_m)
+                                 & (depth <= self.config.max_depth_m), depth, 0).astype(np.float32)
+                conf = np.where(filled & (depth > 0), FLOOR_FILL_CONFIDENCE, conf)
+            info["floor_filled_fraction"] = float((filled & (depth > 0)).mean())
+            info["hole_fraction"] = float((depth <= 0).mean())
         log.debug("%s: lidar completion %s", frame.name, info)
         self.last_confidence = conf
         valid = depth > 0

@@ -501,6 +501,14 @@ def _soffit(f: AppearanceFeatures) -> bool:
             and (_lines(f, 0.02) or (_formwork(f) and f.structure.score_h >= 0.5)))
 
 
+#: Line fraction of rectified floors: below FLOOR_SHEET_LINES a smooth sheet (vinyl: 0.0006–0.009
+#: on the tuning worlds 3000–3009 with the floor-completed LiDAR depth), up to FLOOR_TILE_LINES
+#: a mottled slab (raw concrete 0.011–0.024, one of 16 up to 0.037), above it grout lines
+#: (tiles ≥ 0.030, where the grid itself is not resolved).
+FLOOR_SHEET_LINES = 0.0098
+FLOOR_TILE_LINES = 0.028
+
+
 def _floor_grid(f: AppearanceFeatures) -> bool:
     """A regular grout grid on a floor (LiDAR-completed floor planes blur it: lenient). Raw
     concrete's mottling gives autocorrelation peaks up to ~0.53 on procedural-world floors,
@@ -541,10 +549,14 @@ RULES: tuple = (
     ("floor grout grid", _floor_grid, {"ceramic_tile": 8.0}, ("floor",)),
     ("floor grout lines", lambda f: _measured(f) and not _floor_grid(f) and _floor_grout(f),
      {"ceramic_tile": 6.0}, ("floor",)),
+    ("dense lines, grid unresolved", lambda f: _measured(f) and not _floor_grid(f)
+     and not _floor_grout(f) and f.structure.line_frac >= FLOOR_TILE_LINES,
+     {"ceramic_tile": 2.0}, ("floor",)),
     ("mottled slab, no grid", lambda f: _measured(f) and not _floor_grid(f)
-     and not _floor_grout(f) and f.structure.line_frac >= 0.004,
+     and not _floor_grout(f) and FLOOR_SHEET_LINES <= f.structure.line_frac < FLOOR_TILE_LINES,
      {"concrete": 4.0, "ceramic_tile": 0.3}, ("floor",)),
-    ("smooth sheet floor, no grid", lambda f: _measured(f) and f.structure.line_frac < 0.004,
+    ("smooth sheet floor, no grid", lambda f: _measured(f)
+     and f.structure.line_frac < FLOOR_SHEET_LINES,
      {"plastic": 6.0, "ceramic_tile": 0.3}, ("floor",)),
     # ceilings
     ("suspended-ceiling grid", _ceiling_grid, {"plasterboard": 6.0, "concrete": 0.5},

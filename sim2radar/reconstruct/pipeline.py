@@ -66,8 +66,9 @@ __all__ = [
 
 log = logging.getLogger(__name__)
 
-#: Version of the reconstruction stage's output; part of artifact content keys.
-STAGE_VERSION = 1
+#: Version of the reconstruction stage's output; part of artifact content keys. Bump when the
+#: output of the same inputs and config changes (2: LiDAR depth completed down to the floor).
+STAGE_VERSION = 2
 
 
 class BackendSpec(BaseModel):

@@ -7,8 +7,10 @@ No learned weights. The method, step by step:
    line segments (``backproject.estimate_up`` + ``vertical_line_planes``; a roughly level
    camera is assumed), giving a level frame: x forward, y left, z up, origin at the camera.
    With LiDAR (``lidar_floor``), the floor plane fitted to the raw returns of the lowest beams
-   (``backproject.lidar_floor``) fixes up and the floor level when its returns lie on
-   up-facing surfaces of the depth map (not where those beams hit the walls first).
+   (``backproject.find_floor``) fixes up and the floor level when its returns lie on
+   up-facing surfaces of the depth map (not where those beams hit the walls first). When the
+   depth stage already completed the image down to a floor (``DepthResult.info["floor"]``, the
+   ``lidar`` backend's ``floor_fill``), that plane and its up are used.
 3. Edges between neighbouring pixels where the normal turns by more than ``normal_thresh_deg``,
    the depth jumps (relative jump above the largest a continuous surface at
    ``max_incidence_deg`` could make), the local plane offset n·p steps (a door a few cm proud
@@ -50,14 +52,14 @@ import math
 import cv2
 import numpy as np
 
-from sim2radar.camera import project
 from sim2radar.reconstruct.backproject import (
     FloorPlane,
     estimate_up,
+    find_floor,
     level_from_camera,
-    lidar_floor,
     normals_from_points,
     points_from_depth,
+    smooth_normals,
     vertical_line_planes,
 )
 from sim2radar.reconstruct.facade import FacadeConfig, WallPlane, find_facade_doors
@@ -329,16 +331,20 @@ class BuiltinSegments:
         h, w = frame.shape
         step = max(1, round(w / 200))
         normals = normals_from_points(points, step_px=step)
-        normals = self._smooth_normals(normals, valid, step)
-        up = estimate_up(normals, line_planes=vertical_line_planes(frame.rgb, k))
+        normals = smooth_normals(normals, valid, step)
         floor, floor_z_lidar = None, None
-        if self.lidar_floor and frame.lidar_points is not None and len(frame.lidar_points):
-            # the raw returns of the lowest beams measure the floor to centimetres
-            floor = self._checked_floor(lidar_floor(frame.lidar_points, up), normals, k)
-            if floor is not None:
-                floor_z_lidar = -floor.height_m
-                if floor.tilt_fixed:
-                    up = floor.normal
+        if depth.info.get("floor"):
+            # the depth stage completed the image down to this floor: same plane, same up
+            floor = FloorPlane.from_info(depth.info["floor"])
+            up = floor.normal
+        else:
+            up = estimate_up(normals, line_planes=vertical_line_planes(frame.rgb, k))
+            if self.lidar_floor:
+                # the raw returns of the lowest beams measure the floor to centimetres
+                floor = find_floor(normals, up, k, frame.lidar_points)
+        if floor is not None:
+            floor_z_lidar = -floor.height_m
+            up = floor.normal
         rot = level_from_camera(up)[:3, :3]
         pl = points @ rot.T
 
@@ -377,33 +383,6 @@ class BuiltinSegments:
         return Segments(seg, tuple(labels), np.asarray(scores, np.float32))
 
     # -- steps ------------------------------------------------------------------------------
-    @staticmethod
-    def _checked_floor(floor: FloorPlane | None, normals: np.ndarray, k) -> FloorPlane | None:
-        """The LiDAR floor plane if its returns lie on surfaces that face up in the depth
-        map: where the lowest beam hits the walls before the floor, the plane through those
-        hits is as free of returns below it as a floor, but its points are on walls."""
-        if floor is None:
-            return None
-        uv, ok = project(floor.inliers, k)
-        if ok.sum() < 10:
-            return None
-        n = normals[uv[ok, 1].astype(np.int64), uv[ok, 0].astype(np.int64)]
-        n = n[np.isfinite(n).all(axis=1)]
-        if len(n) < 10 or np.mean(n @ floor.normal > math.cos(math.radians(25))) < 0.5:
-            return None
-        return floor
-
-    @staticmethod
-    def _smooth_normals(normals: np.ndarray, valid: np.ndarray, step: int) -> np.ndarray:
-        n = np.where(np.isfinite(normals), normals, 0).astype(np.float32)
-        k = 2 * step + 1
-        n = cv2.blur(n, (k, k))
-        norm = np.linalg.norm(n, axis=-1, keepdims=True)
-        with np.errstate(invalid="ignore", divide="ignore"):
-            n = n / norm
-        n[~valid | (norm[..., 0] < 1e-6)] = np.nan
-        return n
-
     @staticmethod
     def _lab(rgb: np.ndarray, width: int) -> np.ndarray:
         sigma = max(0.8, width / 320)

@@ -88,6 +88,30 @@ def test_beyond_the_lidar_fov_extrapolate_or_leave_holes(corridor):
     assert results[0.3][1] > 0.85
 
 
+def test_floor_fill_completes_the_image_down_to_the_floor(corridor):
+    """Under the lowest beam the image is completed with the floor: measured by the returns of
+    a -15..15° LiDAR (the camera is 1.5 m up), or, for a -5..15° one whose lowest beam meets the
+    end wall before the floor, from the rig's camera height; without either it stays a hole."""
+    k, rgb, depth, _, _ = corridor
+    low = lidar_scan(elev_deg=(-15.0, 15.0))
+    res = LidarDepth().estimate(FrameInput(rgb, k, low))
+    assert res.info["floor"]["source"] == "lidar"
+    assert res.info["floor"]["height_m"] == pytest.approx(1.5, abs=0.01)
+    absrel, coverage = _absrel(res.depth_m, depth)
+    assert coverage > 0.98 and absrel < 0.01
+    high = lidar_scan(elev_deg=(-5.0, 15.0))
+    bare = LidarDepth().estimate(FrameInput(rgb, k, high))
+    assert bare.info["floor"] is None and _absrel(bare.depth_m, depth)[1] < 0.85
+    rig = LidarDepth(camera_height_m=1.5).estimate(FrameInput(rgb, k, high))
+    assert rig.info["floor"]["source"] == "rig"
+    assert rig.info["floor_filled_fraction"] > 0.15
+    absrel, coverage = _absrel(rig.depth_m, depth)
+    assert coverage > 0.98 and absrel < 0.03
+    json.dumps(rig.info)
+    off = LidarDepth(floor_fill=False).estimate(FrameInput(rgb, k, low))
+    assert "floor" not in off.info and _absrel(off.depth_m, depth)[1] < 0.97
+
+
 def test_bad_lidar_inputs_give_clear_errors(corridor):
     k, rgb, _, _, pts = corridor
     with pytest.raises(ReconstructionInputError, match="needs lidar_points"):
@@ -104,3 +128,5 @@ def test_bad_lidar_inputs_give_clear_errors(corridor):
         project_lidar(np.array([[0, 0, np.nan]]), k)
     with pytest.raises(ValueError, match="known options"):
         LidarDepth(lamda=3)
+    with pytest.raises(ValueError, match="camera_height_m"):
+        LidarDepth(camera_height_m=-1.2)

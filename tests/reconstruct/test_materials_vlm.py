@@ -179,7 +179,8 @@ def test_invalid_answers_are_not_cached(scene, tmp_path):
 def test_concurrency_limit_is_respected(scene):
     frame, depth, segs = scene
     many = Segments(segs.segment_id, segs.labels[:4], segs.scores[:4])
-    with VlmTestServer("json", delay_s=0.15) as srv:
+    # the delay is long enough for two requests to overlap on a loaded 2-core machine
+    with VlmTestServer("json", delay_s=0.4) as srv:
         _backend(srv, max_concurrency=2).label(frame, depth, many)
         assert srv.max_in_flight == 2  # parallel, but never more than the limit
     with VlmTestServer("json", delay_s=0.05) as srv:
