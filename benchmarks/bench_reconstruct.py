@@ -4,11 +4,10 @@
     SIM2RADAR_BENCH_WORLDS=5 SIM2RADAR_BENCH_FRAMES=4 SIM2RADAR_BENCH_WIDTH=320 python -m benchmarks reconstruct
     SIM2RADAR_BENCH_COMBOS=oracle,builtin python -m benchmarks reconstruct   # a subset
     SIM2RADAR_BENCH_SEED=5000 python -m benchmarks reconstruct   # other worlds (held out)
-    SIM2RADAR_BENCH_RIG_HEIGHT=0 python -m benchmarks reconstruct   # no rig camera height
+    SIM2RADAR_BENCH_RIG_HEIGHT=1 python -m benchmarks reconstruct   # with the rig's camera height
 
-The ``lidar`` depth backend gets the rig's camera height (``camera_height_m``, calibration, as
-``sim2radar generate`` passes it) for the floor under the lowest beam where no return measures
-it; ``SIM2RADAR_BENCH_RIG_HEIGHT=0`` leaves it out.
+With ``SIM2RADAR_BENCH_RIG_HEIGHT=1`` the ``lidar`` depth backend gets the rig's camera height
+(option ``camera_height_m``) for the floor under the lowest beam where no return measures it.
 
 Frames: ``WORLDS`` procedural worlds (seeds ``SEED``, ``SEED`` + 1, ...; default 1000) × ``FRAMES`` rig poses each, rendered
 by :mod:`sim2radar.worlds` at ``WIDTH`` × 3/4·``WIDTH`` (the analytic corridor of
@@ -178,7 +177,7 @@ def main() -> dict:
     except Exception:  # noqa: BLE001 - the analytic fallback has no rig config
         pass
     rig_height_m = None
-    if os.environ.get("SIM2RADAR_BENCH_RIG_HEIGHT", "1") != "0" and frames and frames[0][2]:
+    if os.environ.get("SIM2RADAR_BENCH_RIG_HEIGHT", "0") == "1" and frames and frames[0][2]:
         from sim2radar.worlds.config import RigConfig
 
         rig_height_m = float(RigConfig().camera_position_m[2])

@@ -176,17 +176,6 @@ def _reconstruction_config(value):
     return ReconstructionConfig.preset(text)
 
 
-def _with_rig_height(config, rig):
-    """``config`` with the rig's camera height as the ``lidar`` depth backend's
-    ``camera_height_m`` (the floor under the lowest beam, ``LidarDepthConfig``) unless the
-    config sets it: the factory knows its rig's mounting, as a lab knows its cart's."""
-    if config.depth.name != "lidar" or "camera_height_m" in config.depth.options:
-        return config
-    depth = config.depth.model_copy(update={"options": {
-        **config.depth.options, "camera_height_m": float(rig.camera_position_m[2])}})
-    return config.model_copy(update={"depth": depth})
-
-
 def _radar_config(value):
     from sim2radar.radar import RadarConfig, load_radar_config
 
@@ -249,7 +238,7 @@ def resolve_spec(
         frames_per_world=int(frames_per_world),
         geometries=_geometries(geometry),
         radar=radar_cfg,
-        reconstruction=_with_rig_height(_reconstruction_config(reconstruction), rig_cfg),
+        reconstruction=_reconstruction_config(reconstruction),
         world=world_cfg,
         rig=_rig_for_radar(rig_cfg, radar_cfg),
         seed=int(seed),

@@ -196,17 +196,6 @@ def test_split_worlds_is_seeded_and_disjoint():
     assert a != td.split_worlds(ids, seed=4)
 
 
-def test_lidar_depth_gets_the_rigs_camera_height():
-    """The factory passes its rig's camera height to the lidar depth backend (the floor under
-    the lowest beam); a height set in the config wins, other depth backends get nothing."""
-    spec = td.resolve_spec(rig={"camera_position_m": [0.0, 0.0, 1.4]})
-    assert spec.reconstruction.depth.options["camera_height_m"] == 1.4
-    mine = {"depth": {"name": "lidar", "options": {"camera_height_m": 1.1}}}
-    assert td.resolve_spec(reconstruction=mine).reconstruction.depth.options == {
-        "camera_height_m": 1.1}
-    assert td.resolve_spec(reconstruction="oracle").reconstruction.depth.options == {}
-
-
 def test_bad_configs_name_the_field():
     with pytest.raises(ValueError, match="geometry"):
         _spec(geometry="lidar")
