@@ -321,8 +321,10 @@ class LidarDepth:
     a :class:`DepthResult` whose ``info`` holds JSON-able values: ``n_lidar_points`` (LiDAR
     pixels in the image), ``hole_fraction``, ``pixels_per_candidate``, ``confidence_mean``, the
     filter strength ``lambda`` and, with ``floor_fill``, ``floor`` (``FloorPlane.to_info()`` or
-    None; the builtin segmenter takes its floor and up from it) and ``floor_filled_fraction``. The per-pixel confidence map ((H, W) float32 in [0, 1], 0 in
-    holes) of the last frame is ``self.last_confidence``.
+    None; the builtin segmenter takes its floor and up from it) and ``floor_filled_fraction``.
+    The per-pixel confidence map ((H, W) float32 in [0, 1], 0 in holes,
+    ``FLOOR_FILL_CONFIDENCE`` where the floor fill set the depth) of the last frame is
+    ``self.last_confidence``.
     """
 
     def __init__(self, **options) -> None:
