@@ -22,7 +22,7 @@ __all__ = [
     "normals_from_points",
     "estimate_up",
     "vertical_line_planes",
-    "smooth_normals",
+    "surface_normals",
     "FloorPlane",
     "lidar_floor",
     "checked_floor",
@@ -91,12 +91,22 @@ def normals_from_points(points: np.ndarray, step_px: int = 2) -> np.ndarray:
     return n.astype(np.float32)
 
 
-def smooth_normals(normals: np.ndarray, valid: np.ndarray, step_px: int) -> np.ndarray:
-    """Box-filter unit normals over (2·step_px + 1)² pixels and renormalise; NaN where
-    ``valid`` (H, W) is False or the neighbourhood's normals cancel."""
-    n = np.where(np.isfinite(normals), normals, 0).astype(np.float32)
-    k = 2 * int(step_px) + 1
-    n = cv2.blur(n, (k, k))
+def surface_normals(points: np.ndarray, step_px: int | None = None) -> np.ndarray:
+    """Smoothed surface normals of a point grid: :func:`normals_from_points` with a stencil of
+    ``step_px`` (default: 1/200 of the image width, at least 1 px), box-filtered over
+    (2·step_px + 1)² pixels and renormalised. NaN where the point is invalid or the
+    neighbourhood's normals cancel. The segmenter and the LiDAR depth backend's floor search
+    use the same normals, so their gravity estimates agree.
+
+    Returns
+    -------
+    (H, W, 3) float32 — unit normals, camera frame.
+    """
+    step = int(step_px) if step_px is not None else max(1, round(points.shape[1] / 200))
+    valid = np.isfinite(points).all(axis=-1)
+    n = normals_from_points(points, step_px=step)
+    n = np.where(np.isfinite(n), n, 0).astype(np.float32)
+    n = cv2.blur(n, (2 * step + 1, 2 * step + 1))
     norm = np.linalg.norm(n, axis=-1, keepdims=True)
     with np.errstate(invalid="ignore", divide="ignore"):
         n = n / norm

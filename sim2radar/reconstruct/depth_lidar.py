@@ -42,9 +42,8 @@ from sim2radar.reconstruct.backproject import (
     estimate_up,
     extend_to_floor,
     find_floor,
-    normals_from_points,
     points_from_depth,
-    smooth_normals,
+    surface_normals,
     vertical_line_planes,
 )
 from sim2radar.reconstruct.types import (
@@ -320,8 +319,9 @@ class LidarDepth:
     Options are the fields of :class:`LidarDepthConfig` (keyword arguments). ``estimate`` returns
     a :class:`DepthResult` whose ``info`` holds JSON-able values: ``n_lidar_points`` (LiDAR
     pixels in the image), ``hole_fraction``, ``pixels_per_candidate``, ``confidence_mean``, the
-    filter strength ``lambda`` and, with ``floor_fill``, ``floor`` (``FloorPlane.to_info()`` or
-    None; the builtin segmenter takes its floor and up from it) and ``floor_filled_fraction``.
+    filter strength ``lambda`` and, with ``floor_fill``, ``up_cam`` (gravity up, camera frame),
+    ``floor`` (``FloorPlane.to_info()`` or None; the builtin segmenter takes its up and floor
+    from these two) and ``floor_filled_fraction``.
     The per-pixel confidence map ((H, W) float32 in [0, 1], 0 in holes,
     ``FLOOR_FILL_CONFIDENCE`` where the floor fill set the depth) of the last frame is
     ``self.last_confidence``.
@@ -335,18 +335,17 @@ class LidarDepth:
             raise ValueError(f"lidar depth backend: {exc}; known options: {known}") from None
         self.last_confidence: np.ndarray | None = None
 
-    def _floor(self, frame: FrameInput, depth_m: np.ndarray) -> FloorPlane | None:
-        """The floor plane (``backproject.find_floor``), with up from the completed depth's
-        normals checked against the image's vertical lines."""
+    def _floor(self, frame: FrameInput, depth_m: np.ndarray
+               ) -> tuple[np.ndarray | None, FloorPlane | None]:
+        """Gravity up from the completed depth's normals checked against the image's vertical
+        lines, and the floor plane (``backproject.find_floor``); (None, None) without depth."""
         k = frame.intrinsics
         points = points_from_depth(depth_m, k)
-        valid = np.isfinite(points).all(axis=-1)
-        if valid.sum() < 16:
-            return None
-        step = max(1, round(k.width / 200))
-        normals = smooth_normals(normals_from_points(points, step_px=step), valid, step)
+        if np.isfinite(points).all(axis=-1).sum() < 16:
+            return None, None
+        normals = surface_normals(points)
         up = estimate_up(normals, line_planes=vertical_line_planes(frame.rgb, k))
-        return find_floor(normals, up, k, frame.lidar_points, self.config.camera_height_m)
+        return up, find_floor(normals, up, k, frame.lidar_points, self.config.camera_height_m)
 
     def estimate(self, frame: FrameInput) -> DepthResult:
         if frame.lidar_points is None:
@@ -371,7 +370,9 @@ class LidarDepth:
         except ReconstructionInputError as exc:
             raise ReconstructionInputError(f"{frame.name}: {exc}") from None
         if self.config.floor_fill:
-            floor = self._floor(frame, depth)
+            up, floor = self._floor(frame, depth)
+            if up is not None:  # the segmenter takes this search's up and floor
+                info["up_cam"] = [float(x) for x in up]
             info["floor"] = None if floor is None else floor.to_info()
             filled = np.zeros(depth.shape, bool)
             if floor is not None:

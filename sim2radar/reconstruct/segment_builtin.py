@@ -9,8 +9,9 @@ No learned weights. The method, step by step:
    With LiDAR (``lidar_floor``), the floor plane fitted to the raw returns of the lowest beams
    (``backproject.find_floor``) fixes up and the floor level when its returns lie on
    up-facing surfaces of the depth map (not where those beams hit the walls first). When the
-   depth stage already completed the image down to a floor (``DepthResult.info["floor"]``, the
-   ``lidar`` backend's ``floor_fill``), that plane and its up are used.
+   depth stage already searched for the floor and completed the image down to it (the
+   ``lidar`` backend's ``floor_fill``: ``DepthResult.info["up_cam"]`` and ``["floor"]``), its up
+   and floor are used.
 3. Edges between neighbouring pixels where the normal turns by more than ``normal_thresh_deg``,
    the depth jumps (relative jump above the largest a continuous surface at
    ``max_incidence_deg`` could make), the local plane offset n·p steps (a door a few cm proud
@@ -57,9 +58,8 @@ from sim2radar.reconstruct.backproject import (
     estimate_up,
     find_floor,
     level_from_camera,
-    normals_from_points,
     points_from_depth,
-    smooth_normals,
+    surface_normals,
     vertical_line_planes,
 )
 from sim2radar.reconstruct.facade import FacadeConfig, WallPlane, find_facade_doors
@@ -329,21 +329,22 @@ class BuiltinSegments:
                 "check the depth backend (LiDAR in view? model output?)"
             )
         h, w = frame.shape
-        step = max(1, round(w / 200))
-        normals = normals_from_points(points, step_px=step)
-        normals = smooth_normals(normals, valid, step)
-        floor, floor_z_lidar = None, None
-        if depth.info.get("floor"):
-            # the depth stage completed the image down to this floor: same plane, same up
-            floor = FloorPlane.from_info(depth.info["floor"])
-            up = floor.normal
+        normals = surface_normals(points)
+        floor = None
+        if "up_cam" in depth.info and "floor" in depth.info:
+            # the depth stage already searched for the floor (the lidar backend's floor_fill)
+            # and completed the image down to it: same up, same floor
+            up = np.asarray(depth.info["up_cam"], np.float64)
+            if depth.info["floor"]:
+                floor = FloorPlane.from_info(depth.info["floor"])
         else:
             up = estimate_up(normals, line_planes=vertical_line_planes(frame.rgb, k))
             if self.lidar_floor:
                 # the raw returns of the lowest beams measure the floor to centimetres
                 floor = find_floor(normals, up, k, frame.lidar_points)
+        floor_z_known = None
         if floor is not None:
-            floor_z_lidar = -floor.height_m
+            floor_z_known = -floor.height_m
             up = floor.normal
         rot = level_from_camera(up)[:3, :3]
         pl = points @ rot.T
@@ -351,14 +352,14 @@ class BuiltinSegments:
         lab = self._lab(frame.rgb, w)
         regions = self._regions(points, normals, lab, valid, k.fx, up)
         nl = normals @ rot.T
-        floor_z = self._level(pl, nl, up=True) if floor_z_lidar is None else floor_z_lidar
+        floor_z = self._level(pl, nl, up=True) if floor_z_known is None else floor_z_known
         self._pixel_angle = 1.0 / k.fx
         regions = self._merge(regions, pl, lab, valid, floor_z)
         if self.fill_no_depth:
             # pixels without depth (e.g. below the LiDAR's lowest beam) join the nearest
             # region in the image: they get a label and material, but no 3D point
             regions = _fill_nearest(_fill_columns(regions), np.ones_like(valid))
-        labels, scores, info = self._label(regions, pl, frame.rgb, floor_z_lidar)
+        labels, scores, info = self._label(regions, pl, frame.rgb, floor_z_known)
         regions, labels, scores, proud = self._proud_of_walls(regions, labels, scores, pl,
                                                               info["floor_z_m"])
         if self.door_partial:
