@@ -27,6 +27,7 @@ __all__ = [
     "lidar_floor",
     "checked_floor",
     "find_floor",
+    "column_extent",
     "extend_to_floor",
     "level_from_camera",
     "transform_points",
@@ -390,6 +391,16 @@ def find_floor(normals: np.ndarray, up_cam: np.ndarray, intrinsics: CameraIntrin
     return None
 
 
+def column_extent(valid: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """First and last row of each column where ``valid`` (H, W) holds: (W,) int arrays, H and
+    −1 in columns without any (e.g. the band a LiDAR's beams do not reach lies outside)."""
+    h = valid.shape[0]
+    has = valid.any(axis=0)
+    first = np.where(has, np.argmax(valid, axis=0), h)
+    last = np.where(has, h - 1 - np.argmax(valid[::-1], axis=0), -1)
+    return first, last
+
+
 def extend_to_floor(depth_m: np.ndarray, intrinsics: CameraIntrinsics, floor: FloorPlane,
                     *, snap_m: float = 0.03) -> tuple[np.ndarray, np.ndarray]:
     """Complete a depth map below the lowest measured pixel of each column with the floor.
@@ -426,10 +437,9 @@ def extend_to_floor(depth_m: np.ndarray, intrinsics: CameraIntrinsics, floor: Fl
     valid = np.isfinite(depth) & (depth > 0)
     height = (depth * down) + floor.height_m  # height of each point above the floor
     snap = valid & np.isfinite(t_floor) & (height < snap_m + 0.005 * depth)
-    rows = np.arange(h)[:, None]
-    has = valid.any(axis=0)
-    last = np.where(has, h - 1 - np.argmax(valid[::-1], axis=0), -1)
-    below = ~valid & (rows > last[None, :])
+    _, last = column_extent(valid)
+    has = last >= 0
+    below = ~valid & (np.arange(h)[:, None] > last[None, :])
     # horizontal distance of each column's lowest point, and of each ray per unit z
     cols = np.arange(w)
     p_last = rays[np.clip(last, 0, h - 1), cols] * np.where(has, depth[np.clip(last, 0, h - 1),

@@ -55,6 +55,7 @@ import numpy as np
 
 from sim2radar.reconstruct.backproject import (
     FloorPlane,
+    column_extent,
     estimate_up,
     find_floor,
     level_from_camera,
@@ -720,9 +721,7 @@ class BuiltinSegments:
             floor_px = valid & (pl[..., 2] < floor_z - tol)
             ceil_px = valid & (pl[..., 2] > ceil_z + tol)
         rows = np.arange(h)[:, None]
-        has = valid.any(axis=0)
-        first = np.where(has, np.argmax(valid, axis=0), h)
-        last = np.where(has, h - 1 - np.argmax(valid[::-1], axis=0), -1)
+        first, last = column_extent(valid)
         if self.fill_no_depth:
             floor_px |= ~valid & (rows > last[None, :]) & (rays[..., 2] < -0.02)
             ceil_px |= ~valid & (rows < first[None, :]) & (rays[..., 2] > 0.02)
