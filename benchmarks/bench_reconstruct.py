@@ -186,8 +186,9 @@ def main() -> dict:
         cfg = (ReconstructionConfig.model_validate(_EXTRA[combo]) if combo in _EXTRA
                else ReconstructionConfig.preset(combo))
         if cfg.depth.name == "lidar" and rig_height_m is not None:
-            cfg = ReconstructionConfig.model_validate({**cfg.to_dict(), "depth": {
-                "name": "lidar", "options": {"camera_height_m": rig_height_m}}})
+            depth = cfg.depth.model_copy(update={"options": {
+                **cfg.depth.options, "camera_height_m": rig_height_m}})
+            cfg = cfg.model_copy(update={"depth": depth})
         scores = []
         new_vis = {"tp": 0, "n_gt": 0, "n_pred": 0}
         failures = 0

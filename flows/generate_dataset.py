@@ -49,7 +49,6 @@ __all__ = ["generate_dataset_flow", "generate_dataset", "generate_dataset_job", 
            "progress_callback"]
 
 
-
 class DatasetFailures(RuntimeError):
     """Raised by a ``strict`` run when a world or frame failed; ``.summary`` has the details."""
 

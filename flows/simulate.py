@@ -55,7 +55,6 @@ __all__ = [
 ]
 
 
-
 class SceneFailures(RuntimeError):
     """Raised by a ``strict`` run when at least one scene failed; ``.summary`` has the details."""
 
