@@ -4,10 +4,11 @@
     SIM2RADAR_BENCH_WORLDS=5 SIM2RADAR_BENCH_FRAMES=4 SIM2RADAR_BENCH_WIDTH=320 python -m benchmarks reconstruct
     SIM2RADAR_BENCH_COMBOS=oracle,builtin python -m benchmarks reconstruct   # a subset
     SIM2RADAR_BENCH_SEED=5000 python -m benchmarks reconstruct   # other worlds (held out)
-    SIM2RADAR_BENCH_RIG_HEIGHT=1 python -m benchmarks reconstruct   # with the rig's camera height
 
-With ``SIM2RADAR_BENCH_RIG_HEIGHT=1`` the ``lidar`` depth backend gets the rig's camera height
-(option ``camera_height_m``) for the floor under the lowest beam where no return measures it.
+Every frame carries its rig's calibration (``WorldFrame.rig_calibration``: the camera's up and
+height on the level rig, ``FrameInput.up_cam`` / ``camera_height_m``), as a real rig's frames
+would; ``builtin-no-rig`` is the built-in combination without it (gravity from the image, the
+floor only where the LiDAR measures it).
 
 Frames: ``WORLDS`` procedural worlds (seeds ``SEED``, ``SEED`` + 1, ...; default 1000) × ``FRAMES`` rig poses each, rendered
 by :mod:`sim2radar.worlds` at ``WIDTH`` × 3/4·``WIDTH`` (the analytic corridor of
@@ -30,11 +31,13 @@ import numpy as np
 COMBOS = {
     "oracle": "oracle depth + oracle segments + oracle materials",
     "builtin": "lidar depth + builtin segments + prior materials",
+    "builtin-no-rig": "the same without the rig calibration",
     "builtin-oracle-depth": "oracle depth + builtin segments + prior materials",
     "oracle-segments-prior": "oracle depth + oracle segments + prior materials",
 }
 #: Configs of combinations that are not presets of ``ReconstructionConfig``.
-_EXTRA = {"oracle-segments-prior": {"depth": {"name": "oracle"}, "segments": {"name": "oracle"}}}
+_EXTRA = {"oracle-segments-prior": {"depth": {"name": "oracle"}, "segments": {"name": "oracle"}},
+          "builtin-no-rig": {"rig_calibration": False}}
 #: "Visible door" (second definition): at least this fraction of its doorway seen by the camera
 #: (inside the image, unoccluded) and its centre within the radar's range.
 MIN_DOORWAY_FRACTION = 0.3
@@ -176,19 +179,10 @@ def main() -> dict:
         radar_range_m = radar_view(RigConfig())[2]
     except Exception:  # noqa: BLE001 - the analytic fallback has no rig config
         pass
-    rig_height_m = None
-    if os.environ.get("SIM2RADAR_BENCH_RIG_HEIGHT", "0") == "1" and frames and frames[0][2]:
-        from sim2radar.worlds.config import RigConfig
-
-        rig_height_m = float(RigConfig().camera_position_m[2])
     only = [c for c in os.environ.get("SIM2RADAR_BENCH_COMBOS", "").split(",") if c]
     for combo in only or COMBOS:
         cfg = (ReconstructionConfig.model_validate(_EXTRA[combo]) if combo in _EXTRA
                else ReconstructionConfig.preset(combo))
-        if cfg.depth.name == "lidar" and rig_height_m is not None:
-            depth = cfg.depth.model_copy(update={"options": {
-                **cfg.depth.options, "camera_height_m": rig_height_m}})
-            cfg = cfg.model_copy(update={"depth": depth})
         scores = []
         new_vis = {"tp": 0, "n_gt": 0, "n_pred": 0}
         failures = 0
@@ -196,8 +190,8 @@ def main() -> dict:
             lidar = f.lidar_points[f.lidar_points[:, 2] > 0.05]
             try:
                 backends = build_backends(cfg, f)
-                scene = reconstruct(FrameInput(f.rgb, f.intrinsics, lidar, name=f"frame{i}"), cfg,
-                                    backends=backends)
+                scene = reconstruct(FrameInput(f.rgb, f.intrinsics, lidar, name=f"frame{i}",
+                                               **f.rig_calibration), cfg, backends=backends)
             except Exception as exc:  # noqa: BLE001 - a failed frame is reported, not fatal
                 failures += 1
                 print(f"  {combo} frame {i}: failed: {exc}")

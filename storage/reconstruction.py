@@ -29,11 +29,16 @@ __all__ = ["RECONSTRUCTION_SCHEMA", "scene_to_tables", "write_scene_artifacts",
 
 
 
-def frame_digest(rgb: np.ndarray, lidar_points: np.ndarray | None = None) -> str:
-    """Content digest of a frame's inputs (RGB bytes [+ LiDAR bytes])."""
+def frame_digest(rgb: np.ndarray, lidar_points: np.ndarray | None = None,
+                 rig_calibration: dict | None = None) -> str:
+    """Content digest of a frame's inputs (RGB bytes [+ LiDAR bytes] [+ the rig calibration,
+    ``FrameInput.rig_calibration``, when it has one])."""
     data = np.ascontiguousarray(rgb, np.uint8).tobytes()
     if lidar_points is not None:
         data += np.ascontiguousarray(lidar_points, np.float32).tobytes()
+    if rig_calibration:
+        data += json.dumps({k: np.round(np.asarray(v, np.float64), 9).tolist()
+                            for k, v in rig_calibration.items()}, sort_keys=True).encode()
     return bytes_digest(data)
 
 

@@ -296,7 +296,7 @@ def _reconstruction_keys(frame, camera_to_target: np.ndarray, config) -> dict[st
     from sim2radar.reconstruct.pipeline import STAGE_VERSION
     from storage.reconstruction import frame_digest
 
-    inputs = {"image": frame_digest(frame.rgb, frame.lidar_points)}
+    inputs = {"image": frame_digest(frame.rgb, frame.lidar_points, frame.rig_calibration)}
     cfg = {"reconstruction": config.to_dict(),
            "camera_to_target": np.asarray(camera_to_target).round(9).tolist()}
     return {stage: content_key(stage=stage, stage_version=STAGE_VERSION, inputs=inputs,
@@ -536,7 +536,10 @@ def _reconstructed_frame(frame, world_id, store, spec,
         rec_seconds = float(rec["timings_s"].get("total", 0.0))
         info = {"fallbacks": rec["info"].get("fallbacks", []), "cached": True}
     else:
-        scene = reconstruct(FrameInput(frame.rgb, frame.intrinsics, frame.lidar_points, name=fid),
+        # the rig's calibration (camera pitch and height on the level rig) goes with the frame,
+        # as a real rig's would; ``reconstruction.rig_calibration: false`` ignores it
+        scene = reconstruct(FrameInput(frame.rgb, frame.intrinsics, frame.lidar_points, name=fid,
+                                       **frame.rig_calibration),
                             spec.reconstruction, ground_truth=frame)
         keys = write_scene_artifacts(
             store, scene, inputs={"image": _digest(frame)}, config=spec.reconstruction.to_dict(),
@@ -575,7 +578,7 @@ def _reconstructed_frame(frame, world_id, store, spec,
 def _digest(frame) -> str:
     from storage.reconstruction import frame_digest
 
-    return frame_digest(frame.rgb, frame.lidar_points)
+    return frame_digest(frame.rgb, frame.lidar_points, frame.rig_calibration)
 
 
 # ---------------------------------------------------------------------------------------------

@@ -74,15 +74,17 @@ def _inputs(job: ImageJob):
     import numpy as np
 
     from sim2radar.camera import CameraIntrinsics
-    from sim2radar.cli.reconstruct import load_image, load_lidar
+    from sim2radar.cli.reconstruct import load_image, load_lidar, load_rig_calibration
     from storage.reconstruction import frame_digest
 
     rgb = load_image(Path(job.image))
     k = CameraIntrinsics.from_yaml(job.intrinsics)
+    rig = load_rig_calibration(Path(job.intrinsics))
     pts, note = load_lidar(Path(job.lidar)) if job.lidar else (None, "")
     digest = frame_digest(rgb, pts)
-    digest_k = frame_digest(np.asarray([[k.fx, k.fy, k.cx, k.cy, k.width, k.height]], np.float32))
-    return rgb, k, pts, note, {"image": digest, "intrinsics": digest_k}
+    digest_k = frame_digest(np.asarray([[k.fx, k.fy, k.cx, k.cy, k.width, k.height]], np.float32),
+                            rig_calibration=rig)
+    return rgb, k, pts, rig, note, {"image": digest, "intrinsics": digest_k}
 
 
 def reconstruct_image(
@@ -110,7 +112,7 @@ def reconstruct_image(
     st = open_store(store)
     cfg = ReconstructionConfig.model_validate(config or {})
     cfg_dict = cfg.to_dict()
-    rgb, k, pts, note, inputs = _inputs(job)
+    rgb, k, pts, rig, note, inputs = _inputs(job)
     keys = {stage: content_key(stage=stage, stage_version=RECONSTRUCTION_STAGE_VERSION,
                                inputs=inputs,
                                config={"reconstruction": cfg_dict, "camera_to_target": None})
@@ -121,7 +123,7 @@ def reconstruct_image(
     if force:
         for s, key in keys.items():
             st.delete(s, key)
-    scene = reconstruct(FrameInput(rgb, k, pts, name=job.name), cfg)
+    scene = reconstruct(FrameInput(rgb, k, pts, name=job.name, **rig), cfg)
     if note:
         scene.info["fallbacks"].append(note)
     written = write_scene_artifacts(st, scene, inputs=inputs, config=cfg_dict,

@@ -47,6 +47,38 @@ def load_lidar(path: Path, *, drop_invalid: bool = True) -> tuple:
     return pts, note
 
 
+def load_rig_calibration(path: Path) -> dict:
+    """The optional rig calibration in an intrinsics YAML: ``camera_height_m`` (the camera's
+    height above the floor [m]) and the camera's up — ``up_cam: [x, y, z]`` (camera frame: x
+    right, y down, z forward) or ``camera_pitch_deg`` (down is positive) with
+    ``camera_roll_deg`` (default 0). Returns ``FrameInput`` keyword arguments (empty without
+    any of them)."""
+    import numpy as np
+
+    from sim2radar.configio import read_yaml_mapping
+    from sim2radar.reconstruct import up_from_pitch_roll
+
+    doc = read_yaml_mapping(path, what="intrinsics file", error=typer.BadParameter)
+    out: dict = {}
+    if "up_cam" in doc and "camera_pitch_deg" in doc:
+        raise typer.BadParameter(f"{path}: give the camera's up as up_cam or as "
+                                 "camera_pitch_deg (+ camera_roll_deg), not both")
+    try:
+        if "up_cam" in doc:
+            up = np.asarray(doc["up_cam"], np.float64)
+            if up.shape != (3,):
+                raise ValueError(f"up_cam must be [x, y, z], got {doc['up_cam']!r}")
+            out["up_cam"] = up
+        elif "camera_pitch_deg" in doc or "camera_roll_deg" in doc:
+            out["up_cam"] = up_from_pitch_roll(float(doc.get("camera_pitch_deg", 0.0)),
+                                               float(doc.get("camera_roll_deg", 0.0)))
+        if "camera_height_m" in doc:
+            out["camera_height_m"] = float(doc["camera_height_m"])
+    except (TypeError, ValueError) as exc:
+        raise typer.BadParameter(f"{path}: rig calibration: {exc}") from None
+    return out
+
+
 def load_image(path: Path):
     """Read an image file as (H, W, 3) uint8 RGB."""
     import cv2
@@ -63,7 +95,9 @@ def load_image(path: Path):
 def reconstruct_cmd(
     images: list[Path] = typer.Argument(..., help="RGB image(s) (PNG/JPEG)."),
     intrinsics: Path = typer.Option(..., "--intrinsics", "-k",
-                                    help="YAML with fx, fy, cx, cy, width, height (or K)."),
+                                    help="YAML with fx, fy, cx, cy, width, height (or K); "
+                                         "optionally the rig calibration camera_height_m and "
+                                         "camera_pitch_deg / camera_roll_deg (or up_cam)."),
     lidar: list[Path] = typer.Option(None, "--lidar",
                                      help="(N, 3) .npy LiDAR points in the camera frame, "
                                           "metres; one per image, same order."),
@@ -98,6 +132,7 @@ def reconstruct_cmd(
         k = CameraIntrinsics.from_yaml(intrinsics)
     except (FileNotFoundError, ValueError) as exc:
         raise typer.BadParameter(str(exc), param_hint="--intrinsics") from None
+    rig = load_rig_calibration(intrinsics)
     lidar = list(lidar or [])
     if lidar and len(lidar) != len(images):
         raise typer.BadParameter(
@@ -129,13 +164,13 @@ def reconstruct_cmd(
             pts, note = load_lidar(lidar[i]) if lidar else (None, "")
             if note:
                 console.print(f"[yellow]{name}: {note}")
-            frame = FrameInput(rgb, k, pts, name=name)
+            frame = FrameInput(rgb, k, pts, name=name, **rig)
             scene = reconstruct(frame, cfg, backends=backends)
         except (ReconstructionInputError, typer.BadParameter, ValueError) as exc:
             failures += 1
             console.print(f"[red]{name}: failed: {exc}")
             continue
-        inputs = {"image": frame_digest(rgb, pts)}
+        inputs = {"image": frame_digest(rgb, pts, frame.rig_calibration)}
         keys = write_scene_artifacts(store, scene, inputs=inputs, config=cfg.to_dict())
         scene_yaml = scene.write_scene(base / "scenes" / name)
         sheet = sheets / f"{name}.png"

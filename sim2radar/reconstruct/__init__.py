@@ -28,6 +28,7 @@ from sim2radar.reconstruct.types import (
     MaterialLabel,
     ReconstructionInputError,
     Segments,
+    up_from_pitch_roll,
 )
 
 log = logging.getLogger(__name__)
@@ -82,6 +83,7 @@ __all__ = [
     "SEGMENT_BACKENDS",
     "MATERIAL_BACKENDS",
     "FrameInput",
+    "up_from_pitch_roll",
     "DepthResult",
     "Segments",
     "MaterialLabel",

@@ -115,9 +115,8 @@ class LidarDepthConfig:
     min_depth_m, max_depth_m : float [m] — valid depth range of the output.
     floor_fill : bool — below each column's lowest measured pixel, continue the surface seen
         there down to the floor and then the floor (``backproject.extend_to_floor``), with the
-        floor plane from the LiDAR returns or, where none lie on it, from ``camera_height_m``.
-    camera_height_m : float or None [m] — the rig's camera height above the floor
-        (calibration); None: only a floor the LiDAR measures is used.
+        floor plane from the LiDAR returns or, where none lie on it, from the rig calibration
+        the frame carries (``FrameInput.camera_height_m``, with ``up_cam``).
     """
 
     min_points: int = 20
@@ -133,13 +132,8 @@ class LidarDepthConfig:
     min_depth_m: float = 0.05
     max_depth_m: float = 100.0
     floor_fill: bool = True
-    camera_height_m: float | None = None
 
     def __post_init__(self) -> None:
-        if self.camera_height_m is not None and not (
-                np.isfinite(self.camera_height_m) and 0 < self.camera_height_m < 10):
-            raise ValueError("lidar depth: camera_height_m must be the camera's height above "
-                             f"the floor in metres (0, 10), got {self.camera_height_m}")
         if self.min_points < 3:
             raise ValueError(f"lidar depth: min_points must be >= 3, got {self.min_points}")
         if self.lambda_ is not None and self.lambda_ <= 0:
@@ -337,15 +331,17 @@ class LidarDepth:
 
     def _floor(self, frame: FrameInput, depth_m: np.ndarray
                ) -> tuple[np.ndarray | None, FloorPlane | None]:
-        """Gravity up from the completed depth's normals checked against the image's vertical
-        lines, and the floor plane (``backproject.find_floor``); (None, None) without depth."""
+        """Gravity up — the frame's calibrated ``up_cam``, else from the completed depth's
+        normals checked against the image's vertical lines — and the floor plane
+        (``backproject.find_floor``); (None, None) without depth."""
         k = frame.intrinsics
         points = points_from_depth(depth_m, k)
         if np.isfinite(points).all(axis=-1).sum() < 16:
             return None, None
         normals = surface_normals(points)
-        up = estimate_up(normals, line_planes=vertical_line_planes(frame.rgb, k))
-        return up, find_floor(normals, up, k, frame.lidar_points, self.config.camera_height_m)
+        up = frame.up_cam if frame.up_cam is not None else \
+            estimate_up(normals, line_planes=vertical_line_planes(frame.rgb, k))
+        return up, find_floor(normals, up, k, frame.lidar_points, frame.camera_height_m)
 
     def estimate(self, frame: FrameInput) -> DepthResult:
         if frame.lidar_points is None:

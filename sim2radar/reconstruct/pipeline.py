@@ -67,8 +67,9 @@ __all__ = [
 log = logging.getLogger(__name__)
 
 #: Version of the reconstruction stage's output; part of artifact content keys. Bump when the
-#: output of the same inputs and config changes (2: LiDAR depth completed down to the floor).
-STAGE_VERSION = 2
+#: output of the same inputs and config changes (2: LiDAR depth completed down to the floor;
+#: 3: the rig calibration, furniture fronts up to door height).
+STAGE_VERSION = 3
 
 
 class BackendSpec(BaseModel):
@@ -129,6 +130,9 @@ class ReconstructionConfig(BaseModel):
     max_depth_m : float [m] — depth beyond this is treated as invalid.
     unknown_material : str — material given to meshes whose label is ``unknown`` (the radar
         simulator needs a material); recorded as a fallback.
+    rig_calibration : bool — use the rig calibration a frame carries
+        (``FrameInput.up_cam``, ``camera_height_m``) for gravity and the floor; False ignores it
+        (gravity from the image, the floor only where the LiDAR measures it).
     """
 
     model_config = ConfigDict(frozen=True, extra="forbid")
@@ -139,6 +143,7 @@ class ReconstructionConfig(BaseModel):
     doors: DoorOptions = DoorOptions()
     max_depth_m: float = 30.0
     unknown_material: str = "plasterboard"
+    rig_calibration: bool = True
 
     @field_validator("unknown_material")
     @classmethod
@@ -423,6 +428,8 @@ def reconstruct(
     config = config or ReconstructionConfig()
     timings: dict[str, float] = {}
     fallbacks: list[str] = []
+    if not config.rig_calibration:
+        frame = frame.without_rig_calibration()
     t0 = time.perf_counter()
     depth_be, seg_be, mat_be = backends or build_backends(config, ground_truth)
 
@@ -452,12 +459,16 @@ def reconstruct(
     k = frame.intrinsics
     points = points_from_depth(depth.depth_m, k)
     step = max(1, round(k.width / 200))
-    # the segmentation's gravity estimate when it made one (its labels and door boxes are in
-    # that level frame), else normals + the image's vertical lines
+    # the segmentation's gravity when it had one (its labels and door boxes are in that level
+    # frame), else the rig's calibrated up, else normals + the image's vertical lines
     seg_up = getattr(seg_be, "last_info", {}).get("up_cam")
-    up = (np.asarray(seg_up, np.float64) if seg_up is not None else
-          estimate_up(normals_from_points(points, step_px=step),
-                      line_planes=vertical_line_planes(frame.rgb, k)))
+    if seg_up is not None:
+        up = np.asarray(seg_up, np.float64)
+    elif frame.up_cam is not None:
+        up = frame.up_cam
+    else:
+        up = estimate_up(normals_from_points(points, step_px=step),
+                         line_planes=vertical_line_planes(frame.rgb, k))
     level = level_from_camera(up)
     seg = segments.segment_id
     sem_lut = np.array([SEMANTIC_CLASSES.index(s) for s in segments.labels] + [0], np.uint8)
@@ -509,6 +520,7 @@ def reconstruct(
         "depth": depth.info,
         "segments": getattr(seg_be, "last_info", {}),
         "up_cam": up.tolist(),
+        "rig_calibration": frame.rig_calibration,
         "fallbacks": fallbacks,
         "config": config.to_dict(),
     }

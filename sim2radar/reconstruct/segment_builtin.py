@@ -339,10 +339,12 @@ class BuiltinSegments:
             if depth.info["floor"]:
                 floor = FloorPlane.from_info(depth.info["floor"])
         else:
-            up = estimate_up(normals, line_planes=vertical_line_planes(frame.rgb, k))
+            up = frame.up_cam if frame.up_cam is not None else \
+                estimate_up(normals, line_planes=vertical_line_planes(frame.rgb, k))
             if self.lidar_floor:
-                # the raw returns of the lowest beams measure the floor to centimetres
-                floor = find_floor(normals, up, k, frame.lidar_points)
+                # the raw returns of the lowest beams measure the floor to centimetres; without
+                # them the rig's calibrated camera height gives it
+                floor = find_floor(normals, up, k, frame.lidar_points, frame.camera_height_m)
         floor_z_known = None
         if floor is not None:
             floor_z_known = -floor.height_m
@@ -567,15 +569,19 @@ class BuiltinSegments:
 
         A door leaf is flush with its wall or set into it, and a window is set into it; a cabinet
         or a radiator stands 0.1–0.6 m in front of it. A door/wall/window region of fewer
-        pixels than the wall, with at least 80 % of its points within the wall's extent, whose
-        median distance in front of the plane is within ``proud_m`` and whose 10th percentile
-        is more than 3 cm, is that furniture — unless its top is at door height (an open leaf
-        swung out of its doorway stands proud too, up to the lintel). With ``proud_split``,
-        pixels of a large wall region itself that stand proud of its plane (furniture or an
-        open leaf that the depth completion blended into the wall) are split off as their own
-        regions, of at least 0.2 % of the image: ``clutter`` below door height, ``door`` when
-        door-sized up to door height. Returns the regions, labels, scores and the region ids
-        turned to clutter (the door growing step skips them)."""
+        pixels than the wall (a large furniture front may itself count among the walls), with
+        at least 80 % of its points within the wall's extent, whose median distance in front of
+        the plane is within ``proud_m`` and whose 10th percentile is more than 3 cm, is that
+        furniture — unless its top is at door height and its plane is turned from the wall's
+        (an open leaf swung out of its doorway stands proud too, up to the lintel, but turned
+        by its swing angle; a tall cabinet's front faces as the wall does), or it reaches
+        above any door or its top is cut by the image (a wall of its own). With
+        ``proud_split``, pixels of a large wall region itself that stand proud of its plane
+        (furniture or an open leaf that the depth completion blended into the wall) are split
+        off as their own regions, of at least 0.2 % of the image: ``door`` when door-sized up
+        to door height and turned from the wall, ``clutter`` otherwise. Returns the regions,
+        labels, scores and the region ids turned to clutter (the door growing step skips
+        them)."""
         lo, hi = self.proud_m
         valid = np.isfinite(pl).all(axis=-1)
         counts = np.bincount(regions[regions >= 0], minlength=len(labels))
@@ -585,7 +591,6 @@ class BuiltinSegments:
             walls.append((wi, nrm, d, along, np.percentile(wp @ along, [1, 99])))
         labels, scores = list(labels), list(scores)
         proud: set[int] = set()
-        wall_ids = {w[0] for w in walls}
         if self.proud_split:
             # furniture merged into its wall's region (a completion that blends the two):
             # connected pixels of the wall region standing proud of its plane
@@ -603,10 +608,12 @@ class BuiltinSegments:
                         continue
                     blob_c = cc == c
                     regions[blob_c] = len(labels)
-                    if np.percentile(pl[..., 2][blob_c], 99) - floor_z >= self.door_height_m[0]:
-                        # up to door height: an open leaf swung out of its doorway when it is
-                        # door-sized; either way no longer part of the wall's plane
-                        g = region_geometry(pl, blob_c, pixel_angle_rad=self._pixel_angle)
+                    g = region_geometry(pl, blob_c, pixel_angle_rad=self._pixel_angle)
+                    if (np.percentile(pl[..., 2][blob_c], 99) - floor_z >= self.door_height_m[0]
+                            and not self._parallel(g.normal, nrm)):
+                        # up to door height and turned from the wall: an open leaf swung out of
+                        # its doorway when it is door-sized; either way no longer part of the
+                        # wall's plane
                         label, score = self._vertical_label(g, floor_z, np.inf, False)
                         labels.append("door" if label == "door" else "clutter")
                         scores.append(score if label == "door" else 0.4)
@@ -616,13 +623,18 @@ class BuiltinSegments:
                     scores.append(0.5)
             counts = np.bincount(regions[regions >= 0], minlength=len(labels))
         for i, lbl in enumerate(labels):
-            if lbl not in ("door", "wall", "window") or i in wall_ids or counts[i] < 100:
+            if lbl not in ("door", "wall", "window") or counts[i] < 100:
                 continue
             pts = pl[(regions == i) & valid]
-            if len(pts) < 50 or np.percentile(pts[:, 2], 99) - floor_z >= self.door_height_m[0]:
+            if len(pts) < 50:
                 continue
+            top = np.percentile(pts[:, 2], 99) - floor_z
+            tall = top >= self.door_height_m[0]
+            if tall and (top > self.door_height_m[1] or (regions[0] == i).any()):
+                continue  # up to the ceiling, or its top not seen: a wall
+            normal = region_geometry(pl, regions == i).normal if tall else None
             for wi, nrm, d, along, (s0, s1) in walls:
-                if counts[i] >= counts[wi]:
+                if counts[i] >= counts[wi] or (tall and not self._parallel(normal, nrm)):
                     continue
                 sa = pts @ along
                 if ((sa > s0 - 0.1) & (sa < s1 + 0.1)).mean() < 0.8:
@@ -633,6 +645,14 @@ class BuiltinSegments:
                     proud.add(i)
                     break
         return regions, labels, scores, proud
+
+    @staticmethod
+    def _parallel(normal: np.ndarray, wall_normal: np.ndarray, max_deg: float = 10.0) -> bool:
+        """The region's plane faces the same way as the wall's (within ``max_deg``): standing
+        proud of the wall, it is a cabinet's front, not a door leaf swung out of its doorway
+        (turned by the swing angle; a leaf swung against the wall is only its thickness proud)."""
+        return abs(float(normal[:2] @ wall_normal[:2])) / max(
+            float(np.linalg.norm(normal[:2])), 1e-9) > math.cos(math.radians(max_deg))
 
     def _grow_doors(self, regions, labels, scores, pl, lab, floor_z, ceil_z, skip=frozenset()):
         """Complete door leaves from their lower fragment by colour.

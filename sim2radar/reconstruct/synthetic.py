@@ -77,6 +77,13 @@ class SyntheticFrame:
     seed: int = 0
     frame_index: int = 0
 
+    @property
+    def rig_calibration(self) -> dict:
+        """``up_cam`` and ``camera_height_m`` of the level camera above the floor z = 0 (as
+        ``WorldFrame.rig_calibration``): keyword arguments of ``FrameInput``."""
+        return {"up_cam": self.camera_to_world[:3, :3].T @ np.array([0.0, 0.0, 1.0]),
+                "camera_height_m": float(self.camera_to_world[2, 3])}
+
 
 @dataclasses.dataclass(frozen=True)
 class _Quad:

@@ -24,6 +24,7 @@ from sim2radar.registry import Registry
 
 __all__ = [
     "FrameInput",
+    "up_from_pitch_roll",
     "DepthResult",
     "Segments",
     "MaterialLabel",
@@ -41,6 +42,20 @@ class ReconstructionInputError(ValueError):
     """Bad input to reconstruction (image, intrinsics, LiDAR); the message says what and how to fix."""
 
 
+def up_from_pitch_roll(pitch_deg: float, roll_deg: float = 0.0) -> np.ndarray:
+    """Gravity up in the camera frame (OpenCV: x right, y down, z forward) of a camera pitched
+    down by ``pitch_deg`` and rolled clockwise (as seen from behind) by ``roll_deg`` on a level
+    rig [deg]. A level camera has up (0, −1, 0); pitched down, up tilts towards −z.
+    """
+    p, r = np.radians(float(pitch_deg)), np.radians(float(roll_deg))
+    if not (np.isfinite(p) and np.isfinite(r) and abs(p) < np.pi / 2 and abs(r) < np.pi / 2):
+        raise ValueError(f"pitch_deg and roll_deg must be finite and within ±90°, got "
+                         f"{pitch_deg}, {roll_deg}")
+    # pitched down, the optical axis z points partly down (up·z = −sin p); rolled, the x axis
+    # turns towards y (down on the right), so up·x = −sin r cos p
+    return np.array([-np.sin(r) * np.cos(p), -np.cos(r) * np.cos(p), -np.sin(p)])
+
+
 @dataclasses.dataclass(frozen=True, eq=False)
 class FrameInput:
     """One RGB frame to reconstruct.
@@ -52,12 +67,24 @@ class FrameInput:
     lidar_points : (N, 3) float32 or None — sparse LiDAR in the *camera* frame (OpenCV: x right,
         y down, z forward) [m]; gives metric scale when present.
     name : str — identifier used in logs, errors and artifact keys.
+    up_cam : (3,) float64 or None — gravity up (against gravity) in the camera frame, from the
+        rig's calibration (a camera mounted at a known pitch and roll on a level cart: see
+        :func:`up_from_pitch_roll`) or an IMU; stored unit length. None: estimated from the
+        image and depth.
+    camera_height_m : float or None [m] — the camera's height above the floor (rig
+        calibration); gives the floor where the LiDAR has no return on it (e.g. facing a near
+        wall, where its lowest beam hits the wall first).
+
+    ``up_cam`` and ``camera_height_m`` are the rig calibration; the reconstruction uses them
+    unless its config says ``rig_calibration: false``.
     """
 
     rgb: np.ndarray
     intrinsics: CameraIntrinsics
     lidar_points: np.ndarray | None = None
     name: str = "frame"
+    up_cam: np.ndarray | None = None
+    camera_height_m: float | None = None
 
     def __post_init__(self) -> None:
         rgb = np.asarray(self.rgb)
@@ -90,6 +117,37 @@ class FrameInput:
                     f"({int((~np.isfinite(pts)).any(axis=1).sum())} rows); drop them first"
                 )
             object.__setattr__(self, "lidar_points", pts)
+        if self.up_cam is not None:
+            up = np.asarray(self.up_cam, dtype=np.float64)
+            norm = float(np.linalg.norm(up)) if up.shape == (3,) else 0.0
+            if not (np.isfinite(up).all() and norm > 1e-6):
+                raise ReconstructionInputError(
+                    f"{self.name}: up_cam must be a finite non-zero 3-vector (gravity up in the "
+                    f"camera frame: x right, y down, z forward), got {self.up_cam!r}"
+                )
+            object.__setattr__(self, "up_cam", up / norm)
+        if self.camera_height_m is not None:
+            height = float(self.camera_height_m)
+            if not (np.isfinite(height) and 0 < height < 10):
+                raise ReconstructionInputError(
+                    f"{self.name}: camera_height_m must be the camera's height above the floor "
+                    f"in metres, in (0, 10), got {self.camera_height_m!r}"
+                )
+            object.__setattr__(self, "camera_height_m", height)
+
+    @property
+    def rig_calibration(self) -> dict:
+        """The rig calibration this frame carries, JSON-able (empty without one)."""
+        out: dict = {}
+        if self.up_cam is not None:
+            out["up_cam"] = [round(float(x), 9) for x in self.up_cam]
+        if self.camera_height_m is not None:
+            out["camera_height_m"] = round(self.camera_height_m, 9)
+        return out
+
+    def without_rig_calibration(self) -> FrameInput:
+        """This frame without ``up_cam`` and ``camera_height_m``."""
+        return dataclasses.replace(self, up_cam=None, camera_height_m=None)
 
     @property
     def shape(self) -> tuple[int, int]:

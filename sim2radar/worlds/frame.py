@@ -302,3 +302,14 @@ class WorldFrame:
     @property
     def shape(self) -> tuple[int, int]:
         return int(self.depth_m.shape[0]), int(self.depth_m.shape[1])
+
+    @property
+    def rig_calibration(self) -> dict[str, Any]:
+        """The camera's calibration on its rig, as a real rig knows it: ``up_cam`` (3,) — the
+        rig's up (gravity, the rig stands level on the floor) in the camera frame — and
+        ``camera_height_m`` — the camera's height above the rig's floor point [m]. From the
+        camera-to-rig extrinsic only (not from the pose in the world); keyword arguments of
+        :class:`sim2radar.reconstruct.FrameInput`."""
+        cam_in_rig = np.linalg.inv(self.rig_to_world) @ self.camera_to_world
+        return {"up_cam": cam_in_rig[:3, :3].T @ np.array([0.0, 0.0, 1.0]),
+                "camera_height_m": float(cam_in_rig[2, 3])}

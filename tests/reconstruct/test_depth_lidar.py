@@ -102,7 +102,7 @@ def test_floor_fill_completes_the_image_down_to_the_floor(corridor):
     high = lidar_scan(elev_deg=(-5.0, 15.0))
     bare = LidarDepth().estimate(FrameInput(rgb, k, high))
     assert bare.info["floor"] is None and _absrel(bare.depth_m, depth)[1] < 0.85
-    rig = LidarDepth(camera_height_m=1.5).estimate(FrameInput(rgb, k, high))
+    rig = LidarDepth().estimate(FrameInput(rgb, k, high, camera_height_m=1.5))
     assert rig.info["floor"]["source"] == "rig"
     assert rig.info["floor_filled_fraction"] > 0.15
     absrel, coverage = _absrel(rig.depth_m, depth)
@@ -128,5 +128,28 @@ def test_bad_lidar_inputs_give_clear_errors(corridor):
         project_lidar(np.array([[0, 0, np.nan]]), k)
     with pytest.raises(ValueError, match="known options"):
         LidarDepth(lamda=3)
-    with pytest.raises(ValueError, match="camera_height_m"):
-        LidarDepth(camera_height_m=-1.2)
+    with pytest.raises(ValueError, match="known options"):
+        LidarDepth(camera_height_m=1.2)  # the rig's height belongs to the frame (FrameInput)
+
+
+def test_calibrated_up_is_used_for_the_floor_from_the_camera_height(corridor):
+    """With the rig calibration's up, the floor under a -5° lowest beam is the plane
+    camera_height_m below the camera along that up — not along the image's estimate: a 4°
+    wrong up tilts the filled floor, and a measured floor (returns on it) still wins."""
+    from sim2radar.reconstruct import up_from_pitch_roll
+
+    k, rgb, depth, _, _ = corridor
+    high = lidar_scan(elev_deg=(-5.0, 15.0))
+    true_up = up_from_pitch_roll(0.0)  # the analytic corridor's camera is level
+    good = LidarDepth().estimate(FrameInput(rgb, k, high, up_cam=true_up, camera_height_m=1.5))
+    assert good.info["up_cam"] == pytest.approx(list(true_up))
+    assert good.info["floor"]["normal"] == pytest.approx(list(true_up))
+    absrel_good, coverage = _absrel(good.depth_m, depth)
+    assert coverage > 0.98 and absrel_good < 0.03
+    tilted = LidarDepth().estimate(FrameInput(rgb, k, high, up_cam=up_from_pitch_roll(4.0),
+                                              camera_height_m=1.5))
+    assert _absrel(tilted.depth_m, depth)[0] > 2 * absrel_good
+    measured = LidarDepth().estimate(FrameInput(rgb, k, lidar_scan(elev_deg=(-15.0, 15.0)),
+                                                up_cam=true_up, camera_height_m=1.7))
+    assert measured.info["floor"]["source"] == "lidar"
+    assert measured.info["floor"]["height_m"] == pytest.approx(1.5, abs=0.01)

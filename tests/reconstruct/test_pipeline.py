@@ -187,6 +187,34 @@ def test_cli_reconstructs_an_image_with_lidar(tmp_path, frame):
     assert load_scene(tmp_path / "out" / "scenes" / "corridor" / "scene.yaml")
     bad = runner.invoke(app, args[:3] + [str(tmp_path / "missing.yaml")] + args[4:])
     assert bad.exit_code != 0 and "missing.yaml" in bad.output
+    # the rig calibration in the intrinsics file goes with every frame
+    rig = {**frame.intrinsics.to_dict(), "camera_height_m": 1.5, "camera_pitch_deg": 0.0}
+    (tmp_path / "K_rig.yaml").write_text(yaml.safe_dump(rig))
+    with_rig = runner.invoke(app, args[:3] + [str(tmp_path / "K_rig.yaml")] + args[4:])
+    assert with_rig.exit_code == 0, with_rig.output
+    (tmp_path / "K_bad.yaml").write_text(yaml.safe_dump({**rig, "up_cam": [0, -1, 0]}))
+    both = runner.invoke(app, args[:3] + [str(tmp_path / "K_bad.yaml")] + args[4:])
+    assert both.exit_code != 0 and "not both" in both.output
+
+
+def test_rig_calibration_fields_of_the_intrinsics_file(tmp_path):
+    import typer
+    import yaml
+
+    from sim2radar.cli.reconstruct import load_rig_calibration
+    from sim2radar.reconstruct import up_from_pitch_roll
+
+    path = tmp_path / "K.yaml"
+    base = {"fx": 500.0, "fy": 500.0, "cx": 320.0, "cy": 240.0, "width": 640, "height": 480}
+    path.write_text(yaml.safe_dump(base))
+    assert load_rig_calibration(path) == {}
+    path.write_text(yaml.safe_dump({**base, "camera_pitch_deg": 3.0, "camera_height_m": 1.25}))
+    rig = load_rig_calibration(path)
+    np.testing.assert_allclose(rig["up_cam"], up_from_pitch_roll(3.0))
+    assert rig["camera_height_m"] == 1.25
+    path.write_text(yaml.safe_dump({**base, "up_cam": [0.0, -1.0]}))
+    with pytest.raises(typer.BadParameter, match="K.yaml.*up_cam"):
+        load_rig_calibration(path)
 
 
 def test_shipped_configs_parse():
@@ -252,3 +280,46 @@ def test_mitsuba_dict_is_ray_traceable(builtin_scene, frame):
     si = scene.ray_intersect(mi.Ray3f(mi.Point3f(0.5, 0, 0), mi.Vector3f(3.0, 0, -1)))
     hit = np.array(si.p).ravel()
     assert hit[2] == pytest.approx(-1.5, abs=0.05)
+
+
+def test_up_from_pitch_roll_matches_a_rotated_camera():
+    """The up of a camera pitched down by p and rolled by r is world +z seen in its frame."""
+    from sim2radar.reconstruct import up_from_pitch_roll
+
+    p, r = np.radians(7.0), np.radians(-4.0)
+    # level camera (OpenCV) in a z-up world looking along +x: x_cam = -y, y_cam = -z, z_cam = +x
+    cam = np.array([[0.0, 0, 1], [-1, 0, 0], [0, -1, 0]])  # columns: camera axes in the world
+    pitch = np.array([[np.cos(p), 0, np.sin(p)], [0, 1, 0], [-np.sin(p), 0, np.cos(p)]])
+    roll = np.array([[np.cos(r), -np.sin(r), 0], [np.sin(r), np.cos(r), 0], [0, 0, 1]])
+    cam_to_world = pitch @ cam @ roll  # pitch about the world's y, roll about the optical axis
+    want = cam_to_world.T @ np.array([0.0, 0.0, 1.0])
+    np.testing.assert_allclose(up_from_pitch_roll(7.0, -4.0), want, atol=1e-12)
+    np.testing.assert_allclose(up_from_pitch_roll(0.0), [0.0, -1.0, 0.0], atol=1e-12)
+    with pytest.raises(ValueError, match="pitch_deg"):
+        up_from_pitch_roll(95.0)
+
+
+def test_rig_calibration_is_validated_used_and_switchable(frame):
+    """A frame's rig calibration is checked, reaches the depth stage (its up and floor), is
+    recorded in the scene, changes the frame digest, and ``rig_calibration: false`` drops it."""
+    from storage.reconstruction import frame_digest
+
+    k = frame.intrinsics
+    with pytest.raises(ReconstructionInputError, match="up_cam"):
+        FrameInput(frame.rgb, k, up_cam=[0.0, 0.0, 0.0])
+    with pytest.raises(ReconstructionInputError, match="camera_height_m"):
+        FrameInput(frame.rgb, k, camera_height_m=-1.0)
+    rig = frame.rig_calibration
+    assert rig["camera_height_m"] == pytest.approx(1.5)
+    inp = _inp(frame, **rig)
+    assert inp.up_cam == pytest.approx(rig["up_cam"]) and inp.rig_calibration
+    scene = reconstruct(inp, ReconstructionConfig())
+    assert scene.info["rig_calibration"] == inp.rig_calibration
+    assert scene.info["depth"]["up_cam"] == pytest.approx(list(rig["up_cam"]))
+    assert scene.info["up_cam"] == pytest.approx(list(rig["up_cam"]), abs=0.02)
+    off = reconstruct(inp, ReconstructionConfig(rig_calibration=False))
+    assert off.info["rig_calibration"] == {}
+    assert frame_digest(frame.rgb, frame.lidar_points, inp.rig_calibration) != \
+        frame_digest(frame.rgb, frame.lidar_points)
+    assert frame_digest(frame.rgb, frame.lidar_points, {}) == \
+        frame_digest(frame.rgb, frame.lidar_points)

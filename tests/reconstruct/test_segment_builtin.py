@@ -154,34 +154,39 @@ def test_rectangle_cut_by_the_top_and_a_side_border_is_no_door():
         assert seg._vertical_label(_geometry(borders), floor_z, ceil_z, True)[0] == "wall"
 
 
-def _wall_with_block(front_m: float, top_m: float):
+def _wall_with_block(front_m: float, top_m: float, turn_deg: float = 0.0):
     """A wall 4 m ahead (level frame, rows span z 1.5 .. -1.3, the floor level) and a 0.8 m
-    wide block on the floor ``front_m`` in front of it, ``top_m`` tall (region 1)."""
+    wide block on the floor ``front_m`` in front of it, ``top_m`` tall (region 1), its face
+    turned by ``turn_deg`` about its edge at y = -0.4 (a leaf swung out of its doorway)."""
     h, w = 120, 160
     y = np.linspace(2.0, -2.0, w)
     z = np.linspace(1.5, -1.3, h)
     x = np.full((h, w), 4.0)
     block = (np.abs(y[None, :]) < 0.4) & (z[:, None] < -1.3 + top_m)
-    x[block] = 4.0 - front_m
+    face = 4.0 - front_m - (y + 0.4) * np.tan(np.radians(turn_deg))
+    x[block] = np.broadcast_to(face[None, :], (h, w))[block]
     pl = np.stack(np.broadcast_arrays(x, y[None, :], z[:, None]), -1).astype(np.float32)
     regions = block.astype(np.int64)
     return regions, pl
 
 
-@pytest.mark.parametrize(("front_m", "top_m", "label"), [
-    (0.4, 1.5, "clutter"),   # a cabinet 0.4 m proud of the wall
-    (0.2, 0.6, "clutter"),   # a radiator or a bin 0.2 m proud
-    (0.06, 1.5, "door"),     # 6 cm proud (below proud_m): a leaf, a frame, a panel
-    (0.0, 1.9, "door"),      # flush with the wall: a closed leaf
-    (0.4, 2.1, "door"),      # proud but up to door height: an open leaf swung out
-    (1.5, 1.5, "door"),      # far in front: another wall's surface, not furniture on this one
+@pytest.mark.parametrize(("front_m", "top_m", "turn_deg", "label"), [
+    (0.4, 1.5, 0, "clutter"),   # a cabinet 0.4 m proud of the wall
+    (0.2, 0.6, 0, "clutter"),   # a radiator or a bin 0.2 m proud
+    (0.4, 2.0, 0, "clutter"),   # a tall cabinet: up to door height, but facing as the wall
+    (0.06, 1.5, 0, "door"),     # 6 cm proud (below proud_m): a leaf, a frame, a panel
+    (0.0, 1.9, 0, "door"),      # flush with the wall: a closed leaf
+    (0.0, 2.1, 40, "door"),     # up to door height, turned 40°: an open leaf swung out
+    (0.4, 2.6, 0, "door"),      # above any door (up to a ceiling): a wall's own surface
+    (1.5, 1.5, 0, "door"),      # far in front: another wall's surface, not furniture on this one
 ])
-def test_furniture_standing_proud_of_a_wall_is_clutter(front_m, top_m, label):
-    """A door-labelled block standing 0.12–0.7 m (``proud_m``) in front of a large wall and
-    below door height is furniture; flush with the wall, reaching door height, or far in front
-    of the wall it keeps its label."""
+def test_furniture_standing_proud_of_a_wall_is_clutter(front_m, top_m, turn_deg, label):
+    """A door-labelled block standing 0.12–0.7 m (``proud_m``) in front of a large wall is
+    furniture when below door height, or up to it but facing the same way as the wall (a
+    cabinet's front: a leaf swung out of its doorway is turned by its swing); flush with the
+    wall, turned, above door height or far in front of the wall it keeps its label."""
     seg = BuiltinSegments()
-    regions, pl = _wall_with_block(front_m, top_m)
+    regions, pl = _wall_with_block(front_m, top_m, turn_deg)
     _, labels, _, proud = seg._proud_of_walls(regions, ["wall", "door"], [0.8, 0.5], pl, -1.3)
     assert labels[1] == label
     assert (1 in proud) == (label == "clutter")
