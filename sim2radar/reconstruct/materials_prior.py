@@ -477,11 +477,29 @@ def _formwork(f: AppearanceFeatures) -> bool:
             and (_within(st.period_h_m, 0.55, 0.72) or _within(st.period_h_m, 1.1, 1.3)))
 
 
+#: Wall tile sizes [m] (procedural worlds 0.25–0.33 m; common wall tiles 0.2–0.4 m).
+WALL_TILE_M = (0.24, 0.4)
+
+
 def _tile_grid_wall(f: AppearanceFeatures) -> bool:
+    """A grout grid of wall-tile spacing: strong lines in one direction, or a square grid — both
+    directions at the same tile spacing, or one at it and the other at about twice it (the
+    autocorrelation's fundamental lost to every other joint being fainter) — where each
+    direction alone is faint. Concrete blocks have 0.2 m courses in running bond, formwork
+    0.6 / 1.2 m panels: neither has a tile-sized period in both directions."""
     st = f.structure
-    return (_lines(f, 0.02) and not (_running_bond(f) or _block_courses(f) or _formwork(f))
-            and ((st.score_h >= 0.7 and _within(st.period_h_m, 0.24, 0.4))
-                 or (st.score_v >= 0.7 and _within(st.period_v_m, 0.24, 0.4))))
+    if not _lines(f, 0.02) or _running_bond(f) or _block_courses(f):
+        return False
+    ph, pv = st.period_h_m, st.period_v_m
+    tile_h, tile_v = _within(ph, *WALL_TILE_M), _within(pv, *WALL_TILE_M)
+    if (st.score_h >= 0.7 and tile_h) or (st.score_v >= 0.7 and tile_v):
+        return True
+    if tile_h and tile_v and abs(ph - pv) <= 0.15 * max(ph, pv) and min(st.score_h, st.score_v) >= 0.25:
+        return True
+    for p, s, q, t in ((ph, st.score_h, pv, st.score_v), (pv, st.score_v, ph, st.score_h)):
+        if _within(p, *WALL_TILE_M) and s >= 0.55 and t >= 0.25 and _within(q, 1.8 * p, 2.4 * p):
+            return True
+    return False
 
 
 def _ceiling_grid(f: AppearanceFeatures) -> bool:
@@ -539,8 +557,8 @@ RULES: tuple = (
      {"concrete": 10.0, "ceramic_tile": 0.3}, ("wall", "unknown")),
     ("0.2 m block courses", lambda f: _block_courses(f) and not _running_bond(f),
      {"concrete": 6.0, "ceramic_tile": 0.3}, ("wall", "unknown")),
-    ("formwork panel joints", lambda f: _formwork(f) and not _block_courses(f),
-     {"concrete": 5.0}, ("wall", "unknown")),
+    ("formwork panel joints", lambda f: _formwork(f) and not _block_courses(f)
+     and not _tile_grid_wall(f), {"concrete": 5.0}, ("wall", "unknown")),
     ("tile grout grid", _tile_grid_wall, {"ceramic_tile": 8.0}, ("wall", "unknown")),
     ("irregular joint lines", lambda f: _lines(f, 0.02) and not (
         _running_bond(f) or _block_courses(f) or _formwork(f) or _tile_grid_wall(f)),

@@ -365,6 +365,7 @@ class BuiltinSegments:
         labels, scores, info = self._label(regions, pl, frame.rgb, floor_z_known)
         regions, labels, scores, proud = self._proud_of_walls(regions, labels, scores, pl,
                                                               info["floor_z_m"])
+        labels = self._flush_with_walls(regions, labels, pl, skip=proud)
         if self.door_partial:
             regions, labels, scores = self._grow_doors(regions, labels, scores, pl, lab,
                                                        info["floor_z_m"], info["ceiling_z_m"],
@@ -645,6 +646,38 @@ class BuiltinSegments:
                     proud.add(i)
                     break
         return regions, labels, scores, proud
+
+    def _flush_with_walls(self, regions, labels, pl, skip=frozenset(), tol_m: float = 0.05):
+        """Wall pieces too small for a wall by size — the strips a handrail, a window or a
+        shadow cut out of a wall, below the size the vertical rule calls ``wall`` — are
+        ``clutter`` only if they stand apart from the walls: a vertical region whose points lie
+        on a large wall's plane (80 % within ``tol_m`` + 1 % of their range) and within its
+        extent is that wall (furniture stands proud of it, :meth:`_proud_of_walls`)."""
+        labels = list(labels)
+        valid = np.isfinite(pl).all(axis=-1)
+        walls = self._large_walls(regions, labels, pl, 0.02, 8)
+        if not walls:
+            return labels
+        for i, lbl in enumerate(labels):
+            if lbl != "clutter" or i in skip:
+                continue
+            m = (regions == i) & valid
+            if m.sum() < 50:
+                continue
+            pts = pl[m]
+            g = region_geometry(pl, m, pixel_angle_rad=self._pixel_angle)
+            if g.vertical_cos > 0.3:
+                continue
+            tol = tol_m + 0.01 * np.linalg.norm(pts, axis=1)
+            for wi, (nrm, d, _, wp) in walls:
+                along = np.array([-nrm[1], nrm[0], 0.0])
+                s0, s1 = np.percentile(wp @ along, [1, 99])
+                sa = pts @ along
+                on = (np.abs(pts @ nrm - d) < tol) & (sa > s0 - 0.1) & (sa < s1 + 0.1)
+                if on.mean() >= 0.8:
+                    labels[i] = "wall"
+                    break
+        return labels
 
     @staticmethod
     def _parallel(normal: np.ndarray, wall_normal: np.ndarray, max_deg: float = 10.0) -> bool:

@@ -192,3 +192,26 @@ def test_surface_structure_measures_spacing_in_metres_and_the_bond():
     st = surface_structure(_line_strength(rgb), points_from_depth(depth, k),
                            np.ones(depth.shape, bool), k.fx)
     assert st.n_cells == 0
+
+
+@pytest.mark.parametrize(("ph", "sh", "pv", "sv", "tile"), [
+    (0.33, 0.28, 0.33, 0.52, True),    # a square grid, both directions faint
+    (0.59, 0.50, 0.25, 0.61, True),    # every other joint fainter: one period doubled
+    (0.30, 0.80, float("nan"), 0.0, True),   # strong lines at tile spacing, one direction
+    (0.30, 0.45, float("nan"), 0.0, False),  # faint lines in one direction only
+    (0.60, 0.87, 0.21, 0.11, False),   # formwork panel joints, no tile period across
+    (0.30, 0.28, 0.30, 0.10, False),   # tile spacing, but the second direction is noise
+    (0.40, 0.30, 0.20, 0.30, False),   # 0.2 m: block courses, not a tile
+])
+def test_wall_tile_grid_from_both_directions(ph, sh, pv, sv, tile):
+    """Wall tiles show a grout grid at tile spacing: strong lines in one direction, or faint
+    lines in both at the same spacing (or one at twice it). The rule decides on the measured
+    structure alone, and a tile grid outweighs a formwork-like 0.6 m period."""
+    from sim2radar.reconstruct.materials_prior import AppearanceFeatures, SurfaceStructure
+
+    st = SurfaceStructure(period_h_m=ph, score_h=sh, period_v_m=pv, score_v=sv, bond=0.0,
+                          line_frac=0.035, mottling=0.07, extent_m=2.0, n_cells=3000)
+    f = AppearanceFeatures(0.0, 0.1, 0.6, 0.04, 0.0, 0.1, 50_000, st)
+    post, fired = PriorMaterials().posterior("wall", f)
+    assert ("tile grout grid" in fired) == tile, fired
+    assert (max(post, key=post.get) == "ceramic_tile") == tile, (post, fired)

@@ -207,3 +207,12 @@ def test_furniture_blended_into_its_wall_region_is_split_off():
     out, labels, _, _ = BuiltinSegments(proud_split=False)._proud_of_walls(
         merged, ["wall"], [0.8], pl, -1.3)
     assert labels == ["wall"] and (out == 0).all()
+
+
+@pytest.mark.parametrize(("front_m", "label"), [(0.0, "wall"), (0.02, "wall"), (0.3, "clutter")])
+def test_small_region_on_a_wall_plane_is_wall(front_m, label):
+    """A piece of wall too small to be a wall by size (a strip a handrail cut out) is ``wall``
+    when it lies on a large wall's plane; standing proud of it, it stays ``clutter``."""
+    regions, pl = _wall_with_block(front_m, 0.5)
+    labels = BuiltinSegments()._flush_with_walls(regions, ["wall", "clutter"], pl)
+    assert labels == ["wall", label]
