@@ -669,7 +669,7 @@ class BuiltinSegments:
             if g.vertical_cos > 0.3:
                 continue
             tol = tol_m + 0.01 * np.linalg.norm(pts, axis=1)
-            for wi, (nrm, d, _, wp) in walls:
+            for _, (nrm, d, _, wp) in walls:
                 along = np.array([-nrm[1], nrm[0], 0.0])
                 s0, s1 = np.percentile(wp @ along, [1, 99])
                 sa = pts @ along
