@@ -3,9 +3,10 @@
 No learned weights. The method, step by step:
 
 1. Back-project the (metric, e.g. LiDAR-completed) depth; normals from the point-grid gradients.
-2. Gravity from the horizontal and vertical planes, checked against the image's near-vertical
-   line segments (``backproject.estimate_up`` + ``vertical_line_planes``; a roughly level
-   camera is assumed), giving a level frame: x forward, y left, z up, origin at the camera.
+2. Gravity from the rig calibration when the frame carries one (``FrameInput.up_cam``), else
+   from the horizontal and vertical planes, checked against the image's near-vertical line
+   segments (``backproject.estimate_up`` + ``vertical_line_planes``; a roughly level camera is
+   assumed), giving a level frame: x forward, y left, z up, origin at the camera.
    With LiDAR (``lidar_floor``), the floor plane fitted to the raw returns of the lowest beams
    (``backproject.find_floor``) fixes up and the floor level when its returns lie on
    up-facing surfaces of the depth map (not where those beams hit the walls first). When the
@@ -28,8 +29,10 @@ No learned weights. The method, step by step:
    long, thin and at hand height; small red regions ``fire_extinguisher``; remaining large
    vertical regions ``wall``; the rest ``clutter``. A region cut by the top *and* a side
    border has neither its height nor its width measured, so the size rules do not make it a
-   door. Vertical regions standing ``proud_m`` in front of a large wall below door height are
-   furniture (``clutter``): a door is flush with its wall or set into it.
+   door. Vertical regions standing ``proud_m`` in front of a large wall are furniture
+   (``clutter``) when below door height, or up to it but facing as the wall does (a cabinet's
+   front; a leaf swung out of its doorway is turned by its swing): a door is flush with its
+   wall or set into it. Small vertical pieces lying on a large wall's plane are that wall.
 6. Floor and ceiling by room geometry: points below the floor level (above the ceiling) —
    depth a LiDAR completion extrapolated from a wall into the band under its lowest beam — and
    pixels without depth under the lowest (over the highest) measured pixel of their column
