@@ -21,6 +21,7 @@ __all__ = [
     "points_from_depth",
     "normals_from_points",
     "estimate_up",
+    "gravity_up",
     "vertical_line_planes",
     "surface_normals",
     "FloorPlane",
@@ -184,6 +185,16 @@ def _up_from_votes(n: np.ndarray, lp: np.ndarray | None, max_tilt_deg: float) ->
         cand = vecs[:, np.argmax(vals)]
         up = cand if cand @ up >= 0 else -cand
     return up
+
+
+def gravity_up(normals: np.ndarray, rgb: np.ndarray, intrinsics: CameraIntrinsics,
+               up_cam: np.ndarray | None = None) -> np.ndarray:
+    """Gravity up in the camera frame: the rig calibration's ``up_cam`` (unit) when given,
+    else :func:`estimate_up` from ``normals`` checked against the near-vertical line segments
+    of ``rgb`` (:func:`vertical_line_planes`)."""
+    if up_cam is not None:
+        return np.asarray(up_cam, np.float64)
+    return estimate_up(normals, line_planes=vertical_line_planes(rgb, intrinsics))
 
 
 def estimate_up(normals: np.ndarray, max_tilt_deg: float = 30.0,

@@ -39,12 +39,11 @@ import numpy as np
 from sim2radar.camera import CameraIntrinsics, project
 from sim2radar.reconstruct.backproject import (
     FloorPlane,
-    estimate_up,
     extend_to_floor,
     find_floor,
+    gravity_up,
     points_from_depth,
     surface_normals,
-    vertical_line_planes,
 )
 from sim2radar.reconstruct.types import (
     DEPTH_BACKENDS,
@@ -339,8 +338,7 @@ class LidarDepth:
         if np.isfinite(points).all(axis=-1).sum() < 16:
             return None, None
         normals = surface_normals(points)
-        up = frame.up_cam if frame.up_cam is not None else \
-            estimate_up(normals, line_planes=vertical_line_planes(frame.rgb, k))
+        up = gravity_up(normals, frame.rgb, k, frame.up_cam)
         return up, find_floor(normals, up, k, frame.lidar_points, frame.camera_height_m)
 
     def estimate(self, frame: FrameInput) -> DepthResult:

@@ -31,11 +31,10 @@ from sim2radar.camera import CameraIntrinsics
 from sim2radar.configio import read_yaml_mapping
 from sim2radar.mesh import MaterialMesh, save_ply
 from sim2radar.reconstruct.backproject import (
-    estimate_up,
+    gravity_up,
     level_from_camera,
     normals_from_points,
     points_from_depth,
-    vertical_line_planes,
 )
 from sim2radar.reconstruct.doors import (
     DoorFitConfig,
@@ -464,11 +463,8 @@ def reconstruct(
     seg_up = getattr(seg_be, "last_info", {}).get("up_cam")
     if seg_up is not None:
         up = np.asarray(seg_up, np.float64)
-    elif frame.up_cam is not None:
-        up = frame.up_cam
     else:
-        up = estimate_up(normals_from_points(points, step_px=step),
-                         line_planes=vertical_line_planes(frame.rgb, k))
+        up = gravity_up(normals_from_points(points, step_px=step), frame.rgb, k, frame.up_cam)
     level = level_from_camera(up)
     seg = segments.segment_id
     sem_lut = np.array([SEMANTIC_CLASSES.index(s) for s in segments.labels] + [0], np.uint8)

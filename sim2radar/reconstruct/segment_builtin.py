@@ -59,12 +59,11 @@ import numpy as np
 from sim2radar.reconstruct.backproject import (
     FloorPlane,
     column_extent,
-    estimate_up,
     find_floor,
+    gravity_up,
     level_from_camera,
     points_from_depth,
     surface_normals,
-    vertical_line_planes,
 )
 from sim2radar.reconstruct.facade import FacadeConfig, WallPlane, find_facade_doors
 from sim2radar.reconstruct.types import (
@@ -342,8 +341,7 @@ class BuiltinSegments:
             if depth.info["floor"]:
                 floor = FloorPlane.from_info(depth.info["floor"])
         else:
-            up = frame.up_cam if frame.up_cam is not None else \
-                estimate_up(normals, line_planes=vertical_line_planes(frame.rgb, k))
+            up = gravity_up(normals, frame.rgb, k, frame.up_cam)
             if self.lidar_floor:
                 # the raw returns of the lowest beams measure the floor to centimetres; without
                 # them the rig's calibrated camera height gives it
@@ -589,10 +587,7 @@ class BuiltinSegments:
         lo, hi = self.proud_m
         valid = np.isfinite(pl).all(axis=-1)
         counts = np.bincount(regions[regions >= 0], minlength=len(labels))
-        walls = []
-        for wi, (nrm, d, _, wp) in self._large_walls(regions, labels, pl, 0.02, 8):
-            along = np.array([-nrm[1], nrm[0], 0.0])
-            walls.append((wi, nrm, d, along, np.percentile(wp @ along, [1, 99])))
+        walls = self._wall_extents(regions, labels, pl, 0.02, 8)
         labels, scores = list(labels), list(scores)
         proud: set[int] = set()
         if self.proud_split:
@@ -658,7 +653,7 @@ class BuiltinSegments:
         extent is that wall (furniture stands proud of it, :meth:`_proud_of_walls`)."""
         labels = list(labels)
         valid = np.isfinite(pl).all(axis=-1)
-        walls = self._large_walls(regions, labels, pl, 0.02, 8)
+        walls = self._wall_extents(regions, labels, pl, 0.02, 8)
         if not walls:
             return labels
         for i, lbl in enumerate(labels):
@@ -672,9 +667,7 @@ class BuiltinSegments:
             if g.vertical_cos > 0.3:
                 continue
             tol = tol_m + 0.01 * np.linalg.norm(pts, axis=1)
-            for _, (nrm, d, _, wp) in walls:
-                along = np.array([-nrm[1], nrm[0], 0.0])
-                s0, s1 = np.percentile(wp @ along, [1, 99])
+            for _, nrm, d, along, (s0, s1) in walls:
                 sa = pts @ along
                 on = (np.abs(pts @ nrm - d) < tol) & (sa > s0 - 0.1) & (sa < s1 + 0.1)
                 if on.mean() >= 0.8:
@@ -925,13 +918,21 @@ class BuiltinSegments:
                 out.append((int(wi), plane))
         return out
 
+    def _wall_extents(self, regions, labels, pl, min_frac: float, top: int):
+        """``(region id, nrm, d, along, (s0, s1))`` of :meth:`_large_walls`: the horizontal
+        along-wall axis and the 1st–99th percentile extent of the wall's points along it [m]."""
+        out = []
+        for wi, (nrm, d, _, wp) in self._large_walls(regions, labels, pl, min_frac, top):
+            along = np.array([-nrm[1], nrm[0], 0.0])
+            s0, s1 = np.percentile(wp @ along, [1, 99])
+            out.append((wi, nrm, d, along, (float(s0), float(s1))))
+        return out
+
     def _wall_planes(self, regions, labels, pl) -> list[WallPlane]:
         """Planes of the large vertical ``wall`` regions (coplanar ones merged), with the
         along-wall extent of their pixels widened by 1.2 m (a door may split its wall)."""
         planes: list[WallPlane] = []
-        for _, (nrm, d, _, wp) in self._large_walls(regions, labels, pl, 0.01, 10):
-            along = np.array([-nrm[1], nrm[0], 0.0])
-            s0, s1 = np.percentile(wp @ along, [1, 99])
+        for _, nrm, d, _, (s0, s1) in self._wall_extents(regions, labels, pl, 0.01, 10):
             for j, q in enumerate(planes):
                 if q.normal @ nrm > math.cos(math.radians(10)) and abs(q.offset_m - d) < 0.1:
                     lo, hi = q.s_range_m
@@ -939,7 +940,7 @@ class BuiltinSegments:
                                           (min(lo, s0 - 1.2), max(hi, s1 + 1.2)))
                     break
             else:
-                planes.append(WallPlane(nrm, d, (float(s0) - 1.2, float(s1) + 1.2)))
+                planes.append(WallPlane(nrm, d, (s0 - 1.2, s1 + 1.2)))
         return planes
 
     def _facade_doors(self, regions, labels, scores, pl, rot, k, rgb, floor_z, ceil_z):
