@@ -890,16 +890,19 @@ class BuiltinSegments:
                                   float(width), th, float(top), float(heading)])
         return regions, labels, scores, boxes
 
-    def _wall_plane(self, pl, mask):
+    def _wall_plane(self, pl, mask, min_points: int = 10):
         """Vertical plane ``nrm · p = d`` of a wall region (``nrm`` horizontal, facing the
         camera, ``d`` the median offset of its points), its geometry and its valid points; None
-        when the region is not vertical or lies within 0.3 m of the camera."""
+        when the region is not vertical, lies within 0.3 m of the camera, or has fewer than
+        ``min_points`` pixels with depth (a region grown over pixels the LiDAR missed)."""
+        wp = pl[mask & np.isfinite(pl).all(axis=-1)]
+        if len(wp) < min_points:
+            return None
         g = region_geometry(pl, mask, pixel_angle_rad=self._pixel_angle)
         if g.vertical_cos > 0.2:
             return None
         nrm = np.array([g.normal[0], g.normal[1], 0.0])
         nrm /= np.linalg.norm(nrm)
-        wp = pl[mask & np.isfinite(pl).all(axis=-1)]
         d = float(np.median(wp @ nrm))
         return None if d > -0.3 else (nrm, d, g, wp)
 

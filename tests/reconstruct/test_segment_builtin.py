@@ -216,3 +216,16 @@ def test_small_region_on_a_wall_plane_is_wall(front_m, label):
     regions, pl = _wall_with_block(front_m, 0.5)
     labels = BuiltinSegments()._flush_with_walls(regions, ["wall", "clutter"], pl)
     assert labels == ["wall", label]
+
+
+def test_wall_region_without_depth_is_skipped_by_the_opening_search():
+    """A large ``wall`` region whose pixels all lack depth (grown over pixels the LiDAR missed)
+    has no plane: the opening search passes over it instead of failing on its empty point set
+    (found on a procedural frame, where it raised ``IndexError`` and failed the frame)."""
+    regions, pl = _wall_with_block(0.0, 1.9)
+    pl[regions == 1] = np.nan
+    seg = BuiltinSegments()
+    assert seg._wall_plane(pl, regions == 1) is None
+    out, labels, _, boxes = seg._wall_openings(regions, ["wall", "wall"], [0.8, 0.8], pl,
+                                               -1.3, 1.5)
+    assert labels == ["wall", "wall"] and boxes == [] and (out == regions).all()
