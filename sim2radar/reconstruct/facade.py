@@ -26,7 +26,9 @@ facing the camera):
    on to the ceiling; a door frame stops at its lintel). Pairs of posts ``door_width_m`` apart
    with a lintel row (strong horizontal edges along most of the span at ``top_m``) are door
    hypotheses, scored by post and lintel coverage and chosen greedily without overlap.
-   Behind-the-plane cells between the posts (recess or opening) add evidence.
+   Behind-the-plane cells between the posts (recess or opening) add evidence. The joint where
+   a double door's two leaves meet is an edge like a post: two leaf hypotheses sharing it
+   are one double doorway (:func:`_double_doors`).
 4. A doorway cut by the left or right image border shows one post only: a post whose lintel
    runs from it to the border, and not past it on its other side, is a doorway of
    ``nominal_width_m`` (scored below a pair, so a two-post doorway wins an overlap).
@@ -231,11 +233,11 @@ def find_facade_doors(plane: WallPlane, floor_z: float, ceil_z: float, level_rot
     # posts: runs of columns with enough coverage (a frame's two edges, widened by the ±2-cell
     # dilation, make one run); a run's outer ends, less the dilation, are the frame's edges
     runs = _runs(post >= config.post_cover)
-    doors: list[tuple[float, int, int, int]] = []
+    pairs: dict[tuple[int, int], tuple[float, int, int, int]] = {}
     wmin, wmax = (int(round(x / c)) for x in config.door_width_m)
     tz = range(iz(config.top_m[0]), min(iz(config.top_m[1]), len(r.z) - 1) + 1)
     for ia, (a0, a1) in enumerate(runs):
-        for b0, b1 in runs[ia + 1:]:
+        for ib, (b0, b1) in enumerate(runs[ia + 1:], start=ia + 1):
             ja, jb = min(a0 + 2, a1), max(b1 - 2, b0)  # outer frame edges
             if jb - ja < wmin:
                 continue
@@ -263,7 +265,8 @@ def find_facade_doors(plane: WallPlane, floor_z: float, ceil_z: float, level_rot
             if inside.mean() < config.min_seen:
                 continue
             score = (post[a0:a1 + 1].max() + post[b0:b1 + 1].max() + best[0]) / 3.0
-            doors.append((score, int(ja), int(jb), int(t)))
+            pairs[(ia, ib)] = (score, int(ja), int(jb), int(t))
+    doors = list(pairs.values()) + _double_doors(pairs, wmax, int(round(0.1 / c)))
     if config.border_doors:
         doors += _border_doors(r, runs, post, he, visible, tz, config)
     doors.sort(reverse=True)
@@ -293,6 +296,33 @@ def find_facade_doors(plane: WallPlane, floor_z: float, ceil_z: float, level_rot
             poly = cv2.convexHull(uv.astype(np.float32)).astype(np.int32)
             cv2.fillConvexPoly(mask, poly, 1)
         out.append(FacadeDoor(box, (float(sa), float(sb)), top, float(score), mask.astype(bool)))
+    return out
+
+
+def _double_doors(pairs: dict[tuple[int, int], tuple[float, int, int, int]], wmax: int,
+                  top_tol: int) -> list[tuple[float, int, int, int]]:
+    """Double doors: two leaves meeting at a joint. The joint is an edge from the floor to the
+    lintel like a post, so each leaf is a doorway hypothesis of its own between a frame post
+    and the joint, and the greedy choice would keep one leaf (half the doorway). Two leaf
+    hypotheses sharing the joint's run (no other post between them), of similar width (ratio
+    ≤ 1.5) and top (within ``top_tol`` cells), and together at most ``wmax`` cells wide are one
+    doorway, scored above either leaf so that it wins the overlap. Two single doors side by
+    side do not share a post: each has its own frame, with wall between them.
+
+    ``pairs`` maps (left run, right run) to ``(score, first cell, last cell, top row)``."""
+    out = []
+    for (ia, im), left in pairs.items():
+        right = pairs.get((im, im + 1))
+        if right is None or im != ia + 1:
+            continue
+        wl, wr = left[2] - left[1], right[2] - right[1]
+        if (max(wl, wr) > 1.5 * min(wl, wr) or abs(left[3] - right[3]) > top_tol
+                or right[2] - left[1] > wmax):
+            continue
+        whole = pairs.get((ia, im + 1))
+        top = whole[3] if whole is not None else max(left[3], right[3])
+        score = max(left[0], right[0], whole[0] if whole is not None else 0.0) + 0.05
+        out.append((score, left[1], right[2], top))
     return out
 
 

@@ -933,13 +933,19 @@ class BuiltinSegments:
 
     def _wall_planes(self, regions, labels, pl) -> list[WallPlane]:
         """Planes of the large vertical ``wall`` regions (coplanar ones merged), with the
-        along-wall extent of their pixels widened by 1.2 m (a door may split its wall)."""
+        along-wall extent of their pixels widened by 1.2 m (a door may split its wall).
+
+        Regions within 0.1 m of each other are one wall; its face is the front-most of them
+        (the largest offset: normals face the camera). A closed leaf is recessed a few
+        centimetres behind its wall's face and a double door's leaves can outnumber the wall
+        pixels around them: on the leaves' plane the frame around them lies in front of it
+        (occluded cells) and the facade search would not see its posts."""
         planes: list[WallPlane] = []
         for _, nrm, d, _, (s0, s1) in self._wall_extents(regions, labels, pl, 0.01, 10):
             for j, q in enumerate(planes):
                 if q.normal @ nrm > math.cos(math.radians(10)) and abs(q.offset_m - d) < 0.1:
                     lo, hi = q.s_range_m
-                    planes[j] = WallPlane(q.normal, q.offset_m,
+                    planes[j] = WallPlane(q.normal, max(q.offset_m, d),
                                           (min(lo, s0 - 1.2), max(hi, s1 + 1.2)))
                     break
             else:

@@ -248,6 +248,40 @@ def test_plain_wall_has_no_door():
     assert _doors(FRONT, K_FRONT, pts, _grad(lum)) == []
 
 
+def _double_frame(sa: float, sb: float, joint_l: float = 55.0):
+    """A door frame from ``sa`` to ``sb`` holding two equal leaves that meet at a 1.5 cm dark
+    joint in the middle, from the floor to the lintel."""
+    frame = _frame(sa, sb)
+    mid = 0.5 * (sa + sb)
+
+    def paint(s, h):
+        joint = (np.abs(s - mid) <= 0.0075) & (h >= 0) & (h <= TOP_M - POST_M)
+        return np.where(joint, joint_l, frame(s, h))
+
+    return paint
+
+
+def test_double_door_is_one_doorway_not_one_of_its_leaves():
+    """A 1.8 m double door whose leaves meet at a joint running from the floor to the lintel:
+    the joint is an edge like a post, so each leaf is a doorway hypothesis — but the doorway is
+    the whole frame (one box 1.8 m wide, within 10 cm), not one leaf. Two single doors side by
+    side, each in its own frame with 0.3 m of wall between, stay two doorways."""
+    lum, pts = _render(K_FRONT, [_wall(FRONT, _double_frame(-0.9, 0.9))])
+    (door,) = _doors(FRONT, K_FRONT, pts, _grad(lum))
+    assert door.s_m[0] == pytest.approx(-0.9, abs=0.06)
+    assert door.s_m[1] == pytest.approx(0.9, abs=0.06)
+    assert door.top_m == pytest.approx(TOP_M, abs=0.08)
+
+    def two_singles(s, h):
+        return np.minimum(_frame(-1.25, -0.25)(s, h), _frame(0.05, 1.05)(s, h))
+
+    lum, pts = _render(K_FRONT, [_wall(FRONT, two_singles)])
+    doors = sorted(_doors(FRONT, K_FRONT, pts, _grad(lum)), key=lambda d: d.s_m[0])
+    assert len(doors) == 2
+    assert [x for d in doors for x in d.s_m] == pytest.approx([-1.25, -0.25, 0.05, 1.05],
+                                                               abs=0.06)
+
+
 def _tiles(s, h):
     """Tiles 0.5 m wide and 0.3 m high: 2 cm grout lines at s = k·0.5 from the floor to the
     ceiling, and at h = k·0.3 (one at 2.1 m, door height)."""
