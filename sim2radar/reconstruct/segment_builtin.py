@@ -244,7 +244,10 @@ class BuiltinSegments:
     ``min_region_frac`` (3e-4 of the image), ``merge_normal_deg`` (12), ``merge_offset_m``
     (0.06), ``merge_colour_thresh`` (ΔE 12), ``fill_no_depth`` (True: pixels without depth join
     the nearest region), ``door_width_m`` ((0.55, 2.0)), ``door_height_m``
-    ((1.85, 2.5)), ``floor_tolerance_m`` (0.25), ``offset_thresh_m`` (0.015; plane-offset step
+    ((1.85, 2.3); leaves are 1.98–2.13 m in the common standards — DIN 18101, US 6'8"–7'0" —
+    and the measured top adds up to ~0.1 m: a taller rectangle standing on the floor is a
+    wall's surface, e.g. a wall facing the camera and cut by the image's top border),
+    ``floor_tolerance_m`` (0.25), ``offset_thresh_m`` (0.015; plane-offset step
     between neighbours, plus 0.4 % of the depth), ``door_thickness_m`` (0.17; depth of the
     doorway boxes measured from wall openings), ``below_floor_m`` (0.08; points this far below
     the floor / above the ceiling are floor / ceiling), ``door_partial`` (True: tall planar
@@ -269,7 +272,7 @@ class BuiltinSegments:
         merge_offset_m: float = 0.06,
         merge_colour_thresh: float = 12.0,
         door_width_m: tuple[float, float] = (0.55, 2.0),
-        door_height_m: tuple[float, float] = (1.85, 2.5),
+        door_height_m: tuple[float, float] = (1.85, 2.3),
         floor_tolerance_m: float = 0.25,
         offset_thresh_m: float = 0.015,
         door_thickness_m: float = 0.17,

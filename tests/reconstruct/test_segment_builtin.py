@@ -154,6 +154,18 @@ def test_rectangle_cut_by_the_top_and_a_side_border_is_no_door():
         assert seg._vertical_label(_geometry(borders), floor_z, ceil_z, True)[0] == "wall"
 
 
+@pytest.mark.parametrize(("z_max", "label"), [(0.85, "door"), (0.95, "door"), (1.15, "wall")])
+def test_rectangle_taller_than_a_door_is_a_wall(z_max, label):
+    """A 1 m wide vertical rectangle standing on the floor (1.25 m below the camera) is a door
+    up to ``door_height_m[1]`` (2.3 m: standard leaves are at most 2.13 m, plus the error of a
+    measured top); 2.4 m tall it is a wall's surface — with or without the image's top border
+    cutting it (a wall facing the camera in a corner fills the same shape)."""
+    seg = BuiltinSegments()
+    for borders in ("", "t"):
+        g = _geometry(borders, z_max=z_max)
+        assert seg._vertical_label(g, -1.25, 1.55, False)[0] == label
+
+
 def _wall_with_block(front_m: float, top_m: float, turn_deg: float = 0.0):
     """A wall 4 m ahead (level frame, rows span z 1.5 .. -1.3, the floor level) and a 0.8 m
     wide block on the floor ``front_m`` in front of it, ``top_m`` tall (region 1), its face
