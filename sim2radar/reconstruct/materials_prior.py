@@ -15,7 +15,8 @@ features measured on the segment's pixels then multiply the prior by likelihood 
 * image-space fallbacks when the surface is too far or small to rectify: grout lines (pixels
   much darker than their neighbourhood), strong grey mottling (concrete);
 * brushed metal: grey with strongly oriented streaks;
-* plastic: saturated, untextured colour on clutter / floors.
+* plastic: saturated, untextured colour on clutter / floors;
+* glass doors: a dim, strongly but unorientedly textured view through the pane.
 
 The reason string lists the features and the rules that fired, so a wrong label can be traced.
 """
@@ -519,6 +520,16 @@ def _soffit(f: AppearanceFeatures) -> bool:
             and (_lines(f, 0.02) or (_formwork(f) and f.structure.score_h >= 0.5)))
 
 
+def _pane(f: AppearanceFeatures) -> bool:
+    """A glazed leaf shows the room behind it rather than a surface: darker than a lit leaf
+    (median value < 0.15: the corridor's lights do not reach the room beyond) with strong
+    texture of no dominant orientation (band-pass contrast > 0.15, coherence < 0.4: distant
+    objects, and in path-traced renders the noise of that dim scene). Painted leaves are
+    brighter (0.2–0.4 on the tuning worlds 3000–3029); a dark brushed-metal leaf has the same
+    contrast but oriented streaks (coherence ≥ 0.77 there)."""
+    return f.value < 0.15 and f.lf_contrast > 0.15 and f.coherence < 0.4
+
+
 #: Line fraction of rectified floors: below FLOOR_SHEET_LINES a smooth sheet (vinyl), up to
 #: FLOOR_TILE_LINES a mottled slab (raw concrete: 0.011–0.024 on the tuning worlds 3000–3009
 #: with LiDAR depth completed to the floor, one of 16 up to 0.037), above it grout lines (tiles
@@ -585,6 +596,8 @@ RULES: tuple = (
      ("ceiling",)),
     ("smooth ceiling", lambda f: _measured(f) and f.structure.line_frac < 0.02
      and not _soffit(f), {"plasterboard": 2.0}, ("ceiling",)),
+    # doors
+    ("dim view through a pane", _pane, {"glass": 20.0}, ("door",)),
     # image-space fallbacks (no measurable structure)
     ("grout lines", lambda f: not _measured(f) and f.grout_frac > 0.03 and not _is_wood(f),
      {"ceramic_tile": 6.0}, None),

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import cv2
 import numpy as np
 import pytest
 
@@ -38,6 +39,13 @@ def _patch(kind: str) -> np.ndarray:
     elif kind == "grey_paint":
         base = np.array([0.3, 0.34, 0.4])
         mod = np.ones((H, W))
+    elif kind == "pane":  # the dim room seen through a glazed leaf: unoriented blotches
+        base = np.array([0.09, 0.09, 0.1])
+        mod = 1 + 0.6 * cv2.GaussianBlur(RNG.standard_normal((H, W)), (0, 0), 1.2) / 0.25
+    elif kind == "dark_brushed":  # a dark brushed-steel leaf: streaks along x
+        base = np.array([0.09, 0.09, 0.1])
+        streaks = cv2.GaussianBlur(RNG.standard_normal((H, W)), (0, 0), sigmaX=12, sigmaY=0.8)
+        mod = 1 + 0.6 * streaks / streaks.std()
     else:
         raise ValueError(kind)
     img = base * mod[..., None] * (1 + 0.01 * RNG.standard_normal((H, W, 1)))
@@ -65,6 +73,8 @@ def _label(kind: str, label: str) -> str:
         ("paint", "window", "glass"),
         ("grey_paint", "fire_extinguisher", "metal"),
         ("paint", "ceiling", "plasterboard"),
+        ("pane", "door", "glass"),             # a dim, unoriented view through the glass
+        ("dark_brushed", "door", "metal"),     # as dark and textured, but streaked
     ],
 )
 def test_prior_and_rules(kind, label, expected):
