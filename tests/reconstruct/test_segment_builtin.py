@@ -241,3 +241,22 @@ def test_wall_region_without_depth_is_skipped_by_the_opening_search():
     out, labels, _, boxes = seg._wall_openings(regions, ["wall", "wall"], [0.8, 0.8], pl,
                                                -1.3, 1.5)
     assert labels == ["wall", "wall"] and boxes == [] and (out == regions).all()
+
+
+def test_coplanar_wall_regions_merge_to_the_front_most_face():
+    """A wall 4 m ahead and, set 8 cm into it, a recessed double door's leaves that fill more of
+    the image than the wall does: one wall plane, whose face is the wall's (the front-most),
+    not the larger region's — on the leaves' plane the frame around them would lie in front of
+    the plane searched for doors."""
+    h, w = 120, 160
+    y = np.linspace(2.0, -2.0, w)
+    z = np.linspace(1.5, -1.3, h)
+    recess = np.zeros((h, w), bool)
+    recess[:, 48:] = True  # 70 % of the columns: the leaves
+    x = np.where(recess, 4.08, 4.0)
+    pl = np.stack(np.broadcast_arrays(x, y[None, :], z[:, None]), -1).astype(np.float32)
+    regions = np.where(recess, 0, 1)
+    seg = BuiltinSegments()
+    (plane,) = seg._wall_planes(regions, ["wall", "wall"], pl)
+    assert plane.normal @ np.array([-1.0, 0.0, 0.0]) == pytest.approx(1.0, abs=1e-3)
+    assert plane.offset_m == pytest.approx(-4.0, abs=0.01)
