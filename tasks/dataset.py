@@ -294,9 +294,8 @@ def _reconstruction_keys(frame, camera_to_target: np.ndarray, config) -> dict[st
     """Keys :func:`storage.reconstruction.write_scene_artifacts` gives this frame
     (computed up front so a cached reconstruction is read instead of recomputed)."""
     from sim2radar.reconstruct.pipeline import STAGE_VERSION
-    from storage.reconstruction import frame_digest
 
-    inputs = {"image": frame_digest(frame.rgb, frame.lidar_points, frame.rig_calibration)}
+    inputs = {"image": _digest(frame)}
     cfg = {"reconstruction": config.to_dict(),
            "camera_to_target": np.asarray(camera_to_target).round(9).tolist()}
     return {stage: content_key(stage=stage, stage_version=STAGE_VERSION, inputs=inputs,

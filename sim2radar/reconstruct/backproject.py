@@ -257,7 +257,7 @@ class FloorPlane:
         5th–95th percentile): below ``min_spread_m`` the normal is not used, only the height.
     tilt_fixed : bool — the normal is measured (well conditioned) and can serve as gravity's up.
     source : str — ``"lidar"`` (fitted to the returns) or ``"rig"`` (the rig's camera height
-        along the image's estimated up).
+        along gravity's up: the rig's calibrated up, else the image's estimate).
     """
 
     normal: np.ndarray
