@@ -67,8 +67,9 @@ log = logging.getLogger(__name__)
 
 #: Version of the reconstruction stage's output; part of artifact content keys. Bump when the
 #: output of the same inputs and config changes (2: LiDAR depth completed down to the floor;
-#: 3: the rig calibration, furniture fronts up to door height).
-STAGE_VERSION = 3
+#: 3: the rig calibration, furniture fronts up to door height; 4: door height ≤ 2.3 m, double
+#: doors, front-most wall faces, glass door leaves).
+STAGE_VERSION = 4
 
 
 class BackendSpec(BaseModel):
