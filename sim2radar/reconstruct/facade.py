@@ -34,7 +34,8 @@ facing the camera):
    ``nominal_width_m`` (scored below a pair, so a two-post doorway wins an overlap).
 
 Returns doorway boxes ``x y z dx dy dz heading`` in the level frame (``dx`` along the wall, the
-box spanning ``thickness_m`` behind the wall face) and the image pixels of each doorway.
+box spanning ``thickness_m`` behind the wall face, measured around the doorway: the plane searched
+may be that of recessed leaves, :func:`_wall_face`) and the image pixels of each doorway.
 """
 
 from __future__ import annotations
@@ -67,6 +68,8 @@ class FacadeConfig:
     lintel_cover : float — fraction of the span's seen lintel cells with a horizontal edge.
     min_seen : float — fraction of the doorway's cells that must be seen (on or behind the plane).
     thickness_m : float [m] — doorway box depth behind the wall face.
+    face_band_m : float [m] — the wall face is measured on the cells up to this far beside the
+        doorway and above its lintel (:func:`_wall_face`).
     nominal_top_m : float [m] — doorway top assumed when the lintel is out of view (above the
         image; procedural worlds: 2.06–2.26 m).
     min_post_seen_m : float [m] — with the lintel out of view, both posts must be seen at least
@@ -88,6 +91,7 @@ class FacadeConfig:
     lintel_cover: float = 0.45
     min_seen: float = 0.5
     thickness_m: float = 0.17
+    face_band_m: float = 0.4
     nominal_top_m: float = 2.16
     min_post_seen_m: float = 1.3
     border_doors: bool = True
@@ -136,6 +140,7 @@ class _Raster:
     uv: np.ndarray  # (nz, ns, 2) pixel coordinates
     seen: np.ndarray  # (nz, ns) bool: inside the image, in front of the camera
     state: np.ndarray  # (nz, ns) int8: 0 unseen/no depth, 1 on plane, 2 behind, 3 occluded
+    behind: np.ndarray  # (nz, ns) how far the surface seen at each cell lies behind the plane [m]
     vedge: np.ndarray  # (nz, ns) vertical-edge strength [L*/px]
     hedge: np.ndarray  # (nz, ns) horizontal-edge strength [L*/px]
 
@@ -195,7 +200,7 @@ def wall_raster(plane: WallPlane, floor_z: float, height_m: float, level_rot: np
 
     vedge = np.nan_to_num(across(uv_z - uv)) * seen
     hedge = np.nan_to_num(across(uv_s - uv)) * seen
-    return _Raster(s, z, uv, seen, state, vedge, hedge)
+    return _Raster(s, z, uv, seen, state, np.where(has, behind, np.nan), vedge, hedge)
 
 
 def _runs_cover(flags: np.ndarray, valid: np.ndarray) -> np.ndarray:
@@ -285,7 +290,8 @@ def find_facade_doors(plane: WallPlane, floor_z: float, ceil_z: float, level_rot
         ja, jb = max(ja, 0), min(jb, len(r.s) - 1)
         top = float(r.z[t] + c / 2)
         th = config.thickness_m
-        cxy = 0.5 * (sa + sb) * a[:2] + (plane.offset_m - th / 2) * n[:2]
+        face = plane.offset_m + _wall_face(r, ja, jb, t, config)
+        cxy = 0.5 * (sa + sb) * a[:2] + (face - th / 2) * n[:2]
         box = np.array([cxy[0], cxy[1], floor_z + top / 2, sb - sa, th, top, heading])
         cells = np.zeros(r.seen.shape, bool)
         cells[:t + 1, ja:jb + 1] = True
@@ -400,6 +406,42 @@ def _border_doors(r: _Raster, runs: list[tuple[int, int]], post: np.ndarray, he:
             score = 0.8 * (post[a0:a1 + 1].max() + cover) / 2.0
             out.append((float(score), int(ja), int(jb), int(t)))
     return out
+
+
+def _wall_face(r: _Raster, ja: int, jb: int, t: int, config: FacadeConfig) -> float:
+    """Offset [m] (towards the camera) of the wall face around a doorway from the plane it was
+    found on; 0 when the plane is the face.
+
+    The plane searched may be that of the closed leaves, recessed by up to the wall thickness
+    less the leaf (5–10 cm): a leaf region too far behind the wall to merge with it, or a wall
+    region too small to be a plane of its own. The frame's outline is seen on either plane,
+    but the doorway box spans the wall from its face. The face is measured where little stands
+    in front of a wall: on the wall over the doorway (cells from 6 cm to ``face_band_m`` above
+    the lintel: the median of the surfaces within 25 cm of the plane, when 30 cells are seen and
+    the wall beside the frame does not lie on the other side of the plane), else beside the
+    frame from 1.2 m up (above handrails and most cabinets: the median of the surfaces 2–25 cm
+    in front of the plane, when they are at least 40 % of the cells seen there and 20 cells)."""
+    c = config.cell_m
+    nz, ns = r.state.shape
+    band = int(round(config.face_band_m / c))
+
+    def near(rows: slice, cols: slice) -> np.ndarray:
+        b = r.behind[rows, cols].ravel()
+        return b[np.isfinite(b) & (np.abs(b) < 0.25)]
+
+    rows = slice(int(round(1.2 / c)), t)
+    side = np.concatenate([near(rows, slice(max(0, ja - band), max(0, ja - 1))),
+                           near(rows, slice(min(ns, jb + 2), min(ns, jb + band)))])
+    above = near(slice(min(nz, t + 3), min(nz, t + band)), slice(max(0, ja), min(ns, jb + 1)))
+    if len(above) >= 30:
+        med = float(np.median(above))
+        if len(side) >= 20 and float(np.median(side)) * med < 0 and abs(np.median(side)) > 0.02:
+            return 0.0  # the wall beside the frame disagrees (a bulkhead or sign over the door)
+        return -med if abs(med) > 0.02 else 0.0
+    front = side[side < -0.02]
+    if len(front) < 20 or len(front) < 0.4 * len(side):
+        return 0.0
+    return float(-np.median(front))
 
 
 def _runs(flags: np.ndarray) -> list[tuple[int, int]]:

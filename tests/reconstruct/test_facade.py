@@ -206,6 +206,34 @@ def test_door_posts_are_located_along_the_wall(case):
     assert door.box_level[:2] @ plane.along[:2] == pytest.approx(0.5 * (sa + sb), abs=0.03)
 
 
+@pytest.mark.parametrize("recess_m", [0.05, 0.10])
+def test_door_found_on_its_recessed_leaf_plane_is_boxed_from_the_wall_face(recess_m):
+    """A closed leaf recessed 5–10 cm behind the wall face (a 15 cm wall, the leaf on its far
+    side) may be a wall region of its own, and the frame is found on its plane too. The
+    doorway box still spans the wall from its face: its centre lies ``thickness_m``/2 behind
+    the wall face (within 1.5 cm; 5–10 cm deeper without measuring the face over the lintel),
+    as when the search runs on the wall plane itself."""
+    sa, sb = -0.5, 0.5
+    inner = _frame(sa, sb)
+
+    def wall(s, h):  # the wall, open inside the frame
+        return np.where((s > sa + POST_M) & (s < sb - POST_M) & (h < TOP_M - POST_M),
+                        np.nan, inner(s, h))
+
+    def leaf(s, h):
+        return np.where((s > sa) & (s < sb) & (h < TOP_M), 55.0, np.nan)
+
+    leaf_plane = WallPlane(FRONT.normal, FRONT.offset_m - recess_m, FRONT.s_range_m)
+    lum, pts = _render(K_FRONT, [_wall(FRONT, wall), _wall(leaf_plane, leaf)])
+    grad = _grad(lum)
+    cfg = FacadeConfig()
+    want = FRONT.offset_m - cfg.thickness_m / 2
+    for plane in (leaf_plane, FRONT):
+        (door,) = _doors(plane, K_FRONT, pts, grad, cfg)
+        assert door.s_m == pytest.approx((sa, sb), abs=0.06)
+        assert door.box_level[:2] @ FRONT.normal[:2] == pytest.approx(want, abs=0.015)
+
+
 def test_door_cut_by_the_image_border_is_found_from_one_post_and_its_lintel():
     """A doorway at s = 2.3–3.3 m on the wall 4 m ahead leaves the image at s ≈ 2.8 m (70°
     field of view): one post and half the lintel are seen. It is found with its seen end within
