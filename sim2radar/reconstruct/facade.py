@@ -58,7 +58,9 @@ class FacadeConfig:
     Attributes
     ----------
     cell_m : float [m] — raster cell size on the wall plane.
-    door_width_m : (float, float) [m] — doorway width (outer frame edges), single to double.
+    door_width_m : (float, float) [m] — doorway width (outer frame edges), single to double. The
+        lower bound is the narrowest clear opening (0.80 m in the procedural worlds) less 2 cm:
+        a frame painted like its wall shows only its inner edges, against the leaf.
     top_m : (float, float) [m] — lintel height above the floor (doorway top).
     plane_tol_m : float [m] — surface within this of the plane counts as on it (+1 % of range).
     edge_min : float — absolute floor of the edge threshold [L* per pixel].
@@ -81,7 +83,7 @@ class FacadeConfig:
     """
 
     cell_m: float = 0.02
-    door_width_m: tuple[float, float] = (0.85, 2.0)
+    door_width_m: tuple[float, float] = (0.78, 2.0)
     top_m: tuple[float, float] = (1.95, 2.35)
     plane_tol_m: float = 0.06
     edge_min: float = 2.0

@@ -338,7 +338,7 @@ def test_posts_without_a_lintel_are_no_door():
 
 
 def test_frame_narrower_than_a_door_is_no_door():
-    """A complete frame only 0.5 m wide (below ``door_width_m[0]`` = 0.85 m: a cupboard, a
+    """A complete frame only 0.5 m wide (below ``door_width_m[0]`` = 0.78 m: a cupboard, a
     service hatch) is no doorway. (Control: allowing 0.4 m wide doorways finds it.)"""
     cfg = FacadeConfig()
     assert 0.5 < cfg.door_width_m[0]
@@ -347,6 +347,19 @@ def test_frame_narrower_than_a_door_is_no_door():
     assert _doors(FRONT, K_FRONT, pts, grad, cfg) == []
     wide = dataclasses.replace(cfg, door_width_m=(0.4, cfg.door_width_m[1]))
     assert len(_doors(FRONT, K_FRONT, pts, grad, wide)) == 1
+
+
+def test_frame_painted_like_its_wall_is_found_from_its_inner_edges():
+    """A frame painted like the wall shows no outer edge: only its inner edges against a
+    darker leaf, 0.80 m apart (the narrowest clear opening) under a lintel edge at 2.04 m. That
+    is still one doorway, 0.80 m wide within 6 cm."""
+    def paint(s, h):
+        return np.where((np.abs(s) < 0.40) & (h < TOP_M - POST_M), FRAME_L, WALL_L)
+
+    lum, pts = _render(K_FRONT, [_wall(FRONT, paint)])
+    (door,) = _doors(FRONT, K_FRONT, pts, _grad(lum))
+    assert door.s_m == pytest.approx((-0.40, 0.40), abs=0.06)
+    assert door.top_m == pytest.approx(TOP_M - POST_M, abs=0.08)
 
 
 def _wardrobe(s, h):
