@@ -810,7 +810,9 @@ class BuiltinSegments:
         For each large wall region, every other pixel whose point lies 3 cm – 4 m behind the
         wall plane and whose viewing ray crosses the plane inside the wall's extent is a
         candidate; connected candidates form an opening, measured on the wall plane (width
-        along the wall, bottom and top height). Door-sized openings standing on the floor become
+        along the wall, bottom and top height), when the wall frames it left and right (the
+        wall region, or another large wall region on its plane: a doorway may split its
+        wall in two). Door-sized openings standing on the floor become
         door boxes (spanning the wall: ``door_thickness_m`` behind the wall face) and their
         recessed pixels (< 0.35 m behind) a ``door`` segment; sill-height openings a ``window``.
 
@@ -826,6 +828,7 @@ class BuiltinSegments:
         boxes: list[list[float]] = []
         used = np.zeros((h, w), bool)
         labels, scores = list(labels), list(scores)
+        is_wall = np.isin(regions, walls)
         for wi in walls[:6]:
             mask = regions == wi
             plane = self._wall_plane(pl, mask)
@@ -851,12 +854,19 @@ class BuiltinSegments:
                 if stats[c, cv2.CC_STAT_AREA] < max(30, 0.001 * h * w):
                     continue
                 m = cc == c
-                # the opening must be framed by this wall: wall pixels left and right of it
+                # the opening must be framed by this wall left and right of it: pixels of the
+                # wall region at its middle row, or of another wall region on the same plane at
+                # its quarter, middle and three-quarter rows (the wall beyond a door may be a
+                # region of its own)
                 x0, x1 = stats[c, cv2.CC_STAT_LEFT], stats[c, cv2.CC_STAT_LEFT] + stats[c, cv2.CC_STAT_WIDTH]
                 rows = np.flatnonzero(m.any(axis=1))
                 mid = rows[len(rows) // 2]
-                left_wall = mask[mid, max(0, x0 - 6):x0].any() or x0 == 0
-                right_wall = mask[mid, x1:min(w, x1 + 6)].any() or x1 == w
+                quart = rows[[len(rows) // 4, len(rows) // 2, 3 * len(rows) // 4]]
+                coplanar = is_wall[quart] & (np.abs(behind[quart]) < 0.04)
+                left_wall = (mask[mid, max(0, x0 - 6):x0].any() or x0 == 0
+                             or coplanar[:, max(0, x0 - 6):x0].any(1).all())
+                right_wall = (mask[mid, x1:min(w, x1 + 6)].any() or x1 == w
+                              or coplanar[:, x1:min(w, x1 + 6)].any(1).all())
                 if not (left_wall and right_wall):
                     continue
                 ss, zz = sq[m], zq[m]

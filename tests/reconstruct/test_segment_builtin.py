@@ -243,6 +243,31 @@ def test_wall_region_without_depth_is_skipped_by_the_opening_search():
     assert labels == ["wall", "wall"] and boxes == [] and (out == regions).all()
 
 
+@pytest.mark.parametrize("split", [False, True])
+def test_open_doorway_framed_by_two_wall_regions_is_a_door(split):
+    """A wall 4 m ahead with an open doorway 1.0 m wide and 2.1 m high onto a room 2 m deeper.
+    The doorway splits the wall: the wall left of it may be one region and the wall right of
+    it (with the lintel) another. Either way the doorway is framed by the wall plane on both
+    sides and is one door box, 1.0 m wide within 8 cm (pixels are 2.5 cm apart)."""
+    h, w = 120, 160
+    y = np.linspace(2.0, -2.0, w)
+    z = np.linspace(1.5, -1.3, h)
+    pl = np.stack(np.broadcast_arrays(np.full((h, w), 4.0), y[None, :], z[:, None]), -1)
+    door = np.zeros((h, w), bool)
+    door[z < 0.8, 60:100] = True
+    pl[door] *= 1.5  # the same rays, 2 m further: the room seen through the doorway
+    regions = np.zeros((h, w), np.int64)
+    if split:
+        regions[:, 100:] = 1
+        regions[z >= 0.8, 60:100] = 1
+    regions[door] = 2
+    seg = BuiltinSegments()
+    _, _, _, boxes = seg._wall_openings(regions, ["wall", "wall", "clutter"], [0.8] * 3,
+                                        pl.astype(np.float32), -1.3, 1.5)
+    assert len(boxes) == 1
+    assert boxes[0][3] == pytest.approx(1.0, abs=0.08)
+
+
 def test_coplanar_wall_regions_merge_to_the_front_most_face():
     """A wall 4 m ahead and, set 8 cm into it, a recessed double door's leaves that fill more of
     the image than the wall does: one wall plane, whose face is the wall's (the front-most),
