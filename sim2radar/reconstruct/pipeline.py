@@ -68,8 +68,9 @@ log = logging.getLogger(__name__)
 #: Version of the reconstruction stage's output; part of artifact content keys. Bump when the
 #: output of the same inputs and config changes (2: LiDAR depth completed down to the floor;
 #: 3: the rig calibration, furniture fronts up to door height; 4: door height ≤ 2.3 m, double
-#: doors, front-most wall faces, glass door leaves).
-STAGE_VERSION = 4
+#: doors, front-most wall faces, glass door leaves; 5: doorway boxes from the wall face measured
+#: around the doorway, doorways from 0.78 m wide, openings framed by coplanar wall regions).
+STAGE_VERSION = 5
 
 
 class BackendSpec(BaseModel):
