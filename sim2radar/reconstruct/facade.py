@@ -437,7 +437,8 @@ def _wall_face(r: _Raster, ja: int, jb: int, t: int, config: FacadeConfig) -> fl
     above = near(slice(min(nz, t + 3), min(nz, t + band)), slice(max(0, ja), min(ns, jb + 1)))
     if len(above) >= 30:
         med = float(np.median(above))
-        if len(side) >= 20 and float(np.median(side)) * med < 0 and abs(np.median(side)) > 0.02:
+        beside = float(np.median(side)) if len(side) >= 20 else 0.0
+        if beside * med < 0 and abs(beside) > 0.02:
             return 0.0  # the wall beside the frame disagrees (a bulkhead or sign over the door)
         return -med if abs(med) > 0.02 else 0.0
     front = side[side < -0.02]

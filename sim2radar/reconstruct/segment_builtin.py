@@ -811,10 +811,10 @@ class BuiltinSegments:
         wall plane and whose viewing ray crosses the plane inside the wall's extent is a
         candidate; connected candidates form an opening, measured on the wall plane (width
         along the wall, bottom and top height), when the wall frames it left and right (the
-        wall region, or another large wall region on its plane: a doorway may split its
-        wall in two). Door-sized openings standing on the floor become
-        door boxes (spanning the wall: ``door_thickness_m`` behind the wall face) and their
-        recessed pixels (< 0.35 m behind) a ``door`` segment; sill-height openings a ``window``.
+        wall region, or another large wall region on its plane: a doorway may split its wall
+        in two). Door-sized openings standing on the floor become door boxes (spanning the
+        wall: ``door_thickness_m`` behind the wall face) and their recessed pixels (< 0.35 m
+        behind) a ``door`` segment; sill-height openings a ``window``.
 
         Returns the updated regions, labels, scores and a list of door boxes (level frame,
         ``x y z dx dy dz heading``).
