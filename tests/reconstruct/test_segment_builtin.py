@@ -103,17 +103,26 @@ def test_floor_band_without_true_depth_is_floor(frames, corruption):
     assert (pred_floor & band & ~gt_floor).sum() < 0.05 * (band & ~gt_floor).sum()
 
 
+# a level-frame pixel grid ahead of the camera: columns span y 2 .. -2 m, rows z 1.5 .. -1.3 m
+# (the floor level)
+GRID_H, GRID_W = 120, 160
+GRID_Y = np.linspace(2.0, -2.0, GRID_W)
+GRID_Z = np.linspace(1.5, -1.3, GRID_H)
+
+
+def _grid_points(x: np.ndarray) -> np.ndarray:
+    """(H, W, 3) float32 level-frame points of the grid at forward distances ``x`` (H, W)."""
+    return np.stack(np.broadcast_arrays(x, GRID_Y[None, :], GRID_Z[:, None]), -1).astype(np.float32)
+
+
 def _wall_with_door_fragment(door_lab):
-    """A wall 4 m ahead (level frame, rows span z 1.5 .. -1.3, the floor level), a 0.75 m wide
-    door leaf up to 2.1 m above the floor; only its part below z = -0.3 is its own region."""
-    h, w = 120, 160
-    y = np.linspace(2.0, -2.0, w)
-    z = np.linspace(1.5, -1.3, h)
-    pl = np.stack(np.broadcast_arrays(np.full((h, w), 4.0), y[None, :], z[:, None]), -1)
-    pl = pl.astype(np.float32)
-    door = (np.abs(y[None, :] - 0.0) < 0.375) & (z[:, None] < 0.8)
+    """A wall 4 m ahead (the grid), a 0.75 m wide door leaf up to 2.1 m above the floor; only
+    its part below z = -0.3 is its own region."""
+    h, w = GRID_H, GRID_W
+    pl = _grid_points(np.full((h, w), 4.0))
+    door = (np.abs(GRID_Y[None, :] - 0.0) < 0.375) & (GRID_Z[:, None] < 0.8)
     regions = np.zeros((h, w), np.int64)
-    regions[door & (z[:, None] < -0.3)] = 1
+    regions[door & (GRID_Z[:, None] < -0.3)] = 1
     lab = np.zeros((h, w, 3), np.float32)
     lab[...] = (60.0, 0.0, 0.0)
     lab[door] = door_lab
@@ -167,19 +176,14 @@ def test_rectangle_taller_than_a_door_is_a_wall(z_max, label):
 
 
 def _wall_with_block(front_m: float, top_m: float, turn_deg: float = 0.0):
-    """A wall 4 m ahead (level frame, rows span z 1.5 .. -1.3, the floor level) and a 0.8 m
-    wide block on the floor ``front_m`` in front of it, ``top_m`` tall (region 1), its face
-    turned by ``turn_deg`` about its edge at y = -0.4 (a leaf swung out of its doorway)."""
-    h, w = 120, 160
-    y = np.linspace(2.0, -2.0, w)
-    z = np.linspace(1.5, -1.3, h)
-    x = np.full((h, w), 4.0)
-    block = (np.abs(y[None, :]) < 0.4) & (z[:, None] < -1.3 + top_m)
-    face = 4.0 - front_m - (y + 0.4) * np.tan(np.radians(turn_deg))
-    x[block] = np.broadcast_to(face[None, :], (h, w))[block]
-    pl = np.stack(np.broadcast_arrays(x, y[None, :], z[:, None]), -1).astype(np.float32)
-    regions = block.astype(np.int64)
-    return regions, pl
+    """A wall 4 m ahead (the grid) and a 0.8 m wide block on the floor ``front_m`` in front of
+    it, ``top_m`` tall (region 1), its face turned by ``turn_deg`` about its edge at y = -0.4
+    (a leaf swung out of its doorway)."""
+    x = np.full((GRID_H, GRID_W), 4.0)
+    block = (np.abs(GRID_Y[None, :]) < 0.4) & (GRID_Z[:, None] < -1.3 + top_m)
+    face = 4.0 - front_m - (GRID_Y + 0.4) * np.tan(np.radians(turn_deg))
+    x[block] = np.broadcast_to(face[None, :], x.shape)[block]
+    return block.astype(np.int64), _grid_points(x)
 
 
 @pytest.mark.parametrize(("front_m", "top_m", "turn_deg", "label"), [
@@ -249,21 +253,18 @@ def test_open_doorway_framed_by_two_wall_regions_is_a_door(split):
     The doorway splits the wall: the wall left of it may be one region and the wall right of
     it (with the lintel) another. Either way the doorway is framed by the wall plane on both
     sides and is one door box, 1.0 m wide within 8 cm (pixels are 2.5 cm apart)."""
-    h, w = 120, 160
-    y = np.linspace(2.0, -2.0, w)
-    z = np.linspace(1.5, -1.3, h)
-    pl = np.stack(np.broadcast_arrays(np.full((h, w), 4.0), y[None, :], z[:, None]), -1)
-    door = np.zeros((h, w), bool)
-    door[z < 0.8, 60:100] = True
+    pl = _grid_points(np.full((GRID_H, GRID_W), 4.0))
+    door = np.zeros((GRID_H, GRID_W), bool)
+    door[GRID_Z < 0.8, 60:100] = True
     pl[door] *= 1.5  # the same rays, 2 m further: the room seen through the doorway
-    regions = np.zeros((h, w), np.int64)
+    regions = np.zeros((GRID_H, GRID_W), np.int64)
     if split:
         regions[:, 100:] = 1
-        regions[z >= 0.8, 60:100] = 1
+        regions[GRID_Z >= 0.8, 60:100] = 1
     regions[door] = 2
     seg = BuiltinSegments()
-    _, _, _, boxes = seg._wall_openings(regions, ["wall", "wall", "clutter"], [0.8] * 3,
-                                        pl.astype(np.float32), -1.3, 1.5)
+    _, _, _, boxes = seg._wall_openings(regions, ["wall", "wall", "clutter"], [0.8] * 3, pl,
+                                        -1.3, 1.5)
     assert len(boxes) == 1
     assert boxes[0][3] == pytest.approx(1.0, abs=0.08)
 
@@ -273,13 +274,9 @@ def test_coplanar_wall_regions_merge_to_the_front_most_face():
     the image than the wall does: one wall plane, whose face is the wall's (the front-most),
     not the larger region's — on the leaves' plane the frame around them would lie in front of
     the plane searched for doors."""
-    h, w = 120, 160
-    y = np.linspace(2.0, -2.0, w)
-    z = np.linspace(1.5, -1.3, h)
-    recess = np.zeros((h, w), bool)
+    recess = np.zeros((GRID_H, GRID_W), bool)
     recess[:, 48:] = True  # 70 % of the columns: the leaves
-    x = np.where(recess, 4.08, 4.0)
-    pl = np.stack(np.broadcast_arrays(x, y[None, :], z[:, None]), -1).astype(np.float32)
+    pl = _grid_points(np.where(recess, 4.08, 4.0))
     regions = np.where(recess, 0, 1)
     seg = BuiltinSegments()
     (plane,) = seg._wall_planes(regions, ["wall", "wall"], pl)
