@@ -33,6 +33,9 @@ from sim2radar.em import get_material
 
 __all__ = [
     "DetectionConfig",
+    "HardwareConfig",
+    "SignalChainConfig",
+    "FIDELITIES",
     "ScatteringConfig",
     "RadarConfig",
     "RadarConfigError",
@@ -149,6 +152,72 @@ class ScatteringConfig(_Frozen):
         return self.slab_thickness_m.get(get_material(material).name)
 
 
+#: Simulation fidelity levels a RadarConfig can select (``fidelity``): the Mitsuba ray tracer
+#: with coherent range/azimuth/elevation binning (the simulator under test, the paper's), or the
+#: signal-level FMCW MIMO simulator (paths -> IF samples per TX/RX pair -> TI-style processing
+#: chain; the reference radar that stands in for measured data).
+FIDELITIES = ("raytrace", "signal")
+
+
+class HardwareConfig(_Frozen):
+    """Transmitter, receiver and antenna elements: the link budget of the radar.
+
+    Used to derive the receiver noise (``k T B F``) relative to the echo power, for both
+    fidelity levels (:mod:`sim2radar.radar.link_budget`). Element patterns are one-way power
+    patterns ``cos^q`` in azimuth and elevation with the given -3 dB full widths (``q`` from the
+    width), applied on transmit and on receive by the signal-level simulator.
+    """
+
+    tx_power_dbm: float = Field(12.0, ge=-30.0, le=40.0,
+                                description="output power per transmitter [dBm]")
+    tx_gain_dbi: float = Field(10.0, ge=-10.0, le=40.0, description="TX element gain [dBi]")
+    rx_gain_dbi: float = Field(10.0, ge=-10.0, le=40.0, description="RX element gain [dBi]")
+    noise_figure_db: float = Field(14.0, ge=0.0, le=40.0, description="receiver noise figure [dB]")
+    temperature_k: float = Field(290.0, gt=0.0, description="noise reference temperature [K]")
+    system_loss_db: float = Field(0.0, ge=0.0, le=40.0,
+                                  description="radome, feed and processing losses [dB]")
+    azimuth_hpbw_deg: float = Field(100.0, gt=0.0, le=180.0,
+                                    description="element -3 dB beamwidth in azimuth [deg]")
+    elevation_hpbw_deg: float = Field(30.0, gt=0.0, le=180.0,
+                                      description="element -3 dB beamwidth in elevation [deg]")
+
+
+class SignalChainConfig(_Frozen):
+    """The signal-level simulator's synthesis, impairments and processing chain
+    (``fidelity: signal``; TI's cascade MIMO chain is the model). Owned by
+    :mod:`sim2radar.radar.fmcw` (synthesis) and :mod:`sim2radar.radar.processing` (chain);
+    see there for every field's meaning and source."""
+
+    synthesis: str = Field("frequency", description="'time' (per-sample IF) or 'frequency' "
+                           "(range spectrum directly; equal within 0.1 dB on a point target)")
+    doppler: str = Field("integrated", description="'integrated' (static scene: one coherent "
+                         "chirp sum per channel) or 'full' (every chirp, Doppler FFT)")
+    range_window: str = "hann"
+    doppler_window: str = "hann"
+    azimuth_window: str = "none"
+    azimuth_fft_size: int = Field(256, ge=16, le=4096)
+    elevation_step_deg: float = Field(0.5, gt=0.0, le=10.0)
+    cfar_kind: str = Field("ca", description="'ca' (cell averaging) or 'os' (ordered statistic)")
+    cfar_domain: str = Field("range-azimuth", description="'range-azimuth' or 'range-doppler'")
+    cfar_guard_cells: tuple[int, int] = (2, 2)
+    cfar_training_cells: tuple[int, int] = (8, 4)
+    cfar_pfa: float = Field(1e-4, gt=0.0, lt=1.0, description="design false-alarm rate")
+    cfar_os_rank: float = Field(0.75, gt=0.0, le=1.0,
+                                description="OS-CFAR rank as a fraction of the training cells")
+    peak_grouping: bool = True
+    max_points: int | None = Field(None, ge=1)
+    adc_bits: int | None = Field(None, ge=2, le=24, description="ADC quantisation (None: off)")
+    tx_rx_leakage_db: float | None = Field(None, description="TX->RX coupling leakage [dB re "
+                                           "the transmit power] (None: off)")
+    channel_gain_error_db: float = Field(0.0, ge=0.0, description="per-channel gain error std [dB]")
+    channel_phase_error_deg: float = Field(0.0, ge=0.0,
+                                           description="per-channel phase error std [deg]")
+    mutual_coupling_db: float | None = Field(None, description="coupling to each neighbouring "
+                                             "element [dB] (None: off)")
+    impairment_seed: int = Field(0, description="seed of the fixed per-channel errors (a board's "
+                                 "calibration residue, the same every frame)")
+
+
 class RadarConfig(_Frozen):
     """A validated FMCW MIMO radar description (all lengths [m], frequencies [Hz], angles [deg]).
 
@@ -196,8 +265,14 @@ class RadarConfig(_Frozen):
     elevation_bin_deg: float | None = Field(None, gt=0)
     ray_spacing_deg: float = Field(0.2, gt=0.005, le=10.0)
     max_bounces: int = Field(2, ge=1, le=8)
+    chirp_idle_time_s: float = Field(5e-6, ge=0.0, description="idle time between chirps [s]")
+    adc_start_time_s: float = Field(6e-6, ge=0.0,
+                                    description="ramp start to first ADC sample [s]")
+    fidelity: str = Field("raytrace", description="one of FIDELITIES")
     detection: DetectionConfig = Field(default_factory=DetectionConfig)
     scattering: ScatteringConfig = Field(default_factory=ScatteringConfig)
+    hardware: HardwareConfig = Field(default_factory=HardwareConfig)
+    signal: SignalChainConfig = Field(default_factory=SignalChainConfig)
 
     @model_validator(mode="after")
     def _check_consistency(self) -> RadarConfig:
@@ -211,6 +286,8 @@ class RadarConfig(_Frozen):
                 )
         if self.bandwidth_hz >= self.start_frequency_hz:
             raise ValueError("bandwidth_hz must be smaller than start_frequency_hz")
+        if self.fidelity not in FIDELITIES:
+            raise ValueError(f"fidelity must be one of {FIDELITIES}, got {self.fidelity!r}")
         return self
 
     # -- derived values -----------------------------------------------------------------
@@ -240,6 +317,25 @@ class RadarConfig(_Frozen):
     def max_range_m(self) -> float:
         """Maximum unambiguous range ``f_s c / (2 S)`` [m] (complex sampling)."""
         return self.adc_sample_rate_hz * SPEED_OF_LIGHT_M_S / (2.0 * self.slope_hz_per_s)
+
+    @property
+    def sampling_time_s(self) -> float:
+        """ADC sampling window per chirp ``N_adc / f_s`` [s]."""
+        return self.adc_samples / self.adc_sample_rate_hz
+
+    @property
+    def chirp_period_s(self) -> float:
+        """One chirp slot: idle + ramp up to the first sample + sampling window [s] (the
+        interval between consecutive TX slots in TDM-MIMO)."""
+        return self.chirp_idle_time_s + self.adc_start_time_s + self.sampling_time_s
+
+    @property
+    def n_tx(self) -> int:
+        return len(self.tx_antennas_half_wl)
+
+    @property
+    def n_rx(self) -> int:
+        return len(self.rx_antennas_half_wl)
 
     @property
     def n_range_bins(self) -> int:
@@ -371,7 +467,7 @@ class RadarConfig(_Frozen):
         """A validated copy with some fields changed (nested configs as dicts allowed)."""
         data = self.model_dump()
         for key, value in changes.items():
-            if key in ("detection", "scattering") and isinstance(value, dict):
+            if key in ("detection", "scattering", "hardware", "signal") and isinstance(value, dict):
                 data[key] = {**data[key], **value}
             else:
                 data[key] = value
