@@ -1,0 +1,56 @@
+"""The experiment sweep's science (paper §6): pre-train the PointPillars encoder on simulated
+radar, fine-tune on real radar, and compare 3D AP with training from scratch over real-data
+fractions x paired trials.
+
+- :mod:`~sim2radar.experiment.profiles` — :class:`ExperimentProfile` (``paper``, ``demo``,
+  ``smoke`` in ``configs/experiment/``) and the registry of conditions.
+- :mod:`~sim2radar.experiment.subsets` — trial seeds and nested real-data subsets.
+- :mod:`~sim2radar.experiment.plan` — the runs of a sweep and what identifies each.
+- :mod:`~sim2radar.experiment.stats` — paired statistics (t-interval, Holm, d_z, bootstrap).
+- :mod:`~sim2radar.experiment.report` — Table 1 as Markdown and as artifact rows.
+- :mod:`~sim2radar.experiment.data`, :mod:`~sim2radar.experiment.runner` — datasets of a sweep
+  and one training run (import them directly; they load torch).
+
+Prefect wiring lives in ``tasks/experiment.py`` and ``flows/``; nothing here imports Prefect.
+"""
+
+from sim2radar.experiment.plan import (
+    PretrainSpec,
+    RunSpec,
+    epochs_for,
+    plan_sweep,
+    pretrain_key_inputs,
+    run_key_inputs,
+)
+from sim2radar.experiment.profiles import (
+    ABLATIONS,
+    CONDITIONS,
+    Condition,
+    ExperimentProfile,
+    load_profile,
+)
+from sim2radar.experiment.report import results_markdown, results_table_rows
+from sim2radar.experiment.stats import DEFAULT_METRIC, holm_adjust, sweep_stats
+from sim2radar.experiment.subsets import n_real_frames, real_subset, trial_seed
+
+__all__ = [
+    "ABLATIONS",
+    "CONDITIONS",
+    "DEFAULT_METRIC",
+    "Condition",
+    "ExperimentProfile",
+    "PretrainSpec",
+    "RunSpec",
+    "epochs_for",
+    "holm_adjust",
+    "load_profile",
+    "n_real_frames",
+    "plan_sweep",
+    "pretrain_key_inputs",
+    "real_subset",
+    "results_markdown",
+    "results_table_rows",
+    "run_key_inputs",
+    "sweep_stats",
+    "trial_seed",
+]

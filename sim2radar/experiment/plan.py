@@ -1,0 +1,241 @@
+"""The sweep's plan: which pre-trainings and which fine-tuning runs, with their seeds, subsets and
+epochs, and what identifies each of them.
+
+:func:`plan_sweep` is pure: a profile and the real train split's ids in, frozen specs out. The
+runs are ordered trial by trial (within a trial: fraction, then condition), so a sweep stopped
+early has complete pairs for its first trials. Pre-trainings are deduplicated: one per
+(sim dataset role, trial seed) with ``pretrain_per_trial``, otherwise one per role, shared by
+every trial (its seed is trial 0's).
+
+:func:`run_key_inputs` and :func:`pretrain_key_inputs` give the JSON-able content that
+identifies a run; the caller hashes it (``storage.content_key``) together with the datasets'
+content keys and the code version. Settings that do not change a run's result (device, threads,
+checkpoint cadence, progress bars, data paths) are left out, so changing them recomputes nothing.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import math
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+from sim2radar.experiment.profiles import BASELINE, CONDITIONS, ExperimentProfile
+from sim2radar.experiment.subsets import real_subset, trial_seed
+
+__all__ = [
+    "PretrainSpec",
+    "RunSpec",
+    "epochs_for",
+    "ids_digest",
+    "plan_sweep",
+    "pretrain_key_inputs",
+    "run_key_inputs",
+]
+
+
+@dataclasses.dataclass(frozen=True)
+class PretrainSpec:
+    """One pre-training run.
+
+    Attributes
+    ----------
+    condition : str — the (first) condition whose runs load its encoder.
+    trial : int or None — the trial it belongs to; None when shared by all trials.
+    seed : int — its seed (initial weights, data order); the trial's seed when per trial.
+    sim_role : str — dataset role it trains on (``sim``, ``sim-gt``, ``sim-one-material``).
+    epochs : int — training epochs on the simulated frames.
+    """
+
+    condition: str
+    trial: int | None
+    seed: int
+    sim_role: str
+    epochs: int
+
+    @property
+    def name(self) -> str:
+        """Readable id, e.g. ``pretrain-sim-t2`` or ``pretrain-sim-shared``."""
+        return f"pretrain-{self.sim_role}-" + ("shared" if self.trial is None
+                                               else f"t{self.trial}")
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain JSON-able fields (e.g. for a Prefect task parameter)."""
+        return dataclasses.asdict(self)
+
+
+@dataclasses.dataclass(frozen=True)
+class RunSpec:
+    """One fine-tuning run: a (condition, fraction, trial) cell of the grid.
+
+    Attributes
+    ----------
+    condition : str — :data:`~sim2radar.experiment.profiles.CONDITIONS` name.
+    fraction : float — share of the real train split, in (0, 1].
+    trial : int — 0-based trial index.
+    seed : int — the trial's seed (:func:`~sim2radar.experiment.subsets.trial_seed`): real
+        subset, head initialisation and data order, the same for every condition of the trial.
+    n_real : int — real train frames (``len(train_ids)``).
+    pretrain : PretrainSpec or None — whose encoder initialises the run (None: from scratch).
+    epochs : int — fine-tuning epochs (:func:`epochs_for`; the same for every condition).
+    train_ids : tuple of str — the real frames (:func:`~.subsets.real_subset`).
+    """
+
+    condition: str
+    fraction: float
+    trial: int
+    seed: int
+    n_real: int
+    pretrain: PretrainSpec | None
+    epochs: int
+    train_ids: tuple[str, ...] = ()
+
+    @property
+    def name(self) -> str:
+        """Readable id, e.g. ``sim-pretrain-f0.25-t3``."""
+        return f"{self.condition}-f{self.fraction:g}-t{self.trial}"
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain JSON-able fields (``train_ids`` as a list, ``pretrain`` as a dict or None)."""
+        d = dataclasses.asdict(self)
+        d["train_ids"] = list(self.train_ids)
+        return d
+
+
+def epochs_for(n_frames: int, batch_size: int, epochs: int, min_steps: int | None) -> int:
+    """Epochs of a run: ``epochs``, raised so that the run makes at least ``min_steps``
+    optimiser steps (``ceil(n_frames / batch_size)`` per epoch) when ``min_steps`` is set.
+
+    Depends on the number of frames only, so both conditions of a cell get the same epochs.
+    """
+    if n_frames < 1:
+        raise ValueError("a training run needs at least one frame")
+    if batch_size < 1 or epochs < 1:
+        raise ValueError(f"batch_size and epochs must be >= 1, got {batch_size}, {epochs}")
+    if not min_steps:
+        return int(epochs)
+    steps_per_epoch = math.ceil(int(n_frames) / int(batch_size))
+    return max(int(epochs), math.ceil(int(min_steps) / steps_per_epoch))
+
+
+def plan_sweep(
+    profile: ExperimentProfile,
+    train_ids: Sequence[str],
+    conditions: Sequence[str] | None = None,
+) -> tuple[tuple[PretrainSpec, ...], tuple[RunSpec, ...]]:
+    """Every pre-training and fine-tuning run of a sweep.
+
+    Parameters
+    ----------
+    profile : the sweep's protocol.
+    train_ids : the real train split's frame ids.
+    conditions : conditions to run (default ``profile.all_conditions``: main conditions, then
+        ablations); must include ``baseline``, which every comparison is paired with.
+
+    Returns
+    -------
+    pretrains : tuple of :class:`PretrainSpec`, each needed by at least one run.
+    runs : tuple of :class:`RunSpec`, ``trials x fractions x conditions``, ordered by trial,
+        fraction, then condition.
+    """
+    conds = tuple(profile.all_conditions if conditions is None else conditions)
+    for c in conds:
+        if c not in CONDITIONS:
+            raise ValueError(f"unknown condition {c!r}; known: {sorted(CONDITIONS)}")
+    if BASELINE not in conds:
+        raise ValueError(f"conditions must include {BASELINE!r}, got {list(conds)}")
+    if len(set(conds)) != len(conds):
+        raise ValueError(f"duplicate condition in {list(conds)}")
+    conds = (BASELINE, *(c for c in conds if c != BASELINE))
+
+    pretrains: dict[tuple[str, int | None], PretrainSpec] = {}
+
+    def pretrain_for(condition: str, trial: int) -> PretrainSpec | None:
+        role = CONDITIONS[condition].sim_role
+        if role is None:
+            return None
+        key_trial = trial if profile.pretrain_per_trial else None
+        seed = trial_seed(profile.sweep_seed, trial if profile.pretrain_per_trial else 0)
+        if (role, key_trial) not in pretrains:
+            pretrains[(role, key_trial)] = PretrainSpec(condition, key_trial, seed, role,
+                                                       profile.pretrain_epochs)
+        return pretrains[(role, key_trial)]
+
+    runs: list[RunSpec] = []
+    for trial in range(profile.trials):
+        seed = trial_seed(profile.sweep_seed, trial)
+        for fraction in profile.fractions:
+            ids = tuple(real_subset(train_ids, fraction, seed))
+            epochs = epochs_for(len(ids), profile.batch_size, profile.finetune_epochs,
+                                profile.min_steps)
+            for condition in conds:
+                runs.append(RunSpec(condition, float(fraction), trial, seed, len(ids),
+                                    pretrain_for(condition, trial), epochs, ids))
+    return tuple(pretrains.values()), tuple(runs)
+
+
+def ids_digest(ids: Sequence[str]) -> str:
+    """SHA-256 (hex, 20 characters) of frame ids in order (one per line)."""
+    return hashlib.sha256("\n".join(ids).encode()).hexdigest()[:20]
+
+
+def _detector_identity(detector: Mapping[str, Any]) -> dict[str, Any]:
+    """The parts of a resolved DetectConfig dump that change a run's result: model,
+    augmentation, optimisation (epochs left out: the spec carries the run's own), mixed
+    precision. Name, data paths, seed (the spec's), pretrained_encoder (the pretrain's key)
+    and the rest of runtime are left out."""
+    det = dict(detector)
+    missing = [k for k in ("model", "augmentation", "optimization") if k not in det]
+    if missing:
+        raise ValueError(f"detector: expected a DetectConfig dump, missing sections {missing}")
+    optim = {k: v for k, v in dict(det["optimization"]).items() if k != "epochs"}
+    return {"model": det["model"], "augmentation": det["augmentation"],
+            "optimization": optim, "amp": bool(dict(det.get("runtime") or {}).get("amp", False))}
+
+
+def pretrain_key_inputs(spec: PretrainSpec, detector: Mapping[str, Any],
+                        intensity_match: Mapping[str, Any] | None) -> dict[str, Any]:
+    """JSON-able content identifying a pre-training (without the sim dataset's key and the code
+    version, which the caller adds).
+
+    Parameters
+    ----------
+    spec : the pre-training.
+    detector : resolved pre-training DetectConfig dump (``model_dump(mode="json")``).
+    intensity_match : the intensity mapping applied to the sim frames (its dict form), or None.
+    """
+    return {"kind": "pretrain", "sim_role": spec.sim_role, "seed": int(spec.seed),
+            "epochs": int(spec.epochs), "detector": _detector_identity(detector),
+            "intensity_match": None if intensity_match is None else dict(intensity_match)}
+
+
+def run_key_inputs(spec: RunSpec, profile: ExperimentProfile, detector: Mapping[str, Any],
+                   pretrain_key: str | None = None) -> dict[str, Any]:
+    """JSON-able content identifying a fine-tuning run (without the real dataset's key and the
+    code version, which the caller adds).
+
+    Parameters
+    ----------
+    spec : the run.
+    profile : the sweep's profile (evaluation splits and validation cadence are taken from it).
+    detector : resolved fine-tuning DetectConfig dump (``model_dump(mode="json")``).
+    pretrain_key : content key of the run's pre-training (required exactly when
+        ``spec.pretrain`` is set).
+
+    Returns
+    -------
+    dict — condition, fraction, trial, seed, n_real, epochs, ``train_ids`` digest, pretrain key,
+    detector identity and evaluation settings (splits, validation cadence, AP thresholds).
+    """
+    if (spec.pretrain is None) != (pretrain_key is None):
+        raise ValueError(f"{spec.name}: pretrain_key must be given exactly when the run has a "
+                         "pre-training")
+    return {
+        "kind": "finetune", "condition": spec.condition, "fraction": float(spec.fraction),
+        "trial": int(spec.trial), "seed": int(spec.seed), "n_real": int(spec.n_real),
+        "epochs": int(spec.epochs), "train_ids": ids_digest(spec.train_ids),
+        "pretrain": pretrain_key, "detector": _detector_identity(detector),
+        "evaluation": {"eval_split": profile.eval_split, "val_split": profile.val_split,
+                       "val_every": int(profile.val_every), "ap_thresholds": "devkit"},
+    }

@@ -1,0 +1,117 @@
+"""Experiment profiles: the bundled ones load with the intended protocol; paths resolve against
+the YAML's folder; bad fields are named with their file."""
+
+from __future__ import annotations
+
+import shutil
+from pathlib import Path
+
+import pytest
+import yaml
+
+from sim2radar.experiment.profiles import (
+    ABLATIONS,
+    CONDITIONS,
+    PROFILE_DIR,
+    ExperimentProfile,
+    bundled_profiles,
+    load_profile,
+)
+
+DETECT_DIR = PROFILE_DIR.parent / "detect"
+
+
+def test_paper_profile_is_the_papers_protocol():
+    p = load_profile("paper")
+    assert p.name == "paper" and p.detector == (DETECT_DIR / "pointpillars_door.yaml").resolve()
+    assert (p.pretrain_epochs, p.finetune_epochs, p.batch_size, p.lr) == (20, 200, 8, 0.003)
+    assert p.fractions == (0.05, 0.10, 0.25, 0.50, 1.00) and p.trials == 5
+    assert p.conditions == ("baseline", "sim-pretrain") and p.ablations == ()
+    assert p.min_steps is None and p.eval_split == "test" and p.intensity_matching
+    cfg = p.detector_config("finetune")
+    assert cfg.model.grid_size[:2] == (128, 208) and cfg.model.layer_nums == (3, 5, 5)
+    assert cfg.model.voxel_size_m == (0.05, 0.05, 4.0)
+    assert (cfg.optimization.epochs, cfg.optimization.batch_size, cfg.optimization.lr) == (
+        200, 8, 0.003)
+    assert p.detector_config("pretrain").optimization.epochs == 20
+
+
+def test_demo_and_smoke_profiles():
+    demo = load_profile("demo")
+    assert demo.detector.name == "pointpillars_door_cpu_small.yaml"
+    assert demo.trials >= 3 and demo.fractions == (0.05, 0.10, 0.25, 0.50, 1.00)
+    assert demo.min_steps is not None
+    smoke = load_profile("smoke")
+    cfg = smoke.detector_config()
+    assert cfg.model.voxel_size_m[:2] == (0.2, 0.2) and cfg.model.layer_nums == (1,)
+    assert max(smoke.pretrain_epochs, smoke.finetune_epochs) <= 2
+    assert len(smoke.fractions) == 2 and smoke.trials == 2
+    assert cfg.runtime.num_threads == 1 and not cfg.runtime.progress
+    # a tiny model: well under a tenth of the CPU model's weights
+    from sim2radar.detect import PointPillars
+
+    n = sum(t.numel() for t in PointPillars(cfg.model).parameters())
+    n_small = sum(t.numel() for t in PointPillars(demo.detector_config().model).parameters())
+    assert n < n_small / 10
+    assert set(bundled_profiles()) >= {"paper", "demo", "smoke"}
+
+
+def _write(tmp_path: Path, name: str = "mine.yaml", **fields) -> Path:
+    shutil.copy(DETECT_DIR / "pointpillars_door_cpu_small.yaml", tmp_path / "det.yaml")
+    doc = {"detector": "det.yaml", **fields}
+    path = tmp_path / name
+    path.write_text(yaml.safe_dump(doc))
+    return path
+
+
+def test_paths_resolve_against_the_yaml_folder(tmp_path, monkeypatch):
+    path = _write(tmp_path, trials=3)
+    monkeypatch.chdir(PROFILE_DIR)  # a working directory with no det.yaml
+    p = load_profile(path)
+    assert p.detector == (tmp_path / "det.yaml").resolve() and p.name == "mine"
+    assert load_profile(str(path)) == p  # a path as a string
+
+
+@pytest.mark.parametrize(("fields", "named"), [
+    ({"trials": 0}, "'trials'"),
+    ({"trails": 5}, "'trails'"),  # typo: extra fields are refused
+    ({"fractions": [0.5, 0.25]}, "'fractions'"),
+    ({"fractions": [0.0, 0.5]}, "'fractions'"),
+    ({"conditions": ["sim-pretrain"]}, "baseline"),
+    ({"conditions": ["baseline", "sim-pretrian"]}, "sim-pretrian"),
+    ({"conditions": ["baseline", "sim-gt-pretrain"]}, "'ablations'"),
+    ({"ablations": ["sim-pretrain"]}, "'ablations'"),
+    ({"detector_overrides": {"modle": {}}}, "detector_overrides"),
+    ({"detector_overrides": {"model": {"layer_nums": [1, 2]}}}, "detector_overrides"),
+    ({"min_steps": 0}, "'min_steps'"),
+])
+def test_bad_fields_are_named_with_the_file(tmp_path, fields, named):
+    path = _write(tmp_path, **fields)
+    with pytest.raises(ValueError) as exc:
+        load_profile(path)
+    msg = str(exc.value)
+    assert str(path) in msg and named in msg, msg
+
+
+def test_unknown_names_list_the_known_ones(tmp_path):
+    with pytest.raises(FileNotFoundError, match="paper"):
+        load_profile("papr")
+    path = tmp_path / "p.yaml"
+    path.write_text("detector: nowhere.yaml\n")
+    with pytest.raises(FileNotFoundError, match="field 'detector'"):
+        load_profile(path)
+    with pytest.raises(ValueError, match="sim-gt-pretrain") as exc:
+        ExperimentProfile(detector=Path("x.yaml"), conditions=("baseline", "simpretrain"))
+    assert "known" in str(exc.value)
+    assert set(ABLATIONS) == {"sim-gt-pretrain", "sim-one-material-pretrain"}
+    assert CONDITIONS["sim-gt-pretrain"].sim_role == "sim-gt"
+    assert CONDITIONS["baseline"].sim_role is None
+
+
+def test_profile_is_frozen_and_defaults_are_the_papers():
+    p = ExperimentProfile(detector=Path("x.yaml"))
+    assert (p.pretrain_epochs, p.finetune_epochs, p.trials, p.batch_size) == (20, 200, 5, 8)
+    assert p.fractions == (0.05, 0.10, 0.25, 0.50, 1.00)
+    assert p.all_conditions == ("baseline", "sim-pretrain")
+    with pytest.raises(ValueError):
+        p.trials = 3  # frozen
