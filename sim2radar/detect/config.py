@@ -173,6 +173,10 @@ class DataConfig(_Frozen):
 
     #: dataset folder with points/, labels/, ImageSets/; relative to the YAML file
     root: Path | None = None
+    #: point files with more columns than ``model.num_point_features`` keep the first ones
+    #: (OpenPCDet's ``used_feature_list``), e.g. x y z intensity of the reference radar's
+    #: x y z intensity doppler; False refuses them
+    drop_extra_point_columns: bool = True
     train_split: str = "train"
     val_split: str = "val"
     test_split: str = "test"

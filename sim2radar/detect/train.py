@@ -1,16 +1,24 @@
 """Training, encoder transfer and evaluation of PointPillars as plain functions.
 
-``train`` and ``evaluate_checkpoint`` are what the experiment-grid flow calls::
+``train``, ``validation_ap`` and ``evaluate_checkpoint`` are what the experiment sweep calls::
 
-    res = train(cfg, train_ids=ids_25pct, out_dir=run_dir, init_encoder_from=sim_ckpt, seed=3)
+    pre = train(cfg, out_dir=pre_dir, frames=sim_frames, seed=s, epochs=20)
+    res = train(cfg, out_dir=run_dir, frames=real_subset, seed=s, init_encoder_from=pre.checkpoint,
+                on_epoch_end=lambda e, m: {"val_ap": validation_ap(m, val_frames)})
     ap = evaluate_checkpoint(res.checkpoint, split="test")     # {"3d_r11@0.3": ..., ...}
+
+Encoder transfer is the only difference between a run with ``init_encoder_from`` and one without
+at the same seed: the head's initial weights, the shuffling and the augmentation draws are the
+same (the weights are drawn before the encoder is loaded; the data order does not depend on it).
 
 Optimisation follows OpenPCDet's ``adam_onecycle``: AdamW (betas 0.9/0.99, decoupled weight
 decay on every parameter), one-cycle learning rate (cosine warm-up from lr/10 to lr over 40 %
 of the steps, cosine decay to lr/1e5) with inverse momentum (beta1 0.95 -> 0.85 -> 0.95),
 gradient-norm clipping at 10. Randomness: ``torch.manual_seed(seed)`` fixes the initial
 weights; epoch ``e`` draws its shuffling and augmentation from ``numpy.random.default_rng(
-[seed, e])``, so a resumed run continues exactly as an uninterrupted one.
+[seed, e])``, so a resumed run continues exactly as an uninterrupted one. An ``on_epoch_end``
+hook (e.g. validation AP) runs with torch's random state saved and restored, so it cannot change
+the training either.
 """
 
 from __future__ import annotations
@@ -20,8 +28,9 @@ import json
 import logging
 import math
 import os
+import threading
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -43,10 +52,15 @@ __all__ = [
     "load_encoder_from",
     "predict_frames",
     "train",
+    "validation_ap",
 ]
 
 CHECKPOINT_VERSION = 1
 log = logging.getLogger(__name__)
+#: Serialises "seed torch's global RNG, build the model": training runs in threads of one process
+#: (the experiment sweep's thread runner) would otherwise interleave the two and draw each
+#: other's initial weights.
+_INIT_LOCK = threading.Lock()
 
 
 @dataclass(frozen=True)
@@ -58,8 +72,10 @@ class TrainResult:
     checkpoint : path of the final checkpoint (``out_dir/last.pt``).
     out_dir : run folder (checkpoints, ``history.json``, ``config.json``).
     epochs : epochs completed; steps : optimiser steps completed.
-    history : one dict per epoch: mean ``cls``/``loc``/``dir``/``total`` loss, ``lr`` (of the
-        epoch's last step), ``seconds``.
+    history : one dict per epoch: ``epoch`` (1-based), mean ``cls``/``loc``/``dir``/``total``
+        loss, ``lr`` (of the epoch's last step), ``seconds`` (the epoch's wall time, hook
+        included [s]) and, with an ``on_epoch_end`` hook, ``hook_seconds`` [s] and the fields
+        the hook returned (e.g. ``val_ap``).
     seconds : wall time of this call [s].
     """
 
@@ -167,7 +183,8 @@ def _load_frames(cfg: DetectConfig, data_dir, split: str, ids: Sequence[str] | N
     root = Path(data_dir) if data_dir is not None else cfg.data.root
     if root is None:
         raise ValueError("no dataset: set data.root in the config or pass data_dir")
-    ds = OpenPCDetDataset(root, num_point_features=cfg.model.num_point_features)
+    ds = OpenPCDetDataset(root, num_point_features=cfg.model.num_point_features,
+                          drop_extra_columns=cfg.data.drop_extra_point_columns)
     ids = list(ids) if ids is not None else ds.split_ids(split)
     if not ids:
         raise ValueError(f"{root}: no frames selected (split {split!r} is empty)")
@@ -176,6 +193,39 @@ def _load_frames(cfg: DetectConfig, data_dir, split: str, ids: Sequence[str] | N
 
 
 # ---------------------------------------------------------------------------- training
+#: ``on_epoch_end(epoch, model)``: epoch is 1-based; the returned fields join the epoch's record
+EpochHook = Callable[[int, PointPillars], Mapping[str, Any] | None]
+_RESERVED = frozenset({"epoch", "lr", "seconds", "hook_seconds", "cls", "loc", "dir", "total"})
+
+
+def _run_hook(hook: EpochHook, epoch: int, model: PointPillars,
+              dev: torch.device) -> dict[str, Any]:
+    """Call the hook with torch's random state saved and restored, then put the model back in
+    train mode; check that what it returned can join a JSON history record."""
+    devices = [dev.index if dev.index is not None else torch.cuda.current_device()] \
+        if dev.type == "cuda" else []
+    with torch.random.fork_rng(devices=devices):
+        extra = hook(epoch, model)
+    model.train()
+    if extra is None:
+        return {}
+    if not isinstance(extra, Mapping):
+        raise TypeError(f"on_epoch_end must return a dict or None, got {type(extra).__name__}")
+    out: dict[str, Any] = {}
+    for key, value in extra.items():
+        if not isinstance(key, str) or key in _RESERVED:
+            raise ValueError(f"on_epoch_end returned field {key!r}: fields must be strings "
+                             f"other than {sorted(_RESERVED)}")
+        if isinstance(value, (bool, str)) or value is None:
+            out[key] = value
+        elif isinstance(value, (int, float, np.integer, np.floating)):
+            out[key] = float(value)
+        else:
+            raise TypeError(f"on_epoch_end field {key!r}: expected a number, string, bool or "
+                            f"None, got {type(value).__name__}")
+    return out
+
+
 def train(
     config: DetectConfig | str | Path,
     train_ids: Sequence[str] | None = None,
@@ -188,6 +238,7 @@ def train(
     resume: bool = False,
     device: str | torch.device | None = None,
     frames: Sequence[Frame] | None = None,
+    on_epoch_end: EpochHook | None = None,
 ) -> TrainResult:
     """Train PointPillars from a config.
 
@@ -205,6 +256,12 @@ def train(
     resume : continue from ``out_dir/last.pt`` if it exists (same config required).
     device : overrides ``config.runtime.device``.
     frames : train on these in-memory frames instead of reading the dataset.
+    on_epoch_end : ``hook(epoch, model) -> dict | None``, called after every epoch (1-based
+        ``epoch``) before its checkpoint is written. The dict's fields (numbers, strings) join
+        that epoch's history record, so they are saved in the checkpoints and survive
+        ``resume=True`` (a resumed run calls the hook only for the epochs it trains). The hook
+        may leave the model in eval mode; training continues in train mode, with torch's random
+        state as it was before the hook.
 
     Returns
     -------
@@ -238,8 +295,9 @@ def train(
     if cfg.augmentation.gt_sampling:
         db = build_gt_database(frames, mcfg.class_names, cfg.augmentation.min_points_in_gt)
 
-    torch.manual_seed(cfg.seed)
-    model = PointPillars(mcfg)
+    with _INIT_LOCK:  # seed and draw the initial weights without another thread in between
+        torch.manual_seed(cfg.seed)
+        model = PointPillars(mcfg)
     loaded_encoder: list[str] = []
     if encoder_ckpt is not None:
         loaded_encoder = load_encoder_from(model, encoder_ckpt)
@@ -335,8 +393,12 @@ def train(
                 progress.update(1)
                 progress.set_postfix(epoch=epoch + 1, loss=f"{parts['total']:.3f}")
         record = {k: v / steps_per_epoch for k, v in sums.items()}
-        record.update(epoch=epoch + 1, lr=lr_used,
-                      seconds=time.perf_counter() - t_epoch)
+        record.update(epoch=epoch + 1, lr=lr_used)
+        if on_epoch_end is not None:
+            t_hook = time.perf_counter()
+            record.update(_run_hook(on_epoch_end, epoch + 1, model, dev))
+            record["hook_seconds"] = time.perf_counter() - t_hook
+        record["seconds"] = time.perf_counter() - t_epoch
         history.append(record)
         checkpoint(epoch + 1)
     if progress is not None:
@@ -368,6 +430,53 @@ def predict_frames(
     return out
 
 
+def validation_ap(
+    model: PointPillars,
+    frames: Sequence[Frame],
+    iou: float = 0.3,
+    recall_points: int = 40,
+    *,
+    thresholds: str = "devkit",
+    batch_size: int = 8,
+) -> float:
+    """3D AP [%] of ``model`` on ``frames`` (the learning-curve figure of a sweep).
+
+    :func:`predict_frames` + :func:`sim2radar.evaluate.evaluate_detections` at one IoU and one
+    recall-point set; boxes of classes the model does not detect are ignored. The model's
+    train/eval mode is restored afterwards, so this can run inside ``train``'s
+    ``on_epoch_end`` hook.
+
+    Parameters
+    ----------
+    model : the detector (any mode; evaluated in eval mode, without gradients).
+    frames : frames with ground-truth boxes (at least one box of the model's classes).
+    iou : IoU threshold (strict) for a true positive; 0.3 is the paper's.
+    recall_points : 11 or 40.
+    thresholds : ``"devkit"`` or ``"all"`` (:mod:`sim2radar.evaluate.ap`; the devkit's AP is
+        biased low on sets with fewer than 41 boxes).
+    batch_size : frames per forward pass.
+
+    Returns
+    -------
+    float — AP [%] in [0, 100].
+    """
+    frames = [f.select(model.cfg.class_names) for f in frames]
+    if not any(len(f.boxes) for f in frames):
+        raise ValueError(f"validation_ap: the {len(frames)} frames have no "
+                         f"{list(model.cfg.class_names)} boxes; AP is undefined")
+    was_training = model.training
+    try:
+        dets = predict_frames(model, frames, batch_size)
+    finally:
+        model.train(was_training)
+    res = evaluate_detections(
+        [f.boxes for f in frames], [d.boxes.numpy() for d in dets],
+        [d.scores.numpy() for d in dets], iou_thresholds=(float(iou),), metrics=("3d",),
+        recall_points=(int(recall_points),), thresholds=thresholds,
+    )
+    return float(res[f"3d_r{int(recall_points)}@{float(iou):g}"])
+
+
 def evaluate_checkpoint(
     checkpoint: str | Path,
     data_dir: str | Path | None = None,
@@ -377,8 +486,10 @@ def evaluate_checkpoint(
     device: str | torch.device | None = None,
     batch_size: int = 8,
     iou_thresholds: Sequence[float] = (0.3, 0.5),
+    thresholds: str = "devkit",
 ) -> dict[str, float]:
-    """KITTI-protocol AP of a checkpoint on a split.
+    """KITTI-protocol AP of a checkpoint on a split (``thresholds``: ``"devkit"`` or ``"all"``,
+    see :mod:`sim2radar.evaluate.ap`).
 
     Returns
     -------
@@ -392,7 +503,7 @@ def evaluate_checkpoint(
     dets = predict_frames(model, frames, batch_size)
     res = evaluate_detections(
         [f.boxes for f in frames], [d.boxes.numpy() for d in dets],
-        [d.scores.numpy() for d in dets], iou_thresholds=iou_thresholds,
+        [d.scores.numpy() for d in dets], iou_thresholds=iou_thresholds, thresholds=thresholds,
     )
     res.update(frames=float(len(frames)), gt_boxes=float(sum(len(f.boxes) for f in frames)),
                detections=float(sum(len(d.scores) for d in dets)),
