@@ -28,6 +28,7 @@ import json
 import logging
 import math
 import os
+import pickle
 import threading
 import time
 from collections.abc import Callable, Mapping, Sequence
@@ -150,7 +151,13 @@ def _read_checkpoint(path: str | Path, map_location="cpu") -> dict[str, Any]:
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"checkpoint {path} does not exist")
-    ckpt = torch.load(path, map_location=map_location, weights_only=False)
+    try:
+        # tensors and plain data only: a pickled object could run code when loaded
+        ckpt = torch.load(path, map_location=map_location, weights_only=True)
+    except pickle.UnpicklingError as exc:
+        raise ValueError(f"{path}: refused to load: the file holds objects other than tensors "
+                         "and plain data (a sim2radar checkpoint never does; it may be "
+                         f"malicious): {str(exc).splitlines()[0]}") from None
     if not isinstance(ckpt, dict) or "model" not in ckpt:
         raise ValueError(f"{path}: not a sim2radar PointPillars checkpoint (no 'model' entry)")
     return ckpt

@@ -295,3 +295,25 @@ def test_encoder_transfer_is_the_only_difference_between_conditions(tmp_path, mo
     fresh = PointPillars(cfg.model).state_dict()
     for n in params:
         torch.testing.assert_close(finals["baseline"][n], fresh[n], rtol=0, atol=0)
+
+
+def test_a_checkpoint_carrying_code_is_refused_without_running_it(tmp_path):
+    """torch.load(weights_only=False) would execute a pickled __reduce__ payload."""
+    import torch
+
+    from sim2radar.detect import DetectConfig, PointPillars
+    from sim2radar.detect.train import load_checkpoint, load_encoder_from
+
+    marker = tmp_path / "pwned"
+
+    class Payload:
+        def __reduce__(self):
+            return (open, (str(marker), "w"))
+
+    bad = tmp_path / "evil.pt"
+    torch.save({"model": {}, "config": {}, "x": Payload()}, bad)
+    for load in (lambda: load_checkpoint(bad),
+                 lambda: load_encoder_from(PointPillars(DetectConfig().model), bad)):
+        with pytest.raises(ValueError, match="refused to load"):
+            load()
+    assert not marker.exists()
