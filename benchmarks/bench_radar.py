@@ -3,6 +3,9 @@
 Figures: rays/s, seconds per frame (median after a warm-up frame that JIT-compiles the
 kernels), peak memory (resident-set growth), and the overhead ratio of ``simulate_frame`` to
 the bare Mitsuba ``ray_intersect`` of the same rays and bounces, measured in the same run.
+Also the reference radar's tracer output on the same corridor: ``trace_paths`` seconds and
+path counts with the reference model (3 bounces, directive lobes, transmission through
+plasterboard/glass/wood slabs), before and after 1 cm voxel merging.
 
     python -m benchmarks radar
     SIM2RADAR_MITSUBA_VARIANT=cuda_ad_rgb python -m benchmarks radar   # on a GPU
@@ -23,6 +26,12 @@ from sim2radar.radar import RadarScene, load_radar_config
 
 N_FRAMES = 9
 TARGET_TRIANGLES = 100_000
+#: The reference radar's tracer settings benchmarked with ``trace_paths``.
+REFERENCE_SCATTERING = {
+    "model": "directive",
+    "transmission": True,
+    "slab_thickness_m": {"plasterboard": 0.0125, "glass": 0.008, "wood": 0.04},
+}
 
 
 def _rss_mib() -> float:
@@ -67,6 +76,18 @@ def main() -> dict:
         sim_s.append(time.perf_counter() - t0)
         bare_s.append(scene.intersect_only(radar, pose)["seconds"])
         n_points.append(frame.n_points)
+    # the reference radar's paths on the same corridor (seeded: jitter + transmission draws)
+    ref = radar.with_updates(max_bounces=3, scattering=REFERENCE_SCATTERING)
+    scene.trace_paths(ref, poses[0], seed=0)  # JIT
+    path_s, n_paths = [], []
+    for i, pose in enumerate(poses[:3]):
+        t0 = time.perf_counter()
+        paths = scene.trace_paths(ref, pose, seed=i, velocity_mps=[1.0, 0.0, 0.0])
+        path_s.append(time.perf_counter() - t0)
+        n_paths.append(len(paths))
+    t0 = time.perf_counter()
+    merged = paths.merged(0.01, ref.wavelength_m)
+    merge_s = time.perf_counter() - t0
     rss1 = _rss_mib()
     peak1 = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
 
@@ -91,6 +112,12 @@ def main() -> dict:
         "overhead_ratio_median": round(sec / bare, 3),
         "overhead_ratio_of_mins": round(min(sim_s) / min(bare_s), 3),
         "points_per_frame_median": int(statistics.median(n_points)),
+        "trace_paths_s_median": round(statistics.median(path_s), 4),
+        "paths_per_frame_median": int(statistics.median(n_paths)),
+        "paths_traced_last_frame": paths.stats["n_paths_traced"],
+        "paths_pruned_last_frame": paths.stats["n_pruned"],
+        "paths_after_1cm_merge": len(merged),
+        "merge_1cm_s": round(merge_s, 3),
         "rss_growth_mib": round(rss1 - rss0, 1),
         "peak_rss_growth_mib": round(peak1 - peak0, 1),
         "frames": N_FRAMES,

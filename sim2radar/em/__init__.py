@@ -6,13 +6,17 @@ Public API::
     eta = complex_permittivity("concrete", 77e9)             # (5.24 - 0.32j)
     r_te, r_tm = reflection_coefficients("glass", 77e9, 0.3)  # half-space
     r_te, r_tm = reflection_coefficients("glass", 77e9, 0.3, thickness_m=0.006)  # slab
+    t = unpolarized_transmission("plasterboard", 77e9, 0.3, thickness_m=0.0125)  # through it
 """
 
 from sim2radar.em.fresnel import (
     fresnel_coefficients,
     reflection_coefficients,
     slab_coefficients,
+    slab_transmission_coefficients,
+    transmission_coefficients,
     unpolarized_reflection,
+    unpolarized_transmission,
 )
 from sim2radar.em.materials import (
     MATERIALS,
@@ -41,5 +45,8 @@ __all__ = [
     "normalize_material_name",
     "reflection_coefficients",
     "slab_coefficients",
+    "slab_transmission_coefficients",
+    "transmission_coefficients",
     "unpolarized_reflection",
+    "unpolarized_transmission",
 ]

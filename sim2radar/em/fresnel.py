@@ -1,4 +1,5 @@
-"""Fresnel reflection at a half-space and at a single-layer slab (ITU-R P.2040-3).
+"""Fresnel reflection at a half-space; reflection and transmission of a single-layer slab
+(ITU-R P.2040-3).
 
 Conventions
 -----------
@@ -17,13 +18,18 @@ Half-space, incident from vacuum (ITU-R P.2040-3 §2.2, eq. (31))::
     r_tm = (eta cos t - sqrt(eta - sin^2 t)) / (eta cos t + sqrt(eta - sin^2 t))
 
 Single-layer slab of thickness ``d`` in vacuum (ITU-R P.2040-3 §3, multiple internal
-reflections summed)::
+reflections summed; eqs. (43a), (43b) and (44) in the numbering that Sionna RT's
+``itu_coefficients_single_layer_slab`` cites)::
 
-    q = (2 pi d / lambda) sqrt(eta - sin^2 t)          (electrical thickness)
-    R = r (1 - e^{-j 2 q}) / (1 - r^2 e^{-j 2 q})      (r = r_te or r_tm above)
+    q = (2 pi d / lambda) sqrt(eta - sin^2 t)               eq. (44), electrical thickness
+    R = r (1 - e^{-j 2 q}) / (1 - r^2 e^{-j 2 q})           eq. (43a), r = r_te or r_tm above
+    T = (1 - r^2) e^{-j q} / (1 - r^2 e^{-j 2 q})           eq. (43b)
 
-``R -> 0`` as ``d -> 0`` and, for a lossless slab, ``R`` is periodic in ``d`` with period
-``lambda / (2 sqrt(eta - sin^2 t))``.
+``R -> 0`` and ``T -> 1`` as ``d -> 0``; for a lossless slab ``|R|^2 + |T|^2 = 1`` and ``R`` is
+periodic in ``d`` with period ``lambda / (2 sqrt(eta - sin^2 t))``; a lossy slab absorbs
+``1 - |R|^2 - |T|^2 > 0``. ``T`` is the field leaving the back face relative to the field
+arriving at the front face (the wave leaves the slab parallel to the incident direction, as
+both sides are vacuum); its phase ``-q`` is the phase delay across the slab along the normal.
 """
 
 from __future__ import annotations
@@ -36,8 +42,11 @@ from sim2radar.em.materials import complex_permittivity
 __all__ = [
     "fresnel_coefficients",
     "slab_coefficients",
+    "slab_transmission_coefficients",
     "reflection_coefficients",
+    "transmission_coefficients",
     "unpolarized_reflection",
+    "unpolarized_transmission",
 ]
 
 
@@ -78,6 +87,23 @@ def fresnel_coefficients(
     return r_te, r_tm
 
 
+def _slab_terms(
+    eta: complex | np.ndarray,
+    incidence_rad: float | np.ndarray,
+    thickness_m: float | np.ndarray,
+    frequency_hz: float,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Half-space ``r_te``, ``r_tm`` and the slab phase factor ``e^{-j q}`` (eq. (44))."""
+    d = np.asarray(thickness_m, dtype=np.float64)
+    if np.any(~np.isfinite(d)) or np.any(d < 0):
+        raise ValueError("thickness_m must be finite and >= 0")
+    r_te, r_tm = fresnel_coefficients(eta, incidence_rad)
+    wavelength_m = SPEED_OF_LIGHT_M_S / float(frequency_hz)
+    theta = np.asarray(incidence_rad, dtype=np.float64)
+    q = 2.0 * np.pi * d / wavelength_m * _csqrt(np.asarray(eta) - np.sin(theta) ** 2)  # (44)
+    return r_te, r_tm, np.exp(-1j * q)
+
+
 def slab_coefficients(
     eta: complex | np.ndarray,
     incidence_rad: float | np.ndarray,
@@ -101,17 +127,45 @@ def slab_coefficients(
     -------
     r_te, r_tm : complex128 arrays [-]
     """
-    d = np.asarray(thickness_m, dtype=np.float64)
-    if np.any(~np.isfinite(d)) or np.any(d < 0):
-        raise ValueError("thickness_m must be finite and >= 0")
-    r_te, r_tm = fresnel_coefficients(eta, incidence_rad)
-    wavelength_m = SPEED_OF_LIGHT_M_S / float(frequency_hz)
-    theta = np.asarray(incidence_rad, dtype=np.float64)
-    q = 2.0 * np.pi * d / wavelength_m * _csqrt(np.asarray(eta) - np.sin(theta) ** 2)
-    phase = np.exp(-2j * q)
+    r_te, r_tm, phase_q = _slab_terms(eta, incidence_rad, thickness_m, frequency_hz)
+    phase = phase_q**2  # e^{-j 2 q}
     out = []
     for r in (r_te, r_tm):
-        out.append(r * (1.0 - phase) / (1.0 - r**2 * phase))  # ITU-R P.2040-3 §3, slab
+        out.append(r * (1.0 - phase) / (1.0 - r**2 * phase))  # ITU-R P.2040-3, eq. (43a)
+    return out[0], out[1]
+
+
+def slab_transmission_coefficients(
+    eta: complex | np.ndarray,
+    incidence_rad: float | np.ndarray,
+    thickness_m: float | np.ndarray,
+    frequency_hz: float,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Transmission coefficients of a single homogeneous slab in vacuum (ITU-R P.2040-3 §3).
+
+    ``T = (1 - r^2) e^{-j q} / (1 - r^2 e^{-j 2 q})`` (eq. (43b)): the multiply reflected
+    waves inside the slab summed; ``T = 1`` at ``d = 0``.
+
+    Parameters
+    ----------
+    eta : complex or array
+        Complex relative permittivity of the slab [-].
+    incidence_rad : float or array
+        Angle of incidence from the normal [rad], in [0, pi/2].
+    thickness_m : float or array
+        Slab thickness [m], >= 0.
+    frequency_hz : float
+        Frequency [Hz].
+
+    Returns
+    -------
+    t_te, t_tm : complex128 arrays [-] (field behind the slab / field incident on it)
+    """
+    r_te, r_tm, phase_q = _slab_terms(eta, incidence_rad, thickness_m, frequency_hz)
+    out = []
+    for r in (r_te, r_tm):
+        r2 = r**2
+        out.append((1.0 - r2) * phase_q / (1.0 - r2 * phase_q**2))  # ITU-R P.2040-3, eq. (43b)
     return out[0], out[1]
 
 
@@ -167,3 +221,42 @@ def unpolarized_reflection(
     r_te, r_tm = reflection_coefficients(material, frequency_hz, incidence_rad, thickness_m)
     mag = np.sqrt(0.5 * (np.abs(r_te) ** 2 + np.abs(r_tm) ** 2))
     return mag * np.exp(1j * np.angle(r_te))
+
+
+def transmission_coefficients(
+    material: str,
+    frequency_hz: float,
+    incidence_rad: float | np.ndarray,
+    thickness_m: float | np.ndarray,
+) -> tuple[np.ndarray, np.ndarray]:
+    """TE/TM amplitude transmission coefficients of a slab of a named material
+    (ITU-R P.2040-3 §3, eq. (43b)); a half-space transmits nothing back into vacuum, so the
+    thickness [m] is required.
+
+    Returns
+    -------
+    t_te, t_tm : complex128 [-]
+    """
+    eta = complex_permittivity(material, frequency_hz)
+    return slab_transmission_coefficients(eta, incidence_rad, thickness_m, frequency_hz)
+
+
+def unpolarized_transmission(
+    material: str,
+    frequency_hz: float,
+    incidence_rad: float | np.ndarray,
+    thickness_m: float | np.ndarray,
+) -> np.ndarray:
+    """Slab transmission coefficient for an unpolarised wave, built like
+    :func:`unpolarized_reflection`: ``|T| = sqrt((|t_te|^2 + |t_tm|^2) / 2)``, phase of ``t_te``.
+
+    With :func:`unpolarized_reflection` of the same slab, ``|R|^2 + |T|^2 = 1`` for a lossless
+    material (both are the means of the TE and TM powers, each of which is conserved).
+
+    Returns
+    -------
+    complex128 array [-]
+    """
+    t_te, t_tm = transmission_coefficients(material, frequency_hz, incidence_rad, thickness_m)
+    mag = np.sqrt(0.5 * (np.abs(t_te) ** 2 + np.abs(t_tm) ** 2))
+    return mag * np.exp(1j * np.angle(t_te))

@@ -7,9 +7,18 @@ Public API::
     frame = simulate_frame(meshes, radar, pose=None)      # frame.points (N, 4) float32
     scene = RadarScene(meshes)                             # build once, many poses:
     frames = [scene.simulate(radar, pose) for pose in poses]
+    paths = scene.trace_paths(radar, pose, seed=0)         # PathSet for signal-level synthesis
 """
 
-from sim2radar.radar.binning import Accumulator, accumulate, bin_indices
+from sim2radar.radar.binning import (
+    Accumulator,
+    ArrayGeometry,
+    accumulate,
+    array_geometry,
+    beamform,
+    bin_indices,
+    deposit,
+)
 from sim2radar.radar.config import (
     DetectionConfig,
     RadarConfig,
@@ -18,12 +27,28 @@ from sim2radar.radar.config import (
     load_radar_config,
     preset_names,
 )
-from sim2radar.radar.detection import ca_cfar_mask, detect_points, spherical_to_cartesian
+from sim2radar.radar.detection import (
+    ca_cfar_mask,
+    cell_noise_power,
+    detect_points,
+    direction_to_cartesian,
+    spherical_to_cartesian,
+)
 from sim2radar.radar.frame import RadarFrame, simulate_frame, simulate_scene_frame
-from sim2radar.radar.raytrace import RadarScene, TraceResult, check_pose, merge_meshes
+from sim2radar.radar.paths import PATH_KINDS, PathSet
+from sim2radar.radar.raytrace import (
+    RadarScene,
+    TraceResult,
+    check_pose,
+    face_object_ids,
+    merge_meshes,
+)
 
 __all__ = [
     "Accumulator",
+    "ArrayGeometry",
+    "PATH_KINDS",
+    "PathSet",
     "DetectionConfig",
     "RadarConfig",
     "RadarConfigError",
@@ -32,10 +57,16 @@ __all__ = [
     "ScatteringConfig",
     "TraceResult",
     "accumulate",
+    "array_geometry",
+    "beamform",
     "bin_indices",
     "ca_cfar_mask",
+    "cell_noise_power",
     "check_pose",
+    "deposit",
     "detect_points",
+    "direction_to_cartesian",
+    "face_object_ids",
     "load_radar_config",
     "merge_meshes",
     "preset_names",

@@ -22,7 +22,7 @@ import json
 import math
 from functools import cached_property
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
@@ -37,6 +37,9 @@ __all__ = [
     "SignalChainConfig",
     "FIDELITIES",
     "ScatteringConfig",
+    "SCATTERING_MODELS",
+    "DEFAULT_LOBE_EXPONENTS",
+    "DEFAULT_SCATTERING_COEFFICIENTS",
     "RadarConfig",
     "RadarConfigError",
     "load_radar_config",
@@ -67,6 +70,33 @@ DEFAULT_SCATTERING_COEFFICIENTS: dict[str, float] = {
     "unknown": 0.4,
 }
 
+#: Default lobe exponents ``alpha_R`` of the directive scattering model (Degli-Esposti et al.,
+#: IEEE TAP 55(1), 2007, "directive model": scattered intensity ~ ((1 + cos psi_R) / 2)^alpha_R
+#: around the specular direction; 0 = isotropic over the half-space, larger = narrower lobe).
+#: HEURISTIC values, not fitted at 77 GHz: Degli-Esposti et al. fitted alpha_R for building
+#: walls at 1.3 GHz and Pascual-Garcia et al. (IEEE Access 4, 2016) for indoor materials at
+#: 60 GHz; these numbers only encode the ordering "smoother surface (glass, metal sheet,
+#: marble) -> narrower lobe, rough masonry and fabric -> broad lobe". Refit them from
+#: measurements (or the papers above) before using the reference radar for quantitative work.
+DEFAULT_LOBE_EXPONENTS: dict[str, float] = {
+    "metal": 10.0,
+    "glass": 20.0,
+    "wood": 6.0,
+    "plasterboard": 6.0,
+    "ceramic_tile": 8.0,
+    "concrete": 3.0,
+    "brick": 3.0,
+    "fabric": 1.0,
+    "plastic": 6.0,
+    "marble": 10.0,
+    "carpet_tile": 1.0,
+    "vinyl_tile": 6.0,
+    "unknown": 4.0,
+}
+
+#: Diffuse scattering models a ScatteringConfig can select (``model``).
+SCATTERING_MODELS = ("lambertian", "directive")
+
 
 class RadarConfigError(ValueError):
     """An invalid radar configuration; the message names the source, the field and the fix."""
@@ -77,37 +107,83 @@ class _Frozen(BaseModel):
 
 
 class DetectionConfig(_Frozen):
-    """Peak detection on the range-azimuth-elevation power cube.
+    """Peak detection (:mod:`sim2radar.radar.detection`): on the range-azimuth map of the virtual
+    array's complete row, each peak's elevation then read from the 2D beam (TI's cascade DOA).
 
-    CA-CFAR along range (per azimuth/elevation beam): a cell is a detection when
-    ``P > alpha * (mean(training cells) + noise)`` with ``alpha = 10**(threshold_db/10)``
-    (Richards, *Fundamentals of Radar Signal Processing*, §6.5), its power exceeds the
-    absolute ``noise_floor_db`` by ``min_snr_db``, and (``peak_grouping``) it is a local
-    maximum of its 3x3x3 neighbourhood.
+    CA-CFAR along range (per azimuth beam): a cell is a detection when
+    ``P > alpha * (mean(training cells) + N)`` with ``alpha = 10**(threshold_db/10)``
+    (Richards, *Fundamentals of Radar Signal Processing*, §6.5), ``P > N * 10**(min_snr_db/10)``
+    and (``peak_grouping``) it is a local maximum of its neighbourhood (3 cells per axis);
+    ``N`` is the map's noise, ``N0`` times ``N_virtual / n`` for the ``n`` channels it uses.
+    Peaks more than ``sidelobe_level_db`` below the strongest peak of their range bin are taken
+    for sidelobes of the array response and dropped, like the ``sidelobeLevel_dB_azim`` rule
+    of TI's cascade DOA (whose default, 1 dB per range-Doppler cell, would leave about one
+    point per range bin here, where no Doppler axis separates directions). The default 20 dB
+    lies below the -13.3 dB first sidelobe of a filled row with margin (a heuristic).
+
+    ``N0`` is the receiver noise power per cell. By default (``noise_floor_db: null``) it is
+    derived from the preset's ``hardware`` link budget
+    (:func:`sim2radar.radar.link_budget.noise_power_per_cell`: ``k T F f_s`` over the echo
+    scale and the coherent processing gain); a number overrides it [dB re the simulator's
+    ``|a|^2`` unit]. Receiver noise is added to the simulated channels only when the frame has a
+    seed and ``add_noise`` is on: ``seed=None`` stays deterministic and noise-free (the
+    thresholds still use ``N0``).
     """
 
     cfar_guard_cells: int = Field(2, ge=0, le=64, description="guard cells each side [bins]")
     cfar_training_cells: int = Field(8, ge=1, le=256, description="training cells each side [bins]")
     cfar_threshold_db: float = Field(10.0, ge=0.0, le=60.0, description="CFAR scale alpha [dB]")
-    noise_floor_db: float = Field(
-        -110.0, description="receiver noise power per cell [dB re simulator power unit]"
+    noise_floor_db: float | None = Field(
+        None,
+        description="receiver noise power per cell [dB re simulator power unit]; "
+        "None = derived from the hardware link budget",
+    )
+    add_noise: bool = Field(
+        True, description="add receiver noise to frames simulated with a seed (seed=None: never)"
     )
     min_snr_db: float = Field(10.0, ge=0.0, description="minimum cell SNR over the noise [dB]")
-    peak_grouping: bool = Field(True, description="keep only local maxima (3x3x3)")
+    peak_grouping: bool = Field(True, description="keep only local maxima (3 cells per axis)")
+    sidelobe_level_db: float | None = Field(
+        20.0,
+        ge=0.0,
+        le=100.0,
+        description="drop azimuth peaks more than this below the strongest of their range bin "
+        "(array sidelobes) [dB]; None keeps all",
+    )
     max_points: int | None = Field(None, ge=1, description="keep the strongest N points")
+
+    @field_validator("noise_floor_db")
+    @classmethod
+    def _check_noise_floor(cls, value: float | None) -> float | None:
+        if value is not None and not (math.isfinite(value) and -300.0 < value < 100.0):
+            raise ValueError(f"noise_floor_db must be a finite dB value or null, got {value}")
+        return value
 
 
 class ScatteringConfig(_Frozen):
-    """Surface model per material.
+    """Surface model per material (:mod:`sim2radar.radar.returns` has the equations).
 
     ``coefficients``: effective-roughness (ER) scattering coefficient ``S`` in [0, 1]
     (Degli-Esposti et al., IEEE TAP 55(1), 2007): a fraction ``S^2`` of the reflected power is
-    scattered diffusely (Lambertian), ``1 - S^2`` stays in the specular (physical-optics)
-    component. Materials not listed use ``default``.
+    scattered diffusely, ``1 - S^2`` stays in the specular (physical-optics) component.
+    Materials not listed use ``default`` (values: :data:`DEFAULT_SCATTERING_COEFFICIENTS`,
+    heuristics).
+
+    ``model``: the diffuse pattern. ``"lambertian"`` (default; ``cos(theta_s) / pi``) or
+    ``"directive"``: the ER "directive model" of the same paper, intensity
+    ``~ ((1 + cos psi_R) / 2)^alpha_R`` around the specular direction, normalised so the total
+    scattered power is ``S^2 |Gamma|^2`` of the power incident on the facet. ``lobe_exponent``
+    gives ``alpha_R`` per material (>= 0; 0 = uniform over the half-space), ``lobe_default``
+    the rest (values: :data:`DEFAULT_LOBE_EXPONENTS`, heuristics).
 
     ``slab_thickness_m``: materials listed here reflect as a single homogeneous slab of that
     thickness [m] in air (ITU-R P.2040-3 §3, multiple internal reflections) instead of a
     half-space, e.g. ``{glass: 0.008, plasterboard: 0.0125}``. Empty by default.
+
+    ``transmission``: rays may pass through slab materials (slab transmission coefficient,
+    ITU-R P.2040-3 eq. (43b)); one seeded reflect-or-transmit choice per ray and interaction.
+    A transmitting object is one slab: the ray leaves through its back face without a second
+    interaction. Half-space materials (not in ``slab_thickness_m``) never transmit.
     """
 
     default: float = Field(0.4, ge=0.0, le=1.0)
@@ -115,6 +191,12 @@ class ScatteringConfig(_Frozen):
         default_factory=lambda: dict(DEFAULT_SCATTERING_COEFFICIENTS)
     )
     slab_thickness_m: dict[str, float] = Field(default_factory=dict)
+    model: Literal["lambertian", "directive"] = Field(
+        "lambertian", description="diffuse pattern: 'lambertian' or 'directive' (ER model)"
+    )
+    lobe_exponent: dict[str, float] = Field(default_factory=lambda: dict(DEFAULT_LOBE_EXPONENTS))
+    lobe_default: float = Field(4.0, ge=0.0, le=1000.0, description="alpha_R of other materials")
+    transmission: bool = Field(False, description="rays pass through slab materials")
 
     @staticmethod
     def _canonical(name: str) -> str:
@@ -143,6 +225,17 @@ class ScatteringConfig(_Frozen):
             out[cls._canonical(name)] = float(d)
         return out
 
+    @field_validator("lobe_exponent")
+    @classmethod
+    def _check_lobe(cls, value: dict[str, float]) -> dict[str, float]:
+        out = {}
+        for name, a in value.items():
+            if not (math.isfinite(float(a)) and 0.0 <= float(a) <= 1000.0):
+                raise ValueError(f"lobe exponent alpha_R for {name!r} must lie in [0, 1000], "
+                                 f"got {a}")
+            out[cls._canonical(name)] = float(a)
+        return out
+
     def coefficient(self, material: str) -> float:
         """S for ``material`` (its own entry, else ``default``)."""
         return float(self.coefficients.get(get_material(material).name, self.default))
@@ -150,6 +243,14 @@ class ScatteringConfig(_Frozen):
     def thickness_m(self, material: str) -> float | None:
         """Slab thickness [m] of ``material``, or ``None`` for a half-space."""
         return self.slab_thickness_m.get(get_material(material).name)
+
+    def lobe(self, material: str) -> float:
+        """Directive-model lobe exponent ``alpha_R`` of ``material`` (else ``lobe_default``)."""
+        return float(self.lobe_exponent.get(get_material(material).name, self.lobe_default))
+
+    def transmits(self, material: str) -> bool:
+        """Whether rays may pass through ``material`` (``transmission`` on and a slab)."""
+        return bool(self.transmission and self.thickness_m(material) is not None)
 
 
 #: Simulation fidelity levels a RadarConfig can select (``fidelity``): the Mitsuba ray tracer
@@ -165,7 +266,9 @@ class HardwareConfig(_Frozen):
     Used to derive the receiver noise (``k T B F``) relative to the echo power, for both
     fidelity levels (:mod:`sim2radar.radar.link_budget`). Element patterns are one-way power
     patterns ``cos^q`` in azimuth and elevation with the given -3 dB full widths (``q`` from the
-    width), applied on transmit and on receive by the signal-level simulator.
+    width), applied on transmit and on receive by the signal-level simulator, which also
+    applies the IF chain: a first-order high-pass (``if_highpass_hz``) and the decimation
+    filter's band edge (``if_bandwidth_fraction`` of the complex sampling rate).
     """
 
     tx_power_dbm: float = Field(12.0, ge=-30.0, le=40.0,
@@ -180,42 +283,104 @@ class HardwareConfig(_Frozen):
                                     description="element -3 dB beamwidth in azimuth [deg]")
     elevation_hpbw_deg: float = Field(30.0, gt=0.0, le=180.0,
                                       description="element -3 dB beamwidth in elevation [deg]")
+    if_highpass_hz: float | None = Field(
+        None, gt=0.0, description="IF high-pass corner [Hz] (first order; None: off). "
+        "AWR2243 HPF1 options: 175, 235, 350, 700 kHz")
+    if_bandwidth_fraction: float = Field(
+        0.9, gt=0.0, le=1.0, description="usable IF band as a fraction of the complex sampling "
+        "rate; beat frequencies beyond it are removed by the decimation filter")
 
 
 class SignalChainConfig(_Frozen):
     """The signal-level simulator's synthesis, impairments and processing chain
-    (``fidelity: signal``; TI's cascade MIMO chain is the model). Owned by
+    (``fidelity: signal``; TI's cascade MIMO chain, TIDEP-01012, is the model). Owned by
     :mod:`sim2radar.radar.fmcw` (synthesis) and :mod:`sim2radar.radar.processing` (chain);
-    see there for every field's meaning and source."""
+    see there for every formula and its source.
 
-    synthesis: str = Field("frequency", description="'time' (per-sample IF) or 'frequency' "
-                           "(range spectrum directly; equal within 0.1 dB on a point target)")
-    doppler: str = Field("integrated", description="'integrated' (static scene: one coherent "
-                         "chirp sum per channel) or 'full' (every chirp, Doppler FFT)")
-    range_window: str = "hann"
-    doppler_window: str = "hann"
-    azimuth_window: str = "none"
-    azimuth_fft_size: int = Field(256, ge=16, le=4096)
-    elevation_step_deg: float = Field(0.5, gt=0.0, le=10.0)
-    cfar_kind: str = Field("ca", description="'ca' (cell averaging) or 'os' (ordered statistic)")
-    cfar_domain: str = Field("range-azimuth", description="'range-azimuth' or 'range-doppler'")
-    cfar_guard_cells: tuple[int, int] = (2, 2)
-    cfar_training_cells: tuple[int, int] = (8, 4)
-    cfar_pfa: float = Field(1e-4, gt=0.0, lt=1.0, description="design false-alarm rate")
-    cfar_os_rank: float = Field(0.75, gt=0.0, le=1.0,
-                                description="OS-CFAR rank as a fraction of the training cells")
-    peak_grouping: bool = True
-    max_points: int | None = Field(None, ge=1)
+    Two-element tuples are ``(range, other)``: ``other`` is the azimuth axis for
+    ``cfar_domain: range-azimuth`` and the Doppler axis for ``range-doppler``.
+    """
+
+    # -- synthesis (sim2radar.radar.fmcw) ------------------------------------------------
+    synthesis: Literal["time", "frequency"] = Field(
+        "frequency", description="'time': every IF sample of every path evaluated directly "
+        "(the reference); 'frequency': each path's tone gridded onto an oversampled spectrum "
+        "and inverse-FFT'd (NUFFT; P x C x 7 instead of P x C x N_adc operations), equal within "
+        "0.1 dB on a point target")
+    doppler: Literal["integrated", "full"] = Field(
+        "integrated", description="'integrated': no per-chirp synthesis, the Doppler-windowed "
+        "coherent sum over chirps (the zero-Doppler bin; static scenes); 'full': every chirp, "
+        "Doppler FFT, TDM phase compensation")
+    tx_order: tuple[int, ...] | None = Field(
+        None, description="TDM firing order within a loop: 0-based indices into "
+        "tx_antennas_half_wl (None: list order)")
     adc_bits: int | None = Field(None, ge=2, le=24, description="ADC quantisation (None: off)")
-    tx_rx_leakage_db: float | None = Field(None, description="TX->RX coupling leakage [dB re "
-                                           "the transmit power] (None: off)")
-    channel_gain_error_db: float = Field(0.0, ge=0.0, description="per-channel gain error std [dB]")
-    channel_phase_error_deg: float = Field(0.0, ge=0.0,
-                                           description="per-channel phase error std [deg]")
-    mutual_coupling_db: float | None = Field(None, description="coupling to each neighbouring "
-                                             "element [dB] (None: off)")
+    adc_full_scale_db: float = Field(
+        60.0, ge=0.0, le=140.0, description="ADC full scale per I/Q rail above the thermal-noise "
+        "rms per rail [dB] (the IF gain setting; signals beyond it clip)")
+    tx_rx_leakage_db: float | None = Field(
+        None, le=0.0, description="TX->RX coupling leakage [dB re the transmit power] (None: off)")
+    channel_gain_error_db: float = Field(0.0, ge=0.0, le=10.0,
+                                         description="per-virtual-channel gain error std [dB]")
+    channel_phase_error_deg: float = Field(0.0, ge=0.0, le=180.0,
+                                           description="per-virtual-channel phase error std [deg]")
+    mutual_coupling_db: float | None = Field(
+        None, le=0.0, description="coupling between elements lambda/2 apart [dB] (None: off)")
     impairment_seed: int = Field(0, description="seed of the fixed per-channel errors (a board's "
                                  "calibration residue, the same every frame)")
+    # -- processing (sim2radar.radar.processing) ------------------------------------------
+    range_window: Literal["none", "hann", "hamming", "blackman"] = "hann"
+    doppler_window: Literal["none", "hann", "hamming", "blackman"] = "hann"
+    azimuth_window: Literal["none", "hann", "hamming", "blackman"] = "none"
+    azimuth_fft_size: int = Field(256, ge=16, le=4096,
+                                  description="zero-padded azimuth FFT length [bins]")
+    elevation_step_deg: float = Field(0.5, gt=0.0, le=10.0,
+                                      description="elevation beamforming scan step [deg]")
+    cfar_kind: Literal["ca", "os"] = Field("ca", description="'ca' (cell averaging) or 'os' "
+                                           "(ordered statistic)")
+    cfar_domain: Literal["range-azimuth", "range-doppler"] = Field(
+        "range-azimuth", description="2-D CFAR plane: 'range-azimuth' (per Doppler bin) or "
+        "'range-doppler' (power summed over virtual channels, then azimuth peaks per detection)")
+    cfar_guard_cells: tuple[int, int] = Field((2, 2), description="guard cells each side [bins]")
+    cfar_training_cells: tuple[int, int] = Field((8, 4),
+                                                 description="training cells each side [bins]")
+    cfar_pfa: float = Field(1e-4, gt=0.0, lt=0.5, description="design false-alarm rate per cell")
+    cfar_os_rank: float = Field(0.75, gt=0.0, le=1.0,
+                                description="OS-CFAR rank as a fraction of the training cells")
+    angle_sidelobe_db: float = Field(
+        10.0, gt=0.0, le=60.0, description="range-doppler domain: azimuth peaks within this many "
+        "dB of a detection's strongest are points too [dB]")
+    doppler_sidelobe_db: float = Field(
+        20.0, gt=0.0, le=80.0, description="full Doppler, range-azimuth: a point's Doppler bin "
+        "must be within this many dB of the strongest of its range-azimuth cell (the Hann "
+        "window's -31 dB Doppler sidelobes of strong echoes are not targets) [dB]")
+    min_range_m: float = Field(
+        0.0, ge=0.0, description="no detections nearer than this [m] (TX->RX leakage and the "
+        "IF high-pass region; TI's chains skip the first range bins likewise)")
+    peak_grouping: bool = Field(True, description="keep only local maxima (3x3, or 3x3x3 with "
+                                "Doppler)")
+    max_points: int | None = Field(None, ge=1, description="keep the strongest N points")
+
+    @field_validator("cfar_guard_cells")
+    @classmethod
+    def _check_guard(cls, value: tuple[int, int]) -> tuple[int, int]:
+        if min(value) < 0:
+            raise ValueError(f"guard cells must be >= 0, got {value}")
+        return value
+
+    @field_validator("cfar_training_cells")
+    @classmethod
+    def _check_training(cls, value: tuple[int, int]) -> tuple[int, int]:
+        if min(value) < 0 or max(value) < 1:
+            raise ValueError(f"training cells must be >= 0 with at least one > 0, got {value}")
+        return value
+
+    @field_validator("tx_order")
+    @classmethod
+    def _check_tx_order(cls, value: tuple[int, ...] | None) -> tuple[int, ...] | None:
+        if value is not None and (sorted(value) != list(range(len(value)))):
+            raise ValueError(f"tx_order must be a permutation of 0..N_tx-1, got {list(value)}")
+        return value
 
 
 class RadarConfig(_Frozen):
@@ -246,7 +411,9 @@ class RadarConfig(_Frozen):
     max_bounces : int
         Specular bounces followed (1 = direct returns only).
     azimuth_bin_deg, elevation_bin_deg : float | None
-        Angular bin widths of the cube [deg]; default the array's resolution.
+        Angular bin widths of the cube at boresight [deg]; default the array's resolution.
+        Bins are uniform in ``u = sin(angle)`` and centred on boresight (an odd count), so a bin
+        spans ``width / cos(angle)`` off boresight, as the array's resolution does.
     """
 
     name: str = "custom"
@@ -383,25 +550,50 @@ class RadarConfig(_Frozen):
     def elevation_fov_rad(self) -> float:
         return math.radians(self.elevation_fov_deg)
 
+    @staticmethod
+    def _u_bins(fov_rad: float, width_u: float) -> np.ndarray:
+        """Bin centres ``k * width_u`` (k = -K..K) covering ``|u| <= sin(fov / 2)``, ``|u| <= 1``."""
+        u_max = math.sin(min(0.5 * fov_rad, 0.5 * math.pi))
+        k = max(0, math.ceil(u_max / width_u - 0.5 - 1e-9))
+        k = min(k, math.floor(1.0 / width_u + 1e-9))
+        return np.arange(-k, k + 1, dtype=np.float64) * width_u
+
+    @property
+    def azimuth_bin_u(self) -> float:
+        """Azimuth bin width in ``u = sin(azimuth)`` [-] (the boresight width in rad)."""
+        if self.azimuth_bin_deg:
+            return math.radians(self.azimuth_bin_deg)
+        return self.azimuth_resolution_rad
+
+    @property
+    def elevation_bin_u(self) -> float:
+        """Elevation bin width in ``u = sin(elevation)`` [-] (the boresight width in rad)."""
+        if self.elevation_bin_deg:
+            return math.radians(self.elevation_bin_deg)
+        return self.elevation_resolution_rad
+
+    @property
+    def azimuth_bins_u(self) -> np.ndarray:
+        """(n_az,) float64 — azimuth bin centres in ``u = cos(el) sin(az)`` [-] (+ = left),
+        uniform, one centred on boresight. A beam of the virtual array has a constant width in
+        ``u``, so these bins follow its ``1 / cos`` broadening off boresight."""
+        return self._u_bins(self.azimuth_fov_rad, self.azimuth_bin_u)
+
+    @property
+    def elevation_bins_u(self) -> np.ndarray:
+        """(n_el,) float64 — elevation bin centres in ``u = sin(el)`` [-] (+ = up), uniform,
+        one centred on boresight."""
+        return self._u_bins(self.elevation_fov_rad, self.elevation_bin_u)
+
     @property
     def n_azimuth_bins(self) -> int:
-        """Azimuth bins covering the FOV, each no wider than the bin width."""
-        width = (
-            math.radians(self.azimuth_bin_deg)
-            if self.azimuth_bin_deg
-            else self.azimuth_resolution_rad
-        )
-        return max(1, math.ceil(self.azimuth_fov_rad / width - 1e-9))
+        """Azimuth bins covering the FOV (odd: one centred on boresight)."""
+        return len(self.azimuth_bins_u)
 
     @property
     def n_elevation_bins(self) -> int:
-        """Elevation bins covering the FOV, each no wider than the bin width."""
-        width = (
-            math.radians(self.elevation_bin_deg)
-            if self.elevation_bin_deg
-            else self.elevation_resolution_rad
-        )
-        return max(1, math.ceil(self.elevation_fov_rad / width - 1e-9))
+        """Elevation bins covering the FOV (odd: one centred on boresight)."""
+        return len(self.elevation_bins_u)
 
     @property
     def range_bins_m(self) -> np.ndarray:
@@ -410,17 +602,13 @@ class RadarConfig(_Frozen):
 
     @property
     def azimuth_bins_rad(self) -> np.ndarray:
-        """(n_az,) float32 — azimuth bin centres [rad], uniform over the FOV (+ = left)."""
-        n = self.n_azimuth_bins
-        w = self.azimuth_fov_rad / n
-        return (-0.5 * self.azimuth_fov_rad + (np.arange(n) + 0.5) * w).astype(np.float32)
+        """(n_az,) float32 — azimuth bin centres ``arcsin(u)`` [rad] (+ = left; at el = 0)."""
+        return np.arcsin(self.azimuth_bins_u).astype(np.float32)
 
     @property
     def elevation_bins_rad(self) -> np.ndarray:
-        """(n_el,) float32 — elevation bin centres [rad], uniform over the FOV (+ = up)."""
-        n = self.n_elevation_bins
-        w = self.elevation_fov_rad / n
-        return (-0.5 * self.elevation_fov_rad + (np.arange(n) + 0.5) * w).astype(np.float32)
+        """(n_el,) float32 — elevation bin centres ``arcsin(u)`` [rad] (+ = up)."""
+        return np.arcsin(self.elevation_bins_u).astype(np.float32)
 
     @property
     def ray_grid_shape(self) -> tuple[int, int]:

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import dataclasses
-import math
 import time
 from collections.abc import Sequence
 from typing import Any
@@ -11,11 +10,15 @@ from typing import Any
 import numpy as np
 
 from sim2radar.mesh import MaterialMesh
+from sim2radar.radar.binning import add_receiver_noise, array_geometry, beamform
 from sim2radar.radar.config import RadarConfig, load_radar_config
-from sim2radar.radar.detection import detect_points
+from sim2radar.radar.detection import cell_noise_power, detect_points
 from sim2radar.radar.raytrace import RadarScene
 
 __all__ = ["RadarFrame", "simulate_frame", "simulate_scene_frame"]
+
+#: Second seed word of the receiver-noise random stream (distinct from the ray jitter's).
+NOISE_STREAM = 0x4E01
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -27,19 +30,30 @@ class RadarFrame:
     points : (N, 4) float32
         x, y, z [m] in the radar frame (x forward, y left, z up), intensity [dB]
         (``10 log10(4 pi |a|^2)`` = RCS [dBsm] - 40 log10(range [m])), strongest first.
+    doppler_mps : (N,) float32
+        Radial velocity of each point [m/s] (positive = receding). The ray tracer has no
+        Doppler axis (zeros); the signal-level radar measures it.
     cube : (n_range, n_az, n_el) complex64 or None
-        Coherent range-azimuth-elevation returns (``return_cube=True``), noise included
-        when a seed was given.
+        Beamformed range-azimuth-elevation returns of the virtual array (``return_cube=True``;
+        :mod:`sim2radar.radar.binning`), receiver noise included when a seed was given.
+        ``None`` at ``fidelity: signal`` (use :func:`sim2radar.radar.signal.simulate_signal_frame`
+        with ``return_cubes=True`` for its IF samples and range-Doppler cube).
     range_bins_m : (n_range,) float32 — range bin centres [m].
-    azimuth_bins_rad : (n_az,) float32 — azimuth bin centres [rad] (+ = left).
-    elevation_bins_rad : (n_el,) float32 — elevation bin centres [rad] (+ = up).
+    azimuth_bins_rad : (n_az,) float32 — azimuth beam centres [rad] (+ = left), uniform in
+        ``sin`` (one on boresight).
+    elevation_bins_rad : (n_el,) float32 — elevation beam centres [rad] (+ = up), uniform in
+        ``sin``.
     stats : dict
-        ``n_rays``, ``n_hits`` (first bounce), ``hits_per_bounce``, ``n_points``,
-        ``n_triangles``, ``variant``, ``seed`` and ``seconds`` per stage
-        (``rays``, ``trace``, ``readback``, ``detect``, ``total``).
+        ``fidelity``; at ``raytrace``: ``n_rays``, ``n_hits`` (first bounce), ``hits_per_bounce``, ``n_points``,
+        ``n_triangles``, ``variant``, ``seed``, ``noise_power_per_cell`` (N0 [sim. |a|^2]),
+        ``noise_added`` and ``seconds`` per stage (``rays``, ``trace``, ``readback``,
+        ``beamform``, ``detect``, ``total``); at ``signal``: ``n_paths``, the signal chain's
+        stats (:class:`~sim2radar.radar.signal.SignalFrame`) and ``seconds`` (``trace``,
+        ``signal``, ``total``).
     """
 
     points: np.ndarray
+    doppler_mps: np.ndarray
     cube: np.ndarray | None
     range_bins_m: np.ndarray
     azimuth_bins_rad: np.ndarray
@@ -70,24 +84,30 @@ def simulate_scene_frame(
     seed: int | None = None,
 ) -> RadarFrame:
     """Simulate one frame of a pre-built :class:`RadarScene` (see :func:`simulate_frame`)."""
+    if radar.fidelity == "signal":
+        return _simulate_signal_scene_frame(scene, radar, pose, seed=seed)
     t0 = time.perf_counter()
     result = scene.trace(radar, pose, seed=seed)
     t1 = time.perf_counter()
-    shape = (radar.n_range_bins, radar.n_azimuth_bins, radar.n_elevation_bins)
-    cube = result.accumulator.cube(shape)
-    if seed is not None:
-        # receiver noise: circular complex Gaussian, power N0 per cell
-        rng = np.random.default_rng(seed)
-        sigma = math.sqrt(10.0 ** (radar.detection.noise_floor_db / 10.0) / 2.0)
-        cube = cube + (
-            sigma * (rng.standard_normal(shape) + 1j * rng.standard_normal(shape))
-        ).astype(np.complex64)
-    points = detect_points(cube, result.accumulator, radar)
+    geom = array_geometry(radar)
+    aperture = result.accumulator.aperture(geom)
+    n0 = cell_noise_power(radar)
+    noise_added = seed is not None and radar.detection.add_noise
+    if noise_added:
+        # receiver noise per virtual channel (binning.add_receiver_noise), from its own stream
+        # (the ray jitter draws from default_rng(seed))
+        rng = np.random.default_rng([int(seed), NOISE_STREAM])
+        aperture = add_receiver_noise(aperture, geom, n0, rng)
+    cube = beamform(aperture, geom) if return_cube else None
     t2 = time.perf_counter()
+    points = detect_points(cube, result.accumulator, radar, aperture=aperture)
+    t3 = time.perf_counter()
     seconds = dict(result.seconds)
-    seconds["detect"] = t2 - t1
-    seconds["total"] = t2 - t0
+    seconds["beamform"] = t2 - t1
+    seconds["detect"] = t3 - t2
+    seconds["total"] = t3 - t0
     stats = {
+        "fidelity": radar.fidelity,
         "n_rays": result.n_rays,
         "n_hits": result.hits_per_bounce[0] if result.hits_per_bounce else 0,
         "hits_per_bounce": list(result.hits_per_bounce),
@@ -95,13 +115,51 @@ def simulate_scene_frame(
         "n_triangles": scene.n_triangles,
         "variant": scene.variant,
         "seed": seed,
+        "noise_power_per_cell": n0,
+        "noise_added": noise_added,
         "seconds": seconds,
     }
     return RadarFrame(
         points=points,
-        cube=cube if return_cube else None,
+        doppler_mps=np.zeros(len(points), np.float32),
+        cube=cube,
         range_bins_m=radar.range_bins_m,
         azimuth_bins_rad=radar.azimuth_bins_rad,
+        elevation_bins_rad=radar.elevation_bins_rad,
+        stats=stats,
+    )
+
+
+def _simulate_signal_scene_frame(
+    scene: RadarScene, radar: RadarConfig, pose: np.ndarray | None, *, seed: int | None
+) -> RadarFrame:
+    """``fidelity: signal``: trace propagation paths, synthesise IF samples, run the chain."""
+    from sim2radar.radar.signal import simulate_signal_frame
+
+    t0 = time.perf_counter()
+    paths = scene.trace_paths(radar, pose, seed=seed)
+    t1 = time.perf_counter()
+    sf = simulate_signal_frame(paths, radar, seed=seed)
+    t2 = time.perf_counter()
+    stats = {
+        "fidelity": radar.fidelity,
+        "n_paths": int(len(paths)),
+        "n_points": sf.n_points,
+        "n_triangles": scene.n_triangles,
+        "variant": scene.variant,
+        **{k: v for k, v in sf.stats.items() if not k.startswith("seconds")},
+        "seed": seed,
+        "seconds": {"trace": t1 - t0, "signal": t2 - t1, "total": t2 - t0,
+                    **{k.removeprefix("seconds_"): v for k, v in sf.stats.items()
+                       if k.startswith("seconds_") and k != "seconds_total"}},
+    }
+    points = np.ascontiguousarray(sf.points[:, :4], dtype=np.float32)
+    return RadarFrame(
+        points=points,
+        doppler_mps=np.ascontiguousarray(sf.points[:, 4], dtype=np.float32),
+        cube=None,
+        range_bins_m=np.asarray(sf.range_m, np.float32),
+        azimuth_bins_rad=np.arcsin(np.clip(sf.azimuth_sin, -1.0, 1.0)).astype(np.float32),
         elevation_bins_rad=radar.elevation_bins_rad,
         stats=stats,
     )
@@ -130,9 +188,12 @@ def simulate_frame(
     return_cube : bool
         Also return the complex (n_range, n_az, n_el) cube.
     seed : int, optional
-        ``None``: deterministic regular ray grid and no random receiver noise. An integer
-        jitters the rays within their grid cells, re-draws the diffuse speckle phases and adds
-        complex Gaussian receiver noise at ``detection.noise_floor_db`` — reproducibly.
+        ``None``: deterministic regular ray grid, fixed speckle phases and no receiver noise
+        (detection thresholds still use the noise level). An integer jitters the rays within
+        their grid cells, re-draws the speckle phases and (``detection.add_noise``, default on)
+        adds complex Gaussian receiver noise to every virtual channel at the level of
+        :func:`sim2radar.radar.detection.cell_noise_power` (the hardware link budget unless
+        ``detection.noise_floor_db`` overrides it) — reproducibly.
 
     Returns
     -------

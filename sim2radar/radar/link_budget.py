@@ -22,7 +22,10 @@ is the result of that processing in ``|a|^2`` units, so its receiver noise per c
 
 Element patterns: one-way power patterns ``g(theta) = cos(theta)^q`` in each plane, ``q`` such
 that ``g = 1/2`` at half the -3 dB beamwidth (a common fit to patch-antenna patterns, e.g.
-Balanis, *Antenna Theory*, 4th ed., §6.10 cos^q element model); zero beyond 90 deg.
+Balanis, *Antenna Theory*, 4th ed., §6.10 cos^q element model); zero beyond 90 deg. The
+signal-level simulator applies them per path: the TX pattern in the path's departure direction,
+the RX pattern in its arrival direction (:func:`two_way_pattern_gain`), both seen from the
+array's phase centre (the radar-frame origin).
 """
 
 from __future__ import annotations
@@ -35,7 +38,10 @@ from sim2radar.constants import BOLTZMANN_J_K
 from sim2radar.radar.config import RadarConfig
 
 __all__ = [
+    "direction_angles",
     "echo_power_scale_w",
+    "transmit_power_w",
+    "two_way_pattern_gain",
     "noise_power_w",
     "processing_gain",
     "noise_power_per_cell",
@@ -49,11 +55,16 @@ def _db(x_db: float) -> float:
     return 10.0 ** (x_db / 10.0)
 
 
+def transmit_power_w(radar: RadarConfig) -> float:
+    """Output power of one transmitter ``P_t`` [W] (``hardware.tx_power_dbm``)."""
+    return 1e-3 * _db(radar.hardware.tx_power_dbm)
+
+
 def echo_power_scale_w(radar: RadarConfig) -> float:
     """Received power [W] per unit ``|a|^2`` at boresight: ``P_t G_t G_r lambda^2 / ((4 pi)^2
     L_sys)`` (radar equation, Richards eq. (2.17))."""
     hw = radar.hardware
-    p_t = 1e-3 * _db(hw.tx_power_dbm)
+    p_t = transmit_power_w(radar)
     return (p_t * _db(hw.tx_gain_dbi) * _db(hw.rx_gain_dbi) * radar.wavelength_m**2
             / ((4.0 * math.pi) ** 2 * _db(hw.system_loss_db)))
 
@@ -106,3 +117,37 @@ def element_power_pattern(
     ca = np.clip(np.cos(np.asarray(azimuth_rad, dtype=np.float64)), 0.0, 1.0)
     ce = np.clip(np.cos(np.asarray(elevation_rad, dtype=np.float64)), 0.0, 1.0)
     return ca**qa * ce**qe
+
+
+def direction_angles(vectors: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Azimuth and elevation [rad] of radar-frame vectors (x forward, y left, z up).
+
+    Parameters
+    ----------
+    vectors : (N, 3) [m]
+
+    Returns
+    -------
+    azimuth_rad : (N,) — ``atan2(y, x)`` (+ = left).
+    elevation_rad : (N,) — ``atan2(z, hypot(x, y))`` (+ = up).
+    """
+    v = np.asarray(vectors, dtype=np.float64).reshape(-1, 3)
+    return np.arctan2(v[:, 1], v[:, 0]), np.arctan2(v[:, 2], np.hypot(v[:, 0], v[:, 1]))
+
+
+def two_way_pattern_gain(
+    radar: RadarConfig, departure_m: np.ndarray, arrival_m: np.ndarray
+) -> np.ndarray:
+    """Two-way element power gain ``g_tx(departure) g_rx(arrival)`` relative to boresight [-].
+
+    Parameters
+    ----------
+    departure_m, arrival_m : (N, 3) [m] — first / last interaction points of each path, radar
+        frame (directions seen from the array's phase centre).
+
+    Returns
+    -------
+    (N,) float64 in [0, 1].
+    """
+    return (element_power_pattern(radar, *direction_angles(departure_m))
+            * element_power_pattern(radar, *direction_angles(arrival_m)))

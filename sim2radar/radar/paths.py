@@ -100,6 +100,89 @@ class PathSet:
             self.kind[mask], dict(self.stats),
         )
 
+    def merged(self, voxel_m: float, wavelength_m: float) -> PathSet:
+        """Paths sharing a departure voxel, an arrival voxel and an interaction count, each
+        group summed coherently into one path.
+
+        Voxels are cubes of side ``voxel_m`` on a grid fixed in the radar frame. Per group
+        (weights ``w_i = |a_i|^2``, uniform where all are zero)::
+
+            L_m = sum w_i L_i / sum w_i                         merged length [m]
+            A   = sum a_i exp(-j k (L_i - L_m))                 merged amplitude, k = 2 pi / lambda
+            P_dep, P_arr, range rate = w-weighted means
+
+        Approximation: ``A e^{-j k L_m}`` is the exact coherent sum at the array's phase centre
+        and the carrier frequency. An element at offset ``p`` from the phase centre sees each
+        merged path with a phase error ``~ k (u_i - u_m) . p`` per leg, ``|u_i - u_m| <=
+        sqrt(3) voxel_m / r`` (r: range of the voxel), i.e. at most ``k sqrt(3) voxel_m
+        |p| / r`` [rad] per leg (0.24 rad at voxel 5 mm, |p| 5 cm, r 2 m); off the carrier the
+        residual delay ``|L_i - L_m| <= 2 sqrt(3) voxel_m`` shifts the range response by a
+        fraction ``sqrt(3) voxel_m / dR`` of a range bin. Keep ``voxel_m`` well below the
+        range resolution and ``lambda r / (k |p|)``.
+
+        Parameters
+        ----------
+        voxel_m : float — voxel side [m], > 0.
+        wavelength_m : float — carrier wavelength [m] (the phase correction).
+
+        Returns
+        -------
+        PathSet — ``stats`` gains ``n_paths_before_merge`` and ``merge_voxel_m``.
+        """
+        v = float(voxel_m)
+        if not (np.isfinite(v) and v > 0):
+            raise ValueError(f"voxel_m must be > 0 [m], got {voxel_m}")
+        p = len(self)
+        stats = dict(self.stats)
+        stats["n_paths_before_merge"] = p
+        stats["merge_voxel_m"] = v
+        if p == 0:
+            return dataclasses.replace(self, stats=stats)
+        key = np.concatenate(
+            [
+                self.n_interactions.astype(np.int64)[:, None],
+                np.floor(self.departure_point_m / v).astype(np.int64),
+                np.floor(self.arrival_point_m / v).astype(np.int64),
+            ],
+            axis=1,
+        )
+        _, inv = np.unique(key, axis=0, return_inverse=True)
+        inv = inv.reshape(-1)
+        g = int(inv.max()) + 1
+        w = np.abs(self.amplitude) ** 2
+        wsum = np.bincount(inv, weights=w, minlength=g)
+        empty = wsum <= 0
+        if np.any(empty):
+            w = np.where(empty[inv], 1.0, w)
+            wsum = np.bincount(inv, weights=w, minlength=g)
+
+        def mean(x: np.ndarray) -> np.ndarray:
+            return np.bincount(inv, weights=w * x, minlength=g) / wsum
+
+        length = mean(self.path_length_m)
+        k = 2.0 * np.pi / float(wavelength_m)
+        shifted = self.amplitude * np.exp(-1j * k * (self.path_length_m - length[inv]))
+        amp = (np.bincount(inv, weights=shifted.real, minlength=g)
+               + 1j * np.bincount(inv, weights=shifted.imag, minlength=g))
+        dep = np.stack([mean(self.departure_point_m[:, i]) for i in range(3)], axis=1)
+        arr = np.stack([mean(self.arrival_point_m[:, i]) for i in range(3)], axis=1)
+        k_min = np.full(g, np.iinfo(np.int8).max, dtype=np.int8)
+        k_max = np.full(g, np.iinfo(np.int8).min, dtype=np.int8)
+        np.minimum.at(k_min, inv, self.kind)
+        np.maximum.at(k_max, inv, self.kind)
+        n_int = np.zeros(g, dtype=np.int8)
+        n_int[inv] = self.n_interactions
+        return PathSet(
+            amplitude=amp.astype(np.complex128),
+            path_length_m=length,
+            departure_point_m=dep,
+            arrival_point_m=arr,
+            range_rate_mps=mean(self.range_rate_mps),
+            n_interactions=n_int,
+            kind=np.where(k_min == k_max, k_min, PATH_KINDS["mixed"]).astype(np.int8),
+            stats=stats,
+        )
+
     @classmethod
     def point_targets(
         cls,

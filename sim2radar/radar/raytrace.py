@@ -1,11 +1,20 @@
-"""Mitsuba 3 / Dr.Jit radar ray tracer: rays over the FOV -> bounces -> binned complex returns.
+"""Mitsuba 3 / Dr.Jit radar ray tracer: rays over the FOV -> one bounce loop -> cells or paths.
 
 The scene (all meshes merged into one in-memory ``mi.Mesh``, one BVH) is built once per
-:class:`RadarScene`; per-face material indices select the Fresnel table and the roughness
-coefficient. Everything per ray is one vectorised Dr.Jit program (a Python loop runs over
-bounces only); returns are scatter-added into flat per-cell accumulators on the device, and
-only the small cube comes back to NumPy. The return model is documented in
-:mod:`sim2radar.radar.returns`.
+:class:`RadarScene`; per-face material indices select the Fresnel tables and the roughness
+coefficients, per-face object indices let a transmitted ray leave the object it entered.
+
+Everything per ray is one vectorised Dr.Jit program; a Python loop runs over bounces only,
+in :meth:`RadarScene._interactions` — the one bounce loop. It yields, per bounce, what each
+interaction sends back to the radar (specular and diffuse samples without the carrier phase,
+path length, first and last interaction point, visibility), after the return model of
+:mod:`sim2radar.radar.returns`. Two consumers read it:
+
+* :meth:`RadarScene.trace` (the binning simulator) scatter-adds the returns, with carrier
+  phase, into per-range-bin fine angle grids on the device (:mod:`sim2radar.radar.binning`);
+  only that grid comes back to NumPy.
+* :meth:`RadarScene.trace_paths` (the reference radar) keeps every (ray, interaction) return
+  as a propagation path (:class:`~sim2radar.radar.paths.PathSet`) for signal-level synthesis.
 """
 
 from __future__ import annotations
@@ -13,24 +22,36 @@ from __future__ import annotations
 import dataclasses
 import math
 import time
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 
 import numpy as np
 
 from sim2radar.em import get_material
 from sim2radar.mesh import MaterialMesh
-from sim2radar.radar.binning import Accumulator
+from sim2radar.radar.binning import Accumulator, array_geometry
 from sim2radar.radar.config import RadarConfig
+from sim2radar.radar.paths import PATH_KINDS, PathSet
 from sim2radar.radar.returns import (
+    DIRECTIVE_LUT_SIZE,
     FRESNEL_LUT_SIZE,
     GOLDEN,
+    MAX_RETURN_SLABS,
     MIN_COS,
+    continuation_uniforms,
     diffuse_phase_seed,
+    directive_lut,
     fresnel_lut,
     ray_grid,
+    transmission_lut,
+    transmit_probability,
 )
 
-__all__ = ["RadarScene", "TraceResult", "merge_meshes", "check_pose"]
+__all__ = ["RadarScene", "TraceResult", "face_object_ids", "merge_meshes", "check_pose"]
+
+#: Object index meaning "no object" (a ray that is not inside a transmitting slab).
+NO_OBJECT = 0xFFFFFFFF
+#: Default margin below the receiver noise per cell under which single paths are pruned [dB].
+PRUNE_BELOW_NOISE_DB = 40.0
 
 
 def check_pose(pose: np.ndarray | None) -> np.ndarray:
@@ -50,6 +71,18 @@ def check_pose(pose: np.ndarray | None) -> np.ndarray:
     return m
 
 
+def _mesh_list(meshes: Sequence[MaterialMesh]) -> list[MaterialMesh]:
+    if isinstance(meshes, MaterialMesh):
+        return [meshes]
+    meshes = list(meshes)
+    if not meshes:
+        raise ValueError("the scene has no meshes; pass a non-empty list of MaterialMesh")
+    for i, mesh in enumerate(meshes):
+        if not isinstance(mesh, MaterialMesh):
+            raise TypeError(f"meshes[{i}] is {type(mesh).__name__}, expected MaterialMesh")
+    return meshes
+
+
 def merge_meshes(
     meshes: Sequence[MaterialMesh],
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[str]]:
@@ -62,17 +95,11 @@ def merge_meshes(
     face_material : (F,) uint32 — index into ``materials``
     materials : list[str] — normalised material names
     """
-    if isinstance(meshes, MaterialMesh):
-        meshes = [meshes]
-    meshes = list(meshes)
-    if not meshes:
-        raise ValueError("the scene has no meshes; pass a non-empty list of MaterialMesh")
+    meshes = _mesh_list(meshes)
     materials: list[str] = []
     verts, faces, mats = [], [], []
     offset = 0
     for i, mesh in enumerate(meshes):
-        if not isinstance(mesh, MaterialMesh):
-            raise TypeError(f"meshes[{i}] is {type(mesh).__name__}, expected MaterialMesh")
         try:
             name = get_material(mesh.material).name
         except KeyError as exc:
@@ -94,6 +121,15 @@ def merge_meshes(
     )
 
 
+def face_object_ids(meshes: Sequence[MaterialMesh]) -> np.ndarray:
+    """(F,) uint32 — the index of the mesh each face of :func:`merge_meshes` belongs to (one
+    mesh = one object = one slab for transmission)."""
+    meshes = _mesh_list(meshes)
+    return np.concatenate(
+        [np.full(len(m.faces), i, dtype=np.uint32) for i, m in enumerate(meshes)]
+    )
+
+
 @dataclasses.dataclass(frozen=True)
 class TraceResult:
     """Accumulated returns of one frame plus counters and timings."""
@@ -106,17 +142,46 @@ class TraceResult:
 
 @dataclasses.dataclass
 class _Prepared:
-    """Per-(config, seed) device arrays: ray grid, solid angles, tables."""
+    """Per-(config, seed) device arrays: ray grid, solid angles, tables, random draws."""
 
     directions: object  # mi.Vector3f (N,), radar frame
     n_rays: int
     solid_angle: object  # mi.Float (N,)
     diffuse_u: object  # mi.Float (N,) in [0, 1)
     spacing_rad: float
-    lut_re: object
+    lut_re: object  # reflection table (n_mat * FRESNEL_LUT_SIZE,)
     lut_im: object
-    s_coef: object
-    spec_coef: object
+    s_coef: object  # S per material
+    spec_coef: object  # sqrt(1 - S^2) per material
+    directive: bool
+    alpha: object | None  # alpha_R per material
+    dir_lut: object | None  # F_alpha table (n_mat * DIRECTIVE_LUT_SIZE,)
+    transmits: bool
+    t_re: object | None  # transmission table (n_mat * FRESNEL_LUT_SIZE,)
+    t_im: object | None
+    choice_u: list | None  # per bounce: mi.Float (N,) reflect-or-transmit draws
+
+
+@dataclasses.dataclass
+class _Interaction:
+    """One bounce of the whole ray batch (Dr.Jit arrays; points in the world frame).
+
+    ``spec`` / ``diff``: the physical-optics and diffuse samples of :mod:`returns` without the
+    carrier phase ``e^{-jkL}`` (return-leg gain included); zero where not ``visible``.
+    """
+
+    bounce: int
+    valid: object  # Bool: the ray hit a surface
+    visible: object  # Bool: its return reaches the radar
+    hit: object  # Point3f: the interaction point [m]
+    arrival: object  # Point3f: last interaction point on the way back [m]
+    departure: object  # Point3f: first interaction point of the ray [m]
+    path_m: object  # Float: total round-trip length L [m]
+    spec_re: object
+    spec_im: object
+    diff_re: object
+    diff_im: object
+    n_interactions: object  # UInt32
 
 
 class RadarScene:
@@ -132,6 +197,7 @@ class RadarScene:
     --------
     >>> scene = RadarScene(meshes)
     >>> frames = [scene.simulate(radar, pose) for pose in poses]
+    >>> paths = scene.trace_paths(radar, pose, seed=0)        # the reference radar's input
     """
 
     def __init__(self, meshes: Sequence[MaterialMesh]) -> None:
@@ -149,8 +215,10 @@ class RadarScene:
         import mitsuba as mi
 
         self._mi, self._dr = mi, dr
+        meshes = _mesh_list(meshes)  # once: an iterator would be consumed by the first pass
         vertices, faces, face_material, self.materials = merge_meshes(meshes)
         self.n_triangles = int(len(faces))
+        self.n_objects = len(meshes)
         mesh = mi.Mesh(
             "radar_scene",
             vertex_count=len(vertices),
@@ -164,6 +232,7 @@ class RadarScene:
         params.update()
         self._scene = mi.load_dict({"type": "scene", "mesh": mesh})
         self._face_material = mi.UInt32(face_material)
+        self._face_object = mi.UInt32(face_object_ids(meshes))
         self._prepared: dict[tuple[str, int | None], _Prepared] = {}
         self.build_seconds = time.perf_counter() - t0
 
@@ -173,28 +242,55 @@ class RadarScene:
         if key in self._prepared:
             return self._prepared[key]
         mi = self._mi
+        sc = radar.scattering
         directions, solid_angle, spacing = ray_grid(
             radar.azimuth_fov_rad,
             radar.elevation_fov_rad,
             math.radians(radar.ray_spacing_deg),
             seed=seed,
         )
-        thickness = [radar.scattering.thickness_m(m) for m in self.materials]
+        n = len(directions)
+        thickness = [sc.thickness_m(m) for m in self.materials]
         lut = fresnel_lut(self.materials, radar.center_frequency_hz, thickness_m=thickness)
         lut = lut.astype(np.complex64)
-        s = np.array([radar.scattering.coefficient(m) for m in self.materials], dtype=np.float32)
+        s = np.array([sc.coefficient(m) for m in self.materials], dtype=np.float32)
+        directive = sc.model == "directive"
+        alpha = dir_lut = None
+        if directive:
+            alphas = [sc.lobe(m) for m in self.materials]
+            alpha = mi.Float(np.asarray(alphas, dtype=np.float32))
+            dir_lut = mi.Float(directive_lut(alphas).astype(np.float32).ravel())
+        transmits = any(sc.transmits(m) for m in self.materials)
+        t_re = t_im = choice = None
+        if transmits:
+            tl = transmission_lut(
+                self.materials,
+                radar.center_frequency_hz,
+                [d if sc.transmits(m) else None for m, d in zip(self.materials, thickness,
+                                                                  strict=True)],
+            ).astype(np.complex64)
+            t_re, t_im = mi.Float(tl.real.ravel()), mi.Float(tl.imag.ravel())
+            draws = continuation_uniforms(n, radar.max_bounces, seed)
+            choice = [mi.Float(row.astype(np.float32)) for row in draws]
         prep = _Prepared(
             directions=mi.Vector3f(
                 *(mi.Float(directions[:, i].astype(np.float32)) for i in range(3))
             ),
-            n_rays=len(directions),
+            n_rays=n,
             solid_angle=mi.Float(solid_angle.astype(np.float32)),
-            diffuse_u=mi.Float(diffuse_phase_seed(len(directions), seed).astype(np.float32)),
+            diffuse_u=mi.Float(diffuse_phase_seed(n, seed).astype(np.float32)),
             spacing_rad=spacing,
             lut_re=mi.Float(lut.real.ravel()),
             lut_im=mi.Float(lut.imag.ravel()),
             s_coef=mi.Float(s),
             spec_coef=mi.Float(np.sqrt(1.0 - s**2).astype(np.float32)),
+            directive=directive,
+            alpha=alpha,
+            dir_lut=dir_lut,
+            transmits=transmits,
+            t_re=t_re,
+            t_im=t_im,
+            choice_u=choice,
         )
         if len(self._prepared) > 8:
             self._prepared.pop(next(iter(self._prepared)))
@@ -211,6 +307,230 @@ class RadarScene:
             *(rot[i][0] * d.x + rot[i][1] * d.y + rot[i][2] * d.z for i in range(3))
         )
         return mi.Ray3f(origin, d_world), origin
+
+    def _table(self, re, im, mat, cos_t, active, size: int):
+        """Linear interpolation of per-material complex tables sampled over cos in [0, 1]."""
+        mi, dr = self._mi, self._dr
+        x = dr.clip(cos_t, 0.0, 1.0) * (size - 1)
+        i0 = dr.minimum(mi.UInt32(dr.floor(x)), size - 2)
+        frac = x - mi.Float(i0)
+        base = mat * size + i0
+        out_re = dr.lerp(dr.gather(mi.Float, re, base, active),
+                         dr.gather(mi.Float, re, base + 1, active), frac)
+        if im is None:
+            return out_re
+        out_im = dr.lerp(dr.gather(mi.Float, im, base, active),
+                         dr.gather(mi.Float, im, base + 1, active), frac)
+        return out_re, out_im
+
+    def _intersect(self, ray, active, skip_obj):
+        """Closest hit; a ray inside a transmitting slab (``skip_obj``) ignores that object's
+        faces once (its back face: the slab is the whole object)."""
+        mi, dr = self._mi, self._dr
+        si = self._scene.ray_intersect(ray, active)
+        if skip_obj is None:
+            return si
+        obj = dr.gather(mi.UInt32, self._face_object, si.prim_index, active & si.is_valid())
+        again = active & si.is_valid() & (obj == skip_obj)
+        si2 = self._scene.ray_intersect(si.spawn_ray(ray.d), again)
+        return dr.select(again, si2, si)
+
+    def _return_leg(self, si, candidate, radar_pos, prep: _Prepared):
+        """Gain of the way back from ``si`` to the radar through slab materials.
+
+        Returns ``(tau_re, tau_im, visible, arrival, n_slabs)``: each transmissive object on
+        the line multiplies ``tau`` by its ``T`` (both faces of one object count once), any
+        other surface (or more than :data:`MAX_RETURN_SLABS` slabs) blocks.
+        """
+        mi, dr = self._mi, self._dr
+        tau_re = dr.full(mi.Float, 1.0, dr.width(candidate))
+        tau_im = dr.zeros(mi.Float, dr.width(candidate))
+        n_slabs = dr.zeros(mi.UInt32, dr.width(candidate))
+        arrival = mi.Point3f(si.p)
+        visible = mi.Bool(candidate)
+        pending = mi.Bool(candidate)
+        ray = si.spawn_ray_to(radar_pos)
+        for step in range(MAX_RETURN_SLABS + 1):
+            sb = self._scene.ray_intersect(ray, pending)
+            blocked = pending & sb.is_valid()
+            if step == MAX_RETURN_SLABS:
+                visible &= ~blocked
+                break
+            mat = dr.gather(mi.UInt32, self._face_material, sb.prim_index, blocked)
+            obj = dr.gather(mi.UInt32, self._face_object, sb.prim_index, blocked)
+            cos_b = dr.abs(dr.dot(dr.normalize(ray.d), sb.n))
+            t_re, t_im = self._table(prep.t_re, prep.t_im, mat, cos_b, blocked, FRESNEL_LUT_SIZE)
+            through = blocked & ((t_re * t_re + t_im * t_im) > 0.0)
+            visible &= ~(blocked & ~through)
+            new_re = tau_re * t_re - tau_im * t_im
+            new_im = tau_re * t_im + tau_im * t_re
+            tau_re = dr.select(through, new_re, tau_re)
+            tau_im = dr.select(through, new_im, tau_im)
+            n_slabs += dr.select(through, mi.UInt32(1), mi.UInt32(0))
+            # leave the object: skip its other face on the way to the radar
+            ray2 = sb.spawn_ray_to(radar_pos)
+            sb2 = self._scene.ray_intersect(ray2, through)
+            obj2 = dr.gather(mi.UInt32, self._face_object, sb2.prim_index,
+                             through & sb2.is_valid())
+            same = through & sb2.is_valid() & (obj2 == obj)
+            arrival = dr.select(through, dr.select(same, sb2.p, sb.p), arrival)
+            ray = dr.select(same, sb2.spawn_ray_to(radar_pos), ray2)
+            pending = through
+        return tau_re, tau_im, visible, arrival, n_slabs
+
+    def _interactions(
+        self, radar: RadarConfig, pose: np.ndarray, prep: _Prepared, hits
+    ) -> Iterator[_Interaction]:
+        """THE bounce loop: yield what every ray's interaction sends back, bounce by bounce.
+
+        State (ray, carry, path, ...) is evaluated at the start of each following bounce, in
+        one kernel with whatever the consumer scheduled or scattered in between.
+        ``hits`` (UInt32, max_bounces) counts the rays that hit something per bounce.
+        """
+        mi, dr = self._mi, self._dr
+        ray, radar_pos = self._primary_rays(prep, pose)
+        n = prep.n_rays
+        wavenumber = 2.0 * math.pi / radar.wavelength_m
+        inv_lambda = 1.0 / radar.wavelength_m
+
+        # C: product of earlier specular factors. With transmission two copies: ``carry`` is
+        # amplitude-unbiased (E[C] exact; it weights the coherent PO samples) and ``carry_d``
+        # power-unbiased (E|C|^2 exact; it weights the diffuse samples) -- returns.py, item 3
+        carry_re = dr.full(mi.Float, 1.0, n)
+        carry_im = dr.zeros(mi.Float, n)
+        carry_d_re, carry_d_im = carry_re, carry_im
+        path_in = dr.zeros(mi.Float, n)
+        active = dr.full(mi.Bool, True, n)
+        d_omega = prep.solid_angle
+        prev_hit = mi.Point3f(radar_pos)
+        departure = mi.Point3f(radar_pos)
+        skip_obj = dr.full(mi.UInt32, NO_OBJECT, n) if prep.transmits else None
+
+        for bounce in range(radar.max_bounces):
+            if bounce > 0:
+                state = [ray, prev_hit, departure, carry_re, carry_im, path_in, active, hits]
+                if prep.transmits:
+                    state += [skip_obj, carry_d_re, carry_d_im]
+                dr.eval(*state)
+            si = self._intersect(ray, active, skip_obj if bounce > 0 else None)
+            valid = active & si.is_valid()
+            dr.scatter_reduce(dr.ReduceOp.Add, hits, mi.UInt32(1), mi.UInt32(bounce), valid)
+            normal = si.n
+            cos_in = -dr.dot(ray.d, normal)
+            normal = dr.select(cos_in < 0, -normal, normal)
+            cos_in = dr.abs(cos_in)
+            hit = si.p
+            if bounce == 0:
+                departure = mi.Point3f(hit)
+            # unfold the path from the true hit points: si.t is measured from the spawned
+            # origin, which Mitsuba offsets ~(1+|p|) 1e-4 m off the surface (~0.1 lambda)
+            path_in = path_in + dr.select(valid, dr.norm(hit - prev_hit), 0.0)
+            to_radar = radar_pos - hit
+            r_out = dr.norm(to_radar)
+            u_out = to_radar / r_out
+            cos_out = dr.dot(u_out, normal)
+            visible = valid & (cos_out > 0)
+            arrival = mi.Point3f(hit)
+            tau_re = tau_im = None
+            n_ret = mi.UInt32(0)
+            if bounce > 0:
+                if prep.transmits:
+                    tau_re, tau_im, visible, arrival, n_ret = self._return_leg(
+                        si, visible, radar_pos, prep
+                    )
+                else:
+                    visible &= ~self._scene.ray_test(si.spawn_ray_to(radar_pos), visible)
+
+            mat = dr.gather(mi.UInt32, self._face_material, si.prim_index, valid)
+            g_re, g_im = self._table(prep.lut_re, prep.lut_im, mat, cos_in, valid,
+                                     FRESNEL_LUT_SIZE)
+            s_coef = dr.gather(mi.Float, prep.s_coef, mat, valid)
+            spec = dr.gather(mi.Float, prep.spec_coef, mat, valid)
+            cg_re = carry_re * g_re - carry_im * g_im  # C * Gamma
+            cg_im = carry_re * g_im + carry_im * g_re
+            if tau_re is not None:  # C * Gamma * tau
+                cg_re, cg_im = cg_re * tau_re - cg_im * tau_im, cg_re * tau_im + cg_im * tau_re
+            if prep.transmits:  # the diffuse sample's C * Gamma * tau
+                cd_re = carry_d_re * g_re - carry_d_im * g_im
+                cd_im = carry_d_re * g_im + carry_d_im * g_re
+                if tau_re is not None:
+                    cd_re, cd_im = (cd_re * tau_re - cd_im * tau_im,
+                                    cd_re * tau_im + cd_im * tau_re)
+            else:
+                cd_re, cd_im = cg_re, cg_im
+
+            # physical-optics (specular) sample with the Nyquist window
+            ci = dr.maximum(cos_in, MIN_COS)
+            grad = ray.d - u_out
+            grad_t = grad - dr.dot(grad, normal) * normal
+            dphi = wavenumber * dr.norm(grad_t) * path_in * prep.spacing_rad / ci
+            xw = dr.clip((dphi - 0.5 * math.pi) / (0.5 * math.pi), 0.0, 1.0)
+            window = dr.select(xw < 1.0, dr.square(dr.cos(0.5 * math.pi * xw)), 0.0)
+            amp_c = (
+                inv_lambda * spec * d_omega * (cos_in + cos_out) / (2.0 * ci) * (path_in / r_out)
+            ) * window
+            amp_c = dr.select(visible, amp_c, 0.0)
+            # diffuse sample: S sqrt(dOmega f_s) / r_o with a per-ray speckle phase
+            reflected = ray.d + 2.0 * cos_in * normal
+            if prep.directive:
+                alpha = dr.gather(mi.Float, prep.alpha, mat, valid)
+                f_norm = self._table(prep.dir_lut, None, mat, cos_in, valid, DIRECTIVE_LUT_SIZE)
+                x = dr.maximum(0.5 * (1.0 + dr.dot(u_out, reflected)), 1e-30)
+                pattern = dr.exp(alpha * dr.log(x)) / f_norm
+            else:
+                pattern = dr.maximum(cos_out, 0.0) / math.pi
+            amp_d = s_coef * dr.sqrt(d_omega * pattern) / r_out
+            amp_d = dr.select(visible, amp_d, 0.0)
+            u = prep.diffuse_u + bounce * GOLDEN
+            sin_d, cos_d = dr.sincos(-2.0 * math.pi * (u - dr.floor(u)))
+
+            record = _Interaction(
+                bounce=bounce,
+                valid=valid,
+                visible=visible,
+                hit=hit,
+                arrival=arrival,
+                departure=departure,
+                path_m=path_in + r_out,
+                spec_re=-cg_im * amp_c,  # j * C Gamma * amp_c
+                spec_im=cg_re * amp_c,
+                diff_re=(cd_re * cos_d - cd_im * sin_d) * amp_d,
+                diff_im=(cd_re * sin_d + cd_im * cos_d) * amp_d,
+                n_interactions=mi.UInt32(bounce + 1) + n_ret,
+            )
+
+            if bounce + 1 < radar.max_bounces:
+                # continuation: specular reflection, or (slabs) a seeded reflect-or-transmit
+                f_re, f_im = g_re * spec, g_im * spec
+                direction = reflected
+                if prep.transmits:
+                    t_re, t_im = self._table(prep.t_re, prep.t_im, mat, cos_in, valid,
+                                             FRESNEL_LUT_SIZE)
+                    q = transmit_probability(f_re * f_re + f_im * f_im, t_re * t_re + t_im * t_im)
+                    reflect = prep.choice_u[bounce] >= q
+                    w = dr.select(reflect, 1.0 - q, q)  # probability of the chosen branch
+                    b_re = dr.select(reflect, f_re, t_re)
+                    b_im = dr.select(reflect, f_im, t_im)
+                    k_c = dr.rcp(dr.maximum(w, 1e-30))  # amplitude-unbiased weight
+                    k_d = dr.rsqrt(dr.maximum(w, 1e-30))  # power-unbiased weight
+                    carry_d_re, carry_d_im = (
+                        (carry_d_re * b_re - carry_d_im * b_im) * k_d,
+                        (carry_d_re * b_im + carry_d_im * b_re) * k_d,
+                    )
+                    f_re, f_im = b_re * k_c, b_im * k_c
+                    direction = dr.select(reflect, reflected, ray.d)
+                    obj = dr.gather(mi.UInt32, self._face_object, si.prim_index, valid)
+                    skip_obj = dr.select(reflect, mi.UInt32(NO_OBJECT), obj)
+                carry_re, carry_im = (carry_re * f_re - carry_im * f_im,
+                                      carry_re * f_im + carry_im * f_re)
+                ray = si.spawn_ray(direction)
+                prev_hit = hit
+                strength = carry_re * carry_re + carry_im * carry_im
+                if prep.transmits:
+                    strength = dr.maximum(strength,
+                                          carry_d_re * carry_d_re + carry_d_im * carry_d_im)
+                active = valid & (strength > 1e-10)
+            yield record
 
     # ------------------------------------------------------------------------------------
     def simulate(
@@ -231,148 +551,242 @@ class RadarScene:
     def trace(
         self, radar: RadarConfig, pose: np.ndarray | None = None, *, seed: int | None = None
     ) -> TraceResult:
-        """Trace one frame and return the accumulated (not yet detected) returns."""
+        """Trace one frame and return the accumulated (not yet beamformed) returns.
+
+        Each visible return, with its carrier phase ``e^{-jkL}``, is added to its range bin
+        and fine azimuth point once per element row (:mod:`sim2radar.radar.binning`).
+        """
         mi, dr = self._mi, self._dr
         pose = check_pose(pose)
         t0 = time.perf_counter()
         prep = self._prepare(radar, seed)
-        ray, radar_pos = self._primary_rays(prep, pose)
-        n = prep.n_rays
+        geom = array_geometry(radar)
         t1 = time.perf_counter()
 
-        wavenumber = 2.0 * math.pi / radar.wavelength_m
         inv_lambda = 1.0 / radar.wavelength_m
-        lut_n = FRESNEL_LUT_SIZE
         n_r, n_a, n_e = radar.n_range_bins, radar.n_azimuth_bins, radar.n_elevation_bins
-        n_cells = n_r * n_a * n_e
+        n_z, m_fine = len(geom.z_half_wl), geom.fine_az
         inv_dr = 1.0 / radar.range_resolution_m
-        az_half, el_half = 0.5 * radar.azimuth_fov_rad, 0.5 * radar.elevation_fov_rad
-        inv_daz = n_a / radar.azimuth_fov_rad
-        inv_del = n_e / radar.elevation_fov_rad
+        inv_ua, inv_ue = 1.0 / radar.azimuth_bin_u, 1.0 / radar.elevation_bin_u
+        radar_pos = [dr.opaque(mi.Float, float(v)) for v in pose[:3, 3]]
         # world -> radar rotation (R^T) as opaque scalars so a new pose reuses the kernel
         rt = [[dr.opaque(mi.Float, float(pose[j, i])) for j in range(3)] for i in range(3)]
 
-        acc = [dr.zeros(mi.Float, n_cells) for _ in range(6)]
+        # interleaved (re, im) and (power, power * range) pairs: packet scatters of 2 floats are
+        # ~3x faster than two scalar ones, and the grid is complex64 in memory as it stands
+        grid = dr.zeros(mi.Float, 2 * n_z * n_r * m_fine)
+        cells = dr.zeros(mi.Float, 2 * n_r * n_a * n_e)
         hits = dr.zeros(mi.UInt32, radar.max_bounces)
-        carry_re = dr.full(mi.Float, 1.0, n)
-        carry_im = dr.zeros(mi.Float, n)
-        path_in = dr.zeros(mi.Float, n)
-        active = dr.full(mi.Bool, True, n)
-        d_omega = prep.solid_angle
-        prev_hit = mi.Point3f(radar_pos)
 
-        for bounce in range(radar.max_bounces):
-            si = self._scene.ray_intersect(ray, active)
-            valid = active & si.is_valid()
-            dr.scatter_reduce(dr.ReduceOp.Add, hits, mi.UInt32(1), mi.UInt32(bounce), valid)
-            normal = si.n
-            cos_in = -dr.dot(ray.d, normal)
-            normal = dr.select(cos_in < 0, -normal, normal)
-            cos_in = dr.abs(cos_in)
-            hit = si.p
-            # unfold the path from the true hit points: si.t is measured from the spawned
-            # origin, which Mitsuba offsets ~(1+|p|) 1e-4 m off the surface (~0.1 lambda)
-            path_in = path_in + dr.select(valid, dr.norm(hit - prev_hit), 0.0)
-            to_radar = radar_pos - hit
-            r_out = dr.norm(to_radar)
-            u_out = to_radar / r_out
-            cos_out = dr.dot(u_out, normal)
-            visible = valid & (cos_out > 0)
-            if bounce > 0:
-                shadow = si.spawn_ray_to(radar_pos)
-                visible &= ~self._scene.ray_test(shadow, visible)
-
-            mat = dr.gather(mi.UInt32, self._face_material, si.prim_index, valid)
-            x = dr.clip(cos_in, 0.0, 1.0) * (lut_n - 1)
-            i0 = dr.minimum(mi.UInt32(dr.floor(x)), lut_n - 2)
-            frac = x - mi.Float(i0)
-            base = mat * lut_n + i0
-            g_re = dr.lerp(
-                dr.gather(mi.Float, prep.lut_re, base, valid),
-                dr.gather(mi.Float, prep.lut_re, base + 1, valid),
-                frac,
-            )
-            g_im = dr.lerp(
-                dr.gather(mi.Float, prep.lut_im, base, valid),
-                dr.gather(mi.Float, prep.lut_im, base + 1, valid),
-                frac,
-            )
-            s_coef = dr.gather(mi.Float, prep.s_coef, mat, valid)
-            spec = dr.gather(mi.Float, prep.spec_coef, mat, valid)
-            cg_re = carry_re * g_re - carry_im * g_im  # C * Gamma
-            cg_im = carry_re * g_im + carry_im * g_re
-
-            path = path_in + r_out
+        for it in self._interactions(radar, pose, prep, hits):
+            a0_re = it.spec_re + it.diff_re
+            a0_im = it.spec_im + it.diff_im
             # e^{-jkL}: reduce to the fractional number of wavelengths first (float32 sincos
             # loses accuracy for |arguments| of 1e4 rad, i.e. paths of a few metres)
-            cycles = path * inv_lambda
-            phase = -2.0 * math.pi * (cycles - dr.floor(cycles))
-            sin_p, cos_p = dr.sincos(phase)
-            # physical-optics (specular) term with the Nyquist window
-            ci = dr.maximum(cos_in, MIN_COS)
-            grad = ray.d - u_out
-            grad_t = grad - dr.dot(grad, normal) * normal
-            dphi = wavenumber * dr.norm(grad_t) * path_in * prep.spacing_rad / ci
-            xw = dr.clip((dphi - 0.5 * math.pi) / (0.5 * math.pi), 0.0, 1.0)
-            window = dr.square(dr.cos(0.5 * math.pi * xw))
-            amp_c = (
-                inv_lambda * spec * d_omega * (cos_in + cos_out) / (2.0 * ci) * (path_in / r_out)
-            ) * window
-            z_re = cg_re * cos_p - cg_im * sin_p
-            z_im = cg_re * sin_p + cg_im * cos_p
-            a_re = -z_im * amp_c  # multiply by j
-            a_im = z_re * amp_c
-            # diffuse (Lambertian) term with a per-ray pseudo-random phase
-            amp_d = s_coef * dr.sqrt(d_omega * dr.maximum(cos_out, 0.0) / math.pi) / r_out
-            u = prep.diffuse_u + bounce * GOLDEN
-            sin_d, cos_d = dr.sincos(phase - 2.0 * math.pi * (u - dr.floor(u)))
-            a_re += (cg_re * cos_d - cg_im * sin_d) * amp_d
-            a_im += (cg_re * sin_d + cg_im * cos_d) * amp_d
-
-            # bin: range = half path, angles of the last hit seen from the radar
-            q = hit - radar_pos
+            cycles = it.path_m * inv_lambda
+            sin_p, cos_p = dr.sincos(-2.0 * math.pi * (cycles - dr.floor(cycles)))
+            a_re = a0_re * cos_p - a0_im * sin_p
+            a_im = a0_re * sin_p + a0_im * cos_p
+            # arrival direction cosines in the radar frame
+            q = it.arrival - mi.Point3f(*radar_pos)
             qx = rt[0][0] * q.x + rt[0][1] * q.y + rt[0][2] * q.z
             qy = rt[1][0] * q.x + rt[1][1] * q.y + rt[1][2] * q.z
             qz = rt[2][0] * q.x + rt[2][1] * q.y + rt[2][2] * q.z
-            az = dr.atan2(qy, qx)
-            el = dr.atan2(qz, dr.sqrt(qx * qx + qy * qy))
-            rng_m = 0.5 * path
+            inv_q = dr.rsqrt(dr.maximum(qx * qx + qy * qy + qz * qz, 1e-24))
+            ua, ue = qy * inv_q, qz * inv_q
+            rng_m = 0.5 * it.path_m
             ir = mi.Int32(dr.floor(rng_m * inv_dr + 0.5))
-            ia = mi.Int32(dr.floor((az + az_half) * inv_daz))
-            ie = mi.Int32(dr.floor((el + el_half) * inv_del))
-            inside = (
-                visible & (ir >= 0) & (ir < n_r) & (ia >= 0) & (ia < n_a) & (ie >= 0) & (ie < n_e)
-            )
-            idx = mi.UInt32((ir * n_a + ia) * n_e + ie)
+            keep = it.visible & (ir >= 0) & (ir < n_r)
+            g = mi.Int32(dr.floor((ua + 1.0) * (0.5 * m_fine) + 0.5))
+            g = dr.select(g >= m_fine, g - m_fine, g)
+            ug_phase = -math.pi * geom.x_shift * (-1.0 + (2.0 / m_fine) * mi.Float(g))
+            for j, z in enumerate(geom.z_half_wl):
+                sin_z, cos_z = dr.sincos(math.pi * float(z) * ue + ug_phase)
+                v_re = a_re * cos_z - a_im * sin_z
+                v_im = a_re * sin_z + a_im * cos_z
+                idx = mi.UInt32((j * n_r + ir) * m_fine + g)
+                dr.scatter_reduce(dr.ReduceOp.Add, grid, mi.Array2f(v_re, v_im), idx, keep)
+            ia = mi.Int32(dr.floor(ua * inv_ua + 0.5)) + n_a // 2
+            ie = mi.Int32(dr.floor(ue * inv_ue + 0.5)) + n_e // 2
+            cell_ok = keep & (ia >= 0) & (ia < n_a) & (ie >= 0) & (ie < n_e)
+            cell = mi.UInt32((ir * n_a + ia) * n_e + ie)
             pw = a_re * a_re + a_im * a_im
-            for target, value in zip(
-                acc, (a_re, a_im, pw, pw * rng_m, pw * az, pw * el), strict=True
-            ):
-                dr.scatter_reduce(dr.ReduceOp.Add, target, value, idx, inside)
+            dr.scatter_reduce(dr.ReduceOp.Add, cells, mi.Array2f(pw, pw * rng_m), cell, cell_ok)
 
-            if bounce + 1 < radar.max_bounces:
-                carry_re = cg_re * spec
-                carry_im = cg_im * spec
-                reflected = ray.d + 2.0 * cos_in * normal
-                ray = si.spawn_ray(reflected)
-                prev_hit = hit
-                active = valid & ((carry_re * carry_re + carry_im * carry_im) > 1e-10)
-                dr.eval(ray, prev_hit, carry_re, carry_im, path_in, active, *acc, hits)
-
-        dr.eval(*acc, hits)
+        dr.eval(grid, cells, hits)
         dr.sync_thread()
         t2 = time.perf_counter()
-        arrays = [a.numpy().astype(np.float64) for a in acc]
-        accumulator = Accumulator(*arrays)
+        sums = cells.numpy().astype(np.float64).reshape(-1, 2)
+        accumulator = Accumulator(
+            grid=np.ascontiguousarray(grid.numpy()).view(np.complex64).reshape(n_z, n_r, m_fine),
+            power=sums[:, 0].copy(),
+            range_w=sums[:, 1].copy(),
+        )
         t3 = time.perf_counter()
         return TraceResult(
             accumulator=accumulator,
-            n_rays=n,
+            n_rays=prep.n_rays,
             hits_per_bounce=tuple(int(h) for h in hits.numpy()),
             seconds={"rays": t1 - t0, "trace": t2 - t1, "readback": t3 - t2},
         )
 
+    def trace_paths(
+        self,
+        radar: RadarConfig,
+        pose: np.ndarray | None = None,
+        *,
+        seed: int | None = None,
+        velocity_mps: np.ndarray | None = None,
+        prune_below_noise_db: float | None = PRUNE_BELOW_NOISE_DB,
+        merge_voxel_m: float | None = None,
+    ) -> PathSet:
+        """Trace one frame and return its propagation paths (the reference radar's input).
+
+        One path per ray and interaction whose return reaches the radar, from the same bounce
+        loop as :meth:`trace`: amplitude without the carrier phase (specular + diffuse sample
+        of :mod:`sim2radar.radar.returns`), total length, first/last interaction point in the
+        radar frame.
+
+        Parameters
+        ----------
+        radar : RadarConfig — ``max_bounces`` interactions per ray (reflections and, with
+            ``scattering.transmission``, slab transmissions); ``scattering.model`` picks the
+            diffuse pattern.
+        pose : (4, 4), optional — radar-to-world transform (None: identity).
+        seed : int, optional — ray jitter, speckle phases and reflect-or-transmit draws
+            (None: the regular grid and fixed streams).
+        velocity_mps : (3,), optional — radar velocity in the radar frame [m/s] for a static
+            scene: ``range_rate = (dL/dt) / 2 = -v . (u_dep + u_arr) / 2`` with ``u`` the unit
+            vectors from the radar to the first / last interaction point. None: 0.
+        prune_below_noise_db : float or None — drop paths whose power ``|a|^2`` is this far
+            below the receiver noise per cell (:func:`sim2radar.radar.link_budget.
+            noise_power_per_cell`); None keeps all. At 40 dB even a hundred pruned paths in
+            one cell add up to 20 dB below the noise. The pruned count and power are in
+            ``stats``.
+        merge_voxel_m : float or None — merge paths sharing departure and arrival voxels
+            (:meth:`PathSet.merged`); None: no merging.
+
+        Returns
+        -------
+        PathSet — ``stats``: ``n_rays``, ``hits_per_bounce``, ``n_paths_traced``,
+        ``n_pruned``, ``pruned_power``, ``kept_power``, ``noise_power_per_cell``,
+        ``n_paths``, ``seconds`` (``rays``, ``trace``, ``readback``, ``merge``).
+        """
+        from sim2radar.radar.link_budget import noise_power_per_cell
+
+        mi, dr = self._mi, self._dr
+        pose = check_pose(pose)
+        t0 = time.perf_counter()
+        prep = self._prepare(radar, seed)
+        t1 = time.perf_counter()
+        hits = dr.zeros(mi.UInt32, radar.max_bounces)
+        records = []
+        for it in self._interactions(radar, pose, prep, hits):
+            fields = [it.visible, it.spec_re, it.spec_im, it.diff_re, it.diff_im, it.path_m,
+                      it.departure, it.arrival, it.n_interactions]
+            dr.schedule(*fields)
+            records.append(fields)
+        dr.eval(hits)
+        dr.sync_thread()
+        t2 = time.perf_counter()
+
+        rot, origin = pose[:3, :3], pose[:3, 3]
+        parts: dict[str, list[np.ndarray]] = {k: [] for k in
+                                              ("spec", "diff", "path", "dep", "arr", "n")}
+        n = prep.n_rays
+
+        def host(x) -> np.ndarray:  # (n,) float64 (literals broadcast)
+            return np.broadcast_to(np.asarray(x.numpy(), dtype=np.float64), (n,))
+
+        for vis, s_re, s_im, d_re, d_im, path, dep, arr, n_int in records:
+            keep = np.broadcast_to(np.asarray(vis.numpy(), dtype=bool), (n,))
+            parts["spec"].append(host(s_re)[keep] + 1j * host(s_im)[keep])
+            parts["diff"].append(host(d_re)[keep] + 1j * host(d_im)[keep])
+            parts["path"].append(host(path)[keep])
+            for key, p in (("dep", dep), ("arr", arr)):
+                world = np.stack([host(p.x), host(p.y), host(p.z)], 1)[keep]
+                parts[key].append((world - origin) @ rot)
+            parts["n"].append(host(n_int)[keep].astype(np.int8))
+        cat = {k: np.concatenate(v) for k, v in parts.items()}
+        amp = cat["spec"] + cat["diff"]
+        has_s, has_d = np.abs(cat["spec"]) > 0, np.abs(cat["diff"]) > 0
+        kind = np.where(has_s & has_d, PATH_KINDS["mixed"],
+                        np.where(has_s, PATH_KINDS["specular"], PATH_KINDS["diffuse"]))
+        power = np.abs(amp) ** 2
+        nonzero = power > 0
+        n0 = noise_power_per_cell(radar)
+        keep = nonzero.copy()
+        if prune_below_noise_db is not None:
+            keep &= power >= n0 * 10.0 ** (-float(prune_below_noise_db) / 10.0)
+        dep, arr = cat["dep"][keep], cat["arr"][keep]
+        if velocity_mps is None:
+            range_rate = np.zeros(int(keep.sum()))
+        else:
+            v = np.asarray(velocity_mps, dtype=np.float64).reshape(3)
+            u_dep = dep / np.maximum(np.linalg.norm(dep, axis=1, keepdims=True), 1e-12)
+            u_arr = arr / np.maximum(np.linalg.norm(arr, axis=1, keepdims=True), 1e-12)
+            range_rate = -0.5 * (u_dep + u_arr) @ v  # (dL/dt) / 2, dL/dt = -v.(u_dep + u_arr)
+        t3 = time.perf_counter()
+        stats = {
+            "n_rays": prep.n_rays,
+            "hits_per_bounce": [int(h) for h in hits.numpy()],
+            "n_paths_traced": int(nonzero.sum()),
+            "n_pruned": int((nonzero & ~keep).sum()),
+            "pruned_power": float(power[nonzero & ~keep].sum()),
+            "kept_power": float(power[keep].sum()),
+            "noise_power_per_cell": float(n0),
+            "seconds": {"rays": t1 - t0, "trace": t2 - t1, "readback": t3 - t2},
+        }
+        paths = PathSet(
+            amplitude=amp[keep].astype(np.complex128),
+            path_length_m=cat["path"][keep],
+            departure_point_m=dep,
+            arrival_point_m=arr,
+            range_rate_mps=range_rate,
+            n_interactions=cat["n"][keep],
+            kind=kind[keep].astype(np.int8),
+            stats=stats,
+        )
+        if merge_voxel_m is not None:
+            t4 = time.perf_counter()
+            paths = paths.merged(merge_voxel_m, radar.wavelength_m)
+            paths.stats["seconds"]["merge"] = time.perf_counter() - t4
+        paths.stats["n_paths"] = len(paths)
+        return paths
+
     # ------------------------------------------------------------------------------------
+    def first_hit_distance(self, origins_m: np.ndarray, directions: np.ndarray) -> np.ndarray:
+        """Distance along each ray to the first surface (a visibility query).
+
+        Parameters
+        ----------
+        origins_m : (N, 3) float — ray origins, world frame [m].
+        directions : (N, 3) float — ray directions, world frame (normalised here; non-zero).
+
+        Returns
+        -------
+        (N,) float64 — distance to the first hit [m], ``inf`` where the ray misses.
+        """
+        mi, dr = self._mi, self._dr
+        o = np.asarray(origins_m, dtype=np.float64)
+        d = np.asarray(directions, dtype=np.float64)
+        if o.ndim != 2 or o.shape[1] != 3 or d.shape != o.shape:
+            raise ValueError(f"origins_m and directions must both be (N, 3), got {o.shape} "
+                             f"and {d.shape}")
+        if len(o) == 0:
+            return np.zeros(0)
+        norm = np.linalg.norm(d, axis=1, keepdims=True)
+        if not (np.isfinite(o).all() and np.isfinite(d).all()) or np.any(norm <= 0):
+            raise ValueError("origins and directions must be finite, directions non-zero")
+        d = (d / norm).astype(np.float32)
+        ray = mi.Ray3f(
+            mi.Point3f(*(mi.Float(o[:, i].astype(np.float32)) for i in range(3))),
+            mi.Vector3f(*(mi.Float(d[:, i]) for i in range(3))),
+        )
+        pi = self._scene.ray_intersect_preliminary(ray)
+        t = dr.select(pi.is_valid(), pi.t, dr.inf)
+        return np.asarray(t.numpy(), dtype=np.float64)
+
     def intersect_only(
         self, radar: RadarConfig, pose: np.ndarray | None = None, *, seed: int | None = None
     ) -> dict[str, float]:

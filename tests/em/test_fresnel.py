@@ -83,3 +83,67 @@ def test_unpolarised_power_is_mean_of_te_tm():
 def test_bad_angle_rejected():
     with pytest.raises(ValueError, match="incidence_rad"):
         em.reflection_coefficients("wood", F, 2.0)
+
+
+# --- slab transmission (ITU-R P.2040-3 §3, eq. (43b)) -------------------------------------
+
+
+def test_lossless_slab_conserves_power_per_polarisation():
+    """No absorption: every TE and TM wave is either reflected or transmitted."""
+    eta = 4.0 + 0j
+    theta = np.linspace(0.0, 1.5, 31)[:, None]
+    d = np.array([0.0003, 0.001, 0.0037, 0.012])[None, :]
+    r_te, r_tm = em.slab_coefficients(eta, theta, d, F)
+    t_te, t_tm = em.slab_transmission_coefficients(eta, theta, d, F)
+    np.testing.assert_allclose(np.abs(r_te) ** 2 + np.abs(t_te) ** 2, 1.0, atol=1e-12)
+    np.testing.assert_allclose(np.abs(r_tm) ** 2 + np.abs(t_tm) ** 2, 1.0, atol=1e-12)
+
+
+def test_unpolarised_slab_coefficients_conserve_power_when_lossless(monkeypatch):
+    """The unpolarised |R|^2 and |T|^2 are TE/TM means, so they conserve power too."""
+    import sim2radar.em.fresnel as fresnel
+
+    monkeypatch.setattr(fresnel, "complex_permittivity", lambda name, f: 2.73 + 0j)
+    theta = np.linspace(0.0, 1.4, 15)
+    r = fresnel.unpolarized_reflection("plasterboard", F, theta, 0.0125)
+    t = fresnel.unpolarized_transmission("plasterboard", F, theta, 0.0125)
+    np.testing.assert_allclose(np.abs(r) ** 2 + np.abs(t) ** 2, 1.0, atol=1e-12)
+
+
+def test_slab_transmission_tends_to_one_for_zero_thickness():
+    t_te, t_tm = em.transmission_coefficients("glass", F, 0.3, thickness_m=0.0)
+    assert t_te == pytest.approx(1.0, abs=1e-12) and t_tm == pytest.approx(1.0, abs=1e-12)
+    t = em.unpolarized_transmission("glass", F, np.array([0.0, 0.5, 1.0]), thickness_m=1e-6)
+    np.testing.assert_allclose(np.abs(t), 1.0, atol=1e-3)
+
+
+def test_lossy_slab_absorbs_power_and_more_when_thicker():
+    """Plasterboard and concrete are lossy at 77 GHz (Im eta < 0): R + T < 1, falling with d."""
+    theta = np.array([0.0, 0.4, 0.8])
+    for material in ("plasterboard", "concrete"):
+        lost = []
+        for d in (0.005, 0.0125, 0.05):
+            r = em.unpolarized_reflection(material, F, theta, d)
+            t = em.unpolarized_transmission(material, F, theta, d)
+            balance = np.abs(r) ** 2 + np.abs(t) ** 2
+            assert np.all(balance < 1.0 - 1e-4), (material, d, balance)
+            lost.append(1.0 - balance)
+        assert np.all(lost[0] < lost[2])
+    # one-way absorption ~ exp(-2 k |Im sqrt(eta)| d): 12.5 mm plasterboard passes ~ -7 dB
+    # at normal incidence (k = 1.6e3 rad/m, Im sqrt(eta) = -0.036), 0.2 m concrete nothing
+    t_pb = em.unpolarized_transmission("plasterboard", F, 0.0, 0.0125)
+    t_cc = em.unpolarized_transmission("concrete", F, 0.0, 0.2)
+    assert 0.1 < abs(t_pb) ** 2 < 0.4 and abs(t_cc) ** 2 < 1e-4
+
+
+def test_metal_slab_transmits_nothing():
+    t = em.unpolarized_transmission("metal", F, np.array([0.0, 0.7]), 0.001)
+    assert np.all(np.abs(t) < 1e-6)
+
+
+def test_transmission_phase_is_the_delay_across_the_slab_for_a_matched_slab():
+    """A slab with eta = 1 is free space: T = e^{-j k d cos t}, R = 0."""
+    lam = SPEED_OF_LIGHT_M_S / F
+    theta, d = 0.5, 0.01
+    t_te, _ = em.slab_transmission_coefficients(1.0 + 0j, theta, d, F)
+    assert t_te == pytest.approx(np.exp(-2j * np.pi * d / lam * np.cos(theta)), abs=1e-12)

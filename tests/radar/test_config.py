@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
 import pytest
 import yaml
 
@@ -87,10 +88,63 @@ def test_unknown_material_in_scattering_rejected():
         load_radar_config("ti-mmwcas", scattering={"coefficients": {"unobtainium": 0.3}})
 
 
-def test_bins_cover_the_fov():
+def test_bins_are_uniform_in_sine_centred_on_boresight_and_cover_the_fov():
+    """Beams of a virtual array have a constant width in u = sin(angle): the bins follow it,
+    one centred on boresight, width = the array's resolution at boresight."""
     r = load_radar_config("ti-mmwcas")
-    az = r.azimuth_bins_rad
-    assert len(az) == r.n_azimuth_bins and az[0] > -r.azimuth_fov_rad / 2
-    width = az[1] - az[0]
-    assert width <= r.azimuth_resolution_rad + 1e-9
+    for u, width, fov in ((r.azimuth_bins_u, r.azimuth_bin_u, r.azimuth_fov_rad),
+                          (r.elevation_bins_u, r.elevation_bin_u, r.elevation_fov_rad)):
+        assert len(u) % 2 == 1 and u[len(u) // 2] == 0.0
+        np.testing.assert_allclose(np.diff(u), width, rtol=1e-12)
+        assert u[-1] + width / 2 >= math.sin(fov / 2) > u[-1] - width / 2
+    assert r.azimuth_bin_u == pytest.approx(r.azimuth_resolution_rad)
+    assert (r.n_azimuth_bins, r.n_elevation_bins) == (85, 3)
+    np.testing.assert_allclose(r.azimuth_bins_rad, np.arcsin(r.azimuth_bins_u), atol=1e-7)
+    # off boresight a bin spans width / cos(angle)
+    k = r.n_azimuth_bins // 2 + 36
+    span = np.arcsin(r.azimuth_bins_u[k] + r.azimuth_bin_u / 2) - np.arcsin(
+        r.azimuth_bins_u[k] - r.azimuth_bin_u / 2)
+    assert span == pytest.approx(r.azimuth_bin_u / math.cos(r.azimuth_bins_rad[k]), rel=0.01)
     assert RadarConfig.model_validate(r.to_dict()).n_rays == r.n_rays
+    # a 180 deg field of view keeps every bin in visible space (|u| <= 1)
+    wide = r.with_updates(azimuth_fov_deg=180.0)
+    assert np.all(np.abs(wide.azimuth_bins_u) <= 1.0)
+
+
+def test_noise_floor_is_derived_unless_typed():
+    r = load_radar_config("ti-mmwcas")
+    assert r.detection.noise_floor_db is None and r.detection.add_noise
+    typed = load_radar_config("ti-mmwcas", detection={"noise_floor_db": -105.0})
+    assert typed.detection.noise_floor_db == -105.0
+    with pytest.raises(RadarConfigError, match="noise_floor_db"):
+        load_radar_config("ti-mmwcas", detection={"noise_floor_db": float("nan")})
+
+
+def test_scattering_model_fields_are_validated():
+    r = load_radar_config("ti-mmwcas")
+    assert r.scattering.model == "lambertian" and not r.scattering.transmission
+    d = load_radar_config(
+        "ti-mmwcas",
+        scattering={"model": "directive", "lobe_exponent": {"Drywall": 5}, "lobe_default": 2.0,
+                    "transmission": True, "slab_thickness_m": {"glass": 0.008}},
+    )
+    assert d.scattering.lobe("plasterboard") == 5.0  # alias resolved
+    assert d.scattering.lobe("fabric") == 2.0  # not listed: the default
+    assert d.scattering.transmits("glass") and not d.scattering.transmits("concrete")
+    assert not r.scattering.transmits("glass")  # transmission off by default
+    for bad, field in (
+        ({"model": "phong"}, "model"),
+        ({"lobe_exponent": {"unobtainium": 3.0}}, "unobtainium"),
+        ({"lobe_exponent": {"glass": -1.0}}, "lobe_exponent"),
+        ({"lobe_default": -2.0}, "lobe_default"),
+        ({"transmission": "sometimes"}, "transmission"),
+    ):
+        with pytest.raises(RadarConfigError, match=field):
+            load_radar_config("ti-mmwcas", scattering=bad)
+
+
+def test_every_known_material_has_a_documented_lobe_default():
+    from sim2radar.radar.config import DEFAULT_LOBE_EXPONENTS, DEFAULT_SCATTERING_COEFFICIENTS
+
+    assert set(DEFAULT_LOBE_EXPONENTS) == set(DEFAULT_SCATTERING_COEFFICIENTS)
+    assert all(0.0 <= a <= 1000.0 for a in DEFAULT_LOBE_EXPONENTS.values())

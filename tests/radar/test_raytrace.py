@@ -7,6 +7,7 @@ import math
 import numpy as np
 import pytest
 
+from sim2radar.mesh import box_mesh
 from sim2radar.radar import RadarScene, simulate_frame
 from tests.radar.conftest import dihedral, facing_plate
 
@@ -17,6 +18,28 @@ def _peak_db(frame) -> float:
 
 def _azimuth(points):
     return np.arctan2(points[:, 1], points[:, 0])
+
+
+def _elevation(points):
+    return np.arcsin(points[:, 2] / np.linalg.norm(points[:, :3], axis=1))
+
+
+def pointed_plate(range_m, azimuth_deg, elevation_deg, side_m, name, material="metal"):
+    """A thin square plate whose front face is ``range_m`` away in the direction
+    (azimuth, elevation), facing the radar (tilted in both angles)."""
+    a, e = math.radians(azimuth_deg), math.radians(elevation_deg)
+    d = np.array([math.cos(e) * math.cos(a), math.cos(e) * math.sin(a), math.sin(e)])
+    yaw = np.array([[math.cos(a), -math.sin(a), 0], [math.sin(a), math.cos(a), 0], [0, 0, 1]])
+    pitch = np.array([[math.cos(e), 0, -math.sin(e)], [0, 1, 0], [math.sin(e), 0, math.cos(e)]])
+    m = np.eye(4)
+    m[:3, :3] = yaw @ pitch
+    m[:3, 3] = (range_m + 0.0025) * d
+    return box_mesh([0, 0, 0], [0.005, side_m, side_m], 0.0, material=material,
+                    name=name).transformed(m)
+
+
+def _near(frame, range_m, tol_m=0.06):
+    return np.abs(np.linalg.norm(frame.xyz, axis=1) - range_m) < tol_m
 
 
 def test_plate_at_3m_is_detected_at_3m_and_boresight(mmwcas):
@@ -31,11 +54,12 @@ def test_plate_at_3m_is_detected_at_3m_and_boresight(mmwcas):
 
 
 def test_plate_return_matches_image_source_level(mmwcas):
-    """A large flat metal plate in the near field reflects like a mirror: the coherent sum
-    approaches the image-source field 1 / (2 r) (|Gamma| ~ 1), spread over a few cells."""
-    frame = simulate_frame([facing_plate(3.0, size=2.0)], mmwcas, return_cube=True)
-    total = np.abs(frame.cube.sum())  # all cells: the full PO integral
-    assert total == pytest.approx(1 / (2 * 3.0), rel=0.15)
+    """A large flat metal plate in the near field reflects like a mirror: the array sees the
+    image source at 2 r, field 1 / (2 r) (|Gamma| ~ 1), in the boresight beam."""
+    frame = simulate_frame([facing_plate(3.0, size=2.0)], mmwcas)
+    best = frame.points[0]
+    field = math.sqrt(10 ** (best[3] / 10) / (4 * math.pi))
+    assert 20 * math.log10(field * 2 * 3.0) == pytest.approx(0.0, abs=1.0)
 
 
 def test_two_plates_several_resolutions_apart_give_two_clusters(mmwcas):
@@ -124,3 +148,72 @@ def test_half_wave_slab_reflects_far_less_than_a_half_space(mmwcas):
         return_cube=True,
     )
     assert _peak_db(slab) < _peak_db(half_space) - 10.0
+
+
+# --- regression tests of the binning simulator's former defects ------------------------------
+
+
+def test_target_on_boresight_reads_its_full_return_on_a_beam_centre(mmwcas):
+    """Defect (a): with an even number of azimuth bins boresight lay on a bin edge, so a
+    point-like target there was split over two bins (~6 dB low) and placed 0.6 deg off.
+    Now a beam is centred on boresight: a 5 cm plate at 3 m (beyond its far-field distance
+    1.3 m) reads its PO RCS 4 pi A^2 / lambda^2 (within 1 dB; rays 0.1 deg apart sample its
+    area to +0.4 dB) at 0 deg (+- 0.1 deg)."""
+    radar = mmwcas.with_updates(elevation_fov_deg=10.0, ray_spacing_deg=0.1)
+    side = 0.05
+    frame = simulate_frame([facing_plate(3.0, size=side)], radar)
+    best = frame.points[0]
+    expected_db = 10 * math.log10(4 * math.pi * side**4 / radar.wavelength_m**2) - 40 * math.log10(3.0)
+    assert best[3] == pytest.approx(expected_db, abs=1.0)
+    assert math.degrees(math.atan2(best[1], best[0])) == pytest.approx(0.0, abs=0.1)
+    assert mmwcas.n_azimuth_bins % 2 == 1
+    assert mmwcas.azimuth_bins_rad[mmwcas.n_azimuth_bins // 2] == 0.0
+
+
+def test_a_large_plate_gives_no_spurious_side_peaks(mmwcas):
+    """Defect (a): cutting one plate's PO integral into angle bins left partial sums that did
+    not cancel: a 1 m plate at 2 m gave side peaks at +-4.1 deg only 13 dB down. The array
+    sums the whole plate: one point on boresight, nothing within 20 dB of it."""
+    frame = simulate_frame([facing_plate(2.0, size=1.0)], mmwcas)
+    best = frame.points[0]
+    assert abs(math.degrees(math.atan2(best[1], best[0]))) < 0.2
+    assert np.all(frame.intensity_db[1:] < best[3] - 20.0)
+
+
+def test_two_scatterers_closer_than_the_resolution_give_one_point_between_them(mmwcas):
+    """Defect (b): points sat at the power-weighted centroid of the true hit points in a cell,
+    so two small plates 0.8 deg apart (resolution 1.18 deg) on either side of a bin edge came
+    out at one plate's true azimuth. The array cannot tell them apart: one point, between."""
+    plates = [pointed_plate(3.0, 0.4, 0.0, 0.04, "a"), pointed_plate(3.0, -0.4, 0.0, 0.04, "b")]
+    frame = simulate_frame(plates, mmwcas)
+    near = _near(frame, 3.0)
+    assert near.sum() == 1
+    assert math.degrees(_azimuth(frame.points[near])[0]) == pytest.approx(0.0, abs=0.15)
+
+
+def test_two_plates_in_one_elevation_beam_give_one_point(mmwcas):
+    """Defect (b): two plates at the same range and azimuth, +-8 deg in elevation (the
+    elevation resolution is 14.6 deg), fell into two elevation cells and came out as two
+    points at exactly +-8 deg. The array reads one elevation per azimuth peak."""
+    plates = [pointed_plate(3.0, 0.0, 8.0, 0.05, "up"), pointed_plate(3.0, 0.0, -8.0, 0.05, "down")]
+    frame = simulate_frame(plates, mmwcas)
+    near = _near(frame, 3.0)
+    assert near.sum() == 1
+    assert abs(math.degrees(_elevation(frame.points[near])[0])) < 10.0
+
+
+def test_angular_resolution_widens_as_one_over_cos_off_boresight(mmwcas):
+    """Defect (b): angle bins were uniform in angle, so two in-phase scatterers 2.2 deg apart
+    were resolved anywhere. The array's beams are uniform in sin(az): 2.2 deg is 1.65
+    Rayleigh widths on boresight (two points) but 1.06 at 50 deg (one point)."""
+    for centre, expected in ((50.0, 1), (0.0, 2)):
+        plates = [pointed_plate(3.0, centre + 1.1, 0.0, 0.04, "a"),
+                  pointed_plate(3.0, centre - 1.1, 0.0, 0.04, "b")]
+        frame = simulate_frame(plates, mmwcas)
+        near = _near(frame, 3.0)
+        assert near.sum() == expected, centre
+        az = np.degrees(_azimuth(frame.points[near]))
+        if expected == 2:
+            np.testing.assert_allclose(np.sort(az), [centre - 1.1, centre + 1.1], atol=0.3)
+        else:
+            assert az[0] == pytest.approx(centre, abs=0.5)
