@@ -19,6 +19,13 @@ $(BIN)/.installed: pyproject.toml
 	  SUDO=$$( [ "$$(id -u)" = 0 ] || echo sudo ); \
 	  $$SUDO apt-get update -qq && $$SUDO apt-get install -y -qq libllvm19 >/dev/null; \
 	fi
+	@# the dashboard's browser tests drive Debian's Chromium through Playwright (no browser
+	@# downloads: `playwright install` is never run)
+	@if [ ! -x /usr/bin/chromium ] && command -v apt-get >/dev/null; then \
+	  echo "[setup] installing chromium (apt)"; \
+	  SUDO=$$( [ "$$(id -u)" = 0 ] || echo sudo ); \
+	  $$SUDO apt-get update -qq && $$SUDO apt-get install -y -qq chromium >/dev/null; \
+	fi
 	@[ -x $(BIN)/python ] || $(PY) -m venv $(VENV)
 	@# torch first, pinned: any other spec downloads the multi-GB CUDA build (DESIGN.md)
 	$(BIN)/python -m pip install -q --upgrade pip

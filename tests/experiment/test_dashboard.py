@@ -1,0 +1,519 @@
+"""The sweep dashboard without a browser: what the page shows for a constructed sweep (cell
+means, paired differences with their t-interval, trial points, runs, progress, banner, gap
+figures), that the page is self-contained, that partial and broken sweep folders behave, the
+CLI, and the live server's endpoints.
+
+``make_sweep`` / ``append_run`` are shared with test_dashboard_browser.py.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import select
+import signal
+import struct
+import subprocess
+import sys
+import time
+import urllib.error
+import urllib.request
+import zlib
+from pathlib import Path
+
+import numpy as np
+import pyarrow as pa
+import pyarrow.parquet as pq
+import pytest
+from scipy import stats as sps
+
+from sim2radar.experiment.dashboard import (
+    SweepFolderError,
+    dashboard_data,
+    load_sweep,
+    render_html,
+    serve_dashboard,
+    write_dashboard,
+)
+from storage import get_schema
+
+REPO = Path(__file__).resolve().parents[2]
+PROXY = "proxy-real (reference radar simulation)"
+FRACTIONS = (0.1, 0.5, 1.0)
+TRIALS = 3
+N_TRAIN = 40
+
+
+# ------------------------------------------------------------------------------ sweep folders
+def ap_of(condition: str, fraction: float, trial: int) -> float:
+    """The constructed sweep's AP: baseline 21 + 40 f ± 1 (trial - 1); sim-pretrain adds
+    3 + 0.5 trial, so its paired differences are 3.0, 3.5, 4.0 at every fraction."""
+    base = 20.0 + 40.0 * fraction + trial
+    return base if condition == "baseline" else base + 3.0 + 0.5 * trial
+
+
+def run_row(condition: str, fraction: float, trial: int, *, status: str = "ok",
+            error: str = "", epochs: int = 4) -> dict:
+    """One experiment_runs row of the constructed sweep."""
+    n_real = max(1, round(N_TRAIN * fraction))
+    n_sim = 0 if condition == "baseline" else 120
+    ok = status != "failed"
+    ap = ap_of(condition, fraction, trial) if ok else None
+    row = {
+        "sweep": "t", "run_key": f"{condition}-{fraction:g}-{trial}-" + "0" * 40,
+        "condition": condition, "fraction": fraction, "n_real_frames": n_real,
+        "n_sim_frames": n_sim, "sim_real_ratio": None if n_sim == 0 else n_sim / n_real,
+        "trial": trial, "seed": 1000 + trial,
+        "epochs": epochs, "steps": 10 * epochs if ok else 0,
+        "history_epoch": list(range(1, epochs + 1)) if ok else [],
+        "history_loss": [2.0 / e for e in range(1, epochs + 1)] if ok else [],
+        "history_val_epoch": [2, 4] if ok else [],
+        "history_val_ap": [0.5 * ap, ap] if ok else [],
+        "wall_time_s": 12.5 if ok else 0.0, "device": "cpu" if ok else "",
+        "checkpoint": f"t/runs/{condition}-{fraction:g}-{trial}/last.pt" if ok else "",
+        "pretrain_key": None if n_sim == 0 else f"pre-{trial}",
+        "status": status, "error": error, "finished_at": "2026-11-20T10:00:00+00:00",
+    }
+    for m in ("3d", "bev"):
+        for p in ("11", "40"):
+            for i in ("03", "05"):
+                row[f"ap_{m}_r{p}_iou{i}"] = None if ap is None else ap - (i == "05") * 10.0
+    return row
+
+
+def write_runs(folder: Path, rows: list[dict]) -> None:
+    """runs.parquet, validated against the declared schema and replaced atomically (as the
+    sweep flow does)."""
+    schema = get_schema("experiment_runs")
+    table = schema.validate(pa.Table.from_pylist(rows, schema=schema.schema))
+    tmp = folder / ".runs.parquet.tmp"
+    pq.write_table(table, tmp)
+    os.replace(tmp, folder / "runs.parquet")
+
+
+def append_run(folder: Path, row: dict) -> int:
+    """Add one run to runs.parquet (atomic rewrite); returns the new number of runs."""
+    rows = pq.read_table(folder / "runs.parquet").to_pylist() + [row]
+    write_runs(folder, rows)
+    return len(rows)
+
+
+def png_bytes(width: int = 64, height: int = 48) -> bytes:
+    """A valid RGB PNG (PNG spec: signature, IHDR, one IDAT, IEND) with a colour gradient."""
+    def chunk(kind: bytes, data: bytes) -> bytes:
+        return (struct.pack(">I", len(data)) + kind + data
+                + struct.pack(">I", zlib.crc32(kind + data) & 0xFFFFFFFF))
+    rows = b"".join(b"\x00" + bytes(v for x in range(width)
+                                    for v in (x * 4 % 256, y * 5 % 256, 128))
+                    for y in range(height))
+    ihdr = struct.pack(">IIBBBBB", width, height, 8, 2, 0, 0, 0)
+    return (b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", ihdr) + chunk(b"IDAT", zlib.compress(rows))
+            + chunk(b"IEND", b""))
+
+
+def make_sweep(folder: Path, *, conditions=("baseline", "sim-pretrain"),
+               fractions=FRACTIONS, trials=TRIALS, failed=(("sim-pretrain", 0.5, 2),),
+               ran=None, proxy: bool = True, sweep_json: bool = True,
+               extras: bool = True) -> Path:
+    """A sweep folder like the sweep flow writes: runs.parquet (every run of ``ran``
+    conditions, ``failed`` ones failed), sweep.json and, with ``extras``, progress.json,
+    generation.json and gap/ with gap.json and two PNGs. No stats.json."""
+    folder.mkdir(parents=True, exist_ok=True)
+    ran = conditions if ran is None else ran
+    rows = [run_row(c, f, t, status="failed" if (c, f, t) in failed else "ok",
+                    error="RuntimeError: diverged </script><b>x</b>" if (c, f, t) in failed
+                    else "")
+            for c in ran for f in fractions for t in range(trials)]
+    write_runs(folder, rows)
+    n_runs = len(conditions) * len(fractions) * trials
+    if sweep_json:
+        domain = PROXY if proxy else "measured"
+        sweep = {
+            "name": folder.name, "profile": {"name": "smoke", "trials": trials},
+            "conditions": list(conditions), "fractions": list(fractions), "trials": trials,
+            "metric": "ap_3d_r40_iou03",
+            "datasets": {"sim": {"role": "sim", "path": "/data/sim", "key": "k" * 16,
+                                 "domain": "measured", "n_frames": 120,
+                                 "splits": {"train": 100, "val": 20}},
+                         "real": {"role": "real", "path": "/data/real", "key": "r" * 16,
+                                  "domain": domain, "n_frames": 60,
+                                  "splits": {"train": N_TRAIN, "val": 10, "test": 10}}},
+            "real_domain": domain, "real_is_proxy": proxy, "n_runs": n_runs,
+            "provenance": {"versions": {"python": "3.11.2", "torch": "2.13.0"},
+                           "code": {"stage_version": 1, "sim2radar": "0.1.0"},
+                           "configs": {"finetune": {"model": {"name": "pointpillars"}}}},
+            "created_at": "2026-11-20T09:00:00+00:00",
+        }
+        (folder / "sweep.json").write_text(json.dumps(sweep))
+    if extras:
+        (folder / "progress.json").write_text(json.dumps({
+            "total_runs": n_runs, "finished": len(rows),
+            "failed": sum(r["status"] == "failed" for r in rows),
+            "running": ["sim-pretrain 100 % t2"], "updated_at": "2026-11-20T10:00:00+00:00"}))
+        (folder / "generation.json").write_text(json.dumps({"datasets": [
+            {"name": "demo", "role": "sim", "scenes_ok": 23, "scenes_failed": 1,
+             "scenes_skipped": 0, "frames": 96, "points_per_frame_mean": 312.4,
+             "labels_per_frame_mean": 1.25}]}))
+        gap = folder / "gap"
+        gap.mkdir(exist_ok=True)
+        (gap / "overlay.png").write_bytes(png_bytes())
+        (gap / "azimuth.png").write_bytes(png_bytes(32, 32))
+        (gap / "gap.json").write_text(json.dumps({
+            "sim": {"root": "/data/sim", "frames": 24, "points_per_frame_mean": 300.5,
+                    "points_per_frame_median": 290.0},
+            "real": {"root": "/data/real", "frames": 24, "points_per_frame_mean": 1200.0,
+                     "points_per_frame_median": 1150.0},
+            "points_ratio": 0.2504,
+            "azimuth": {"edges_deg": [-60, 0, 60], "sim_fraction": [0.5, 0.5],
+                        "real_fraction": [0.4, 0.6],
+                        "effective_fov_deg": {"sim": 80.5, "real": 110.0}},
+            "range": {"edges_m": [0, 5, 10], "sim_fraction": [0.7, 0.3],
+                      "real_fraction": [0.6, 0.4]},
+            "intensity": {"edges_db": [0, 10], "sim_before": [1.0], "sim_after": [1.0],
+                          "real": [1.0], "fitted_on": "train split: 24 frames"},
+            "chamfer": {"pairs": 24, "mean_m": 0.231, "per_frame": {}},
+            "overlay_frame": "world_000001_f000",
+            "figures": {"overlay": "overlay.png", "azimuth": "azimuth.png",
+                        "range": "range.png", "escape": "../sweep.json"}}))
+    return folder
+
+
+@pytest.fixture
+def sweep_dir(tmp_path):
+    return make_sweep(tmp_path / "t")
+
+
+def _traces(fig: dict, role: str) -> list[dict]:
+    return [t for t in fig["data"] if (t.get("meta") or {}).get("role") == role]
+
+
+# ------------------------------------------------------------------------------ the data
+def test_ap_plot_has_one_mean_trace_per_condition_at_the_cell_means(sweep_dir):
+    data = dashboard_data(load_sweep(sweep_dir))
+    assert [c["name"] for c in data["conditions"]] == ["baseline", "sim-pretrain"]
+    ap = data["figures"]["ap"]
+    means = _traces(ap, "mean")
+    assert [t["meta"]["condition"] for t in means] == ["baseline", "sim-pretrain"]
+    assert len(_traces(ap, "trials")) == 2 and len(ap["data"]) == 4   # the count rule
+    base, sim = means
+    # baseline: 20 + 40 f + trial over trials 0..2 -> mean 21 + 40 f, std 1
+    np.testing.assert_allclose(base["y"], [21 + 40 * f for f in FRACTIONS])
+    np.testing.assert_allclose(base["error_y"]["array"], [1.0, 1.0, 1.0])
+    # sim-pretrain at 50 %: trial 2 failed -> trials 0, 1: 43 + 0, 44 + 0.5
+    sim_vals = {f: [ap_of("sim-pretrain", f, t) for t in range(TRIALS)
+                    if not (f == 0.5 and t == 2)] for f in FRACTIONS}
+    np.testing.assert_allclose(sim["y"], [np.mean(sim_vals[f]) for f in FRACTIONS])
+    np.testing.assert_allclose(sim["error_y"]["array"],
+                               [np.std(sim_vals[f], ddof=1) for f in FRACTIONS])
+    # x: the fraction in %, nudged apart per condition by a few per cent on the log axis
+    np.testing.assert_allclose(np.array(base["x"]) / [100 * f for f in FRACTIONS], 1, atol=0.05)
+    assert ap["layout"]["xaxis"]["type"] == "log"
+
+
+def test_trial_points_are_every_finished_run(sweep_dir):
+    data = dashboard_data(load_sweep(sweep_dir))
+    base_pts, sim_pts = _traces(data["figures"]["ap"], "trials")
+    assert len(base_pts["y"]) == 9 and len(sim_pts["y"]) == 8       # one failed run left out
+    assert sorted(sim_pts["y"]) == sorted(ap_of("sim-pretrain", f, t) for f in FRACTIONS
+                                          for t in range(TRIALS) if (f, t) != (0.5, 2))
+
+
+def test_delta_is_the_paired_mean_difference_with_its_t_interval(sweep_dir):
+    data = dashboard_data(load_sweep(sweep_dir))
+    (delta,) = _traces(data["figures"]["delta"], "delta")
+    assert delta["meta"]["condition"] == "sim-pretrain"
+    # differences 3 + 0.5 t: (3, 3.5, 4) at 10 % and 100 %, (3, 3.5) at 50 % (trial 2 failed)
+    diffs = {0.1: [3.0, 3.5, 4.0], 0.5: [3.0, 3.5], 1.0: [3.0, 3.5, 4.0]}
+    np.testing.assert_allclose(delta["y"], [np.mean(diffs[f]) for f in FRACTIONS])
+    half = [sps.t.ppf(0.975, len(d) - 1) * np.std(d, ddof=1) / np.sqrt(len(d))
+            for d in diffs.values()]
+    np.testing.assert_allclose(delta["error_y"]["array"], half, rtol=1e-6)
+    np.testing.assert_allclose(delta["error_y"]["arrayminus"], half, rtol=1e-6)
+    (points,) = _traces(data["figures"]["delta"], "delta-trials")
+    assert sorted(points["y"]) == sorted(sum(diffs.values(), []))
+    # Table 1 rows: one per fraction, k/n counts the pairs
+    rows = data["summary"]["rows"]
+    kn = data["summary"]["columns"].index("k/n")
+    assert [r[kn] for r in rows] == ["3/3", "2/2", "3/3"]
+
+
+def test_learning_curves_have_a_loss_and_a_val_trace_per_finished_run(sweep_dir):
+    curves = dashboard_data(load_sweep(sweep_dir))["figures"]["curves"]
+    loss, val = _traces(curves, "loss"), _traces(curves, "val_ap")
+    assert len(loss) == len(val) == 17
+    r = next(t for t in loss if t["meta"]["run_key"].startswith("baseline-0.1-0-"))
+    assert r["x"] == [1, 2, 3, 4] and r["y"] == pytest.approx([2.0, 1.0, 2 / 3, 0.5])
+    # one legend entry per condition
+    assert sum(bool(t.get("showlegend", True)) for t in loss + val) == 2
+
+
+def test_runs_table_has_every_run_and_the_metric_first_among_the_aps(sweep_dir):
+    runs = dashboard_data(load_sweep(sweep_dir))["runs"]
+    keys = [c["key"] for c in runs["columns"]]
+    assert len(runs["rows"]) == 18
+    first_ap = next(i for i, c in enumerate(runs["columns"]) if c["type"] == "ap")
+    assert keys[first_ap] == "ap_3d_r40_iou03"
+    status = [r[runs["status_column"]] for r in runs["rows"]]
+    assert status.count("failed") == 1 and status.count("ok") == 17
+    failed = next(r for r in runs["rows"] if r[runs["status_column"]] == "failed")
+    assert failed[keys.index("ap_3d_r40_iou03")] is None
+    assert "diverged" in failed[keys.index("error")]
+
+
+def test_progress_banner_datasets_gap_and_provenance(sweep_dir):
+    data = dashboard_data(load_sweep(sweep_dir))
+    p = data["progress"]
+    assert (p["finished"], p["total"], p["ok"], p["failed"]) == (18, 18, 17, 1)
+    assert p["running"] == ["sim-pretrain 100 % t2"] and p["state"] == "complete"
+    assert data["banner"]["kind"] == "proxy"
+    assert "not claims about measured radar" in data["banner"]["text"]
+    assert PROXY in data["banner"]["text"]
+    assert {d["role"]: d["domain"] for d in data["datasets"]}["real"] == PROXY
+    (gen,) = data["generation"]
+    assert (gen["scenes_ok"], gen["scenes_failed"], gen["points_per_frame"]) == (23, 1, "312.4")
+    gap = data["gap"]
+    assert ["points per frame (mean)", "300.5", "1,200.0"] in gap["rows"]
+    assert ["points ratio sim / real", "25.0 %"] in gap["facts"]
+    prov = data["provenance"]
+    assert prov["versions"]["torch"] == "2.13.0" and "finetune" in prov["configs"]
+    json.dumps(data, allow_nan=False)   # no NaN reaches the page
+
+
+def test_gap_pngs_are_embedded_and_bad_figure_entries_are_warned(sweep_dir):
+    import base64
+
+    sweep = load_sweep(sweep_dir)
+    assert set(sweep.gap_images) == {"overlay", "azimuth"}
+    uri = sweep.gap_images["overlay"]
+    assert uri.startswith("data:image/png;base64,")
+    assert base64.b64decode(uri.split(",", 1)[1]) == (sweep_dir / "gap/overlay.png").read_bytes()
+    text = " ".join(sweep.warnings)
+    assert "range.png: missing" in text                      # named in gap.json, not there
+    assert "'../sweep.json' is not a file name" in text        # no path escapes the gap folder
+
+
+def test_measured_and_unknown_domains(tmp_path):
+    measured = dashboard_data(load_sweep(make_sweep(tmp_path / "m", proxy=False)))
+    assert measured["banner"]["kind"] == "measured"
+    assert "PROXY" not in measured["banner"]["text"]
+    unknown = dashboard_data(load_sweep(make_sweep(tmp_path / "u", sweep_json=False)))
+    assert unknown["banner"]["kind"] == "unknown" and unknown["provenance"] is None
+
+
+def test_stats_json_is_used_while_it_counts_the_runs_and_recomputed_when_stale(sweep_dir):
+    fresh = load_sweep(sweep_dir)
+    assert fresh.stats_source.startswith("computed")             # none written yet
+    marked = dict(fresh.stats, notes=["from stats.json"])
+    (sweep_dir / "stats.json").write_text(json.dumps(marked))
+    assert load_sweep(sweep_dir).stats["notes"] == ["from stats.json"]
+    append_run(sweep_dir, run_row("baseline", 0.25, 0))            # the sweep went on
+    again = load_sweep(sweep_dir)
+    assert again.stats["notes"] != ["from stats.json"] and "0.25" not in again.stats_source
+    assert 0.25 in again.stats["fractions"]
+
+
+# ------------------------------------------------------------------------------ the page
+def _embedded(page: str) -> dict:
+    m = re.search(r'<script type="application/json" id="dashboard-data">(.*?)</script>', page,
+                  re.S)
+    return json.loads(m.group(1))
+
+
+def test_the_page_is_self_contained(sweep_dir, tmp_path):
+    from plotly.offline import get_plotlyjs
+
+    out = write_dashboard(sweep_dir, tmp_path / "page" / "d.html")
+    page = out.read_text(encoding="utf-8")
+    assert get_plotlyjs()[:2000] in page and get_plotlyjs()[-2000:] in page   # bundle inline
+    tags = re.findall(r"<(?:script|link|img|iframe)\b[^>]*>", page, re.I)
+    assert tags and not [t for t in tags
+                         if re.search(r"\b(src|href)\s*=\s*[\"']?\s*(https?:)?//", t, re.I)]
+    assert not re.search(r"<script[^>]*\bsrc\s*=", page, re.I)         # every script inline
+    assert not re.search(r"<link\b", page, re.I)                        # no stylesheet links
+    csp = re.search(r'http-equiv="Content-Security-Policy" content="([^"]+)"', page).group(1)
+    assert "default-src &#x27;none&#x27;" in csp and "connect-src &#x27;none&#x27;" in csp
+    assert _embedded(page) == dashboard_data(load_sweep(sweep_dir))
+    assert "PROXY real domain" in page                                # banner without JS
+    assert '"poll_ms":0' in page                                      # static: no polling
+
+
+def test_text_in_the_data_cannot_close_the_script(sweep_dir):
+    data = dashboard_data(load_sweep(sweep_dir))
+    page = render_html(data)
+    assert "</script><b>x</b>" not in page
+    keys = [c["key"] for c in data["runs"]["columns"]]
+    errors = [r[keys.index("error")] for r in _embedded(page)["runs"]["rows"]]
+    assert "RuntimeError: diverged </script><b>x</b>" in errors
+
+
+@pytest.mark.parametrize("case", ["empty", "baseline only", "all failed", "no extras",
+                                  "sweep started"])
+def test_partial_sweeps_render(tmp_path, case):
+    folder = tmp_path / "p"
+    if case == "empty":
+        make_sweep(folder, ran=())
+    elif case == "baseline only":
+        make_sweep(folder, ran=("baseline",), failed=())
+    elif case == "all failed":
+        make_sweep(folder, failed={(c, f, t) for c in ("baseline", "sim-pretrain")
+                                   for f in FRACTIONS for t in range(TRIALS)})
+    elif case == "no extras":
+        make_sweep(folder, extras=False, sweep_json=False)
+    else:
+        make_sweep(folder)
+        (folder / "runs.parquet").unlink()
+    sweep = load_sweep(folder, require_runs=case != "sweep started")
+    data = dashboard_data(sweep)
+    json.dumps(data, allow_nan=False)
+    page = render_html(data)
+    assert _embedded(page) == data
+    assert [c["name"] for c in data["conditions"]] == ["baseline", "sim-pretrain"]
+    assert len(_traces(data["figures"]["ap"], "mean")) == 2      # the count rule, always
+    finished = {"empty": 0, "baseline only": 9, "all failed": 18, "no extras": 18,
+                "sweep started": 0}[case]
+    assert data["progress"]["finished"] == len(data["runs"]["rows"]) == finished
+    if case in ("empty", "sweep started"):
+        assert data["progress"]["state"] == "not started" and data["progress"]["total"] == 18
+        assert all(not t["y"] for t in data["figures"]["ap"]["data"])
+    if case == "baseline only":   # sim-pretrain is planned: listed, with nothing to plot yet
+        assert _traces(data["figures"]["ap"], "mean")[1]["y"] == []
+        assert _traces(data["figures"]["delta"], "delta")[0]["y"] == []
+    if case == "all failed":
+        assert data["progress"]["failed"] == 18
+        assert all(c["verdict"] == "insufficient trials"
+                   for c in sweep.stats["comparisons"])
+
+
+@pytest.mark.parametrize("case,named", [
+    ("missing folder", "nowhere"),
+    ("no runs.parquet", "runs.parquet"),
+    ("damaged runs.parquet", "runs.parquet"),
+    ("malformed sweep.json", "sweep.json"),
+    ("malformed stats.json", "stats.json"),
+    ("stats.json without cells", "stats.json"),
+    ("gap.json not an object", "gap.json"),
+])
+def test_bad_sweep_folders_name_the_file_and_the_fix(tmp_path, case, named):
+    folder = make_sweep(tmp_path / "b")
+    if case == "missing folder":
+        folder = tmp_path / "nowhere"
+    elif case == "no runs.parquet":
+        (folder / "runs.parquet").unlink()
+    elif case == "damaged runs.parquet":
+        (folder / "runs.parquet").write_bytes(b"PAR1 not really")
+    elif case == "malformed sweep.json":
+        (folder / "sweep.json").write_text('{"name": "b",')
+    elif case == "malformed stats.json":
+        (folder / "stats.json").write_text("{nan}")
+    elif case == "stats.json without cells":
+        (folder / "stats.json").write_text('{"conditions": []}')
+    else:
+        (folder / "gap" / "gap.json").write_text("[1, 2]")
+    with pytest.raises(SweepFolderError) as info:
+        load_sweep(folder)
+    msg = str(info.value)
+    assert named in msg and "\n" not in msg
+    assert re.search(r"rerun|delete|give|run `sim2radar", msg), msg
+
+
+# ------------------------------------------------------------------------------ the CLI
+def _cli(*args):
+    from typer.testing import CliRunner
+
+    from sim2radar.cli import app
+
+    return CliRunner().invoke(app, ["dashboard", *map(str, args)])
+
+
+def test_cli_writes_the_page_and_prints_its_path(sweep_dir, tmp_path):
+    out = tmp_path / "dash.html"
+    res = _cli(sweep_dir, "--out", out)
+    assert res.exit_code == 0, res.output
+    assert res.output.strip() == str(out) and out.stat().st_size > 1_000_000
+    # by name under --root
+    res = _cli("t", "--root", sweep_dir.parent, "--out", tmp_path / "by_name.html")
+    assert res.exit_code == 0, res.output
+    assert _embedded((tmp_path / "by_name.html").read_text())["name"] == "t"
+
+
+@pytest.mark.parametrize("case", ["missing", "no runs", "malformed json", "no action"])
+def test_cli_bad_input_is_one_line_and_exit_2(sweep_dir, tmp_path, case):
+    args = [sweep_dir, "--out", tmp_path / "x.html"]
+    if case == "missing":
+        args[0] = tmp_path / "nope"
+    elif case == "no runs":
+        (sweep_dir / "runs.parquet").unlink()
+    elif case == "malformed json":
+        (sweep_dir / "progress.json").write_text("{")
+    else:
+        args = [sweep_dir]
+    res = _cli(*args)
+    assert res.exit_code == 2
+    lines = [ln for ln in res.output.splitlines() if ln.strip()]
+    assert len(lines) == 1 and lines[0].startswith("error: "), res.output
+    assert "Traceback" not in res.output
+    expected = {"missing": "nope", "no runs": "runs.parquet", "malformed json": "progress.json",
+                "no action": "--out"}[case]
+    assert expected in lines[0]
+    assert not (tmp_path / "x.html").exists()
+
+
+def test_cli_serve_prints_the_url_serves_and_stops_on_ctrl_c(sweep_dir):
+    exe = Path(sys.executable).with_name("sim2radar")
+    proc = subprocess.Popen([str(exe), "dashboard", str(sweep_dir), "--serve", "--port", "0"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        ready, _, _ = select.select([proc.stdout], [], [], 60)
+        assert ready, "no URL printed within 60 s"
+        line = proc.stdout.readline()
+        url = re.search(r"http://127\.0\.0\.1:\d+/", line).group(0)
+        with urllib.request.urlopen(url + "data.json", timeout=10) as r:
+            assert json.load(r)["progress"]["finished"] == 18
+        proc.send_signal(signal.SIGINT)
+        assert proc.wait(timeout=10) == 0
+        assert "stopped" in proc.stdout.read()
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+
+
+# ------------------------------------------------------------------------------ the server
+def _get(url: str) -> tuple[int, bytes]:
+    try:
+        with urllib.request.urlopen(url, timeout=10) as r:
+            return r.status, r.read()
+    except urllib.error.HTTPError as e:
+        return e.code, e.read()
+
+
+def test_server_serves_the_live_page_and_fresh_data(sweep_dir):
+    with serve_dashboard(sweep_dir, poll_s=0.5) as server:
+        assert server.host == "127.0.0.1" and server.port > 0
+        status, page = _get(server.url)
+        assert status == 200 and b'"poll_ms":500' in page
+        assert b"connect-src &#x27;self&#x27;" in page
+        status, body = _get(server.url + "data.json")
+        assert status == 200 and json.loads(body)["progress"]["finished"] == 18
+        append_run(sweep_dir, run_row("baseline", 0.25, 0))
+        time.sleep(0.05)  # a new mtime/size signature
+        data = json.loads(_get(server.url + "data.json")[1])
+        assert data["progress"]["finished"] == 19 and len(data["runs"]["rows"]) == 19
+        # a broken file mid-sweep: 503 with the reason; the page still loads (last good data)
+        (sweep_dir / "progress.json").write_text("{")
+        status, body = _get(server.url + "data.json")
+        assert status == 503 and "progress.json" in json.loads(body)["error"]
+        status, page = _get(server.url)
+        assert status == 200 and '"finished":19' in page.decode()
+        assert _get(server.url + "etc/passwd")[0] == 404
+        url = server.url
+    with pytest.raises(urllib.error.URLError):
+        urllib.request.urlopen(url + "data.json", timeout=2)
+
+
+def test_server_binds_loopback_only_and_checks_the_folder_first(sweep_dir, tmp_path):
+    with pytest.raises(ValueError, match="loopback"):
+        serve_dashboard(sweep_dir, host="0.0.0.0")
+    with pytest.raises(SweepFolderError, match="no such sweep folder"):
+        serve_dashboard(tmp_path / "missing")

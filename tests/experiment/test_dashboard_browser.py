@@ -1,0 +1,132 @@
+"""The sweep dashboard in a real browser (headless Debian Chromium through Playwright): the
+static page loads with no console error and requests nothing but itself, the AP plot has one
+mean series per condition, the runs table sorts, a screenshot is taken; the served page shows a
+run appended to runs.parquet without a reload.
+
+Needs ``/usr/bin/chromium`` (``make setup`` installs Debian's ``chromium``; Playwright's own
+browser downloads are not used). Skipped only on a machine without apt.
+"""
+
+from __future__ import annotations
+
+import shutil
+import struct
+from pathlib import Path
+
+import pytest
+
+from sim2radar.experiment.dashboard import serve_dashboard, write_dashboard
+from tests.experiment.test_dashboard import append_run, make_sweep, run_row
+
+CHROMIUM = Path("/usr/bin/chromium")
+#: flags for a sandbox-less container; without the background-networking ones Chromium's own
+#: connections (component updates, ...) would show up as refused requests
+CHROMIUM_ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic",
+                 "--no-first-run", "--disable-background-networking",
+                 "--disable-component-update", "--disable-sync"]
+TIMEOUT_MS = 15_000
+
+if not CHROMIUM.exists():
+    if shutil.which("apt-get") is None:
+        pytest.skip("no apt on this machine to install Debian's chromium: browser tests skipped",
+                    allow_module_level=True)
+    pytest.fail(f"{CHROMIUM} not found: run `make setup` (or `sudo apt-get install chromium`)",
+                pytrace=False)
+try:
+    from playwright.sync_api import sync_playwright
+except ImportError:
+    pytest.fail("the playwright package is missing: pip install -e '.[dev]' (or `make setup`)",
+                pytrace=False)
+
+
+@pytest.fixture(scope="module")
+def browser():
+    with sync_playwright() as pw:
+        b = pw.chromium.launch(executable_path=str(CHROMIUM), args=CHROMIUM_ARGS, headless=True)
+        try:
+            yield b
+        finally:
+            b.close()
+
+
+@pytest.fixture
+def page(browser):
+    """A page that records every request, console error and uncaught exception."""
+    ctx = browser.new_context(viewport={"width": 1280, "height": 900})
+    pg = ctx.new_page()
+    pg.requests, pg.errors = [], []
+    pg.on("request", lambda r: pg.requests.append(r.url))
+    pg.on("console", lambda m: pg.errors.append(m.text) if m.type == "error" else None)
+    pg.on("pageerror", lambda e: pg.errors.append(str(e)))
+    pg.set_default_timeout(TIMEOUT_MS)
+    yield pg
+    ctx.close()
+
+
+_ROLES_JS = """(role) => document.getElementById('plot-ap').data
+    .filter(t => t.meta && t.meta.role === role).map(t => t.meta.condition)"""
+
+
+def test_static_page_is_offline_plots_every_condition_and_sorts(tmp_path, page):
+    sweep = make_sweep(tmp_path / "t")
+    html = write_dashboard(sweep, tmp_path / "dash.html")
+    page.goto(html.as_uri())
+    page.wait_for_selector("#plot-ap .main-svg")
+    page.wait_for_selector("#plot-curves .main-svg")
+    assert page.evaluate(_ROLES_JS, "mean") == ["baseline", "sim-pretrain"]
+    assert page.evaluate(_ROLES_JS, "trials") == ["baseline", "sim-pretrain"]
+    # the rendered SVG draws the two mean lines (one path each), not just the data
+    assert page.locator("#plot-ap .scatterlayer .trace .js-line").count() == 2
+    assert page.locator("#banner.proxy").inner_text().startswith("PROXY real domain")
+    assert page.locator("#run-count").inner_text() == "18"
+    assert page.locator(".gap-figs img").count() == 2
+    assert page.evaluate("Array.from(document.images).every(i => i.complete && "
+                         "i.naturalWidth > 0)")
+
+    # sort by the headline AP: ascending, then descending on a second click; failed run last
+    heading = page.locator("#runs-table th", has_text="3D AP R40 @0.3")
+    col = int(heading.get_attribute("data-col"))
+    cells_js = f"""() => Array.from(document.querySelectorAll('#runs-table tbody tr'))
+        .map(r => r.children[{col}].textContent)"""
+    heading.click()
+    asc = page.evaluate(cells_js)
+    assert page.locator("#runs-table th[aria-sort=ascending]").count() == 1
+    values = [float(v) for v in asc if v != "—"]
+    assert values == sorted(values) and asc[-1] == "—" and len(asc) == 18
+    heading.click()
+    desc = page.evaluate(cells_js)
+    assert [float(v) for v in desc if v != "—"] == sorted(values, reverse=True)
+    assert desc[-1] == "—"
+
+    shot = page.screenshot(path=str(tmp_path / "dashboard.png"), full_page=True)
+    width, height = struct.unpack(">II", shot[16:24])       # PNG IHDR
+    assert shot.startswith(b"\x89PNG\r\n\x1a\n") and len(shot) > 50_000
+    assert width == 1280 and height > 2000
+    assert page.errors == []
+    assert page.requests == [html.as_uri()]                 # nothing but the file itself
+
+
+def test_served_page_shows_a_new_run_without_reload(tmp_path, page):
+    sweep = make_sweep(tmp_path / "s", ran=("baseline",), failed=())
+    with serve_dashboard(sweep, poll_s=0.5) as server:
+        page.goto(server.url)
+        page.wait_for_selector("#plot-ap .main-svg")
+        assert page.locator("#run-count").inner_text() == "9"
+        assert page.evaluate(_ROLES_JS, "mean") == ["baseline", "sim-pretrain"]
+        page.evaluate("window.__notReloaded = true")
+        renders = page.evaluate("window.dashboard.renders")
+
+        n = append_run(sweep, run_row("sim-pretrain", 0.1, 0))
+        # a function, not an expression string: the page's CSP refuses eval (as it should)
+        page.wait_for_function("(n) => document.getElementById('run-count').textContent "
+                               "=== String(n)", arg=n)
+        assert page.locator("#runs-table tbody tr").count() == n
+        assert page.evaluate("window.__notReloaded === true")        # updated in place
+        assert page.evaluate("window.dashboard.renders") > renders
+        # the new run reached the plot: sim-pretrain's trial points now hold one value
+        assert page.evaluate("""() => document.getElementById('plot-ap').data
+            .find(t => t.meta.role === 'trials' && t.meta.condition === 'sim-pretrain')
+            .y.length""") == 1
+        assert page.errors == []
+        origin = server.url.rstrip("/")
+        assert {u.split("?")[0] for u in page.requests} <= {server.url, origin + "/data.json"}
