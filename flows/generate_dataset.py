@@ -82,6 +82,10 @@ def generate_dataset_flow(
     export_dir: str | None = None,
     force: bool = False,
     strict: bool = False,
+    frames_by_seed: dict[int, int] | None = None,
+    splits: dict[str, list[str]] | None = None,
+    export_doppler: bool = False,
+    domain: str | None = None,
 ) -> dict[str, Any]:
     """Generate each world's dataset frames and record them in the ``dataset`` manifest.
 
@@ -95,6 +99,10 @@ def generate_dataset_flow(
     export_dir : OpenPCDet export folder, or None
     force : recompute dataset frames even when cached
     strict : raise :class:`DatasetFailures` at the end if anything failed
+    frames_by_seed : frames of particular worlds (default ``spec["frames_per_world"]``)
+    splits : export splits, split name -> world ids (default: seeded split by world)
+    export_doppler : export points with a 5th column, Doppler [m/s]
+    domain : how the export labels its domain in ``dataset.json`` (default: simulated)
 
     Returns
     -------
@@ -103,9 +111,10 @@ def generate_dataset_flow(
     logger = get_run_logger()
     st = ArtifactStore(store)
     st.manifest(dataset)  # validates the name before any work
+    frames_by_seed = {int(k): int(v) for k, v in (frames_by_seed or {}).items()}
     futures = {
         generate_world_dataset_task.with_options(task_run_name=f"world-{s}").submit(
-            int(s), spec, store, force): int(s)
+            int(s), spec, store, force, frames_by_seed.get(int(s))): int(s)
         for s in seeds
     }
     outcomes: dict[int, WorldDatasetOutcome] = {}
@@ -129,7 +138,8 @@ def generate_dataset_flow(
     ordered = [outcomes[int(s)] for s in seeds]
     summary = summarize_dataset(st, dataset, spec, ordered)
     if export_dir is not None:
-        summary["export"] = export_all(st, ordered, export_dir, spec)
+        summary["export"] = export_all(st, ordered, export_dir, spec, splits=splits,
+                                       with_doppler=export_doppler, domain=domain)
         logger.info("exported to %s: %s", export_dir, summary["export"])
     logger.info("generate-dataset: worlds %s, frames %s into %s (dataset %s)",
                 summary["counts"], summary["frame_counts"], st.root, dataset)
@@ -158,6 +168,8 @@ def generate_dataset(
     strict: bool = False,
     workers: int = 1,
     dask_address: str | None = None,
+    labels: Any = None,
+    material_override: str | None = None,
 ) -> dict[str, Any]:
     """Run :func:`generate_dataset_flow` on worlds ``first_seed .. first_seed + n_worlds - 1``
     (or explicit ``seeds``).
@@ -176,7 +188,7 @@ def generate_dataset(
     Configs are validated here, before the flow starts, so a bad field fails fast with its name.
     """
     spec = resolve_spec(frames_per_world, geometry, radar, reconstruction, world, rig, seed,
-                        class_name)
+                        class_name, labels, material_override)
     seed_list = [int(s) for s in (seeds if seeds is not None
                                   else range(int(first_seed), int(first_seed) + int(n_worlds)))]
     if not seed_list:
@@ -208,6 +220,7 @@ def generate_dataset_job(
     strict: bool = False,
     workers: int = 1,
     dask_address: str | None = None,
+    material_override: str | None = None,
 ) -> dict[str, Any]:
     """Deployment entry point (see ``deploy/prefect.yaml``): worlds ``first_seed ..
     first_seed + n_worlds - 1`` through :func:`generate_dataset` as a subflow on the chosen
@@ -227,4 +240,5 @@ def generate_dataset_job(
         radar=radar, geometry=geometry, reconstruction=reconstruction, world=world, rig=rig,
         seed=seed, export_dir=export_dir, first_seed=first_seed, class_name=class_name,
         force=force, strict=strict, workers=workers, dask_address=dask_address,
+        material_override=material_override,
     )

@@ -434,19 +434,21 @@ RECONSTRUCTION = register_schema(
 )
 
 
-# --- dataset_frames (the generate_dataset flow; tasks/dataset.py) ---------------------------
+# --- dataset_frames (the factory's flows: tasks/dataset.py, tasks/reference.py) -------------
 DATASET_FRAMES = register_schema(
     ArtifactSchema(
         stage="dataset_frames",
-        version=1,
+        version=2,
         row="one radar frame of one world frame and one geometry",
-        description="radar points (radar frame) + door labels + ground-truth doors + timings",
+        description="radar points (radar frame) + door labels with their visibility + "
+        "ground-truth doors + timings",
         schema=pa.schema([
             field("frame_id", pa.string(), doc="world_<seed>_f<index>"),
             field("world_id", pa.string(), doc="world identifier (world_<seed>)"),
             field("seed", pa.int64(), doc="world seed"),
             field("frame_index", pa.int32(), doc="frame number along the world's trajectory"),
             field("geometry", pa.string(), doc="ground_truth | reconstructed"),
+            field("radar_fidelity", pa.string(), doc="raytrace | signal (RadarConfig.fidelity)"),
             field("radar_to_world", pa.list_(pa.float64(), 16), unit="m",
                   doc="(4, 4) row-major radar-to-world transform"),
             field("n_points", pa.int32(), doc="detected radar points"),
@@ -454,14 +456,20 @@ DATASET_FRAMES = register_schema(
             field("y_m", pa.list_(pa.float32()), unit="m", doc="(N,) left"),
             field("z_m", pa.list_(pa.float32()), unit="m", doc="(N,) up"),
             field("intensity_db", pa.list_(pa.float32()), unit="dB", doc="(N,) intensity"),
+            field("doppler_mps", pa.list_(pa.float32()), unit="m/s",
+                  doc="(N,) radial velocity (0 for the ray tracer)"),
             field("boxes", pa.list_(_BOX7_F32), unit="m, rad",
                   doc="(M, 7) training labels x y z dx dy dz heading, radar frame"),
             field("box_labels", pa.list_(pa.string()), doc="(M,) class names"),
+            field("label_visibility", pa.list_(pa.float32()),
+                  doc="(M,) fraction of each label's doorway the radar sees"),
             field("gt_boxes", pa.list_(_BOX7_F32), unit="m, rad",
-                  doc="(G, 7) ground-truth doors in FOV and range, radar frame"),
+                  doc="(G, 7) ground-truth doors the radar sees, radar frame"),
             field("gt_door_index", pa.list_(pa.int32()), doc="(G,) index into the world's doors"),
             field("gt_points_near", pa.list_(pa.int32()),
                   doc="(G,) radar points inside each GT box grown by NEAR_BOX_MARGIN_M"),
+            field("gt_visibility", pa.list_(pa.float32()),
+                  doc="(G,) fraction of each ground-truth doorway the radar sees"),
             field("n_triangles", pa.int64(), doc="triangles the radar traced"),
             field("timings_s", pa.map_(pa.string(), pa.float64()), unit="s",
                   doc="render / reconstruct / simulate wall time of this frame"),

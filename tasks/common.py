@@ -8,16 +8,14 @@ from __future__ import annotations
 
 import glob
 import logging
-import math
 import os
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
 
-import numpy as np
 import yaml
 
 from storage import ArtifactStore
+from storage.provenance import jsonable
 
 __all__ = [
     "expand_scenes",
@@ -55,24 +53,6 @@ def scene_id_for(scene_path: str | os.PathLike) -> str:
     except (OSError, yaml.YAMLError, UnicodeDecodeError):
         pass
     return path.stem
-
-
-def jsonable(obj: Any) -> Any:
-    """Best-effort conversion of stats/timings dicts to JSON-safe values (for provenance)."""
-    if isinstance(obj, dict):
-        return {str(k): jsonable(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [jsonable(v) for v in obj]
-    if isinstance(obj, np.ndarray):
-        return jsonable(obj.tolist()) if obj.size <= 64 else f"<array {obj.shape} {obj.dtype}>"
-    if isinstance(obj, (np.integer,)):
-        return int(obj)
-    if isinstance(obj, (float, np.floating)):
-        v = float(obj)
-        return v if math.isfinite(v) else repr(v)
-    if obj is None or isinstance(obj, (bool, int, str)):
-        return obj
-    return repr(obj)
 
 
 def expand_scenes(scenes: Sequence[str | os.PathLike]) -> list[str]:

@@ -14,13 +14,15 @@ Per world seed, :func:`generate_world_dataset`:
 
    * ``ground_truth``: the radar is simulated on the world's own meshes at the frame's
      ``radar_to_world`` (one :class:`~sim2radar.radar.RadarScene` per world); labels are the
-     ground-truth door boxes in the radar frame whose centre is in the radar's FOV and range
-     (the world renderer's ``door_in_fov & door_in_range`` flags);
+     ground-truth door boxes in the radar frame that the radar sees (at least
+     ``labels.min_visibility`` of the doorway unoccluded, in FOV and range:
+     :func:`sim2radar.factory.labels.radar_visibility` on the world's meshes);
    * ``reconstructed`` (the paper's pipeline): :func:`sim2radar.reconstruct.reconstruct` on the
      frame's RGB + LiDAR, meshes moved into the rig's radar frame
      (``inv(radar_to_world) @ camera_to_world``), radar simulated on them; labels are the
-     reconstructed door boxes in the radar frame (in FOV and range), the paper's pre-training
-     pseudo-labels. The ground-truth boxes are stored alongside for scoring. The reconstruction
+     reconstructed door boxes in the radar frame that the radar sees on the reconstructed
+     geometry (the same visibility rule), the paper's pre-training pseudo-labels. The
+     ground-truth doors the radar sees are stored alongside for scoring. The reconstruction
      itself is cached as its own ``scene_meshes`` + ``reconstruction`` artifacts
      (:func:`storage.reconstruction.write_scene_artifacts`), so changing only the
      radar re-simulates without re-reconstructing;
@@ -36,7 +38,6 @@ The ``dataset_frames`` schema is declared here (registered on import).
 from __future__ import annotations
 
 import dataclasses
-import json
 import logging
 import math
 import os
@@ -46,19 +47,21 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import pyarrow as pa
 from prefect import task
 from prefect.cache_policies import NO_CACHE
 
-from sim2radar.boxes import boxes_in_view, points_in_boxes, transform_boxes
+from sim2radar.boxes import transform_boxes
 from sim2radar.datasets.splits import split_groups as split_worlds
-from storage import (
-    ArtifactStore,
-    content_key,
-    meshes_from_table,
-    ragged_arrays,
-    ragged_column,
+from sim2radar.factory.frames import NEAR_BOX_MARGIN_M, DatasetFrame, points_near_boxes
+from sim2radar.factory.labels import (
+    DEFAULT_POINT_CLOUD_RANGE_M,
+    LabelConfig,
+    boxes_in_point_cloud_range,
+    radar_visibility,
 )
+from sim2radar.factory.seeds import frame_seed
+from storage import ArtifactStore, content_key, meshes_from_table
+from storage.frames import dataset_frame_from_table, dataset_frame_to_table
 from storage.schemas import DATASET_FRAMES as DATASET_FRAMES_SCHEMA
 from tasks.common import REMOTE_IO_RETRIES, REMOTE_IO_RETRY_DELAYS_S, jsonable, open_store
 
@@ -83,23 +86,28 @@ __all__ = [
     "summarize_dataset",
     "generate_dataset_plain",
     "world_bev_pngs",
+    "outcomes_from_manifest",
+    "export_store_dataset",
     "generate_world_dataset_task",
     "record_world_dataset_task",
+    "points_near_boxes",
+    "NEAR_BOX_MARGIN_M",
 ]
 
 log = logging.getLogger(__name__)
 
 #: Bump when a ``dataset_frames`` artifact of the same inputs changes (labels, filtering,
 #: table logic): every dataset frame is recomputed, world renders and reconstructions are not.
-DATASET_STAGE_VERSION = 1
+DATASET_STAGE_VERSION = 2
+#: (2: door labels need the radar to see >= LabelConfig.min_visibility of the doorway instead
+#: of only the box centre in FOV and range; label visibility and Doppler stored; derived
+#: receiver noise in the ray tracer)
 #: Geometry modes: radar simulated on the world's meshes, or on meshes reconstructed from RGB.
 GEOMETRIES = ("ground_truth", "reconstructed")
 #: Short tags used in frame ids and artifact maps.
 _TAG = {"ground_truth": "gt", "reconstructed": "rec"}
 #: 3D IoU at which a label counts as matching a ground-truth door (the paper's AP threshold).
 LABEL_IOU_THRESHOLD = 0.3
-#: Extra margin around a ground-truth box when counting radar points "in or near" it [m].
-NEAR_BOX_MARGIN_M = 0.25
 
 
 
@@ -120,6 +128,13 @@ class DatasetSpec:
     rig : RigConfig — its radar FOV/range (for the door flags) match ``radar``.
     seed : int — run seed: trajectories and radar noise derive from it.
     class_name : str — label class of door boxes (the detector's ``class_names``).
+    labels : LabelConfig — a door is a label when the radar sees enough of its doorway.
+    material_override : str or None — simulate every mesh as this material (the
+        "one material" ablation: what the material step contributes); None keeps each mesh's.
+    export_label_range_m : (6,) or None — OpenPCDet exports keep only labels whose centre lies
+        in this point-cloud range [m] (the detector's; None keeps every label).
+    render_rgb : bool — path trace RGB and cast LiDAR for the world frames (needed by
+        ``reconstructed``; a ground-truth-only run such as the reference radar can skip it).
     """
 
     frames_per_world: int
@@ -130,6 +145,10 @@ class DatasetSpec:
     rig: Any
     seed: int = 0
     class_name: str = "door"
+    labels: LabelConfig = LabelConfig()
+    material_override: str | None = None
+    export_label_range_m: tuple[float, ...] | None = DEFAULT_POINT_CLOUD_RANGE_M
+    render_rgb: bool = True
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-able form (what the Prefect flow passes to its tasks)."""
@@ -142,6 +161,11 @@ class DatasetSpec:
             "rig": self.rig.model_dump(mode="json"),
             "seed": self.seed,
             "class_name": self.class_name,
+            "labels": self.labels.model_dump(),
+            "material_override": self.material_override,
+            "export_label_range_m": (None if self.export_label_range_m is None
+                                     else list(self.export_label_range_m)),
+            "render_rgb": self.render_rgb,
         }
 
 
@@ -207,6 +231,10 @@ def resolve_spec(
     rig: Any = None,
     seed: int = 0,
     class_name: str = "door",
+    labels: Any = None,
+    material_override: str | None = None,
+    export_label_range_m: Any = DEFAULT_POINT_CLOUD_RANGE_M,
+    render_rgb: bool = True,
 ) -> DatasetSpec:
     """Validate and resolve a run's configuration.
 
@@ -221,6 +249,10 @@ def resolve_spec(
     world, rig : WorldConfig / RigConfig or dicts of their fields (None = defaults)
     seed : int — run seed
     class_name : str — class of the door labels
+    labels : LabelConfig or its dict (None = defaults: visibility >= 0.2)
+    material_override : a material name for every mesh (one-material ablation) or None
+    export_label_range_m : (6,) point-cloud range of the exported labels, or None
+    render_rgb : bool — False only for ground-truth-only runs (no RGB, no LiDAR rendered)
 
     Raises
     ------
@@ -234,6 +266,20 @@ def resolve_spec(
         raise ValueError(f"class_name must be a non-empty word, got {class_name!r}")
     radar_cfg = _radar_config(radar)
     world_cfg, rig_cfg = _configs(world, rig)
+    if material_override is not None:
+        from sim2radar.em import get_material
+
+        try:
+            material_override = get_material(material_override).name
+        except KeyError as exc:
+            raise ValueError(f"material_override: {exc}") from None
+    label_cfg = labels if isinstance(labels, LabelConfig) else LabelConfig.model_validate(
+        labels or {})
+    if not render_rgb and "reconstructed" in _geometries(geometry):
+        raise ValueError("render_rgb: the reconstructed geometry needs RGB and LiDAR frames")
+    if export_label_range_m is not None:
+        boxes_in_point_cloud_range(np.zeros((0, 7)), export_label_range_m)  # validates
+        export_label_range_m = tuple(float(v) for v in export_label_range_m)
     return DatasetSpec(
         frames_per_world=int(frames_per_world),
         geometries=_geometries(geometry),
@@ -243,6 +289,10 @@ def resolve_spec(
         rig=_rig_for_radar(rig_cfg, radar_cfg),
         seed=int(seed),
         class_name=class_name,
+        labels=label_cfg,
+        material_override=material_override,
+        export_label_range_m=export_label_range_m,
+        render_rgb=bool(render_rgb),
     )
 
 
@@ -251,7 +301,10 @@ def _spec(spec: DatasetSpec | dict) -> DatasetSpec:
         return spec
     return resolve_spec(spec["frames_per_world"], spec["geometry"], spec["radar"],
                         spec["reconstruction"], spec["world"], spec["rig"], spec["seed"],
-                        spec.get("class_name", "door"))
+                        spec.get("class_name", "door"), spec.get("labels"),
+                        spec.get("material_override"),
+                        spec.get("export_label_range_m", DEFAULT_POINT_CLOUD_RANGE_M),
+                        spec.get("render_rgb", True))
 
 
 # ---------------------------------------------------------------------------------------------
@@ -273,7 +326,10 @@ def frame_key(world_keys: dict[str, str], frame_index: int, geometry: str,
         "radar": spec.radar.to_dict(),
         "seed": spec.seed,
         "class_name": spec.class_name,
+        "labels": spec.labels.model_dump(),
     }
+    if spec.material_override is not None:
+        config["material_override"] = spec.material_override
     if geometry == "reconstructed":
         config["reconstruction"] = spec.reconstruction.to_dict()
     return content_key(
@@ -282,12 +338,6 @@ def frame_key(world_keys: dict[str, str], frame_index: int, geometry: str,
                 "scene_meshes": world_keys["scene_meshes"]},
         config=config,
     )
-
-
-def _frame_seed(run_seed: int, world_seed: int, frame_index: int) -> int:
-    """Radar-noise seed of one frame (same for both geometries, so they compare fairly)."""
-    ss = np.random.SeedSequence([int(run_seed), int(world_seed), int(frame_index), 0x5EED])
-    return int(ss.generate_state(1)[0])
 
 
 def _reconstruction_keys(frame, camera_to_target: np.ndarray, config) -> dict[str, str]:
@@ -320,7 +370,7 @@ class FrameOutcome:
     timings_s : dict — ``render``, ``reconstruct``, ``simulate_<geometry>`` [s] (compute time,
         also for cached frames: read from the artifacts)
     n_points, n_labels : dict — geometry -> points / labelled boxes
-    n_gt_doors : int — ground-truth doors in the radar's FOV and range
+    n_gt_doors : int — ground-truth doors the radar sees
     gt_points_near : dict — geometry -> (G,) radar points near each GT door
     comparison : dict — ``both`` geometries: ``points_ratio`` (rec / gt), ``chamfer_m``
     label_match : dict — geometry -> ``tp``, ``n_pred``, ``n_gt``: labels matched one-to-one
@@ -395,97 +445,42 @@ def failed_world_outcome(seed: int, error: BaseException | str) -> WorldDatasetO
 # ---------------------------------------------------------------------------------------------
 # One frame, one geometry
 # ---------------------------------------------------------------------------------------------
-@dataclasses.dataclass(frozen=True, eq=False)
-class DatasetFrame:
-    """One decoded ``dataset_frames`` row.
-
-    Attributes
-    ----------
-    frame_id, world_id : str; seed, frame_index : int; geometry : str
-    radar_to_world : (4, 4) float64 [m]
-    points : (N, 4) float32 — x, y, z [m] radar frame, intensity [dB]
-    boxes : (M, 7) float32 — labels ``x y z dx dy dz heading`` [m, rad], radar frame
-    box_labels : tuple[str, ...]
-    gt_boxes : (G, 7) float32 — ground-truth doors in FOV and range, radar frame
-    gt_door_index : (G,) int32; gt_points_near : (G,) int32
-    n_triangles : int; timings_s : dict [s]; stats : dict
-    """
-
-    frame_id: str
-    world_id: str
-    seed: int
-    frame_index: int
-    geometry: str
-    radar_to_world: np.ndarray
-    points: np.ndarray
-    boxes: np.ndarray
-    box_labels: tuple[str, ...]
-    gt_boxes: np.ndarray
-    gt_door_index: np.ndarray
-    gt_points_near: np.ndarray
-    n_triangles: int
-    timings_s: dict
-    stats: dict
-
-
-def _frame_table(f: DatasetFrame) -> pa.Table:
-    pts = np.asarray(f.points, np.float32).reshape(-1, 4)
-    return pa.table({
-        "frame_id": [f.frame_id],
-        "world_id": [f.world_id],
-        "seed": pa.array([f.seed], pa.int64()),
-        "frame_index": pa.array([f.frame_index], pa.int32()),
-        "geometry": [f.geometry],
-        "radar_to_world": pa.array([np.asarray(f.radar_to_world, np.float64).ravel()],
-                                   pa.list_(pa.float64(), 16)),
-        "n_points": pa.array([len(pts)], pa.int32()),
-        "x_m": ragged_column([pts[:, 0]], pa.float32()),
-        "y_m": ragged_column([pts[:, 1]], pa.float32()),
-        "z_m": ragged_column([pts[:, 2]], pa.float32()),
-        "intensity_db": ragged_column([pts[:, 3]], pa.float32()),
-        "boxes": ragged_column([np.asarray(f.boxes, np.float32).reshape(-1, 7)], pa.float32()),
-        "box_labels": pa.array([list(f.box_labels)], pa.list_(pa.string())),
-        "gt_boxes": ragged_column([np.asarray(f.gt_boxes, np.float32).reshape(-1, 7)],
-                                  pa.float32()),
-        "gt_door_index": ragged_column([np.asarray(f.gt_door_index, np.int32)], pa.int32()),
-        "gt_points_near": ragged_column([np.asarray(f.gt_points_near, np.int32)], pa.int32()),
-        "n_triangles": pa.array([int(f.n_triangles)], pa.int64()),
-        "timings_s": pa.array([list(f.timings_s.items())], pa.map_(pa.string(), pa.float64())),
-        "stats_json": [json.dumps(jsonable(f.stats), sort_keys=True)],
-    })
-
-
 def read_dataset_frame(store: str | os.PathLike | ArtifactStore, key: str) -> DatasetFrame:
     """Read one ``dataset_frames`` artifact back."""
-    t = open_store(store).read("dataset_frames", key)
-    x, y, z, i = (ragged_arrays(t.column(c))[0] for c in ("x_m", "y_m", "z_m", "intensity_db"))
-    row = t.select(["frame_id", "world_id", "seed", "frame_index", "geometry", "box_labels",
-                    "n_triangles", "timings_s", "stats_json"]).to_pylist()[0]
-    return DatasetFrame(
-        frame_id=row["frame_id"], world_id=row["world_id"], seed=int(row["seed"]),
-        frame_index=int(row["frame_index"]), geometry=row["geometry"],
-        radar_to_world=np.asarray(t.column("radar_to_world")[0].as_py()).reshape(4, 4),
-        points=np.stack([x, y, z, i], axis=1).astype(np.float32).reshape(-1, 4),
-        boxes=ragged_arrays(t.column("boxes"))[0].reshape(-1, 7).astype(np.float32),
-        box_labels=tuple(row["box_labels"]),
-        gt_boxes=ragged_arrays(t.column("gt_boxes"))[0].reshape(-1, 7).astype(np.float32),
-        gt_door_index=np.asarray(ragged_arrays(t.column("gt_door_index"))[0], np.int32),
-        gt_points_near=np.asarray(ragged_arrays(t.column("gt_points_near"))[0], np.int32),
-        n_triangles=int(row["n_triangles"]), timings_s=dict(row["timings_s"]),
-        stats=json.loads(row["stats_json"]),
-    )
+    return dataset_frame_from_table(open_store(store).read("dataset_frames", key))
 
 
-def points_near_boxes(points: np.ndarray, boxes: np.ndarray,
-                      margin_m: float = NEAR_BOX_MARGIN_M) -> np.ndarray:
-    """(M,) int32 — radar points inside each box grown by ``margin_m`` [m] on every side."""
-    return points_in_boxes(points, boxes, margin_m).sum(axis=0).astype(np.int32)
+def _caster(radar_scene, radar_to_world: np.ndarray | None = None):
+    """``first_hit_distance`` for rays given in the radar frame of a scene built in the world
+    frame (``radar_to_world``) or in the radar frame itself (None)."""
+    if radar_to_world is None:
+        return radar_scene.first_hit_distance
+    m = np.asarray(radar_to_world, np.float64)
+
+    def cast(origins, directions):
+        return radar_scene.first_hit_distance(origins @ m[:3, :3].T + m[:3, 3],
+                                              directions @ m[:3, :3].T)
+
+    return cast
 
 
-def _gt_labels(frame) -> tuple[np.ndarray, np.ndarray]:
-    keep = np.asarray(frame.door_in_fov, bool) & np.asarray(frame.door_in_range, bool)
-    idx = np.flatnonzero(keep).astype(np.int32)
-    return np.asarray(frame.door_boxes_radar, np.float32).reshape(-1, 7)[idx], idx
+def _gt_labels(frame, world_scene, spec: DatasetSpec):
+    """Ground-truth doors the radar sees (on the world's meshes): boxes (radar frame), their
+    door indices and visibilities."""
+    from sim2radar.worlds import radar_view
+
+    boxes = np.asarray(frame.door_boxes_radar, np.float32).reshape(-1, 7)
+    vis = radar_visibility(boxes, _caster(world_scene, frame.radar_to_world),
+                           radar_view(spec.rig), spec.labels)
+    idx = np.flatnonzero(vis >= spec.labels.min_visibility).astype(np.int32)
+    return boxes[idx], idx, vis[idx].astype(np.float32)
+
+
+def _with_material(meshes, material: str | None):
+    """The meshes, every one made of ``material`` (None: unchanged)."""
+    if material is None:
+        return meshes
+    return [dataclasses.replace(m, material=material) for m in meshes]
 
 
 def _render_seconds(frame) -> float:
@@ -500,23 +495,25 @@ def _simulate(scene, radar, pose, seed):
     return simulate_scene_frame(scene, radar, pose, seed=seed)
 
 
-def _ground_truth_frame(frame, world_id, radar_scene, spec, radar_seed) -> DatasetFrame:
+def _ground_truth_frame(frame, world_id, world_scene, radar_scene, spec,
+                        radar_seed) -> DatasetFrame:
     t0 = time.perf_counter()
     rf = _simulate(radar_scene, spec.radar, frame.radar_to_world, radar_seed)
     sim_s = time.perf_counter() - t0
-    gt, idx = _gt_labels(frame)
+    gt, idx, vis = _gt_labels(frame, world_scene, spec)
     return DatasetFrame(
         frame_id=frame_id_for(frame.seed, frame.frame_index), world_id=world_id,
         seed=frame.seed, frame_index=frame.frame_index, geometry="ground_truth",
-        radar_to_world=frame.radar_to_world, points=rf.points, boxes=gt,
-        box_labels=(spec.class_name,) * len(gt), gt_boxes=gt, gt_door_index=idx,
-        gt_points_near=points_near_boxes(rf.points, gt), n_triangles=radar_scene.n_triangles,
+        radar_to_world=frame.radar_to_world, points=rf.points, doppler_mps=rf.doppler_mps,
+        boxes=gt, box_labels=(spec.class_name,) * len(gt), label_visibility=vis,
+        gt_boxes=gt, gt_door_index=idx, gt_points_near=points_near_boxes(rf.points, gt),
+        gt_visibility=vis, n_triangles=radar_scene.n_triangles,
         timings_s={"render": _render_seconds(frame), "simulate": sim_s},
         stats={"radar": rf.stats, "radar_seed": radar_seed},
     )
 
 
-def _reconstructed_frame(frame, world_id, store, spec,
+def _reconstructed_frame(frame, world_id, world_scene, store, spec,
                          radar_seed) -> tuple[DatasetFrame, dict[str, str]]:
     from sim2radar.radar import RadarScene
     from sim2radar.reconstruct import FrameInput, reconstruct
@@ -552,20 +549,24 @@ def _reconstructed_frame(frame, world_id, store, spec,
                 "n_segments": scene.n_segments}
     if not meshes:
         raise ValueError(f"{fid}: reconstruction produced no meshes; nothing for the radar")
-    az, el, rng = radar_view(spec.rig)
     boxes = np.asarray(boxes, np.float32).reshape(-1, 7)
     n_fitted = int(len(boxes))
-    boxes = boxes[boxes_in_view(boxes, az, el, rng)]
     t0 = time.perf_counter()
-    radar_scene = RadarScene(meshes)
+    radar_scene = RadarScene(_with_material(meshes, spec.material_override))
     rf = _simulate(radar_scene, spec.radar, None, radar_seed)
     sim_s = time.perf_counter() - t0
-    gt, idx = _gt_labels(frame)
+    # the reconstructed doors the radar sees on the reconstructed geometry are the labels
+    vis = radar_visibility(boxes, _caster(radar_scene), radar_view(spec.rig), spec.labels)
+    keep = vis >= spec.labels.min_visibility
+    boxes, vis = boxes[keep], vis[keep].astype(np.float32)
+    gt, idx, gt_vis = _gt_labels(frame, world_scene, spec)
     out = DatasetFrame(
         frame_id=fid, world_id=world_id, seed=frame.seed, frame_index=frame.frame_index,
         geometry="reconstructed", radar_to_world=frame.radar_to_world, points=rf.points,
-        boxes=boxes, box_labels=(spec.class_name,) * len(boxes), gt_boxes=gt, gt_door_index=idx,
-        gt_points_near=points_near_boxes(rf.points, gt), n_triangles=radar_scene.n_triangles,
+        doppler_mps=rf.doppler_mps, boxes=boxes, box_labels=(spec.class_name,) * len(boxes),
+        label_visibility=vis, gt_boxes=gt, gt_door_index=idx,
+        gt_points_near=points_near_boxes(rf.points, gt), gt_visibility=gt_vis,
+        n_triangles=radar_scene.n_triangles,
         timings_s={"render": _render_seconds(frame),
                    "reconstruct": rec_seconds, "simulate": sim_s},
         stats={"radar": rf.stats, "radar_seed": radar_seed, "reconstruction": info,
@@ -586,8 +587,10 @@ def _digest(frame) -> str:
 class _WorldInputs:
     """Lazily loaded world geometry and frames (only when some frame must be computed)."""
 
-    def __init__(self, store: ArtifactStore, keys: dict[str, str]) -> None:
+    def __init__(self, store: ArtifactStore, keys: dict[str, str],
+                 material_override: str | None = None) -> None:
         self.store, self.keys = store, keys
+        self.material_override = material_override
         self._frames = None
         self._radar_scene = None
 
@@ -604,7 +607,7 @@ class _WorldInputs:
             from sim2radar.radar import RadarScene
 
             meshes = meshes_from_table(self.store.read("scene_meshes", self.keys["scene_meshes"]))
-            self._radar_scene = RadarScene(meshes)
+            self._radar_scene = RadarScene(_with_material(meshes, self.material_override))
         return self._radar_scene
 
 
@@ -644,6 +647,7 @@ def generate_world_dataset(
     *,
     force: bool = False,
     keep_frames: bool = False,
+    n_frames: int | None = None,
 ) -> WorldDatasetOutcome:
     """Make (or find cached) every dataset frame of world ``seed``.
 
@@ -655,6 +659,7 @@ def generate_world_dataset(
     force : bool — recompute the dataset frames (world renders and reconstructions stay cached)
     keep_frames : bool — attach the decoded :class:`DatasetFrame` objects as
         ``outcome.frames[i].data`` (tests, notebooks)
+    n_frames : int, optional — frames of this world (default ``spec.frames_per_world``)
 
     Returns
     -------
@@ -668,15 +673,16 @@ def generate_world_dataset(
     spec = _spec(spec)
     st = open_store(store)
     world_id = world_id_for(seed)
-    wo = generate_world_artifacts(int(seed), spec.frames_per_world, st, spec.world, spec.rig,
-                                  trajectory_seed=spec.seed)
+    n_frames = spec.frames_per_world if n_frames is None else int(n_frames)
+    wo = generate_world_artifacts(int(seed), n_frames, st, spec.world, spec.rig,
+                                  trajectory_seed=spec.seed, rgb=spec.render_rgb)
     keys = dict(wo.artifacts)
-    inputs = _WorldInputs(st, keys)
+    inputs = _WorldInputs(st, keys, spec.material_override)
     timings = {"world": time.perf_counter() - t_start}
     computed_any = wo.status == "ok"
     frames_out = []
     t_frames = time.perf_counter()
-    for k in range(spec.frames_per_world):
+    for k in range(n_frames):
         fo = FrameOutcome(frame_id_for(seed, k), world_id, int(seed), k, "skipped")
         fo.artifacts.update({f"world/{s}": v for s, v in keys.items()})
         decoded: dict[str, DatasetFrame] = {}
@@ -690,7 +696,7 @@ def generate_world_dataset(
                     rkeys = df.stats.get("reconstruction_keys") or {}
                 else:
                     df, rkeys = _compute_frame(inputs, k, geometry, world_id, st, spec)
-                    st.write("dataset_frames", key, _frame_table(df),
+                    st.write("dataset_frames", key, dataset_frame_to_table(df),
                              stage_version=DATASET_STAGE_VERSION,
                              provenance=_provenance(spec, keys, df, geometry, rkeys))
                     fo.status = "ok" if fo.status != "failed" else "failed"
@@ -720,10 +726,11 @@ def generate_world_dataset(
 def _compute_frame(inputs: _WorldInputs, k: int, geometry: str, world_id: str,
                    store: ArtifactStore, spec: DatasetSpec) -> tuple[DatasetFrame, dict]:
     frame = inputs.frames()[k]
-    radar_seed = _frame_seed(spec.seed, frame.seed, k)
+    radar_seed = frame_seed(spec.seed, frame.seed, k)
+    scene = inputs.radar_scene()  # the world's meshes: the GT radar and the labels' visibility
     if geometry == "ground_truth":
-        return _ground_truth_frame(frame, world_id, inputs.radar_scene(), spec, radar_seed), {}
-    return _reconstructed_frame(frame, world_id, store, spec, radar_seed)
+        return _ground_truth_frame(frame, world_id, scene, scene, spec, radar_seed), {}
+    return _reconstructed_frame(frame, world_id, scene, store, spec, radar_seed)
 
 
 def _provenance(spec, keys, df: DatasetFrame, geometry, rkeys) -> dict:
@@ -828,36 +835,111 @@ def summarize_dataset(store, dataset: str, spec: DatasetSpec | dict,
 # OpenPCDet export
 # ---------------------------------------------------------------------------------------------
 def export_openpcdet(store, outcomes: list[WorldDatasetOutcome], export_dir: str | os.PathLike,
-                     geometry: str, *, seed: int = 0) -> dict[str, Any]:
+                     geometry: str, *, seed: int = 0,
+                     label_range_m: Sequence[float] | None = DEFAULT_POINT_CLOUD_RANGE_M,
+                     with_doppler: bool = False,
+                     splits: dict[str, list[str]] | None = None,
+                     metadata: dict[str, Any] | None = None) -> dict[str, Any]:
     """Write the frames of one geometry in OpenPCDet's custom layout with
     :func:`sim2radar.datasets.write_dataset`.
 
-    ``points/<frame_id>.npy`` (N, 4) float32 x, y, z [m], intensity [dB];
-    ``labels/<frame_id>.txt`` ``x y z dx dy dz heading <class>``; ``ImageSets/{train,val,test}
-    .txt`` split by world (seeded, :func:`split_worlds`). Only frames whose geometry artifact
-    exists are exported.
+    ``points/<frame_id>.npy`` (N, 4) float32 x, y, z [m], intensity [dB] (+ doppler [m/s] as a
+    5th column with ``with_doppler``); ``labels/<frame_id>.txt`` ``x y z dx dy dz heading
+    <class>``, only labels whose centre lies in ``label_range_m`` (the detector's point-cloud
+    range; None keeps all); ``ImageSets/{train,val,test}.txt`` split by world (seeded,
+    :func:`split_worlds`, or the given ``splits``: split name -> world ids); ``dataset.json``
+    (:func:`sim2radar.datasets.write_metadata`): ``metadata`` plus the counts, the label rule
+    and the worlds of each split. Only frames whose geometry artifact exists are exported.
 
-    Returns ``{"root", "frames", "splits": {name: n_frames}}``.
+    Returns ``{"root", "frames", "labels", "labels_dropped_out_of_range", "splits": {name:
+    n_frames}}``.
     """
     from sim2radar.datasets import Frame, write_dataset
 
     st = open_store(store)
     frames, world_of = [], {}
+    n_labels = n_dropped = 0
     for o in outcomes:
         for f in o.frames:
             key = f.artifacts.get(f"dataset_frames/{geometry}")
             if key is None or geometry not in f.n_points:
                 continue
             df = read_dataset_frame(st, key)
-            frames.append(Frame(df.frame_id, df.points, df.boxes, df.box_labels))
+            keep = boxes_in_point_cloud_range(df.boxes, label_range_m)
+            n_labels += int(keep.sum())
+            n_dropped += int((~keep).sum())
+            points = df.points_with_doppler if with_doppler else df.points
+            frames.append(Frame(df.frame_id, points, df.boxes[keep],
+                                tuple(n for n, k in zip(df.box_labels, keep, strict=True) if k)))
             world_of[df.frame_id] = df.world_id
-    worlds = split_worlds(sorted(set(world_of.values())), seed)
-    splits = {name: [fid for fid in sorted(world_of) if world_of[fid] in set(ws)]
-              for name, ws in worlds.items()}
+    worlds = splits or split_worlds(sorted(set(world_of.values())), seed)
+    by_split = {name: [fid for fid in sorted(world_of) if world_of[fid] in set(ws)]
+                for name, ws in worlds.items()}
     root = Path(export_dir)
-    write_dataset(root, frames, splits)
-    return {"root": str(root), "frames": len(frames),
-            "splits": {k: len(v) for k, v in splits.items()}}
+    write_dataset(root, frames, by_split)
+    out = {"root": str(root), "frames": len(frames), "labels": n_labels,
+           "labels_dropped_out_of_range": n_dropped,
+           "splits": {k: len(v) for k, v in by_split.items()}}
+    from datetime import UTC, datetime
+
+    from sim2radar.datasets import write_metadata
+
+    write_metadata(root, {
+        **(metadata or {}), **out, "geometry": geometry,
+        "point_columns": ["x_m", "y_m", "z_m", "intensity_db"] + (
+            ["doppler_mps"] if with_doppler else []),
+        "label_range_m": None if label_range_m is None else list(label_range_m),
+        "worlds": {k: sorted(set(v)) for k, v in worlds.items()},
+        "exported_at": datetime.now(UTC).isoformat(timespec="seconds"),
+    })
+    return out
+
+
+def outcomes_from_manifest(store, dataset: str) -> list[WorldDatasetOutcome]:
+    """The world outcomes of a finished dataset, rebuilt from its manifest (frame rows
+    ``world_<seed>_f<k>`` with ``dataset_frames/<geometry>`` artifacts): what
+    :func:`export_openpcdet` needs to export a dataset of an earlier run. Geometries whose
+    artifact is missing from the store are left out of each frame."""
+    st = open_store(store)
+    rows = st.manifest(dataset).rows()
+    if not rows:
+        raise ValueError(f"store {st.root}: dataset {dataset!r} has no manifest rows; "
+                         f"known datasets: {st.manifests()}")
+    worlds: dict[str, WorldDatasetOutcome] = {}
+    for r in rows:
+        if "_f" not in r["scene_id"] or r["status"] == "failed":
+            continue
+        world_id, k = r["scene_id"].rsplit("_f", 1)
+        o = worlds.setdefault(world_id, WorldDatasetOutcome(world_id, -1, "skipped"))
+        fo = FrameOutcome(r["scene_id"], world_id, -1, int(k), r["status"],
+                          artifacts=dict(r["artifacts"]))
+        for name, key in r["artifacts"].items():
+            if name.startswith("dataset_frames/") and st.exists("dataset_frames", key):
+                fo.n_points[name.split("/", 1)[1]] = -1  # present; the count is in the frame
+        o.frames.append(fo)
+    return [worlds[w] for w in sorted(worlds)]
+
+
+def export_store_dataset(store, dataset: str, geometry: str, export_dir: str | os.PathLike,
+                         *, seed: int = 0) -> dict[str, Any]:
+    """Export ``geometry`` frames of a dataset already in the store (by its manifest) to
+    OpenPCDet's layout, split by world with ``seed``; Doppler is exported when the frames came
+    from the signal-level radar."""
+    outcomes = outcomes_from_manifest(store, dataset)
+    frames = [f for o in outcomes for f in o.frames if geometry in f.n_points]
+    if not frames:
+        raise ValueError(f"store dataset {dataset!r} has no {geometry!r} frames; choose the "
+                         f"geometry with {dataset}:ground_truth or {dataset}:reconstructed")
+    first = read_dataset_frame(store, frames[0].artifacts[f"dataset_frames/{geometry}"])
+    fidelity = (first.stats.get("radar") or {}).get("fidelity", "raytrace")
+    from sim2radar.factory.reference import DOMAIN_LABEL
+
+    # the signal-level radar on ground-truth geometry is the reference radar: a proxy
+    domain = (DOMAIN_LABEL if fidelity == "signal" and geometry == "ground_truth"
+              else f"simulated ({fidelity} radar, {geometry} geometry)")
+    return export_openpcdet(store, outcomes, export_dir, geometry, seed=seed,
+                            with_doppler=fidelity == "signal",
+                            metadata={"domain": domain, "source": f"store dataset {dataset!r}"})
 
 
 def world_bev_pngs(store, outcomes: list[WorldDatasetOutcome], png_dir: str | os.PathLike,
@@ -910,17 +992,24 @@ def generate_dataset_plain(
     export_dir: str | os.PathLike | None = None,
     force: bool = False,
     on_world: Callable[[WorldDatasetOutcome], None] | None = None,
+    frames_by_seed: dict[int, int] | None = None,
+    splits: dict[str, list[str]] | None = None,
+    export_doppler: bool = False,
+    domain: str | None = None,
 ) -> dict[str, Any]:
     """The generate-dataset flow's semantics without the Prefect engine (notebooks, tests):
-    worlds one after another, failures recorded, not raised. Returns
-    :func:`summarize_dataset`'s dict (plus ``export`` when ``export_dir`` is given)."""
+    worlds one after another, failures recorded, not raised. ``frames_by_seed`` overrides the
+    frames of some worlds; ``splits`` (split -> world ids) and ``export_doppler`` go to the
+    export. Returns :func:`summarize_dataset`'s dict (plus ``export`` when ``export_dir`` is
+    given)."""
     spec = _spec(spec)
     st = open_store(store)
     st.manifest(dataset)  # validates the name before any work
     outcomes = []
     for seed in seeds:
         try:
-            outcome = generate_world_dataset(int(seed), spec, st, force=force)
+            outcome = generate_world_dataset(int(seed), spec, st, force=force,
+                                             n_frames=(frames_by_seed or {}).get(int(seed)))
         except Exception as exc:  # noqa: BLE001 - one broken world must not stop the others
             log.error("world %s failed: %s: %s", seed, type(exc).__name__, exc)
             outcome = failed_world_outcome(seed, exc)
@@ -930,18 +1019,44 @@ def generate_dataset_plain(
             on_world(outcome)
     summary = summarize_dataset(st, dataset, spec, outcomes)
     if export_dir is not None:
-        summary["export"] = export_all(st, outcomes, export_dir, spec)
+        summary["export"] = export_all(st, outcomes, export_dir, spec, splits=splits,
+                                       with_doppler=export_doppler, domain=domain)
     return summary
 
 
-def export_all(store, outcomes, export_dir, spec: DatasetSpec | dict) -> dict[str, Any]:
+def dataset_metadata(spec: DatasetSpec, geometry: str, domain: str | None = None) -> dict:
+    """What a dataset export says about itself (``dataset.json``): its domain, radar and the
+    rules its labels follow."""
+    radar = spec.radar
+    return {
+        "domain": domain or (f"simulated ({radar.fidelity} radar {radar.name!r}, {geometry} "
+                             "geometry" + (f", every material {spec.material_override}"
+                                           if spec.material_override else "") + ")"),
+        "radar": radar.name, "radar_fidelity": radar.fidelity,
+        "radar_config_hash": radar.content_hash(),
+        "material_override": spec.material_override,
+        "label_rule": (f"doors the radar sees (>= {spec.labels.min_visibility:g} of the "
+                       "doorway unoccluded, in FOV and range)"
+                       + (" on the reconstructed geometry" if geometry == "reconstructed"
+                          else "")),
+        "class_name": spec.class_name, "run_seed": spec.seed,
+    }
+
+
+def export_all(store, outcomes, export_dir, spec: DatasetSpec | dict, *,
+               splits: dict[str, list[str]] | None = None,
+               with_doppler: bool = False, domain: str | None = None) -> dict[str, Any]:
     """Export every geometry of the run: straight into ``export_dir`` for one geometry, into
-    ``export_dir/<geometry>`` for ``both``."""
+    ``export_dir/<geometry>`` for ``both``; ``domain`` labels the export (default: simulated)."""
     spec = _spec(spec)
+    opts = {"seed": spec.seed, "label_range_m": spec.export_label_range_m, "splits": splits,
+            "with_doppler": with_doppler}
     if len(spec.geometries) == 1:
-        return {spec.geometries[0]: export_openpcdet(store, outcomes, export_dir,
-                                                     spec.geometries[0], seed=spec.seed)}
-    return {g: export_openpcdet(store, outcomes, Path(export_dir) / g, g, seed=spec.seed)
+        g = spec.geometries[0]
+        return {g: export_openpcdet(store, outcomes, export_dir, g, **opts,
+                                    metadata=dataset_metadata(spec, g, domain))}
+    return {g: export_openpcdet(store, outcomes, Path(export_dir) / g, g, **opts,
+                                metadata=dataset_metadata(spec, g, domain))
             for g in spec.geometries}
 
 
@@ -950,10 +1065,10 @@ def export_all(store, outcomes, export_dir, spec: DatasetSpec | dict) -> dict[st
 # the real error); manifest writes are storage I/O -> retried. Caching is by content key.
 # ---------------------------------------------------------------------------------------------
 @task(name="generate-world-dataset", cache_policy=NO_CACHE, retries=0, persist_result=False)
-def generate_world_dataset_task(seed: int, spec: dict, store: str,
-                                force: bool = False) -> WorldDatasetOutcome:
+def generate_world_dataset_task(seed: int, spec: dict, store: str, force: bool = False,
+                                n_frames: int | None = None) -> WorldDatasetOutcome:
     """Prefect task around :func:`generate_world_dataset`."""
-    return generate_world_dataset(seed, spec, store, force=force)
+    return generate_world_dataset(seed, spec, store, force=force, n_frames=n_frames)
 
 
 @task(name="record-dataset-manifest", cache_policy=NO_CACHE, retries=REMOTE_IO_RETRIES,

@@ -46,7 +46,7 @@ __all__ = [
 log = logging.getLogger(__name__)
 
 #: Version of the radar_points produced here (bump with changes to the labelling below).
-RADAR_POINTS_STAGE_VERSION = 1
+RADAR_POINTS_STAGE_VERSION = 2  # 2: labels are the doors the radar sees (visibility rule)
 
 
 @dataclasses.dataclass
@@ -93,9 +93,11 @@ def _configs(world_cfg, rig):
 
 
 def world_keys(seed: int, n_frames: int, world_cfg=None, rig=None,
-               trajectory_seed: int = 0, radar=None) -> dict[str, str]:
+               trajectory_seed: int = 0, radar=None, *, rgb: bool = True) -> dict[str, str]:
     """Content keys ``{"scene_meshes", "world_specs", "world_frames"}`` of one world, plus
-    ``"radar_points"`` when ``radar`` (preset name, YAML path or RadarConfig) is given."""
+    ``"radar_points"`` when ``radar`` (preset name, YAML path or RadarConfig) is given.
+    ``rgb=False``: frames without the path-traced RGB image and LiDAR (exact maps, poses and
+    door boxes only: all a ground-truth-geometry radar needs), under their own key."""
     from sim2radar.worlds import RENDER_VERSION, STAGE_VERSION
 
     world_cfg, rig = _configs(world_cfg, rig)
@@ -103,11 +105,13 @@ def world_keys(seed: int, n_frames: int, world_cfg=None, rig=None,
     meshes = content_key(stage="scene_meshes", stage_version=STAGE_VERSION,
                          inputs={"generator": "sim2radar.worlds"}, config=cfg)
     specs = content_key(stage="world_specs", stage_version=STAGE_VERSION, config=cfg)
+    frame_cfg = {"rig": rig.model_dump(mode="json"), "n_frames": int(n_frames),
+                 "trajectory_seed": int(trajectory_seed)}
+    if not rgb:
+        frame_cfg["rgb"] = False
     frames = content_key(
         stage="world_frames", stage_version=RENDER_VERSION,
-        inputs={"scene_meshes": meshes, "world_specs": specs},
-        config={"rig": rig.model_dump(mode="json"), "n_frames": int(n_frames),
-                "trajectory_seed": int(trajectory_seed)},
+        inputs={"scene_meshes": meshes, "world_specs": specs}, config=frame_cfg,
     )
     keys = {"scene_meshes": meshes, "world_specs": specs, "world_frames": frames}
     if radar is not None:
@@ -132,6 +136,7 @@ def generate_world_artifacts(
     trajectory_seed: int = 0,
     force: bool = False,
     radar=None,
+    rgb: bool = True,
 ) -> WorldOutcome:
     """Generate, render and store one world (skip if its artifacts exist).
 
@@ -144,6 +149,7 @@ def generate_world_artifacts(
     trajectory_seed : int
     force : bool — recompute even if cached
     radar : str or RadarConfig, optional — also simulate radar point clouds per frame
+    rgb : bool — path trace RGB and cast the LiDAR (False: exact maps, poses, boxes only)
     """
     from sim2radar.worlds import generate_world, render_frame, trajectory
     from storage.worlds import frames_to_table, world_id_for, world_spec_to_table
@@ -151,7 +157,7 @@ def generate_world_artifacts(
     t_start = time.perf_counter()
     store = open_store(store)
     world_cfg, rig = _configs(world_cfg, rig)
-    keys = world_keys(seed, n_frames, world_cfg, rig, trajectory_seed, radar)
+    keys = world_keys(seed, n_frames, world_cfg, rig, trajectory_seed, radar, rgb=rgb)
     world_id = world_id_for(seed)
     timings: dict[str, float] = {}
     if not force and all(store.exists(stage, key) for stage, key in keys.items()):
@@ -165,7 +171,7 @@ def generate_world_artifacts(
     world = generate_world(seed, world_cfg)
     timings["generate"] = time.perf_counter() - t0
     t0 = time.perf_counter()
-    frames = [render_frame(world, pose, rig)
+    frames = [render_frame(world, pose, rig, rgb=rgb, lidar=rgb)
               for pose in trajectory(world, n_frames, seed=trajectory_seed)]
     timings["render"] = time.perf_counter() - t0
     t0 = time.perf_counter()
@@ -182,7 +188,7 @@ def generate_world_artifacts(
             **common,
             "inputs": {"scene_meshes": keys["scene_meshes"], "world_specs": keys["world_specs"]},
             "config": {"rig": rig.model_dump(mode="json"), "n_frames": int(n_frames),
-                       "trajectory_seed": int(trajectory_seed)},
+                       "trajectory_seed": int(trajectory_seed), "rgb": bool(rgb)},
             "timings_s": {"generate": timings["generate"], "render": timings["render"],
                           "per_frame": jsonable([f.timings_s for f in frames])},
         },
@@ -203,19 +209,28 @@ def _simulate_radar(world, frames, radar, store, keys, seed, world_id) -> None:
     """Radar point clouds of every frame on the world's ground-truth geometry."""
     import numpy as np
 
+    from sim2radar.factory import LabelConfig, frame_seed, radar_visibility
     from sim2radar.radar import RadarConfig, RadarScene, load_radar_config, simulate_frame
     from storage import radar_frames_to_table
 
     radar_cfg = radar if isinstance(radar, RadarConfig) else load_radar_config(radar)
     scene = RadarScene(list(world.meshes))
+    view = (radar_cfg.azimuth_fov_deg, radar_cfg.elevation_fov_deg, radar_cfg.max_range_m)
+    labels = LabelConfig()
     points, seconds, boxes = [], [], []
     for f in frames:
         t0 = time.perf_counter()
-        frame_seed = int(np.random.SeedSequence([int(seed), f.frame_index, 77]).generate_state(1)[0])
-        result = simulate_frame(scene, radar_cfg, f.radar_to_world, seed=frame_seed)
+        result = simulate_frame(scene, radar_cfg, f.radar_to_world,
+                                seed=frame_seed(0, seed, f.frame_index))
         seconds.append(time.perf_counter() - t0)
         points.append(np.asarray(result.points, np.float32).reshape(-1, 4))
-        boxes.append(f.door_boxes_radar[f.door_in_fov & f.door_in_range])
+        r = f.radar_to_world
+
+        def cast(o, d, r=r):
+            return scene.first_hit_distance(o @ r[:3, :3].T + r[:3, 3], d @ r[:3, :3].T)
+
+        vis = radar_visibility(f.door_boxes_radar, cast, view, labels)
+        boxes.append(f.door_boxes_radar[vis >= labels.min_visibility])
     table = radar_frames_to_table(
         scene_id=world_id, radar_to_world=[f.radar_to_world for f in frames], points=points,
         boxes=boxes, box_labels=[["door"] * len(b) for b in boxes], sim_seconds=seconds)
@@ -227,7 +242,8 @@ def _simulate_radar(world, frames, radar, store, keys, seed, world_id) -> None:
                             "config": {"radar": radar_cfg.to_dict(), "seed": int(seed)},
                             "timings_s": {"simulate": float(sum(seconds))},
                             "extra": {"world_id": world_id,
-                                      "labels": "doors with centre in radar FOV and range"}})
+                                      "labels": "doors the radar sees (visibility >= "
+                                                f"{labels.min_visibility})"}})
 
 
 def _stage_version() -> int:

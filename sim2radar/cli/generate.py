@@ -24,7 +24,8 @@ from sim2radar.cli._app import app
 __all__ = ["generate", "load_generate_config", "print_generate_summary", "run_generate"]
 
 _CONFIG_KEYS = {"worlds", "first_seed", "frames", "geometry", "radar", "reconstruction", "seed",
-                "class_name", "world", "rig", "dataset"}
+                "class_name", "world", "rig", "dataset", "labels", "material_override",
+                "export_label_range_m"}
 
 
 def load_generate_config(path: str | Path) -> dict[str, Any]:
@@ -77,6 +78,9 @@ def run_generate(
     rig: Any = None,
     seed: int = 0,
     class_name: str = "door",
+    labels: Any = None,
+    material_override: str | None = None,
+    export_label_range_m: Any = "detector",
     export_dir: str | None = None,
     png_dir: Path | None = None,
     force: bool = False,
@@ -86,12 +90,21 @@ def run_generate(
     use_prefect: bool = True,
     show_progress: bool = True,
     verbose: bool = False,
+    render_rgb: bool = True,
+    frames_by_seed: dict[int, int] | None = None,
+    splits: dict[str, list[str]] | None = None,
+    export_doppler: bool = False,
+    domain: str | None = None,
+    flow_name: str = "generate-dataset",
 ) -> dict[str, Any]:
     """Run the generate-dataset flow (or its plain loop) with a progress bar; write BEV PNGs.
 
     ``workers`` worlds run concurrently (threads); ``dask_address`` (a scheduler address such as
     ``tcp://127.0.0.1:8786``, or ``"local"`` for a LocalCluster of ``workers`` processes) runs
     them on Dask instead (needs ``prefect-dask``; not with ``use_prefect=False``).
+
+    ``render_rgb``, ``frames_by_seed``, ``splits``, ``export_doppler``, ``domain`` and
+    ``flow_name`` serve the reference dataset (:mod:`flows.reference_dataset`).
 
     Returns the flow's summary (``pngs`` added); failures are counted in it, never raised
     (with ``strict`` the Prefect run is marked failed; the CLI exits with status 1).
@@ -106,7 +119,11 @@ def run_generate(
 
     from tasks.dataset import generate_dataset_plain, resolve_spec, world_bev_pngs
 
-    spec = resolve_spec(frames, geometry, radar, reconstruction, world, rig, seed, class_name)
+    spec = resolve_spec(frames, geometry, radar, reconstruction, world, rig, seed, class_name,
+                        labels, material_override, _label_range(export_label_range_m),
+                        render_rgb)
+    extras = {"frames_by_seed": frames_by_seed, "splits": splits,
+              "export_doppler": export_doppler, "domain": domain}
     with Progress(*_progress_columns(), disable=not show_progress, transient=False) as progress:
         bar = progress.add_task("starting" + (" Prefect" if use_prefect else ""),
                                 total=len(seeds))
@@ -128,20 +145,28 @@ def run_generate(
             runner = task_runner(workers, dask_address)
             with progress_callback(on_world):
                 try:
-                    summary = generate_dataset_flow.with_options(task_runner=runner)(
+                    summary = generate_dataset_flow.with_options(
+                        task_runner=runner, name=flow_name)(
                         seeds=seeds, spec=spec.to_dict(), store=store, dataset=dataset,
-                        export_dir=export_dir, force=force, strict=strict)
+                        export_dir=export_dir, force=force, strict=strict, **extras)
                 except DatasetFailures as exc:  # strict: the run is marked failed in Prefect
                     summary = exc.summary
         else:
             summary = generate_dataset_plain(seeds, spec, store, dataset, export_dir=export_dir,
-                                             force=force, on_world=on_world)
+                                             force=force, on_world=on_world, **extras)
     summary["pngs"] = []
     if png_dir is not None:
         from tasks.dataset import outcomes_from_summary
 
         summary["pngs"] = world_bev_pngs(store, outcomes_from_summary(summary), png_dir, spec)
     return summary
+
+
+def _label_range(value: Any):
+    """``"detector"`` -> the paper's PointPillars point-cloud range; a list or None as given."""
+    from sim2radar.factory.labels import DEFAULT_POINT_CLOUD_RANGE_M
+
+    return DEFAULT_POINT_CLOUD_RANGE_M if value == "detector" else value
 
 
 def _fmt(v: float, spec: str = ".1f") -> str:
@@ -220,6 +245,9 @@ def generate(
     width: int | None = typer.Option(None, help="Override the camera width [px]."),
     height: int | None = typer.Option(None, help="Override the camera height [px]."),
     spp: int | None = typer.Option(None, help="Override RGB samples per pixel."),
+    material_override: str | None = typer.Option(
+        None, "--material-override",
+        help="Simulate every mesh as this material (the one-material ablation)."),
     export_openpcdet: Path | None = typer.Option(
         None, "--export-openpcdet", help="Also write the OpenPCDet custom layout here."),
     png_dir: Path | None = typer.Option(None, "--png-dir",
@@ -273,13 +301,17 @@ def generate(
             world=cfg.get("world"), rig=rig,
             seed=int(seed if seed is not None else cfg.get("seed", 0)),
             class_name=cfg.get("class_name", "door"),
+            labels=cfg.get("labels"),
+            material_override=material_override or cfg.get("material_override"),
+            export_label_range_m=cfg.get("export_label_range_m", "detector"),
         )
         from tasks.dataset import resolve_spec
 
         # validate every config before any work (bad field -> exit 2 with its name)
         resolve_spec(params["frames"], params["geometry"], params["radar"],
                      params["reconstruction"], params["world"], params["rig"], params["seed"],
-                     params["class_name"])
+                     params["class_name"], params["labels"], params["material_override"],
+                     _label_range(params["export_label_range_m"]))
     except (ValueError, FileNotFoundError, ImportError) as exc:
         typer.secho(f"error: {exc}", fg="red", err=True)
         raise typer.Exit(2) from None
@@ -297,81 +329,4 @@ def generate(
         json_out.parent.mkdir(parents=True, exist_ok=True)
         json_out.write_text(json.dumps(summary, indent=1, default=str))
     if strict and summary["counts"]["failed"]:
-        raise typer.Exit(1)
-
-
-def run_demo(
-    out: Path,
-    *,
-    worlds: int = 2,
-    frames: int = 3,
-    geometry: str = "both",
-    radar: str = "ti-mmwcas",
-    rig: dict | None = None,
-    use_prefect: bool = True,
-    verbose: bool = False,
-) -> dict[str, Any]:
-    """The main job on the built-in default, procedural worlds, needing no model weights.
-
-    ``worlds`` seeded worlds × ``frames`` frames are rendered, reconstructed with the built-in
-    backends (LiDAR depth, classical segmentation, prior materials) and simulated with the radar
-    on both the reconstructed and the ground-truth geometry. Outputs under ``out``:
-
-    * ``store/`` — Parquet artifacts (worlds, frames, reconstructions, ``dataset_frames``) and
-      the ``demo`` manifest;
-    * ``openpcdet/{ground_truth,reconstructed}/`` — the frames in OpenPCDet's custom layout,
-      ready for ``sim2radar train``;
-    * ``bev/`` — bird's-eye views of radar points with door labels, one per world and geometry;
-    * ``preview_world0.png`` — contact sheet of the first world (RGB, depth, masks, map);
-    * ``summary.json`` — the run summary.
-    """
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
-    summary = run_generate(
-        list(range(worlds)), frames=frames, store=str(out / "store"), dataset="demo",
-        geometry=geometry, radar=radar, rig=rig or {}, export_dir=str(out / "openpcdet"),
-        png_dir=out / "bev", use_prefect=use_prefect, verbose=verbose,
-    )
-    from sim2radar.worlds import (
-        RigConfig,
-        generate_world,
-        make_rig_config,
-        render_frame,
-        trajectory,
-    )
-    from sim2radar.worlds.preview import contact_sheet
-
-    rig_cfg = make_rig_config(rig) if rig else RigConfig()
-    world = generate_world(0)
-    pose = trajectory(world, 1, seed=0)[0]
-    summary["preview"] = str(contact_sheet(world, render_frame(world, pose, rig_cfg),
-                                           out / "preview_world0.png", rig_cfg))
-    (out / "summary.json").write_text(json.dumps(summary, indent=1, default=str))
-    return summary
-
-
-@app.command()
-def demo(
-    out: Path = typer.Option(Path("out"), "--out", "-o", help="Output folder."),
-    worlds: int = typer.Option(2, "--worlds", "-n", help="Procedural worlds (seeds 0..n-1)."),
-    frames: int = typer.Option(3, "--frames", "-m", help="Frames per world."),
-    width: int | None = typer.Option(None, help="Camera width [px] (default 640)."),
-    height: int | None = typer.Option(None, help="Camera height [px] (default 480)."),
-    spp: int | None = typer.Option(None, help="RGB samples per pixel."),
-    no_prefect: bool = typer.Option(False, "--no-prefect", help="Run without the Prefect engine."),
-    verbose: bool = typer.Option(False, "--verbose", "-v", help="Show Prefect's logs."),
-) -> None:
-    """Run the main job on the built-in default: procedural worlds -> RGB + LiDAR ->
-    reconstructed and ground-truth geometry -> radar points + door boxes (Parquet, OpenPCDet
-    layout, pictures). No model weights needed."""
-    from sim2radar.cli.simulate import _prefect_env
-
-    if not no_prefect:
-        _prefect_env(verbose)
-    rig = {k: v for k, v in (("width", width), ("height", height), ("spp", spp)) if v is not None}
-    summary = run_demo(out, worlds=worlds, frames=frames, rig=rig, use_prefect=not no_prefect,
-                       verbose=verbose)
-    print_generate_summary(summary)
-    typer.echo(f"preview:  {summary['preview']}")
-    if summary["counts"]["failed"]:
         raise typer.Exit(1)

@@ -30,7 +30,15 @@ __all__ = [
     "write_dataset",
     "write_frame",
     "write_split",
+    "METADATA_FILE",
+    "read_metadata",
+    "write_metadata",
 ]
+
+#: Optional description of a dataset folder (JSON): its ``domain`` ("measured", "proxy-real
+#: (reference radar simulation)", "simulated (...)"), the radar, how labels were chosen, worlds
+#: and splits. Measured datasets need not have it (their domain reads as "measured").
+METADATA_FILE = "dataset.json"
 
 
 class DatasetError(ValueError):
@@ -61,8 +69,13 @@ class Frame:
                      tuple(self.names[i] for i in keep))
 
 
-def read_points(path: str | Path, num_point_features: int | None = None) -> np.ndarray:
-    """Load ``points/<id>.npy`` as (N, C) float32, checking shape, dtype and finiteness."""
+def read_points(path: str | Path, num_point_features: int | None = None,
+                drop_extra_columns: bool = False) -> np.ndarray:
+    """Load ``points/<id>.npy`` as (N, C) float32, checking shape, dtype and finiteness.
+
+    With ``drop_extra_columns``, a file with more columns than ``num_point_features`` keeps the
+    first ``num_point_features`` (OpenPCDet's ``used_feature_list``: e.g. x y z intensity of a
+    file that also has Doppler); fewer columns are always an error."""
     path = Path(path)
     if not path.is_file():
         raise DatasetError(f"{path}: point file missing (expected points/<frame_id>.npy)")
@@ -74,6 +87,8 @@ def read_points(path: str | Path, num_point_features: int | None = None) -> np.n
         raise DatasetError(f"{path}: points must be an (N, C>=3) array [x y z ...], got {pts.shape}")
     if not np.issubdtype(pts.dtype, np.number):
         raise DatasetError(f"{path}: points must be numeric, got dtype {pts.dtype}")
+    if drop_extra_columns and num_point_features is not None and pts.shape[1] > num_point_features:
+        pts = pts[:, :num_point_features]
     if num_point_features is not None and pts.shape[1] != num_point_features:
         raise DatasetError(
             f"{path}: points have {pts.shape[1]} columns but the model expects "
@@ -121,11 +136,15 @@ class OpenPCDetDataset:
     ----------
     root : dataset folder (``points/``, ``labels/``, ``ImageSets/``).
     num_point_features : if given, every point file must have this many columns.
+    drop_extra_columns : keep the first ``num_point_features`` columns of files that have more
+        (e.g. a 5th Doppler column), instead of refusing them.
     """
 
-    def __init__(self, root: str | Path, num_point_features: int | None = None) -> None:
+    def __init__(self, root: str | Path, num_point_features: int | None = None,
+                 drop_extra_columns: bool = False) -> None:
         self.root = Path(root)
         self.num_point_features = num_point_features
+        self.drop_extra_columns = drop_extra_columns
         if not self.root.is_dir():
             raise DatasetError(f"dataset folder {self.root} does not exist (set data.root)")
         for sub in ("points", "labels", "ImageSets"):
@@ -152,7 +171,8 @@ class OpenPCDetDataset:
 
     def frame(self, frame_id: str) -> Frame:
         """Load one frame."""
-        pts = read_points(self.root / "points" / f"{frame_id}.npy", self.num_point_features)
+        pts = read_points(self.root / "points" / f"{frame_id}.npy", self.num_point_features,
+                          self.drop_extra_columns)
         boxes, names = read_labels(self.root / "labels" / f"{frame_id}.txt")
         return Frame(frame_id, pts, boxes, names)
 
@@ -216,3 +236,33 @@ def write_dataset(
             raise DatasetError(f"split {name!r} lists frames that were not written: {unknown[:5]}")
         write_split(root, name, ids)
     return OpenPCDetDataset(root)
+
+
+def write_metadata(root: str | Path, metadata: Mapping) -> Path:
+    """Write ``ROOT/dataset.json`` atomically (keys sorted); returns its path."""
+    import json
+
+    root = Path(root)
+    root.mkdir(parents=True, exist_ok=True)
+    path = root / METADATA_FILE
+    _atomic_write(path, (json.dumps(dict(metadata), indent=1, sort_keys=True, default=str)
+                         + "\n").encode())
+    return path
+
+
+def read_metadata(root: str | Path) -> dict:
+    """``ROOT/dataset.json`` as a dict; ``{"domain": "measured"}`` when the folder has none (a
+    measured dataset such as IFR). A malformed file raises :class:`DatasetError`."""
+    import json
+
+    path = Path(root) / METADATA_FILE
+    if not path.is_file():
+        return {"domain": "measured"}
+    try:
+        doc = json.loads(path.read_text())
+    except (ValueError, OSError) as exc:
+        raise DatasetError(f"{path}: not valid JSON ({exc}); fix or delete the file") from exc
+    if not isinstance(doc, dict):
+        raise DatasetError(f"{path}: expected a JSON object")
+    doc.setdefault("domain", "measured")
+    return doc

@@ -13,20 +13,35 @@ runner = CliRunner()
 
 
 def test_demo_runs_procedural_worlds_end_to_end(prefect_server, tmp_path):
+    """The main job, small: simulated domain, proxy-real domain, gap report, a smoke sweep and
+    its dashboard, all from one command."""
     out = tmp_path / "out"
-    args = ["demo", "--out", str(out), "--worlds", "1", "--frames", "1",
+    args = ["demo", "--out", str(out), "--worlds", "3", "--frames", "1",
+            "--reference-worlds", "3", "--reference-frames", "2", "--profile", "smoke",
             "--width", "160", "--height", "120", "--spp", "4"]
     result = runner.invoke(app, args)
     assert result.exit_code == 0, result.output
-    assert str(out / "store") in result.output and "preview" in result.output
+    assert "dashboard" in result.output and "preview" in result.output
     summary = json.loads((out / "summary.json").read_text())
-    assert summary["counts"]["failed"] == 0 and summary["frame_counts"]["failed"] == 0
+    sim, real = summary["generate"], summary["reference"]
+    assert sim["counts"]["failed"] == 0 and sim["frame_counts"]["failed"] == 0
     for geometry in ("ground_truth", "reconstructed"):
-        assert summary["geometry"][geometry]["frames"] == 1
-        assert summary["geometry"][geometry]["points_per_frame"] > 20  # radar saw the corridor
+        assert sim["geometry"][geometry]["frames"] == 3
+        assert sim["geometry"][geometry]["points_per_frame"] > 20  # radar saw the corridor
         assert (out / "openpcdet" / geometry / "ImageSets" / "train.txt").is_file()
-    # ground-truth labels are the world's doors in the radar's view
-    assert summary["geometry"]["ground_truth"]["label_recall"] == 1.0
+    # ground-truth labels are the world's doors the radar sees
+    assert sim["geometry"]["ground_truth"]["label_recall"] == 1.0
+    # the proxy-real domain: denser than the ray-traced sim, labelled as a proxy, 5 columns
+    ref = real["geometry"]["ground_truth"]
+    assert real["counts"] == {"ok": 3, "skipped": 0, "failed": 0} and ref["frames"] == 6
+    assert ref["points_per_frame"] > 2 * sim["geometry"]["ground_truth"]["points_per_frame"]
+    meta = json.loads((out / "openpcdet" / "proxy_real" / "dataset.json").read_text())
+    assert meta["domain"] == "proxy-real (reference radar simulation)"
+    gap = summary["gap"]
+    assert 0 < gap["points_ratio"] < 1 and (out / "sweeps" / "demo" / "gap" / "gap.json").is_file()
+    assert summary["sweep"]["counts"]["failed"] == 0 and summary["sweep"]["counts"]["ok"] > 0
+    html = (out / "sweeps" / "demo" / "dashboard.html").read_text()
+    assert "proxy-real" in html
     pngs = sorted((out / "bev").glob("*.png")) + [out / "preview_world0.png"]
     assert len(pngs) >= 3 and all(p.read_bytes()[:4] == b"\x89PNG" for p in pngs)
     store = ArtifactStore(out / "store")

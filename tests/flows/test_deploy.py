@@ -26,7 +26,8 @@ def test_deployments_point_at_real_flows_with_valid_parameters(monkeypatch):
         for sched in dep.get("schedules", []) or []:
             CronSchedule(cron=sched["cron"], timezone=sched.get("timezone"))
         assert dep["work_pool"]["name"]
-    assert {"nightly-radar", "radar-on-demand", "nightly-generate", "generate-on-demand"} <= names
+    assert {"nightly-radar", "radar-on-demand", "nightly-generate", "generate-on-demand",
+            "weekly-reference", "sweep-on-demand"} <= names
     nightly = next(d for d in doc["deployments"] if d["name"] == "nightly-radar")
     assert nightly["schedules"][0]["cron"] == "0 2 * * *"
 

@@ -1,0 +1,217 @@
+"""Flow: the paper's experiment grid — pre-train on simulated radar, fine-tune on real radar,
+compare with training from scratch over real-data fractions × trials — as a resumable sweep.
+
+    from flows.run_experiment import run_experiment
+    summary = run_experiment("data/sim", "data/proxy_real", profile="demo", name="demo",
+                             out="out/sweeps")
+
+Every training run is its own Prefect task keyed by content (:mod:`tasks.experiment`): a
+finished run is ``skipped`` on a rerun, a run killed half-way resumes from its last checkpoint,
+and a pre-training shared by several cells runs once (per trial seed with the profile's
+``pretrain_per_trial``). Baseline runs start at once; a pre-trained condition's runs start when
+their pre-training finishes. Runs fan out over the factory's task runners (threads, Dask local
+or a scheduler address). As runs finish, the sweep folder's ``runs.parquet`` and
+``progress.json`` are rewritten (the dashboard's ``--serve`` mode shows them live) and a Prefect
+progress artifact moves; at the end the statistics (``stats.json``), the results table
+(``results.md``, a Prefect table + markdown artifact) and the dashboard (``dashboard.html``)
+are written.
+
+The sweep folder (``<out>/<name>/``)::
+
+    sweep.json        profile, conditions, datasets (+ domain, digest), provenance
+    runs.parquet      one experiment_runs row per run (storage/schemas.py)
+    progress.json     total / finished / failed runs
+    stats.json        paired statistics (sim2radar.experiment.stats)
+    results.md        Table-1-style results with confidence intervals
+    dashboard.html    the offline dashboard
+    pretrain/<key>/   pre-training checkpoints;  runs/<key>/   fine-tuning checkpoints
+"""
+
+from __future__ import annotations
+
+import importlib
+import os
+from collections.abc import Callable
+from datetime import UTC, datetime
+from pathlib import Path
+from typing import Any
+
+from prefect import flow, get_run_logger
+from prefect.futures import as_completed
+
+from flows import _progress
+from tasks.experiment import (
+    failed_row,
+    finetune_task,
+    pretrain_task,
+    write_json,
+    write_runs_table,
+)
+from tasks.runners import task_runner
+
+__all__ = ["run_experiment_flow", "run_experiment", "run_experiment_job", "progress_callback"]
+
+
+def progress_callback(fn: Callable[[dict], None]):
+    """Context manager: call ``fn(row)`` in this process after each training run finishes."""
+    return _progress.listen("run_experiment", fn)
+
+
+def _artifact_key(name: str, what: str) -> str:
+    import re
+
+    return re.sub(r"[^a-z0-9-]+", "-", f"sweep-{name}-{what}".lower()).strip("-")[:100]
+
+
+@flow(name="run-experiment", log_prints=False)
+def run_experiment_flow(plan: dict) -> dict[str, Any]:
+    """Run a prepared sweep (:func:`tasks.experiment.prepare_sweep`'s ``plan``): every
+    pre-training and fine-tuning task, the tables, statistics, artifacts and dashboard."""
+    from prefect.artifacts import (
+        create_markdown_artifact,
+        create_progress_artifact,
+        create_table_artifact,
+        update_progress_artifact,
+    )
+
+    from tasks.experiment import finish_sweep
+
+    logger = get_run_logger()
+    ctx, sweep_dir, name = plan["context"], Path(plan["context"]["sweep_dir"]), plan["name"]
+    runs, pretrains = plan["runs"], plan["pretrains"]
+    total = len(runs)
+    progress_id = create_progress_artifact(
+        progress=0.0, key=_artifact_key(name, "progress"),
+        description=f"sweep {name}: finished training runs of {total}")
+    rows: dict[str, dict] = {}
+
+    def record(row: dict) -> None:
+        rows[row["run_key"]] = row
+        ordered = [rows[k] for k in sorted(rows, key=lambda k: _order(rows[k]))]
+        write_runs_table(sweep_dir, ordered)
+        failed = sum(r["status"] == "failed" for r in ordered)
+        write_json(sweep_dir / "progress.json", {
+            "total_runs": total, "finished": len(ordered), "failed": failed,
+            "updated_at": datetime.now(UTC).isoformat(timespec="seconds")})
+        update_progress_artifact(progress_id, 100.0 * len(ordered) / max(total, 1))
+        _progress.notify("run_experiment", row)
+        if row["status"] == "failed":
+            logger.error("%s fraction %.2f trial %d FAILED: %s", row["condition"],
+                         row["fraction"], row["trial"], row["error"])
+        else:
+            logger.info("%s fraction %.2f trial %d: %s, 3D AP@0.3 (R40) %.1f",
+                        row["condition"], row["fraction"], row["trial"], row["status"],
+                        row["ap_3d_r40_iou03"])
+
+    pending: dict[Any, tuple[str, Any]] = {}
+    for p in pretrains:
+        fut = pretrain_task.with_options(task_run_name=p['id']).submit(ctx, p)
+        pending[fut] = ("pretrain", p)
+    for r in runs:
+        if r["pretrain_id"] is None:
+            fut = finetune_task.with_options(task_run_name=_run_name(r)).submit(ctx, r, None)
+            pending[fut] = ("run", (r, None))
+    while pending:
+        fut = next(iter(as_completed(list(pending))))
+        kind, what = pending.pop(fut)
+        result = fut.result(raise_on_failure=False)
+        error = result if isinstance(result, BaseException) else (
+            None if fut.state.is_completed() else (fut.state.message or repr(result)))
+        if kind == "pretrain":
+            for r in runs:
+                if r["pretrain_id"] != what["id"]:
+                    continue
+                if error is None:
+                    f2 = finetune_task.with_options(task_run_name=_run_name(r)).submit(
+                        ctx, r, result)
+                    pending[f2] = ("run", (r, result))
+                else:
+                    record(failed_row(ctx, r, {"key": what["key"], "n_frames": 0},
+                                      f"pre-training {what['id']} failed: {_text(error)}"))
+            continue
+        spec, pre = what
+        record(result if error is None else failed_row(ctx, spec, pre, _text(error)))
+
+    ordered = [rows[k] for k in sorted(rows, key=lambda k: _order(rows[k]))]
+    summary = finish_sweep(plan, ordered)
+    create_table_artifact(table=summary["table_rows"], key=_artifact_key(name, "results"),
+                          description=f"sweep {name}: {summary['metric']} per cell")
+    create_markdown_artifact(markdown=summary["markdown"], key=_artifact_key(name, "summary"),
+                             description=f"sweep {name}: results")
+    logger.info("sweep %s: %s runs; results %s; dashboard %s", name, summary["counts"],
+                summary["results_md"], summary["dashboard"])
+    return {k: v for k, v in summary.items() if k not in ("markdown", "table_rows")}
+
+
+def _text(error: Any) -> str:
+    return f"{type(error).__name__}: {error}" if isinstance(error, BaseException) else str(error)
+
+
+def _run_name(r: dict) -> str:
+    return str(r["id"])
+
+
+def _order(row: dict) -> tuple:
+    return (str(row["condition"]), float(row["fraction"]), int(row["trial"]))
+
+
+def run_experiment(
+    sim: str | os.PathLike,
+    real: str | os.PathLike,
+    *,
+    profile: str | os.PathLike = "demo",
+    name: str = "sweep",
+    out: str | os.PathLike = "out/sweeps",
+    store: str | os.PathLike = "out/store",
+    sim_gt: str | os.PathLike | None = None,
+    sim_one_material: str | os.PathLike | None = None,
+    ablations: bool = False,
+    overrides: dict[str, Any] | None = None,
+    workers: int | None = None,
+    dask_address: str | None = None,
+    device: str | None = None,
+) -> dict[str, Any]:
+    """Prepare and run a sweep (see the module docstring); configs and datasets are validated
+    before the flow starts, so a bad input fails fast with the file and field named.
+
+    Parameters
+    ----------
+    sim, real : dataset folders (OpenPCDet custom layout) or ``store:NAME[:geometry]`` names of
+        factory datasets in ``store`` (exported into the sweep folder first).
+    profile : ``paper``, ``demo``, ``smoke`` or a profile YAML.
+    sim_gt, sim_one_material : the ablations' simulated datasets (with ``ablations``).
+    overrides : profile fields to replace (e.g. ``{"trials": 3}``).
+    workers : concurrent runs (default: the profile's ``concurrent_runs``); with
+        ``dask_address`` (``"local"`` or ``tcp://...``) the runs go to Dask instead of threads.
+    """
+    from tasks.experiment import prepare_sweep
+
+    plan = prepare_sweep(sim, real, profile=profile, name=name, out=out, store=store,
+                         sim_gt=sim_gt, sim_one_material=sim_one_material, ablations=ablations,
+                         overrides=overrides, device=device)
+    n = int(workers or plan["concurrent_runs"])
+    runner = task_runner(n, dask_address)
+    return run_experiment_flow.with_options(task_runner=runner)(plan=plan)
+
+
+@flow(name="run-experiment-job", log_prints=False)
+def run_experiment_job(
+    sim: str,
+    real: str,
+    profile: str = "demo",
+    name: str = "sweep",
+    out: str = "out/sweeps",
+    store: str = "out/store",
+    sim_gt: str | None = None,
+    sim_one_material: str | None = None,
+    ablations: bool = False,
+    workers: int | None = None,
+    dask_address: str | None = None,
+) -> dict[str, Any]:
+    """Deployment entry point (``deploy/prefect.yaml``): :func:`run_experiment` as a subflow
+    (the package's copy, so Dask workers can import it)."""
+    package = importlib.import_module("flows.run_experiment")
+    return package.run_experiment(sim, real, profile=profile, name=name, out=out, store=store,
+                                  sim_gt=sim_gt, sim_one_material=sim_one_material,
+                                  ablations=ablations, workers=workers,
+                                  dask_address=dask_address)

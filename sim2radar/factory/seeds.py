@@ -1,0 +1,17 @@
+"""Seed recipes of the factory: one function per derived seed, called everywhere it is needed."""
+
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["frame_seed"]
+
+
+def frame_seed(run_seed: int, world_seed: int, frame_index: int) -> int:
+    """Radar seed (ray jitter, speckle, receiver noise) of one world frame.
+
+    The same for every geometry and radar of that frame, so frames compare fairly; derived with
+    :class:`numpy.random.SeedSequence` from (run seed, world seed, frame index).
+    """
+    ss = np.random.SeedSequence([int(run_seed), int(world_seed), int(frame_index), 0x5EED])
+    return int(ss.generate_state(1)[0])

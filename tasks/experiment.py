@@ -1,0 +1,465 @@
+"""The experiment sweep's tasks: content keys, caching, store I/O and outcome records around
+:mod:`sim2radar.experiment` (no science here).
+
+Identity. A pre-training run is keyed by its sim dataset's digest and
+:func:`sim2radar.experiment.plan.pretrain_key_inputs` (role, seed, epochs, detector, intensity
+matching); a fine-tuning run by the real dataset's digest and
+:func:`~sim2radar.experiment.plan.run_key_inputs` (condition, fraction, trial seed, frames,
+epochs, detector, its pre-training's key, evaluation settings); both with the code version
+(:data:`EXPERIMENT_STAGE_VERSION` and the package version). :func:`prepare_sweep` computes every
+key up front. A finished fine-tuning run is one
+``experiment_runs`` artifact in the store under its key: a rerun finds it and reports the run as
+``skipped``; a run killed half-way resumes from its last checkpoint in the sweep folder
+(``<sweep>/runs/<key>/``, ``<sweep>/pretrain/<key>/``). Failed runs are not stored (a rerun
+retries them); they are recorded in the sweep's ``runs.parquet`` with their error.
+
+Retries: none. Training is deterministic given its inputs, so a failure would only fail again;
+the store writes are local or retried by the store itself.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+import json
+import logging
+import os
+from datetime import UTC, datetime
+from pathlib import Path
+from typing import Any
+
+import pyarrow as pa
+from prefect import task
+from prefect.cache_policies import NO_CACHE
+
+from storage import content_key, get_schema
+from storage.provenance import jsonable, package_versions
+from tasks.common import open_store
+
+__all__ = [
+    "EXPERIMENT_STAGE_VERSION",
+    "SweepContext",
+    "prepare_sweep",
+    "run_pretraining",
+    "run_finetuning",
+    "failed_row",
+    "finish_sweep",
+    "write_runs_table",
+    "read_runs_table",
+    "write_json",
+    "pretrain_task",
+    "finetune_task",
+]
+
+log = logging.getLogger(__name__)
+
+#: Bump when a training run of the same inputs gives a different result (training, evaluation
+#: or the row's content changed): every run is recomputed.
+EXPERIMENT_STAGE_VERSION = 1
+RUNS_FILE = "runs.parquet"
+#: dataset roles of the conditions (sim2radar.experiment.profiles.CONDITIONS) and their flags
+ROLES = ("sim", "real", "sim-gt", "sim-one-material")
+
+
+def _code_version() -> dict[str, Any]:
+    return {"stage_version": EXPERIMENT_STAGE_VERSION,
+            "sim2radar": package_versions().get("sim2radar", "unknown")}
+
+
+@dataclasses.dataclass(frozen=True)
+class SweepContext:
+    """What every task of one sweep needs, as plain JSON-able values (pickles to Dask workers).
+
+    Attributes
+    ----------
+    name : str — the sweep's name.
+    sweep_dir : str — the sweep folder (checkpoints, runs.parquet, sweep.json, ...).
+    store : str — artifact store root (path or URI).
+    datasets : dict — role -> {"root", "key"} (roles :data:`ROLES`).
+    pretrain_config, finetune_config : dict — resolved :class:`DetectConfig` dumps.
+    intensity_match : dict — sim role -> :meth:`IntensityMatch.to_dict` applied to its frames
+        before pre-training (empty without intensity matching).
+    eval_split, val_split : str — the real splits for the test and the learning curves.
+    val_every : int — epochs between validation APs (0: none).
+    device : str or None — torch device for every run (None: automatic).
+    """
+
+    name: str
+    sweep_dir: str
+    store: str
+    datasets: dict[str, dict[str, str]]
+    pretrain_config: dict[str, Any]
+    finetune_config: dict[str, Any]
+    intensity_match: dict[str, dict[str, Any]]
+    eval_split: str = "test"
+    val_split: str = "val"
+    val_every: int = 0
+    device: str | None = None
+
+    def to_dict(self) -> dict[str, Any]:
+        return dataclasses.asdict(self)
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> SweepContext:
+        return cls(**d)
+
+
+def _ctx(ctx: SweepContext | dict) -> SweepContext:
+    return ctx if isinstance(ctx, SweepContext) else SweepContext.from_dict(ctx)
+
+
+# ---------------------------------------------------------------------------------------------
+# Data (cached per process: every run of a sweep reads the same few hundred frames)
+# ---------------------------------------------------------------------------------------------
+@functools.lru_cache(maxsize=32)
+def _frames(root: str, key: str, ids: tuple[str, ...], num_point_features: int,
+            class_names: tuple[str, ...]) -> tuple:
+    from sim2radar.experiment.data import open_domain
+
+    ds = open_domain(root, "any")
+    if ds.key != key:
+        raise RuntimeError(f"{root} changed while the sweep ran (content digest {ds.key}, "
+                           f"expected {key}); rerun the sweep")
+    return tuple(ds.frames(ids, num_point_features, class_names))
+
+
+def _load(ctx: SweepContext, role: str, ids, cfg) -> list:
+    d = ctx.datasets[role]
+    return list(_frames(d["root"], d["key"], tuple(ids), int(cfg.model.num_point_features),
+                        tuple(cfg.model.class_names)))
+
+
+def _split_ids(ctx: SweepContext, role: str, split: str) -> list[str]:
+    from sim2radar.experiment.data import open_domain
+
+    return open_domain(ctx.datasets[role]["root"], role).splits.get(split, [])
+
+
+# ---------------------------------------------------------------------------------------------
+# Preparing a sweep: datasets, configs, intensity matching, the plan and every key
+# ---------------------------------------------------------------------------------------------
+def _resolve_dataset(source: str | os.PathLike, role: str, store: str, sweep_dir: Path,
+                     seed: int):
+    """A dataset folder, or ``store:NAME[:geometry]`` exported from the store."""
+    from sim2radar.experiment.data import open_domain
+    from tasks.dataset import export_store_dataset
+
+    text = os.fspath(source)
+    if text.startswith("store:"):
+        parts = text.split(":")
+        name = parts[1]
+        geometry = parts[2] if len(parts) > 2 else ("ground_truth" if role == "real"
+                                                     or role == "sim-gt" else "reconstructed")
+        folder = sweep_dir / "data" / f"{role}-{name}-{geometry}"
+        export_store_dataset(store, name, geometry, folder, seed=seed)
+        return open_domain(folder, role)
+    if not Path(text).is_dir():
+        raise FileNotFoundError(f"{role} dataset {text!r}: no such folder (give an OpenPCDet "
+                                "dataset folder, or store:NAME for a dataset in the store)")
+    return open_domain(text, role)
+
+
+def prepare_sweep(
+    sim: str | os.PathLike,
+    real: str | os.PathLike,
+    *,
+    profile: Any = "demo",
+    name: str = "sweep",
+    out: str | os.PathLike = "out/sweeps",
+    store: str | os.PathLike = "out/store",
+    sim_gt: str | os.PathLike | None = None,
+    sim_one_material: str | os.PathLike | None = None,
+    ablations: bool = False,
+    overrides: dict[str, Any] | None = None,
+    device: str | None = None,
+) -> dict[str, Any]:
+    """Validate the inputs and plan a sweep; writes ``<out>/<name>/sweep.json``.
+
+    Returns the plan the flow runs: ``name``, ``context`` (:class:`SweepContext` dict),
+    ``pretrains`` and ``runs`` (spec dicts with their content ``key``; a run names its
+    pre-training by ``pretrain_id``), ``concurrent_runs``, ``metric``, ``sweep`` (what
+    sweep.json holds).
+
+    Raises
+    ------
+    ValueError, FileNotFoundError, DatasetError — naming the dataset, profile or field at fault.
+    """
+    import numpy as np
+
+    from sim2radar.experiment import (
+        ABLATIONS,
+        CONDITIONS,
+        load_profile,
+        plan_sweep,
+        pretrain_key_inputs,
+        run_key_inputs,
+    )
+    from sim2radar.experiment.data import check_disjoint_worlds
+    from sim2radar.experiment.profiles import ExperimentProfile
+    from sim2radar.experiment.stats import DEFAULT_METRIC
+    from sim2radar.radar.intensity import fit_intensity_match
+
+    if not name or not all(c.isalnum() or c in "-_." for c in name):
+        raise ValueError(f"sweep name {name!r}: use letters, digits, '-', '_' or '.'")
+    prof = profile if isinstance(profile, ExperimentProfile) else load_profile(profile)
+    if overrides:
+        try:
+            prof = ExperimentProfile.model_validate({**prof.model_dump(), **overrides})
+        except Exception as exc:  # pydantic's message names the field
+            raise ValueError(f"profile {prof.name!r} overrides: {exc}") from None
+    sweep_dir = Path(out) / name
+    sweep_dir.mkdir(parents=True, exist_ok=True)
+    st = open_store(store)
+
+    conditions = list(prof.all_conditions)
+    if ablations:
+        conditions += [c for c in ABLATIONS if c not in conditions]
+    sources = {"sim": sim, "real": real, "sim-gt": sim_gt, "sim-one-material": sim_one_material}
+    needed = {"real"} | {CONDITIONS[c].sim_role for c in conditions if CONDITIONS[c].sim_role}
+    missing = sorted(r for r in needed if sources[r] is None)
+    if missing:
+        flags = {"sim-gt": "--sim-gt", "sim-one-material": "--sim-one-material"}
+        raise ValueError("conditions " + ", ".join(c for c in conditions
+                                                     if CONDITIONS[c].sim_role in missing)
+                         + " need the dataset(s) " + ", ".join(flags.get(r, r) for r in missing))
+    domains = {role: _resolve_dataset(sources[role], role, st.root_uri, sweep_dir,
+                                      prof.sweep_seed)
+               for role in ROLES if role in needed}
+    real_ds = domains["real"]
+    for role, ds in domains.items():
+        if role != "real":
+            check_disjoint_worlds(ds, real_ds)
+    for split in (prof.train_split, prof.eval_split):
+        if not real_ds.splits.get(split):
+            raise ValueError(f"{real_ds.root}/ImageSets/{split}.txt lists no frame: the real "
+                             f"dataset needs a {split!r} split")
+
+    pre_cfg, ft_cfg = prof.detector_config("pretrain"), prof.detector_config("finetune")
+    if device is not None:
+        pre_cfg = pre_cfg.with_updates(runtime={"device": device})
+        ft_cfg = ft_cfg.with_updates(runtime={"device": device})
+    nfeat, classes = ft_cfg.model.num_point_features, ft_cfg.model.class_names
+    matches: dict[str, dict] = {}
+    if prof.intensity_matching and nfeat > 3:
+        real_train = real_ds.frames(real_ds.splits[prof.train_split], nfeat, classes)
+        target = np.concatenate([f.points[:, 3] for f in real_train])
+        for role, ds in domains.items():
+            if role == "real":
+                continue
+            source = np.concatenate([f.points[:, 3] for f in ds.frames(ds.ids(), nfeat,
+                                                                        classes)])
+            matches[role] = fit_intensity_match(source, target).to_dict()
+            matches[role]["fitted_on"] = (f"{len(real_train)} frames of the real "
+                                          f"{prof.train_split!r} split")
+
+    pretrain_dump, ft_dump = pre_cfg.model_dump(mode="json"), ft_cfg.model_dump(mode="json")
+    pretrains, runs = plan_sweep(prof, real_ds.splits[prof.train_split], conditions)
+    pre_out, pre_key = [], {}
+    for p in pretrains:
+        key = content_key(
+            stage="experiment_pretrain", stage_version=EXPERIMENT_STAGE_VERSION,
+            inputs={"sim": domains[p.sim_role].key},
+            config={**pretrain_key_inputs(p, pretrain_dump, matches.get(p.sim_role)),
+                    "code": _code_version()})
+        pre_key[p.name] = key
+        pre_out.append({**p.to_dict(), "id": p.name, "key": key})
+    run_out = []
+    for r in runs:
+        pkey = pre_key[r.pretrain.name] if r.pretrain else None
+        key = content_key(
+            stage="experiment_runs", stage_version=EXPERIMENT_STAGE_VERSION,
+            inputs={"real": real_ds.key},
+            config={**run_key_inputs(r, prof, ft_dump, pkey), "code": _code_version()})
+        d = r.to_dict()
+        d.pop("pretrain")
+        run_out.append({**d, "id": r.name, "key": key,
+                        "pretrain_id": r.pretrain.name if r.pretrain else None})
+
+    ctx = SweepContext(
+        name=name, sweep_dir=str(sweep_dir.resolve()), store=st.root_uri,
+        datasets={role: {"root": str(ds.root), "key": ds.key} for role, ds in domains.items()},
+        pretrain_config=pretrain_dump, finetune_config=ft_dump, intensity_match=matches,
+        eval_split=prof.eval_split, val_split=prof.val_split, val_every=prof.val_every,
+        device=device)
+    sweep = {
+        "name": name, "profile": prof.model_dump(mode="json"), "conditions": list(
+            dict.fromkeys(["baseline", *conditions])),
+        "fractions": list(prof.fractions), "trials": prof.trials, "metric": DEFAULT_METRIC,
+        "datasets": {role: ds.describe() for role, ds in domains.items()},
+        "real_domain": real_ds.domain, "real_is_proxy": real_ds.is_proxy,
+        "intensity_match": matches,
+        "n_pretrains": len(pre_out), "n_runs": len(run_out),
+        "provenance": {"versions": package_versions(), "code": _code_version(),
+                       "configs": {"pretrain": pretrain_dump, "finetune": ft_dump}},
+        "created_at": datetime.now(UTC).isoformat(timespec="seconds"),
+    }
+    write_json(sweep_dir / "sweep.json", sweep)
+    return {"name": name, "context": ctx.to_dict(), "pretrains": pre_out, "runs": run_out,
+            "concurrent_runs": prof.concurrent_runs, "metric": DEFAULT_METRIC, "sweep": sweep}
+
+
+# ---------------------------------------------------------------------------------------------
+# Runs (plain functions; the Prefect tasks below only wrap them)
+# ---------------------------------------------------------------------------------------------
+def run_pretraining(ctx: SweepContext | dict, spec: dict[str, Any]) -> dict[str, Any]:
+    """Pre-train (or find finished) the encoder of ``spec`` (a planned pre-training with its
+    ``key``); returns ``{"key", "checkpoint", "n_frames"}``."""
+    from sim2radar.detect.config import DetectConfig
+    from sim2radar.experiment.data import open_domain, with_intensity
+    from sim2radar.experiment.runner import pretrain_encoder
+    from sim2radar.radar.intensity import IntensityMatch
+
+    ctx = _ctx(ctx)
+    role = spec["sim_role"]
+    cfg = DetectConfig.model_validate(ctx.pretrain_config)
+    sim = open_domain(ctx.datasets[role]["root"], role)
+    frames = _load(ctx, role, sim.ids(), cfg)
+    if role in ctx.intensity_match:
+        frames = with_intensity(frames, IntensityMatch.from_dict(ctx.intensity_match[role]))
+    out = Path(ctx.sweep_dir) / "pretrain" / spec["key"]
+    ckpt = pretrain_encoder(cfg, frames, out, seed=int(spec["seed"]), epochs=int(spec["epochs"]),
+                            device=ctx.device)
+    return {"key": spec["key"], "checkpoint": str(ckpt), "n_frames": len(frames)}
+
+
+def _base_row(ctx: SweepContext, spec: dict[str, Any],
+              pretrain: dict[str, Any] | None) -> dict[str, Any]:
+    n_sim = int(pretrain["n_frames"]) if pretrain else 0
+    return {
+        "sweep": ctx.name, "run_key": spec["key"], "condition": spec["condition"],
+        "fraction": float(spec["fraction"]), "n_real_frames": int(spec["n_real"]),
+        "n_sim_frames": n_sim,
+        "sim_real_ratio": (n_sim / int(spec["n_real"])) if pretrain else None,
+        "trial": int(spec["trial"]), "seed": int(spec["seed"]),
+        "pretrain_key": pretrain["key"] if pretrain else None,
+    }
+
+
+def run_finetuning(ctx: SweepContext | dict, spec: dict[str, Any],
+                   pretrain: dict[str, Any] | None) -> dict[str, Any]:
+    """Fine-tune and test one cell's run (or read it back); returns its experiment_runs row
+    with ``status`` ``ok`` (computed now) or ``skipped`` (found in the store)."""
+    from sim2radar.detect.config import DetectConfig
+    from sim2radar.experiment.runner import finetune_and_test
+
+    ctx = _ctx(ctx)
+    st = open_store(ctx.store)
+    key = spec["key"]
+    if st.exists("experiment_runs", key):
+        row = st.read("experiment_runs", key).to_pylist()[0]
+        return {**row, "sweep": ctx.name, "status": "skipped"}
+    cfg = DetectConfig.model_validate(ctx.finetune_config)
+    train = _load(ctx, "real", spec["train_ids"], cfg)
+    test = _load(ctx, "real", _split_ids(ctx, "real", ctx.eval_split), cfg)
+    val = (_load(ctx, "real", _split_ids(ctx, "real", ctx.val_split), cfg)
+           if ctx.val_every else [])
+    out = Path(ctx.sweep_dir) / "runs" / key
+    fields = finetune_and_test(
+        cfg, train, test, out, seed=int(spec["seed"]), epochs=int(spec["epochs"]),
+        encoder_checkpoint=pretrain["checkpoint"] if pretrain else None, val_frames=val,
+        val_every=ctx.val_every, device=ctx.device)
+    row = {**_base_row(ctx, spec, pretrain), **fields,
+           "checkpoint": os.path.relpath(out / "last.pt", Path(ctx.sweep_dir).parent),
+           "status": "ok", "error": "",
+           "finished_at": datetime.now(UTC).isoformat(timespec="seconds")}
+    schema = get_schema("experiment_runs")
+    table = schema.validate(pa.Table.from_pylist([row], schema=schema.schema))
+    st.write("experiment_runs", key, table, stage_version=EXPERIMENT_STAGE_VERSION,
+             provenance={"inputs": {"real": ctx.datasets["real"]["key"],
+                                    "pretrain": row["pretrain_key"]},
+                         "config": {"detector": ctx.finetune_config,
+                                    "spec": {k: v for k, v in spec.items() if k != "train_ids"}},
+                         "seed": int(spec["seed"]),
+                         "timings_s": {"run": float(row["wall_time_s"])},
+                         "extra": {"sweep": ctx.name, "train_ids": list(spec["train_ids"])}})
+    return row
+
+
+def failed_row(ctx: SweepContext | dict, spec: dict[str, Any], pretrain: dict[str, Any] | None,
+               error: BaseException | str) -> dict[str, Any]:
+    """The experiment_runs row of a run that failed (AP null, ``error`` set)."""
+    ctx = _ctx(ctx)
+    text = error if isinstance(error, str) else f"{type(error).__name__}: {error}"
+    row = {c: None for c in get_schema("experiment_runs").schema.names}
+    row.update(_base_row(ctx, spec, pretrain))
+    row.update(epochs=int(spec["epochs"]), steps=0, history_epoch=[], history_loss=[],
+               history_val_epoch=[], history_val_ap=[], wall_time_s=0.0, device="",
+               checkpoint="", status="failed", error=text[:2000],
+               finished_at=datetime.now(UTC).isoformat(timespec="seconds"))
+    return row
+
+
+def finish_sweep(plan: dict[str, Any], rows: list[dict[str, Any]]) -> dict[str, Any]:
+    """Statistics, report and dashboard of a sweep's rows; writes ``stats.json``,
+    ``results.md`` and ``dashboard.html`` into the sweep folder.
+
+    Returns ``counts`` (runs by status), ``metric``, ``stats``, ``markdown``, ``table_rows``
+    (for a Prefect table artifact) and the paths ``sweep_dir``, ``results_md``, ``dashboard``.
+    """
+    from sim2radar.experiment.dashboard import write_dashboard
+
+    from sim2radar.experiment import results_markdown, results_table_rows, sweep_stats
+
+    sweep_dir = Path(plan["context"]["sweep_dir"])
+    sweep = plan["sweep"]
+    stats = sweep_stats(rows, plan["metric"], conditions=sweep["conditions"])
+    md = results_markdown(stats, rows, title=f"Sweep {plan['name']}",
+                          real_domain_label=sweep["real_domain"],
+                          proxy=sweep["real_is_proxy"])
+    write_json(sweep_dir / "stats.json", stats)
+    (sweep_dir / "results.md").write_text(md)
+    dashboard = write_dashboard(sweep_dir, sweep_dir / "dashboard.html")
+    counts = {k: sum(r["status"] == k for r in rows) for k in ("ok", "skipped", "failed")}
+    return {"name": plan["name"], "sweep_dir": str(sweep_dir), "counts": counts,
+            "metric": plan["metric"], "stats": stats, "markdown": md,
+            "table_rows": results_table_rows(stats),
+            "results_md": str(sweep_dir / "results.md"), "dashboard": str(dashboard)}
+
+
+# ---------------------------------------------------------------------------------------------
+# The sweep folder's tables
+# ---------------------------------------------------------------------------------------------
+def write_runs_table(sweep_dir: str | os.PathLike, rows: list[dict[str, Any]]) -> Path:
+    """Write ``<sweep>/runs.parquet`` atomically (validated against experiment_runs)."""
+    import pyarrow.parquet as pq
+
+    schema = get_schema("experiment_runs")
+    table = schema.validate(pa.Table.from_pylist(rows, schema=schema.schema))
+    path = Path(sweep_dir) / RUNS_FILE
+    tmp = path.with_name(f".{path.name}.tmp{os.getpid()}")
+    pq.write_table(table, tmp)
+    os.replace(tmp, path)
+    return path
+
+
+def read_runs_table(sweep_dir: str | os.PathLike) -> list[dict[str, Any]]:
+    """The rows of ``<sweep>/runs.parquet`` (empty when the sweep has none yet)."""
+    import pyarrow.parquet as pq
+
+    path = Path(sweep_dir) / RUNS_FILE
+    return pq.read_table(path).to_pylist() if path.is_file() else []
+
+
+def write_json(path: str | os.PathLike, doc: Any) -> Path:
+    """Write JSON atomically (for sweep.json, stats.json, progress.json)."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.name}.tmp{os.getpid()}")
+    tmp.write_text(json.dumps(jsonable(doc), indent=1))
+    os.replace(tmp, path)
+    return path
+
+
+# ---------------------------------------------------------------------------------------------
+# Prefect tasks: no retries (deterministic training); caching by content key inside.
+# ---------------------------------------------------------------------------------------------
+@task(name="pretrain-encoder", cache_policy=NO_CACHE, retries=0, persist_result=False)
+def pretrain_task(ctx: dict, spec: dict) -> dict:
+    """Prefect task around :func:`run_pretraining`."""
+    return run_pretraining(ctx, spec)
+
+
+@task(name="finetune-and-test", cache_policy=NO_CACHE, retries=0, persist_result=False)
+def finetune_task(ctx: dict, spec: dict, pretrain: dict | None) -> dict:
+    """Prefect task around :func:`run_finetuning`."""
+    return run_finetuning(ctx, spec, pretrain)

@@ -1,0 +1,185 @@
+"""The experiment sweep as a Prefect flow: every cell runs once, reruns skip, a killed sweep
+resumes, a broken frame fails only the runs that read it, and the outputs are written."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pyarrow.parquet as pq
+import pytest
+
+from sim2radar.datasets import make_door_frames, write_dataset, write_metadata
+from storage import ArtifactStore, get_schema
+
+REPO = Path(__file__).resolve().parents[2]
+PROXY = "proxy-real (reference radar simulation)"
+
+
+def _write(root: Path, seed: int, n: dict[str, int], first_world: int, proxy: bool = False):
+    frames = make_door_frames(sum(n.values()), seed=seed, points_per_frame=300)
+    splits, i = {}, 0
+    renamed = []
+    for split, count in n.items():
+        splits[split] = []
+        for k in range(count):
+            f = frames[i]
+            fid = f"world_{first_world + i // 2:06d}_f{i % 2:03d}"
+            renamed.append(type(f)(fid, f.points, f.boxes, f.names))
+            splits[split].append(fid)
+            i += 1
+    write_dataset(root, renamed, splits)
+    if proxy:
+        write_metadata(root, {"domain": PROXY})
+    return root
+
+
+@pytest.fixture(scope="module")
+def data(tmp_path_factory):
+    root = tmp_path_factory.mktemp("sweep")
+    sim = _write(root / "sim", 1, {"train": 8, "val": 2, "test": 2}, 0)
+    real = _write(root / "real", 2, {"train": 8, "val": 4, "test": 4}, 100_000, proxy=True)
+    return {"root": root, "sim": sim, "real": real}
+
+
+@pytest.fixture(scope="module")
+def first(data, prefect_server):
+    from flows.run_experiment import run_experiment
+
+    out, store = data["root"] / "sweeps", data["root"] / "store"
+    summary = run_experiment(data["sim"], data["real"], profile="smoke", name="t", out=out,
+                             store=store)
+    return {"summary": summary, "out": out, "store": store, "dir": out / "t"}
+
+
+def test_every_cell_runs_once_and_the_outputs_are_written(first):
+    s, d = first["summary"], first["dir"]
+    assert s["counts"] == {"ok": 8, "skipped": 0, "failed": 0}   # 2 fractions x 2 trials x 2
+    table = pq.read_table(d / "runs.parquet")
+    get_schema("experiment_runs").validate(table)
+    rows = table.to_pylist()
+    assert sorted({(r["condition"], r["fraction"], r["trial"]) for r in rows}) == sorted(
+        (c, f, t) for c in ("baseline", "sim-pretrain") for f in (0.5, 1.0) for t in (0, 1))
+    # pairs see the same real frames; pre-trained runs name their (per-trial) pre-training
+    for r in rows:
+        assert r["n_real_frames"] == {0.5: 4, 1.0: 8}[r["fraction"]]
+        assert (r["pretrain_key"] is None) == (r["condition"] == "baseline")
+        assert r["history_val_epoch"] == [1, 2] and len(r["history_loss"]) == 2
+    assert len({r["pretrain_key"] for r in rows if r["pretrain_key"]}) == 2   # one per trial
+    assert len(list((d / "pretrain").iterdir())) == 2
+    stats = json.loads((d / "stats.json").read_text())
+    assert {c["n"] for c in stats["cells"]} == {2}
+    sweep = json.loads((d / "sweep.json").read_text())
+    assert sweep["real_is_proxy"] and sweep["datasets"]["real"]["domain"] == PROXY
+    assert "sim" in sweep["intensity_match"]               # fitted on the real train split
+    md = (d / "results.md").read_text()
+    assert "proxy" in md and "not claims about measured radar" in md
+    html = (d / "dashboard.html").read_text()
+    assert "<html" in html.lower()
+    assert json.loads((d / "progress.json").read_text())["finished"] == 8
+
+
+def test_prefect_artifacts_are_published(first):
+    from prefect.client.orchestration import get_client
+    from prefect.client.schemas.filters import ArtifactFilter, ArtifactFilterKey
+
+    async def keys():
+        async with get_client() as client:
+            arts = await client.read_artifacts(
+                artifact_filter=ArtifactFilter(key=ArtifactFilterKey(like_="sweep-t-")))
+            return {a.key: a.type for a in arts}
+
+    import asyncio
+
+    found = asyncio.run(keys())
+    assert found.get("sweep-t-results") == "table"
+    assert found.get("sweep-t-summary") == "markdown"
+    assert found.get("sweep-t-progress") == "progress"
+
+
+def test_a_rerun_trains_nothing(first, data, monkeypatch):
+    import sim2radar.detect.train as train_mod
+    from flows.run_experiment import run_experiment
+
+    calls = []
+    real_train = train_mod.train
+    monkeypatch.setattr(train_mod, "train", lambda *a, **k: calls.append(1) or real_train(*a, **k))
+    again = run_experiment(data["sim"], data["real"], profile="smoke", name="t",
+                           out=first["out"], store=first["store"])
+    assert again["counts"] == {"ok": 0, "skipped": 8, "failed": 0}
+    assert calls == []                                     # pre-trainings found finished too
+    assert again["stats"]["cells"] == first["summary"]["stats"]["cells"]
+
+
+def test_a_broken_frame_fails_only_the_runs_that_read_it(data, prefect_server, tmp_path):
+    from flows.run_experiment import run_experiment
+
+    real = _write(tmp_path / "real", 2, {"train": 8, "val": 4, "test": 4}, 100_000, proxy=True)
+    # the frame only the 100 % subsets contain (nested subsets: 50 % is a prefix)
+    from sim2radar.experiment import real_subset, trial_seed
+
+    train_ids = (real / "ImageSets" / "train.txt").read_text().split()
+    half = set(real_subset(train_ids, 0.5, trial_seed(0, 0))) | set(
+        real_subset(train_ids, 0.5, trial_seed(0, 1)))
+    victim = next(i for i in train_ids if i not in half)
+    (real / "points" / f"{victim}.npy").write_bytes(b"not a numpy file")
+    s = run_experiment(data["sim"], real, profile="smoke", name="broken", out=tmp_path / "o",
+                       store=tmp_path / "store", overrides={"intensity_matching": False})
+    rows = pq.read_table(tmp_path / "o" / "broken" / "runs.parquet").to_pylist()
+    failed = [r for r in rows if r["status"] == "failed"]
+    assert s["counts"]["failed"] == len(failed) == 4       # 100 % x 2 trials x 2 conditions
+    assert all(r["fraction"] == 1.0 and victim in r["error"] for r in failed)
+    assert all(r["ap_3d_r40_iou03"] is None for r in failed)
+    assert {c["n_failed"] for c in s["stats"]["cells"] if c["fraction"] == 1.0} == {2}
+
+
+def test_bad_inputs_exit_2_with_one_line(data, tmp_path):
+    from typer.testing import CliRunner
+
+    from sim2radar.cli import app
+
+    res = CliRunner().invoke(app, ["sweep", str(data["sim"]), str(tmp_path / "nope"),
+                                   "--profile", "smoke", "--out", str(tmp_path)])
+    assert res.exit_code == 2 and "no such folder" in res.output
+    res = CliRunner().invoke(app, ["sweep", str(data["sim"]), str(data["real"]),
+                                   "--profile", "no-such-profile", "--out", str(tmp_path)])
+    assert res.exit_code == 2 and "bundled" in res.output
+    res = CliRunner().invoke(app, ["sweep", str(data["sim"]), str(data["sim"]), "--profile",
+                                   "smoke", "--out", str(tmp_path), "--ablations"])
+    assert res.exit_code == 2 and "--sim-gt" in res.output
+
+
+def test_a_killed_sweep_resumes_and_only_finishes_the_missing_runs(data, tmp_path):
+    """SIGKILL the sweep after its first finished run; the rerun skips what finished."""
+    env = {**os.environ, "PREFECT_HOME": str(tmp_path / "prefect")}
+    args = [sys.executable, "-c", "from sim2radar.cli import main; main()", "sweep",
+            str(data["sim"]), str(data["real"]), "--profile", "smoke", "--name", "k",
+            "--out", str(tmp_path / "o"), "--store", str(tmp_path / "store")]
+    proc = subprocess.Popen(args, cwd=REPO, env=env, stdout=subprocess.DEVNULL,
+                            stderr=subprocess.DEVNULL, start_new_session=True)
+    runs = tmp_path / "o" / "k" / "runs.parquet"
+    deadline = time.monotonic() + 120
+    try:
+        while time.monotonic() < deadline and not (runs.is_file()
+                                                   and pq.read_table(runs).num_rows >= 1):
+            time.sleep(0.2)
+    finally:
+        os.killpg(proc.pid, signal.SIGKILL)
+        proc.wait()
+    done = {r["run_key"] for r in pq.read_table(runs).to_pylist() if r["status"] == "ok"}
+    assert 1 <= len(done) < 8
+    res = subprocess.run(args, cwd=REPO, env=env, capture_output=True, text=True, timeout=300)
+    assert res.returncode == 0, res.stdout + res.stderr
+    rows = pq.read_table(runs).to_pylist()
+    assert len(rows) == 8
+    status = {r["run_key"]: r["status"] for r in rows}
+    assert all(status[k] == "skipped" for k in done)
+    assert sum(v == "ok" for v in status.values()) == 8 - len(done)
+    assert len(ArtifactStore(tmp_path / "store").keys("experiment_runs")) == 8
+    assert np.isfinite([r["ap_3d_r40_iou03"] for r in rows]).all()
