@@ -396,9 +396,8 @@ def finish_sweep(plan: dict[str, Any], rows: list[dict[str, Any]]) -> dict[str, 
     Returns ``counts`` (runs by status), ``metric``, ``stats``, ``markdown``, ``table_rows``
     (for a Prefect table artifact) and the paths ``sweep_dir``, ``results_md``, ``dashboard``.
     """
-    from sim2radar.experiment.dashboard import write_dashboard
-
     from sim2radar.experiment import results_markdown, results_table_rows, sweep_stats
+    from sim2radar.experiment.dashboard import write_dashboard
 
     sweep_dir = Path(plan["context"]["sweep_dir"])
     sweep = plan["sweep"]

@@ -28,7 +28,7 @@ def _write(root: Path, seed: int, n: dict[str, int], first_world: int, proxy: bo
     renamed = []
     for split, count in n.items():
         splits[split] = []
-        for k in range(count):
+        for _k in range(count):
             f = frames[i]
             fid = f"world_{first_world + i // 2:06d}_f{i % 2:03d}"
             renamed.append(type(f)(fid, f.points, f.boxes, f.names))
