@@ -25,7 +25,7 @@ $(BIN)/.installed: pyproject.toml
 	  echo "[setup] installing chromium (apt)"; \
 	  SUDO=$$( [ "$$(id -u)" = 0 ] || echo sudo ); \
 	  ( $$SUDO apt-get update -qq && $$SUDO apt-get install -y -qq chromium >/dev/null ) \
-	    || echo "[setup] could not install chromium: the dashboard's browser tests will skip"; \
+	    || echo "[setup] could not install chromium: the browser tests will fail until it is installed"; \
 	fi
 	@[ -x $(BIN)/python ] || $(PY) -m venv $(VENV)
 	@# torch first, pinned: any other spec downloads the multi-GB CUDA build (DESIGN.md)
