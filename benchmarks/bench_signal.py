@@ -5,14 +5,19 @@ two-bounce paths whose departure and arrival points differ) at the ``ti-mmwcas-r
 preset (12 TX x 16 RX = 192 channels, 256 samples, integrated Doppler). Figures: synthesis,
 processing and total seconds per frame (median of the timed frames after one warm-up frame),
 the torch device, and the process's peak resident memory (and its growth per path count);
-then one frame of the full chirp cube (``doppler: full``, static scene).
+then one frame of the full chirp cube (``doppler: full``, static scene). Last, the reference
+radar as the factory runs it: procedural corridors (worlds 100000-100002, 3 frames each along
+the rig's trajectory), traced paths -> IF -> points, with seconds per frame (trace, signal),
+paths and points per frame and the peak resident memory.
 
     python -m benchmarks signal
+    SIM2RADAR_BENCH_BEV=docs/reference_frame_bev.png python -m benchmarks signal   # + a picture
 """
 
 from __future__ import annotations
 
 import math
+import os
 import resource
 import statistics
 import time
@@ -105,7 +110,70 @@ def main() -> dict:
           f"{frame.stats['seconds_if_total']:.3f} s, processing "
           f"{frame.stats['seconds_processing']:.3f} s, total {wall:.3f} s, "
           f"peak RSS {_peak_rss_mib():.0f} MiB")
+    out["corridors"] = corridor_frames()
     return out
+
+
+def corridor_frames(seeds=(100_000, 100_001, 100_002), n_frames: int = 3) -> dict:
+    """The reference radar on procedural corridors, as ``sim2radar reference`` runs it."""
+    from sim2radar.factory import LabelConfig, frame_seed, radar_visibility
+    from sim2radar.radar import RadarScene
+    from sim2radar.radar.frame import simulate_scene_frame
+    from sim2radar.worlds import RigConfig, generate_world, render_frame, trajectory
+
+    radar = load_radar_config("ti-mmwcas-reference")
+    rows, first = [], None
+    for seed in seeds:
+        world = generate_world(seed)
+        scene = RadarScene(list(world.meshes))
+        for pose in trajectory(world, n_frames, seed=seed):
+            wf = render_frame(world, pose, RigConfig(width=64, height=48, spp=1))
+            t0 = time.perf_counter()
+            frame = simulate_scene_frame(scene, radar, wf.radar_to_world,
+                                         seed=frame_seed(0, seed, pose.index))
+            wall = time.perf_counter() - t0
+            sec = frame.stats["seconds"]
+            rows.append((wall, sec["trace"], sec["signal"], frame.stats["n_paths"],
+                         frame.n_points))
+            if first is None:
+                first = (world, scene, wf, frame)
+    wall, trace, sig, paths, points = (np.array(c, float) for c in zip(*rows, strict=True))
+    res = {
+        "frames": len(rows),
+        "seconds_per_frame_median": round(float(np.median(wall)), 3),
+        "seconds_per_frame_max": round(float(wall.max()), 3),
+        "seconds_trace_median": round(float(np.median(trace)), 3),
+        "seconds_signal_median": round(float(np.median(sig)), 3),
+        "paths_per_frame_median": int(np.median(paths)),
+        "points_per_frame_median": int(np.median(points)),
+        "points_per_frame_range": [int(points.min()), int(points.max())],
+        "peak_rss_mib": round(_peak_rss_mib(), 1),
+    }
+    print(f"corridors ({len(rows)} frames): {res['seconds_per_frame_median']:.2f} s per frame "
+          f"(trace {res['seconds_trace_median']:.2f}, signal {res['seconds_signal_median']:.2f};"
+          f" max {res['seconds_per_frame_max']:.2f}), {res['paths_per_frame_median']} paths, "
+          f"{res['points_per_frame_median']} points per frame (range "
+          f"{res['points_per_frame_range']}), peak RSS {res['peak_rss_mib']:.0f} MiB")
+    bev_path = os.environ.get("SIM2RADAR_BENCH_BEV")
+    if bev_path:
+        from sim2radar.visualize import bev_png
+
+        world, scene, wf, frame = first
+        r = wf.radar_to_world
+
+        def cast(o, d):
+            return scene.first_hit_distance(o @ r[:3, :3].T + r[:3, 3], d @ r[:3, :3].T)
+
+        labels = LabelConfig()
+        view = (radar.azimuth_fov_deg, radar.elevation_fov_deg, radar.max_range_m)
+        vis = radar_visibility(wf.door_boxes_radar, cast, view, labels)
+        boxes = wf.door_boxes_radar[vis >= labels.min_visibility]
+        bev_png(frame.points, boxes=boxes, box_labels=["door"] * len(boxes),
+                fov_deg=radar.azimuth_fov_deg, max_range_m=radar.max_range_m,
+                title=f"reference radar (proxy-real), world {seeds[0]} frame 0: "
+                      f"{frame.n_points} points", path=bev_path)
+        print(f"BEV picture: {bev_path}")
+    return res
 
 
 if __name__ == "__main__":

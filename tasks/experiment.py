@@ -81,6 +81,7 @@ class SweepContext:
         before pre-training (empty without intensity matching).
     eval_split, val_split : str — the real splits for the test and the learning curves.
     val_every : int — epochs between validation APs (0: none).
+    max_val_points : int — at most this many validation APs per run.
     device : str or None — torch device for every run (None: automatic).
     """
 
@@ -94,6 +95,7 @@ class SweepContext:
     eval_split: str = "test"
     val_split: str = "val"
     val_every: int = 0
+    max_val_points: int = 12
     device: str | None = None
 
     def to_dict(self) -> dict[str, Any]:
@@ -280,7 +282,7 @@ def prepare_sweep(
         datasets={role: {"root": str(ds.root), "key": ds.key} for role, ds in domains.items()},
         pretrain_config=pretrain_dump, finetune_config=ft_dump, intensity_match=matches,
         eval_split=prof.eval_split, val_split=prof.val_split, val_every=prof.val_every,
-        device=device)
+        max_val_points=prof.max_val_points, device=device)
     sweep = {
         "name": name, "profile": prof.model_dump(mode="json"), "conditions": list(
             dict.fromkeys(["baseline", *conditions])),
@@ -357,7 +359,7 @@ def run_finetuning(ctx: SweepContext | dict, spec: dict[str, Any],
     fields = finetune_and_test(
         cfg, train, test, out, seed=int(spec["seed"]), epochs=int(spec["epochs"]),
         encoder_checkpoint=pretrain["checkpoint"] if pretrain else None, val_frames=val,
-        val_every=ctx.val_every, device=ctx.device)
+        val_every=ctx.val_every, max_val_points=ctx.max_val_points, device=ctx.device)
     row = {**_base_row(ctx, spec, pretrain), **fields,
            "checkpoint": os.path.relpath(out / "last.pt", Path(ctx.sweep_dir).parent),
            "status": "ok", "error": "",

@@ -480,8 +480,10 @@ def _delta_figure(stats: Mapping[str, Any], conds: Sequence[str], metric: str,
 
 
 def _curves_figure(runs: Sequence[Mapping[str, Any]], conds: Sequence[str]) -> dict[str, Any]:
-    """Learning curves: per run a ``loss`` trace (training loss vs epoch) and a ``val_ap``
-    trace (validation AP vs epoch), coloured by condition."""
+    """Learning curves: per run a ``loss`` trace (training loss per epoch) and a ``val_ap``
+    trace (validation AP), coloured by condition, against the optimiser step at the end of
+    each epoch (``epoch x steps / epochs``): runs of different fractions have different
+    epoch lengths, so steps put them on one axis."""
     import plotly.graph_objects as go
     from plotly.subplots import make_subplots
 
@@ -502,6 +504,10 @@ def _curves_figure(runs: Sequence[Mapping[str, Any]], conds: Sequence[str]) -> d
         color, label = _color(cond, conds), condition_label(cond)
         run = (f"{html.escape(label)} {_pct(float(r.get('fraction') or 0))}, "
                f"trial {r.get('trial')} (seed {r.get('seed')})")
+        n_ep, n_steps = int(r.get("epochs") or 0), int(r.get("steps") or 0)
+        per_epoch = n_steps / n_ep if n_ep > 0 and n_steps > 0 else 1.0
+        epochs = [round(e * per_epoch) for e in epochs]
+        v_ep = [round(e * per_epoch) for e in v_ep]
         for col, (x, y, role, fmt) in enumerate(((epochs, loss, "loss", ".4f"),
                                                  (v_ep, v_ap, "val_ap", ".2f")), start=1):
             if not (x and y):
@@ -513,14 +519,11 @@ def _curves_figure(runs: Sequence[Mapping[str, Any]], conds: Sequence[str]) -> d
                 name=label, legendgroup=cond, showlegend=legend,
                 line={"color": color, "width": 1.3}, marker={"size": 4}, opacity=0.75,
                 meta={"role": role, "condition": cond, "run_key": r.get("run_key")},
-                hovertemplate=f"{run}<br>epoch %{{x}}: %{{y:{fmt}}}<extra></extra>"),
+                hovertemplate=f"{run}<br>step %{{x}}: %{{y:{fmt}}}<extra></extra>"),
                 row=1, col=col)
             n_curves += 1
-    for col, key in ((1, "history_epoch"), (2, "history_val_epoch")):  # integer epoch ticks
-        span = [e for r in runs for e in (r.get(key) or [])]
-        width = max(span) - min(span) if span else 0
-        fig.update_xaxes(title_text="epoch", tick0=0, dtick=max(1, math.ceil(width / 10)),
-                         row=1, col=col)
+    for col in (1, 2):
+        fig.update_xaxes(title_text="optimiser step", rangemode="tozero", row=1, col=col)
     fig.update_layout(template=_PLOTLY_TEMPLATE, height=380,
                       margin={"l": 60, "r": 20, "t": 50, "b": 55},
                       legend={"orientation": "h", "y": -0.25}, uirevision="keep")

@@ -237,5 +237,6 @@ def run_key_inputs(spec: RunSpec, profile: ExperimentProfile, detector: Mapping[
         "epochs": int(spec.epochs), "train_ids": ids_digest(spec.train_ids),
         "pretrain": pretrain_key, "detector": _detector_identity(detector),
         "evaluation": {"eval_split": profile.eval_split, "val_split": profile.val_split,
-                       "val_every": int(profile.val_every), "ap_thresholds": "devkit"},
+                       "val_every": int(profile.val_every),
+                       "max_val_points": int(profile.max_val_points), "ap_thresholds": "devkit"},
     }

@@ -146,6 +146,9 @@ class ExperimentProfile(BaseModel):
     #: epochs between validation APs (3D, R40, IoU 0.3) on ``val_split``; 0 = none. Learning
     #: curves only: the last epoch is tested, as in the paper
     val_every: int = Field(0, ge=0)
+    #: at most this many validation APs per run: a run with many short epochs (a small fraction
+    #: raised to ``min_steps``) validates every ``ceil(epochs / max_val_points)`` epochs instead
+    max_val_points: int = Field(12, ge=1)
     train_split: str = "train"
     val_split: str = "val"
     eval_split: str = "test"

@@ -100,6 +100,7 @@ def finetune_and_test(
     encoder_checkpoint: str | Path | None = None,
     val_frames: Sequence = (),
     val_every: int = 0,
+    max_val_points: int | None = None,
     device=None,
 ) -> dict[str, Any]:
     """Fine-tune on ``train_frames`` (encoder from ``encoder_checkpoint``, or from scratch) and
@@ -108,15 +109,20 @@ def finetune_and_test(
 
     ``val_every`` > 0: 3D AP (R40, IoU 0.3) on ``val_frames`` every that many epochs and at the
     last epoch, for the learning curves (it does not select the checkpoint: the last epoch is
-    tested, as in the paper).
+    tested, as in the paper). ``max_val_points`` caps their number: the interval becomes
+    ``max(val_every, ceil(epochs / max_val_points))`` epochs.
     """
     from sim2radar.detect.train import load_checkpoint, train, validation_ap
 
     out_dir = Path(out_dir)
     hook = None
     if val_every and len(val_frames):
+        every = int(val_every)
+        if max_val_points:
+            every = max(every, -(-int(epochs) // int(max_val_points)))
+
         def hook(epoch: int, model) -> dict[str, float] | None:
-            if epoch % int(val_every) == 0 or epoch == int(epochs):
+            if epoch % every == 0 or epoch == int(epochs):
                 return {"val_ap": validation_ap(model, list(val_frames))}
             return None
 

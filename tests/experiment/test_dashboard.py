@@ -243,7 +243,8 @@ def test_learning_curves_have_a_loss_and_a_val_trace_per_finished_run(sweep_dir)
     loss, val = _traces(curves, "loss"), _traces(curves, "val_ap")
     assert len(loss) == len(val) == 17
     r = next(t for t in loss if t["meta"]["run_key"].startswith("baseline-0.1-0-"))
-    assert r["x"] == [1, 2, 3, 4] and r["y"] == pytest.approx([2.0, 1.0, 2 / 3, 0.5])
+    # x is the optimiser step at each epoch's end (10 steps per epoch here)
+    assert r["x"] == [10, 20, 30, 40] and r["y"] == pytest.approx([2.0, 1.0, 2 / 3, 0.5])
     # one legend entry per condition
     assert sum(bool(t.get("showlegend", True)) for t in loss + val) == 2
 

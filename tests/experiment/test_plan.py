@@ -89,7 +89,9 @@ def test_min_steps_raises_epochs_equally_for_both_conditions():
         assert epochs.setdefault((r.fraction, r.trial), r.epochs) == r.epochs
         steps = r.epochs * -(-r.n_real // demo.batch_size)
         assert steps >= demo.min_steps
-    assert epochs[(0.05, 0)] == 100 and epochs[(1.0, 0)] == demo.finetune_epochs
+    # 371 frames: 5 % -> 18 frames, 3 steps per epoch; 100 % -> 47 steps per epoch
+    assert epochs[(0.05, 0)] == -(-demo.min_steps // 3)
+    assert epochs[(1.0, 0)] == max(demo.finetune_epochs, -(-demo.min_steps // 47))
 
 
 def _detector(**changes):

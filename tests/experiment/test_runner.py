@@ -80,3 +80,13 @@ def test_diverged_training_is_an_error():
     _check_finite([{"epoch": 1, "total": 1.0}], "x")
     with pytest.raises(NonFiniteLoss, match="epoch 2"):
         _check_finite([{"epoch": 1, "total": 1.0}, {"epoch": 2, "total": float("nan")}], "x")
+
+
+def test_validation_points_are_capped_on_long_runs(setup):
+    """A small fraction raised to many short epochs validates at most max_val_points times,
+    evenly, and always at the last epoch."""
+    s = setup
+    row = finetune_and_test(s["cfg"], s["train"][:2], s["test"], s["root"] / "capped", seed=7,
+                            epochs=7, val_frames=s["test"], val_every=1, max_val_points=3)
+    assert row["history_val_epoch"] == [3, 6, 7]
+    assert len(row["history_val_ap"]) == 3
