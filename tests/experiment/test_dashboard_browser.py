@@ -9,6 +9,7 @@ browser downloads are not used). Skipped only on a machine without apt.
 
 from __future__ import annotations
 
+import shutil
 import struct
 from pathlib import Path
 
