@@ -78,19 +78,37 @@ class VlmTestServer:
             n = len(self.requests)
             self.in_flight += 1
             self.max_in_flight = max(self.max_in_flight, self.in_flight)
+        done = False
+
+        def finished() -> None:
+            # the request stops counting as in flight once its answer is ready, *before* it is
+            # written: the client may send its next request the moment it has read this one,
+            # before this thread would reach a later decrement (a false "2 in flight")
+            nonlocal done
+            if not done:
+                done = True
+                with self._lock:
+                    self.in_flight -= 1
+
+        send = self._send
+
+        def _send(h, code, doc):
+            finished()
+            send(h, code, doc)
+
         try:
             if h.path != "/v1/chat/completions":
-                return self._send(h, 404, {"error": f"no route {h.path}"})
+                return _send(h, 404, {"error": f"no route {h.path}"})
             if n <= self.n_slow:
                 time.sleep(self.slow_s)
             if self.delay_s:
                 time.sleep(self.delay_s)
             if n <= self.n_fail:
-                return self._send(h, 500, {"error": "internal error (scripted)"})
+                return _send(h, 500, {"error": "internal error (scripted)"})
             if self.mode == "no_rf" and "response_format" in body:
-                return self._send(h, 400, {"error": "response_format is not supported"})
+                return _send(h, 400, {"error": "response_format is not supported"})
             text = self._answer(body)
-            self._send(h, 200, {
+            _send(h, 200, {
                 "id": f"chatcmpl-{n}", "object": "chat.completion", "model": body.get("model"),
                 "choices": [{"index": 0, "finish_reason": "stop",
                              "message": {"role": "assistant", "content": text}}],
@@ -98,8 +116,7 @@ class VlmTestServer:
         except (BrokenPipeError, ConnectionResetError):
             pass  # the client gave up (timeout); fine
         finally:
-            with self._lock:
-                self.in_flight -= 1
+            finished()
 
     def _answer(self, body: dict) -> str:
         prompt = ""
