@@ -183,3 +183,27 @@ def test_a_killed_sweep_resumes_and_only_finishes_the_missing_runs(data, tmp_pat
     assert sum(v == "ok" for v in status.values()) == 8 - len(done)
     assert len(ArtifactStore(tmp_path / "store").keys("experiment_runs")) == 8
     assert np.isfinite([r["ap_3d_r40_iou03"] for r in rows]).all()
+
+
+def test_a_sweep_on_a_dask_cluster_gives_the_thread_runners_results(first, data, tmp_path):
+    """The same smoke sweep with its runs on a 2-process LocalCluster (loopback) finishes every
+    run and reports the thread runner's APs: training is seeded per run, not per process."""
+    pytest.importorskip("prefect_dask")
+    distributed = pytest.importorskip("distributed")
+    from flows.run_experiment import run_experiment
+    from tasks.runners import local_cluster_kwargs
+
+    with distributed.LocalCluster(**local_cluster_kwargs(2)) as lc:
+        summary = run_experiment(data["sim"], data["real"], profile="smoke", name="t",
+                                 out=tmp_path / "sweeps", store=tmp_path / "store",
+                                 dask_address=lc.scheduler_address)
+    assert summary["counts"] == {"ok": 8, "skipped": 0, "failed": 0}
+
+    def aps(path):
+        rows = pq.read_table(path).to_pylist()
+        return {(r["condition"], r["fraction"], r["trial"]): r["ap_3d_r40_iou03"] for r in rows}
+
+    on_dask, on_threads = aps(tmp_path / "sweeps" / "t" / "runs.parquet"), aps(
+        first["dir"] / "runs.parquet")
+    assert on_dask.keys() == on_threads.keys()
+    assert on_dask == pytest.approx(on_threads, abs=1e-6)
