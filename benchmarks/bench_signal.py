@@ -116,7 +116,7 @@ def main() -> dict:
 
 def corridor_frames(seeds=(100_000, 100_001, 100_002), n_frames: int = 3) -> dict:
     """The reference radar on procedural corridors, as ``sim2radar reference`` runs it."""
-    from sim2radar.factory import LabelConfig, frame_seed, radar_visibility
+    from sim2radar.factory import LabelConfig, frame_seed, radar_visibility, scene_ray_caster
     from sim2radar.radar import RadarScene
     from sim2radar.radar.frame import simulate_scene_frame
     from sim2radar.worlds import RigConfig, generate_world, render_frame, trajectory
@@ -159,14 +159,10 @@ def corridor_frames(seeds=(100_000, 100_001, 100_002), n_frames: int = 3) -> dic
         from sim2radar.visualize import bev_png
 
         world, scene, wf, frame = first
-        r = wf.radar_to_world
-
-        def cast(o, d):
-            return scene.first_hit_distance(o @ r[:3, :3].T + r[:3, 3], d @ r[:3, :3].T)
-
         labels = LabelConfig()
         view = (radar.azimuth_fov_deg, radar.elevation_fov_deg, radar.max_range_m)
-        vis = radar_visibility(wf.door_boxes_radar, cast, view, labels)
+        vis = radar_visibility(wf.door_boxes_radar, scene_ray_caster(scene, wf.radar_to_world),
+                               view, labels)
         boxes = wf.door_boxes_radar[vis >= labels.min_visibility]
         bev_png(frame.points, boxes=boxes, box_labels=["door"] * len(boxes),
                 fov_deg=radar.azimuth_fov_deg, max_range_m=radar.max_range_m,

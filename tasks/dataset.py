@@ -58,6 +58,7 @@ from sim2radar.factory.labels import (
     LabelConfig,
     boxes_in_point_cloud_range,
     radar_visibility,
+    scene_ray_caster,
 )
 from sim2radar.factory.seeds import frame_seed
 from storage import ArtifactStore, content_key, meshes_from_table
@@ -450,27 +451,13 @@ def read_dataset_frame(store: str | os.PathLike | ArtifactStore, key: str) -> Da
     return dataset_frame_from_table(open_store(store).read("dataset_frames", key))
 
 
-def _caster(radar_scene, radar_to_world: np.ndarray | None = None):
-    """``first_hit_distance`` for rays given in the radar frame of a scene built in the world
-    frame (``radar_to_world``) or in the radar frame itself (None)."""
-    if radar_to_world is None:
-        return radar_scene.first_hit_distance
-    m = np.asarray(radar_to_world, np.float64)
-
-    def cast(origins, directions):
-        return radar_scene.first_hit_distance(origins @ m[:3, :3].T + m[:3, 3],
-                                              directions @ m[:3, :3].T)
-
-    return cast
-
-
 def _gt_labels(frame, world_scene, spec: DatasetSpec):
     """Ground-truth doors the radar sees (on the world's meshes): boxes (radar frame), their
     door indices and visibilities."""
     from sim2radar.worlds import radar_view
 
     boxes = np.asarray(frame.door_boxes_radar, np.float32).reshape(-1, 7)
-    vis = radar_visibility(boxes, _caster(world_scene, frame.radar_to_world),
+    vis = radar_visibility(boxes, scene_ray_caster(world_scene, frame.radar_to_world),
                            radar_view(spec.rig), spec.labels)
     idx = np.flatnonzero(vis >= spec.labels.min_visibility).astype(np.int32)
     return boxes[idx], idx, vis[idx].astype(np.float32)
@@ -556,7 +543,7 @@ def _reconstructed_frame(frame, world_id, world_scene, store, spec,
     rf = _simulate(radar_scene, spec.radar, None, radar_seed)
     sim_s = time.perf_counter() - t0
     # the reconstructed doors the radar sees on the reconstructed geometry are the labels
-    vis = radar_visibility(boxes, _caster(radar_scene), radar_view(spec.rig), spec.labels)
+    vis = radar_visibility(boxes, scene_ray_caster(radar_scene), radar_view(spec.rig), spec.labels)
     keep = vis >= spec.labels.min_visibility
     boxes, vis = boxes[keep], vis[keep].astype(np.float32)
     gt, idx, gt_vis = _gt_labels(frame, world_scene, spec)

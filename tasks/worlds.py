@@ -209,7 +209,7 @@ def _simulate_radar(world, frames, radar, store, keys, seed, world_id) -> None:
     """Radar point clouds of every frame on the world's ground-truth geometry."""
     import numpy as np
 
-    from sim2radar.factory import LabelConfig, frame_seed, radar_visibility
+    from sim2radar.factory import LabelConfig, frame_seed, radar_visibility, scene_ray_caster
     from sim2radar.radar import RadarConfig, RadarScene, load_radar_config, simulate_frame
     from storage import radar_frames_to_table
 
@@ -224,12 +224,8 @@ def _simulate_radar(world, frames, radar, store, keys, seed, world_id) -> None:
                                 seed=frame_seed(0, seed, f.frame_index))
         seconds.append(time.perf_counter() - t0)
         points.append(np.asarray(result.points, np.float32).reshape(-1, 4))
-        r = f.radar_to_world
-
-        def cast(o, d, r=r):
-            return scene.first_hit_distance(o @ r[:3, :3].T + r[:3, 3], d @ r[:3, :3].T)
-
-        vis = radar_visibility(f.door_boxes_radar, cast, view, labels)
+        vis = radar_visibility(f.door_boxes_radar, scene_ray_caster(scene, f.radar_to_world),
+                               view, labels)
         boxes.append(f.door_boxes_radar[vis >= labels.min_visibility])
     table = radar_frames_to_table(
         scene_id=world_id, radar_to_world=[f.radar_to_world for f in frames], points=points,

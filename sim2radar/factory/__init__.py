@@ -7,6 +7,7 @@ from sim2radar.factory.labels import (
     boxes_in_point_cloud_range,
     doorway_samples,
     radar_visibility,
+    scene_ray_caster,
 )
 from sim2radar.factory.seeds import frame_seed
 
@@ -16,4 +17,5 @@ __all__ = [
     "doorway_samples",
     "frame_seed",
     "radar_visibility",
+    "scene_ray_caster",
 ]

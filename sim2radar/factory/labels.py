@@ -30,6 +30,7 @@ __all__ = [
     "LabelConfig",
     "doorway_samples",
     "radar_visibility",
+    "scene_ray_caster",
     "boxes_in_point_cloud_range",
     "DEFAULT_POINT_CLOUD_RANGE_M",
 ]
@@ -83,6 +84,22 @@ def doorway_samples(boxes, samples_along: int = 7, samples_up: int = 9,
     ww = np.tile(w, (1, samples_along))
     c, s = np.cos(b[:, 6])[:, None], np.sin(b[:, 6])[:, None]
     return np.stack([b[:, None, 0] + uu * c, b[:, None, 1] + uu * s, b[:, None, 2] + ww], -1)
+
+
+def scene_ray_caster(scene, radar_to_world: np.ndarray | None = None
+                     ) -> Callable[[np.ndarray, np.ndarray], np.ndarray]:
+    """The ``first_hit_distance`` query of :func:`radar_visibility` for rays given in the radar
+    frame, on a :class:`~sim2radar.radar.RadarScene` built in the world frame
+    (``radar_to_world``, (4, 4)) or in the radar frame itself (None)."""
+    if radar_to_world is None:
+        return scene.first_hit_distance
+    m = np.asarray(radar_to_world, np.float64)
+
+    def cast(origins: np.ndarray, directions: np.ndarray) -> np.ndarray:
+        return scene.first_hit_distance(origins @ m[:3, :3].T + m[:3, 3],
+                                        directions @ m[:3, :3].T)
+
+    return cast
 
 
 def radar_visibility(
