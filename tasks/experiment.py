@@ -21,7 +21,6 @@ from __future__ import annotations
 
 import dataclasses
 import functools
-import json
 import logging
 import os
 from datetime import UTC, datetime
@@ -442,13 +441,11 @@ def read_runs_table(sweep_dir: str | os.PathLike) -> list[dict[str, Any]]:
 
 
 def write_json(path: str | os.PathLike, doc: Any) -> Path:
-    """Write JSON atomically (for sweep.json, stats.json, progress.json)."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.tmp{os.getpid()}")
-    tmp.write_text(json.dumps(jsonable(doc), indent=1))
-    os.replace(tmp, path)
-    return path
+    """Write JSON atomically (for sweep.json, stats.json, progress.json), numpy values as
+    numbers (:func:`storage.provenance.jsonable`)."""
+    from sim2radar.fileio import write_json as write
+
+    return write(path, jsonable(doc))
 
 
 # ---------------------------------------------------------------------------------------------

@@ -14,12 +14,13 @@ file (and line) at fault and what to change.
 
 from __future__ import annotations
 
-import os
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+
+from sim2radar.fileio import atomic_write, write_json
 
 __all__ = [
     "DatasetError",
@@ -184,12 +185,6 @@ class OpenPCDetDataset:
         return f"OpenPCDetDataset({str(self.root)!r}, splits={self.splits()})"
 
 
-def _atomic_write(path: Path, data: bytes) -> None:
-    tmp = path.with_name(f".{path.name}.tmp{os.getpid()}")
-    tmp.write_bytes(data)
-    os.replace(tmp, path)
-
-
 def write_frame(root: str | Path, frame: Frame) -> None:
     """Write ``points/<id>.npy`` (float32) and ``labels/<id>.txt`` atomically."""
     root = Path(root)
@@ -208,17 +203,17 @@ def write_frame(root: str | Path, frame: Frame) -> None:
 
     buf = io.BytesIO()
     np.save(buf, pts, allow_pickle=False)
-    _atomic_write(root / "points" / f"{frame.frame_id}.npy", buf.getvalue())
+    atomic_write(root / "points" / f"{frame.frame_id}.npy", buf.getvalue())
     lines = [" ".join(f"{v:.6f}" for v in b) + f" {n}\n"
              for b, n in zip(boxes, frame.names, strict=True)]
-    _atomic_write(root / "labels" / f"{frame.frame_id}.txt", "".join(lines).encode())
+    atomic_write(root / "labels" / f"{frame.frame_id}.txt", "".join(lines).encode())
 
 
 def write_split(root: str | Path, split: str, ids: Sequence[str]) -> None:
     """Write ``ImageSets/<split>.txt``."""
     d = Path(root) / "ImageSets"
     d.mkdir(parents=True, exist_ok=True)
-    _atomic_write(d / f"{split}.txt", "".join(f"{i}\n" for i in ids).encode())
+    atomic_write(d / f"{split}.txt", "".join(f"{i}\n" for i in ids).encode())
 
 
 def write_dataset(
@@ -240,14 +235,7 @@ def write_dataset(
 
 def write_metadata(root: str | Path, metadata: Mapping) -> Path:
     """Write ``ROOT/dataset.json`` atomically (keys sorted); returns its path."""
-    import json
-
-    root = Path(root)
-    root.mkdir(parents=True, exist_ok=True)
-    path = root / METADATA_FILE
-    _atomic_write(path, (json.dumps(dict(metadata), indent=1, sort_keys=True, default=str)
-                         + "\n").encode())
-    return path
+    return write_json(Path(root) / METADATA_FILE, dict(metadata), sort_keys=True)
 
 
 def read_metadata(root: str | Path) -> dict:

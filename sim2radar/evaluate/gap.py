@@ -25,9 +25,7 @@ Effective azimuth field of view
 from __future__ import annotations
 
 import io
-import json
 import math
-import os
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -37,6 +35,7 @@ import numpy as np
 
 from sim2radar.datasets.openpcdet import DatasetError, read_labels, read_points
 from sim2radar.evaluate.reconstruction import chamfer_distance
+from sim2radar.fileio import atomic_write, write_json
 from sim2radar.radar.intensity import IntensityMatch, fit_intensity_match
 
 __all__ = [
@@ -531,7 +530,7 @@ def _maybe_write(path: str | Path | None, data: bytes) -> None:
     if path is not None:
         path = Path(path)
         path.parent.mkdir(parents=True, exist_ok=True)
-        _atomic_write(path, data)
+        atomic_write(path, data)
 
 
 def _steps(ax, edges, frac, **kw) -> None:
@@ -691,12 +690,6 @@ def _json_safe(obj: Any) -> Any:
     return obj
 
 
-def _atomic_write(path: Path, data: bytes) -> None:
-    tmp = path.with_name(f".{path.name}.tmp{os.getpid()}")
-    tmp.write_bytes(data)
-    os.replace(tmp, path)
-
-
 def write_gap_report(
     sim_root: str | Path,
     real_root: str | Path,
@@ -788,7 +781,7 @@ def write_gap_report(
                  f"density {_pct(len(sim_pts) / max(len(real_pts), 1))}")
     overlay_png(sim_pts, real_pts, title=title, boxes=boxes, path=out_dir / FIGURES["overlay"])
     for name, data in gap_figures(rep).items():
-        _atomic_write(out_dir / FIGURES[name], data)
+        atomic_write(out_dir / FIGURES[name], data)
 
     doc = _json_safe({
         "sim": _dataset_dict(sim_root, rep.sim),
@@ -810,7 +803,7 @@ def write_gap_report(
         "overlay_frame": chosen,
         "figures": dict(FIGURES),
     })
-    _atomic_write(out_dir / "gap.json", (json.dumps(doc, indent=1) + "\n").encode())
+    write_json(out_dir / "gap.json", doc)
     return doc
 
 

@@ -14,15 +14,15 @@ loading the encoder; the head, shuffling and augmentation follow the seed).
 
 from __future__ import annotations
 
-import json
 import math
-import os
 import time
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+
+from sim2radar.fileio import write_json
 
 __all__ = [
     "NonFiniteLoss",
@@ -50,12 +50,6 @@ def _check_finite(history: Sequence[dict], what: str) -> None:
             raise NonFiniteLoss(f"{what}: training loss became {loss} at epoch {rec['epoch']}")
 
 
-def _write_json(path: Path, doc: dict) -> None:
-    tmp = path.with_name(f".{path.name}.tmp{os.getpid()}")
-    tmp.write_text(json.dumps(doc, indent=1, default=str))
-    os.replace(tmp, path)
-
-
 def pretrain_encoder(cfg, frames: Sequence, out_dir: str | Path, *, seed: int, epochs: int,
                      device=None) -> Path:
     """Pre-train on (simulated) ``frames``; returns the checkpoint whose encoder the
@@ -72,7 +66,7 @@ def pretrain_encoder(cfg, frames: Sequence, out_dir: str | Path, *, seed: int, e
     res = train(cfg, out_dir=out_dir, frames=frames, seed=seed, epochs=epochs, resume=True,
                 device=device)
     _check_finite(res.history, f"pre-training in {out_dir}")
-    _write_json(done, {"epochs": res.epochs, "steps": res.steps, "frames": len(frames),
+    write_json(done, {"epochs": res.epochs, "steps": res.steps, "frames": len(frames),
                        "seconds": res.seconds, "history": res.history})
     return res.checkpoint
 
