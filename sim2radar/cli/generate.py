@@ -173,6 +173,17 @@ def _fmt(v: float, spec: str = ".1f") -> str:
     return "-" if v is None or (isinstance(v, float) and math.isnan(v)) else format(v, spec)
 
 
+def finish_generate(summary: dict[str, Any], json_out: Path | None, strict: bool) -> None:
+    """The end of a generate-style command: print the summary, write it as JSON if asked, and
+    exit with status 1 under ``--strict`` when a world or frame failed."""
+    print_generate_summary(summary)
+    if json_out is not None:
+        json_out.parent.mkdir(parents=True, exist_ok=True)
+        json_out.write_text(json.dumps(summary, indent=1, default=str))
+    if strict and summary["counts"]["failed"]:
+        raise typer.Exit(1)
+
+
 def print_generate_summary(summary: dict[str, Any]) -> None:
     """Human summary: counts, per-geometry table, seconds per stage, where things went."""
     from rich.console import Console
@@ -324,9 +335,4 @@ def generate(
         png_dir=None if no_png else png_dir, force=force, strict=strict, workers=workers,
         dask_address=dask, use_prefect=not no_prefect, verbose=verbose, **params,
     )
-    print_generate_summary(summary)
-    if json_out is not None:
-        json_out.parent.mkdir(parents=True, exist_ok=True)
-        json_out.write_text(json.dumps(summary, indent=1, default=str))
-    if strict and summary["counts"]["failed"]:
-        raise typer.Exit(1)
+    finish_generate(summary, json_out, strict)

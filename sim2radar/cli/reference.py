@@ -12,7 +12,6 @@ every experiment with no code change.
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import typer
@@ -48,7 +47,7 @@ def reference(
     verbose: bool = typer.Option(False, "--verbose", "-v", help="Show Prefect's logs."),
 ) -> None:
     """Build the reference radar dataset: the labelled proxy for measured radar."""
-    from sim2radar.cli.generate import print_generate_summary, run_generate
+    from sim2radar.cli.generate import finish_generate, run_generate
     from sim2radar.cli.simulate import _default_png_dir, _prefect_env
     from sim2radar.factory.reference import DOMAIN_LABEL
 
@@ -77,9 +76,4 @@ def reference(
         verbose=verbose, render_rgb=False, flow_name="reference-dataset", **args,
     )
     summary["plan"] = plan.split_frames()
-    print_generate_summary(summary)
-    if json_out is not None:
-        json_out.parent.mkdir(parents=True, exist_ok=True)
-        json_out.write_text(json.dumps(summary, indent=1, default=str))
-    if strict and summary["counts"]["failed"]:
-        raise typer.Exit(1)
+    finish_generate(summary, json_out, strict)
