@@ -391,13 +391,8 @@ def _ap_figure(stats: Mapping[str, Any], conds: Sequence[str], metric: str) -> d
                            "mean %{y:.2f} ± %{customdata[1]:.2f} (std)<br>"
                            "%{customdata[2]} trial(s), %{customdata[3]} failed<br>"
                            "%{customdata[4]} real frames<extra></extra>")))
-        fig.add_trace(go.Scatter(
-            x=tx, y=ty, mode="markers", name=f"{label}: trials", legendgroup=cond,
-            showlegend=False, marker={"color": color, "size": 6, "opacity": 0.45,
-                                      "symbol": "circle-open", "line": {"width": 1.5}},
-            customdata=tinfo, meta={"role": "trials", "condition": cond},
-            hovertemplate=(f"{html.escape(label)} %{{customdata[0]}}, trial %{{customdata[1]}}"
-                           "<br>%{y:.2f}<extra></extra>")))
+        fig.add_trace(_trial_markers(tx, ty, tinfo, cond, label, color, name=f"{label}: trials",
+                                     role="trials", value="%{y:.2f}"))
     fig.update_layout(
         template=_PLOTLY_TEMPLATE, height=440, margin={"l": 60, "r": 20, "t": 50, "b": 55},
         title={"text": f"{_metric_label(metric)} vs real data (mean ± std, every trial)"},
@@ -458,13 +453,9 @@ def _delta_figure(stats: Mapping[str, Any], conds: Sequence[str], metric: str,
                            "bootstrap (reference) %{customdata[2]}<br>"
                            "p (Holm) %{customdata[3]}, improved in %{customdata[4]}<br>"
                            "%{customdata[5]}<extra></extra>")))
-        fig.add_trace(go.Scatter(
-            x=tx, y=ty, mode="markers", name=f"{label}: per-trial Δ", legendgroup=cond,
-            showlegend=False, marker={"color": color, "size": 6, "opacity": 0.45,
-                                      "symbol": "circle-open", "line": {"width": 1.5}},
-            customdata=tinfo, meta={"role": "delta-trials", "condition": cond},
-            hovertemplate=(f"{html.escape(label)} %{{customdata[0]}}, trial %{{customdata[1]}}"
-                           "<br>Δ %{y:+.2f}<extra></extra>")))
+        fig.add_trace(_trial_markers(tx, ty, tinfo, cond, label, color,
+                                     name=f"{label}: per-trial Δ", role="delta-trials",
+                                     value="Δ %{y:+.2f}"))
     fig.update_layout(
         template=_PLOTLY_TEMPLATE, height=400, margin={"l": 60, "r": 20, "t": 50, "b": 55},
         title={"text": f"Δ {_metric_label(metric)} vs baseline, paired by trial "
@@ -477,6 +468,20 @@ def _delta_figure(stats: Mapping[str, Any], conds: Sequence[str], metric: str,
         _empty_note(fig, "no paired runs yet (a pair needs the baseline and the condition "
                          "of the same trial)")
     return _fig_json(fig)
+
+
+def _trial_markers(tx, ty, tinfo, cond: str, label: str, color: str, *, name: str, role: str,
+                   value: str):
+    """One open marker per trial (``tinfo``: [fraction label, trial]) beside a cell's mean."""
+    import plotly.graph_objects as go
+
+    return go.Scatter(
+        x=tx, y=ty, mode="markers", name=name, legendgroup=cond, showlegend=False,
+        marker={"color": color, "size": 6, "opacity": 0.45, "symbol": "circle-open",
+                "line": {"width": 1.5}},
+        customdata=tinfo, meta={"role": role, "condition": cond},
+        hovertemplate=(f"{html.escape(label)} %{{customdata[0]}}, trial %{{customdata[1]}}"
+                       f"<br>{value}<extra></extra>"))
 
 
 def _curves_figure(runs: Sequence[Mapping[str, Any]], conds: Sequence[str]) -> dict[str, Any]:
