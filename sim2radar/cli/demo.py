@@ -46,6 +46,21 @@ def _manifest_status(summary: dict[str, Any], name: str, role: str) -> dict[str,
                          for g, v in summary["geometry"].items()}}
 
 
+def _reference_dataset(store: str, dataset: str, export_dir: Path, png_dir: Path | None,
+                       verbose: bool, **plan: Any) -> dict[str, Any]:
+    """The reference radar's dataset of a plan (:func:`flows.reference_dataset.reference_run`
+    arguments) through the generate flow, exported to ``export_dir``."""
+    from flows.reference_dataset import REFERENCE_RADAR, reference_run
+    from sim2radar.cli.generate import run_generate
+
+    args = reference_run(**plan)
+    args.pop("plan")
+    return run_generate(args.pop("seeds"), frames=plan["frames_per_world"], store=store,
+                        dataset=dataset, geometry="ground_truth", radar=REFERENCE_RADAR,
+                        export_dir=str(export_dir), png_dir=png_dir, verbose=verbose,
+                        render_rgb=False, flow_name="reference-dataset", **args)
+
+
 def run_demo(
     out: Path,
     *,
@@ -60,7 +75,6 @@ def run_demo(
     verbose: bool = False,
 ) -> dict[str, Any]:
     """The main job (see the module docstring); returns a summary with every output's path."""
-    from flows.reference_dataset import reference_run  # noqa: I001  (Prefect after the env)
     from sim2radar.cli.experiment import run_sweep
     from sim2radar.cli.generate import run_generate
     from sim2radar.evaluate.gap import write_gap_report
@@ -82,23 +96,12 @@ def run_demo(
             geometry="reconstructed", rig=rig or {}, material_override=ablation_material,
             export_dir=str(data / "one_material"), png_dir=None, verbose=verbose)
     typer.secho("2/5 proxy-real domain (reference radar on other worlds)", bold=True)
-    args = reference_run(worlds=reference_worlds, frames_per_world=reference_frames)
-    args.pop("plan")
-    real = run_generate(args.pop("seeds"), frames=reference_frames, store=store,
-                        dataset="reference", geometry="ground_truth",
-                        radar="ti-mmwcas-reference", export_dir=str(data / "proxy_real"),
-                        png_dir=out / "bev", verbose=verbose, render_rgb=False,
-                        flow_name="reference-dataset", **args)
+    real = _reference_dataset(store, "reference", data / "proxy_real", out / "bev", verbose,
+                              worlds=reference_worlds, frames_per_world=reference_frames)
     typer.secho("3/5 sim-real gap (reference radar on the simulated domain's own frames)",
                 bold=True)
-    args = reference_run(first_seed=0, worlds=worlds, frames_per_world=frames)
-    args.pop("plan")
-    paired = run_generate(args.pop("seeds"), frames=frames, store=store,
-                          dataset="reference-paired", geometry="ground_truth",
-                          radar="ti-mmwcas-reference",
-                          export_dir=str(data / "proxy_real_paired"), png_dir=None,
-                          verbose=verbose, render_rgb=False, flow_name="reference-dataset",
-                          **args)
+    paired = _reference_dataset(store, "reference-paired", data / "proxy_real_paired", None,
+                                verbose, first_seed=0, worlds=worlds, frames_per_world=frames)
     gap = write_gap_report(data / "reconstructed", data / "proxy_real_paired",
                            sweep_dir / "gap")
     write_json(sweep_dir / "generation.json", {"datasets": [
