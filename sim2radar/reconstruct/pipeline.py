@@ -60,6 +60,10 @@ __all__ = [
     "ReconstructionConfig",
     "LabeledScene",
     "reconstruct",
+    "estimate_depth",
+    "segment_image",
+    "label_materials",
+    "build_scene",
     "build_backends",
 ]
 
@@ -400,71 +404,59 @@ def _complete_cut_doors(boxes, groups, door_ids, seg, level_from_cam, k, nominal
     return boxes
 
 
-def reconstruct(
-    frame: FrameInput,
-    config: ReconstructionConfig | None = None,
-    ground_truth=None,
-    *,
-    backends: tuple | None = None,
-) -> LabeledScene:
-    """Run the four stages on one frame.
+def estimate_depth(frame: FrameInput, config: ReconstructionConfig, backend) -> DepthResult:
+    """Stage 1: metric depth of ``frame`` by ``backend``, checked (shape, at least one valid
+    pixel) and clipped to ``config.max_depth_m`` (beyond it: 0, invalid)."""
+    return _check_depth(frame, backend.estimate(frame), config.max_depth_m)
 
-    Parameters
-    ----------
-    frame : FrameInput — RGB, intrinsics, optional LiDAR (camera frame).
-    config : ReconstructionConfig — backends and options (default: lidar/builtin/prior).
-    ground_truth : ``WorldFrame``-like or dict — required by ``oracle`` backends.
-    backends : (depth, segments, materials) instances — reuse across frames (e.g. a VLM
-        client with its cache); default: built from ``config``.
 
-    Returns
-    -------
-    LabeledScene
+def segment_image(frame: FrameInput, depth: DepthResult, backend) -> Segments:
+    """Stage 2: segments with semantic labels (and, for segmenters that measure them, gravity
+    and doorway boxes), checked against the image and the vocabulary."""
+    return _check_segments(frame, backend.segment(frame, depth))
 
-    Raises
-    ------
-    ReconstructionInputError
-        Bad image/intrinsics/LiDAR, no valid depth, no segments.
+
+def label_materials(frame: FrameInput, depth: DepthResult, segments: Segments,
+                    config: ReconstructionConfig, backend) -> tuple[list[MaterialLabel], list[str]]:
+    """Stage 3: one material label per segment; out-of-vocabulary answers become ``unknown``.
+
+    Returns the labels and the fallbacks recorded on the way.
     """
-    config = config or ReconstructionConfig()
-    timings: dict[str, float] = {}
-    fallbacks: list[str] = []
-    if not config.rig_calibration:
-        frame = frame.without_rig_calibration()
-    t0 = time.perf_counter()
-    depth_be, seg_be, mat_be = backends or build_backends(config, ground_truth)
-
-    t = time.perf_counter()
-    depth = _check_depth(frame, depth_be.estimate(frame), config.max_depth_m)
-    timings["depth"] = time.perf_counter() - t
-
-    t = time.perf_counter()
-    segments = _check_segments(frame, seg_be.segment(frame, depth))
-    timings["segments"] = time.perf_counter() - t
-
-    t = time.perf_counter()
-    labels = list(mat_be.label(frame, depth, segments))
+    labels = list(backend.label(frame, depth, segments))
     if len(labels) != segments.n_segments:
         raise RuntimeError(
             f"{frame.name}: material backend {config.materials.name!r} returned {len(labels)} "
             f"labels for {segments.n_segments} segments"
         )
+    fallbacks = []
     for i, lab in enumerate(labels):
         if lab.material not in MATERIAL_CLASSES:
             fallbacks.append(f"segment {i}: material {lab.material!r} not in vocabulary -> unknown")
             labels[i] = MaterialLabel("unknown", 0.0, f"out of vocabulary: {lab.material!r}")
-    timings["materials"] = time.perf_counter() - t
+    return labels, fallbacks
 
-    # Stage 4: back-projection, gravity, meshes, door boxes
+
+def build_scene(frame: FrameInput, depth: DepthResult, segments: Segments,
+                labels: list[MaterialLabel], config: ReconstructionConfig, *,
+                timings_s: dict[str, float] | None = None,
+                fallbacks: list[str] | None = None) -> LabeledScene:
+    """Stage 4: back-projection, gravity, one mesh per segment and door boxes.
+
+    ``timings_s`` (the earlier stages' wall times) and ``fallbacks`` are carried into the
+    scene; this stage adds ``backproject``, ``meshing`` and ``doors``.
+    """
+    if not config.rig_calibration:
+        frame = frame.without_rig_calibration()
+    timings = dict(timings_s or {})
+    fallbacks = list(fallbacks or [])
     t = time.perf_counter()
     k = frame.intrinsics
     points = points_from_depth(depth.depth_m, k)
     step = max(1, round(k.width / 200))
     # the segmentation's gravity when it had one (its labels and door boxes are in that level
     # frame), else the rig's calibrated up, else normals + the image's vertical lines
-    seg_up = getattr(seg_be, "last_info", {}).get("up_cam")
-    if seg_up is not None:
-        up = np.asarray(seg_up, np.float64)
+    if segments.up_cam is not None:
+        up = np.asarray(segments.up_cam, np.float64)
     else:
         up = gravity_up(normals_from_points(points, step_px=step), frame.rgb, k, frame.up_cam)
     level = level_from_camera(up)
@@ -503,8 +495,7 @@ def reconstruct(
     # doorways the segmentation measured on wall planes (door frames on the rectified wall,
     # openings seen through it) take precedence; a box fitted to door pixels is kept where no
     # measured one lies within 0.5 m or overlaps it along the wall
-    measured = np.asarray(getattr(seg_be, "last_info", {}).get("door_boxes_level", []),
-                          np.float32).reshape(-1, 7)
+    measured = segments.door_boxes_level
     if len(measured):
         kept = [b for b in boxes
                 if np.min(np.linalg.norm(measured[:, :2] - b[:2], axis=1)
@@ -512,11 +503,14 @@ def reconstruct(
         boxes = np.vstack([measured, *[b[None] for b in kept]]).astype(np.float32)
     boxes = dedupe_boxes(boxes)
     timings["doors"] = time.perf_counter() - t
-    timings["total"] = time.perf_counter() - t0
 
+    seg_info = dict(segments.info)
+    if segments.up_cam is not None:
+        seg_info["up_cam"] = segments.up_cam.tolist()
+        seg_info["door_boxes_level"] = segments.door_boxes_level.tolist()
     info = {
         "depth": depth.info,
-        "segments": getattr(seg_be, "last_info", {}),
+        "segments": seg_info,
         "up_cam": up.tolist(),
         "rig_calibration": frame.rig_calibration,
         "fallbacks": fallbacks,
@@ -532,3 +526,56 @@ def reconstruct(
         meshes=meshes, door_boxes=boxes, level_from_camera=level, floor_z_m=floor_z,
         timings_s=timings, info=info,
     )
+
+
+def reconstruct(
+    frame: FrameInput,
+    config: ReconstructionConfig | None = None,
+    ground_truth=None,
+    *,
+    backends: tuple | None = None,
+) -> LabeledScene:
+    """Run the four stages on one frame (:func:`estimate_depth`, :func:`segment_image`,
+    :func:`label_materials`, :func:`build_scene`; the capture factory runs them as separate,
+    cached tasks).
+
+    Parameters
+    ----------
+    frame : FrameInput — RGB, intrinsics, optional LiDAR (camera frame).
+    config : ReconstructionConfig — backends and options (default: lidar/builtin/prior).
+    ground_truth : ``WorldFrame``-like or dict — required by ``oracle`` backends.
+    backends : (depth, segments, materials) instances — reuse across frames (e.g. a VLM
+        client with its cache); default: built from ``config``.
+
+    Returns
+    -------
+    LabeledScene
+
+    Raises
+    ------
+    ReconstructionInputError
+        Bad image/intrinsics/LiDAR, no valid depth, no segments.
+    """
+    config = config or ReconstructionConfig()
+    timings: dict[str, float] = {}
+    if not config.rig_calibration:
+        frame = frame.without_rig_calibration()
+    t0 = time.perf_counter()
+    depth_be, seg_be, mat_be = backends or build_backends(config, ground_truth)
+
+    t = time.perf_counter()
+    depth = estimate_depth(frame, config, depth_be)
+    timings["depth"] = time.perf_counter() - t
+
+    t = time.perf_counter()
+    segments = segment_image(frame, depth, seg_be)
+    timings["segments"] = time.perf_counter() - t
+
+    t = time.perf_counter()
+    labels, fallbacks = label_materials(frame, depth, segments, config, mat_be)
+    timings["materials"] = time.perf_counter() - t
+
+    scene = build_scene(frame, depth, segments, labels, config, timings_s=timings,
+                        fallbacks=fallbacks)
+    scene.timings_s["total"] = time.perf_counter() - t0
+    return scene

@@ -315,8 +315,6 @@ class BuiltinSegments:
                              f"known: {sorted(known)}")
         self.facade_config = FacadeConfig(**{
             key: tuple(v) if isinstance(v, list) else v for key, v in (facade_options or {}).items()})
-        #: Diagnostics of the last call: up vector, floor / ceiling level, region count.
-        self.last_info: dict = {}
         self._pixel_angle: float | None = None
 
     # -- stage entry ------------------------------------------------------------------------
@@ -384,12 +382,12 @@ class BuiltinSegments:
                 regions, labels, scores, pl, rot, k, frame.rgb, info["floor_z_m"],
                 info["ceiling_z_m"])
             openings = found + openings
-        info["door_boxes_level"] = openings
         seg, labels, scores = self._compact(regions, labels, scores)
-        self.last_info = {"up_cam": up.tolist(), **info, "n_segments": len(labels)}
         if not labels:
             raise ReconstructionInputError(f"{frame.name}: no segments found")
-        return Segments(seg, tuple(labels), np.asarray(scores, np.float32))
+        return Segments(seg, tuple(labels), np.asarray(scores, np.float32), up_cam=up,
+                        door_boxes_level=np.asarray(openings, np.float32).reshape(-1, 7),
+                        info={**info, "n_segments": len(labels)})
 
     # -- steps ------------------------------------------------------------------------------
     @staticmethod

@@ -604,8 +604,8 @@ class Sam2GdinoSegments:
     keep_unmatched : bool — keep segments without a matching detection as ``unknown`` (default
         True; they still carry geometry) or drop them (pixels -1).
 
-    After :meth:`segment`, ``last_detections`` holds the Grounding DINO :class:`Detections` and
-    ``last_info`` a JSON-able summary (mask and detection counts, detections as
+    After :meth:`segment`, ``last_detections`` holds the Grounding DINO :class:`Detections`; the
+    returned ``Segments.info`` is a JSON-able summary (mask and detection counts, detections as
     ``[label, score, x0, y0, x1, y1]``).
     """
 
@@ -637,7 +637,6 @@ class Sam2GdinoSegments:
         self.match_iou = float(match_iou)
         self.keep_unmatched = bool(keep_unmatched)
         self.last_detections: Detections | None = None
-        self.last_info: dict = {}
 
     def segment(self, frame: FrameInput, depth: DepthResult) -> Segments:
         masks, _ = self.sam.generate(frame.rgb)
@@ -658,7 +657,7 @@ class Sam2GdinoSegments:
             seg = np.where(seg >= 0, remap[seg], -1).astype(np.int32)
             labels = [labels[i] for i in keep]
             scores = scores[keep] if keep else np.zeros(0, np.float32)
-        self.last_info = {
+        info = {
             "backend": "sam2-gdino",
             "n_masks": len(masks),
             "n_segments": len(labels),
@@ -668,4 +667,5 @@ class Sam2GdinoSegments:
         }
         log.info("%s: %d SAM2 segments, %d detections, %d labelled", frame.name,
                  len(labels), len(dets), sum(lab != "unknown" for lab in labels))
-        return Segments(seg.astype(np.int32), tuple(labels), np.asarray(scores, np.float32))
+        return Segments(seg.astype(np.int32), tuple(labels), np.asarray(scores, np.float32),
+                        info=info)

@@ -172,11 +172,27 @@ class Segments:
     segment_id : (H, W) int32 — segment index per pixel, -1 for unassigned pixels.
     labels : tuple[str, ...] — semantic class per segment (names from ``vocab.SEMANTIC_CLASSES``).
     scores : (S,) float32 — label confidence per segment in [0, 1].
+    up_cam : (3,) float64 or None — gravity up in the camera frame the segmentation worked in
+        (its door boxes and labels assume it); None: the pipeline estimates gravity itself.
+    door_boxes_level : (M, 7) float32 — doorways the segmentation measured (e.g. on rectified
+        wall planes), ``x y z dx dy dz heading`` in the level frame of ``up_cam`` [m, rad];
+        they take precedence over boxes fitted to door pixels. Empty when none.
+    info : dict — JSON-able diagnostics (floor / ceiling level, detection counts, ...).
     """
 
     segment_id: np.ndarray
     labels: tuple[str, ...]
     scores: np.ndarray
+    up_cam: np.ndarray | None = None
+    door_boxes_level: np.ndarray = dataclasses.field(
+        default_factory=lambda: np.zeros((0, 7), np.float32))
+    info: dict = dataclasses.field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        if self.up_cam is not None:
+            object.__setattr__(self, "up_cam", np.asarray(self.up_cam, np.float64).reshape(3))
+        object.__setattr__(self, "door_boxes_level",
+                           np.asarray(self.door_boxes_level, np.float32).reshape(-1, 7))
 
     @property
     def n_segments(self) -> int:

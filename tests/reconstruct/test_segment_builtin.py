@@ -34,8 +34,8 @@ def test_structure_classes_are_recovered(frames):
             c = semantic_id(name)
             assert _iou(sem == c, f.semantic_id == c) > 0.85, name
         # gravity: the camera is level, so up is -y
-        assert np.dot(backend.last_info["up_cam"], [0, -1, 0]) > np.cos(np.radians(1))
-        assert backend.last_info["floor_z_m"] == pytest.approx(-1.5, abs=0.05)
+        assert np.dot(seg.up_cam, [0, -1, 0]) > np.cos(np.radians(1))
+        assert seg.info["floor_z_m"] == pytest.approx(-1.5, abs=0.05)
 
 
 def test_the_nearest_visible_door_is_segmented_as_a_door(frames):

@@ -127,7 +127,7 @@ def test_decoder_without_orig_im_size_input_and_flat_options(models, frame):
     )
     seg = backend.segment(frame, _depth())
     assert "fire_extinguisher" in seg.labels
-    info = json.loads(json.dumps(backend.last_info))
+    info = json.loads(json.dumps(seg.info))
     assert info["n_labelled"] == 6 and len(info["detections"]) == 7
 
 
