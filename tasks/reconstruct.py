@@ -74,7 +74,7 @@ def _inputs(job: ImageJob):
     import numpy as np
 
     from sim2radar.camera import CameraIntrinsics
-    from sim2radar.cli.reconstruct import load_image, load_lidar, load_rig_calibration
+    from sim2radar.reconstruct.inputs import load_image, load_lidar, load_rig_calibration
     from storage.reconstruction import frame_digest
 
     rgb = load_image(Path(job.image))

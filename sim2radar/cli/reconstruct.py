@@ -18,79 +18,6 @@ import typer
 from sim2radar.cli._app import app
 
 
-def load_lidar(path: Path, *, drop_invalid: bool = True) -> tuple:
-    """Read an (N, ≥3) ``.npy`` of LiDAR points in the camera frame; return (points, note).
-
-    Rows with NaN/inf are dropped (and reported) when ``drop_invalid``; otherwise they raise.
-    """
-    import numpy as np
-
-    if not path.is_file():
-        raise typer.BadParameter(f"{path}: LiDAR file not found")
-    try:
-        pts = np.load(path, allow_pickle=False)
-    except Exception as exc:  # noqa: BLE001 - any read error is a bad file
-        raise typer.BadParameter(f"{path}: cannot read as .npy ({exc})") from None
-    if pts.ndim != 2 or pts.shape[1] < 3:
-        raise typer.BadParameter(
-            f"{path}: LiDAR must be an (N, 3) array of camera-frame points [m] (x right, y down, "
-            f"z forward), got shape {pts.shape}"
-        )
-    pts = pts[:, :3].astype(np.float32)
-    bad = ~np.isfinite(pts).all(axis=1)
-    note = ""
-    if bad.any():
-        if not drop_invalid:
-            raise typer.BadParameter(f"{path}: {int(bad.sum())} LiDAR rows contain NaN/inf")
-        pts = pts[~bad]
-        note = f"dropped {int(bad.sum())} LiDAR rows with NaN/inf"
-    return pts, note
-
-
-def load_rig_calibration(path: Path) -> dict:
-    """The optional rig calibration in an intrinsics YAML: ``camera_height_m`` (the camera's
-    height above the floor [m]) and the camera's up — ``up_cam: [x, y, z]`` (camera frame: x
-    right, y down, z forward) or ``camera_pitch_deg`` (down is positive) with
-    ``camera_roll_deg`` (default 0). Returns ``FrameInput`` keyword arguments (empty without
-    any of them)."""
-    import numpy as np
-
-    from sim2radar.configio import read_yaml_mapping
-    from sim2radar.reconstruct import up_from_pitch_roll
-
-    doc = read_yaml_mapping(path, what="intrinsics file", error=typer.BadParameter)
-    out: dict = {}
-    if "up_cam" in doc and "camera_pitch_deg" in doc:
-        raise typer.BadParameter(f"{path}: give the camera's up as up_cam or as "
-                                 "camera_pitch_deg (+ camera_roll_deg), not both")
-    try:
-        if "up_cam" in doc:
-            up = np.asarray(doc["up_cam"], np.float64)
-            if up.shape != (3,):
-                raise ValueError(f"up_cam must be [x, y, z], got {doc['up_cam']!r}")
-            out["up_cam"] = up
-        elif "camera_pitch_deg" in doc or "camera_roll_deg" in doc:
-            out["up_cam"] = up_from_pitch_roll(float(doc.get("camera_pitch_deg", 0.0)),
-                                               float(doc.get("camera_roll_deg", 0.0)))
-        if "camera_height_m" in doc:
-            out["camera_height_m"] = float(doc["camera_height_m"])
-    except (TypeError, ValueError) as exc:
-        raise typer.BadParameter(f"{path}: rig calibration: {exc}") from None
-    return out
-
-
-def load_image(path: Path):
-    """Read an image file as (H, W, 3) uint8 RGB."""
-    import cv2
-
-    if not path.is_file():
-        raise typer.BadParameter(f"{path}: image not found")
-    img = cv2.imread(str(path), cv2.IMREAD_COLOR)
-    if img is None:
-        raise typer.BadParameter(f"{path}: not a readable image (PNG/JPEG/...)")
-    return cv2.cvtColor(img, cv2.COLOR_BGR2RGB)
-
-
 @app.command("reconstruct")
 def reconstruct_cmd(
     images: list[Path] = typer.Argument(..., help="RGB image(s) (PNG/JPEG)."),
@@ -123,6 +50,7 @@ def reconstruct_cmd(
         build_backends,
         reconstruct,
     )
+    from sim2radar.reconstruct.inputs import load_image, load_lidar, load_rig_calibration
     from sim2radar.reconstruct.sheet import stage_sheet
     from storage import ArtifactStore
     from storage.reconstruction import frame_digest, write_scene_artifacts
@@ -132,7 +60,10 @@ def reconstruct_cmd(
         k = CameraIntrinsics.from_yaml(intrinsics)
     except (FileNotFoundError, ValueError) as exc:
         raise typer.BadParameter(str(exc), param_hint="--intrinsics") from None
-    rig = load_rig_calibration(intrinsics)
+    try:
+        rig = load_rig_calibration(intrinsics)
+    except ValueError as exc:
+        raise typer.BadParameter(str(exc), param_hint="--intrinsics") from None
     lidar = list(lidar or [])
     if lidar and len(lidar) != len(images):
         raise typer.BadParameter(
@@ -166,7 +97,7 @@ def reconstruct_cmd(
                 console.print(f"[yellow]{name}: {note}")
             frame = FrameInput(rgb, k, pts, name=name, **rig)
             scene = reconstruct(frame, cfg, backends=backends)
-        except (ReconstructionInputError, typer.BadParameter, ValueError) as exc:
+        except (ReconstructionInputError, ValueError) as exc:
             failures += 1
             console.print(f"[red]{name}: failed: {exc}")
             continue
