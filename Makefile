@@ -27,6 +27,15 @@ $(BIN)/.installed: pyproject.toml
 	  ( $$SUDO apt-get update -qq && $$SUDO apt-get install -y -qq chromium >/dev/null ) \
 	    || echo "[setup] could not install chromium: the browser tests will fail until it is installed"; \
 	fi
+	@# the Prefect-server-on-PostgreSQL test (tests/deploy) runs Debian's server binaries from
+	@# /usr/lib/postgresql/<version>/bin on a temporary cluster of its own (no service needed)
+	@if ! ls /usr/lib/postgresql/*/bin/initdb >/dev/null 2>&1 && command -v apt-get >/dev/null; then \
+	  echo "[setup] installing postgresql (apt)"; \
+	  SUDO=$$( [ "$$(id -u)" = 0 ] || echo sudo ); \
+	  ( $$SUDO apt-get update -qq && $$SUDO env DEBIAN_FRONTEND=noninteractive \
+	      apt-get install -y -qq --no-install-recommends postgresql >/dev/null ) \
+	    || echo "[setup] could not install postgresql: the Postgres-backed Prefect server test will fail until it is installed"; \
+	fi
 	@[ -x $(BIN)/python ] || $(PY) -m venv $(VENV)
 	@# torch first, pinned: any other spec downloads the multi-GB CUDA build (DESIGN.md)
 	$(BIN)/python -m pip install -q --upgrade pip
