@@ -25,7 +25,9 @@ from storage.keys import bytes_digest, content_key
 from storage.schemas import RECONSTRUCTION as RECONSTRUCTION_SCHEMA
 
 __all__ = ["RECONSTRUCTION_SCHEMA", "scene_to_tables", "write_scene_artifacts",
-           "read_reconstruction", "frame_digest"]
+           "read_reconstruction", "frame_digest", "reconstruction_keys", "depth_to_table",
+           "depth_from_table", "segments_to_table", "segments_from_table", "materials_to_table",
+           "materials_from_table"]
 
 
 
@@ -90,6 +92,26 @@ def scene_to_tables(scene, camera_to_target: np.ndarray | None = None) -> dict[s
             "reconstruction": table}
 
 
+def reconstruction_keys(inputs: dict[str, str], config: dict,
+                        camera_to_target: np.ndarray | None = None, *,
+                        stage_version: int = 1) -> dict[str, str]:
+    """Content keys of a frame's ``scene_meshes`` and ``reconstruction`` artifacts: the one
+    recipe every writer and reader uses (a cached reconstruction is found by computing these up
+    front).
+
+    Parameters
+    ----------
+    inputs : name -> digest of the frame's inputs (``{"image": frame_digest(...)}``).
+    config : the resolved reconstruction config (``ReconstructionConfig.to_dict()``).
+    camera_to_target : (4, 4) camera -> frame of the meshes and boxes; None: the level frame.
+    stage_version : the reconstruction's ``STAGE_VERSION``.
+    """
+    frame_cfg = None if camera_to_target is None else np.asarray(camera_to_target).round(9).tolist()
+    return {stage: content_key(stage=stage, stage_version=stage_version, inputs=inputs,
+                               config={"reconstruction": config, "camera_to_target": frame_cfg})
+            for stage in ("scene_meshes", "reconstruction")}
+
+
 def write_scene_artifacts(store, scene, *, inputs: dict[str, str], config: dict,
                           camera_to_target: np.ndarray | None = None, seed: int | None = None,
                           stage_version: int = 1) -> dict[str, str]:
@@ -101,20 +123,17 @@ def write_scene_artifacts(store, scene, *, inputs: dict[str, str], config: dict,
     inputs : name -> content key/digest of the frame's inputs (e.g. ``{"image": frame_digest(...)}``).
     config : the resolved reconstruction config (``ReconstructionConfig.to_dict()``).
     """
-    frame_cfg = None if camera_to_target is None else np.asarray(camera_to_target).round(9).tolist()
-    keys = {}
+    keys = reconstruction_keys(inputs, config, camera_to_target, stage_version=stage_version)
+    frame_cfg = None if camera_to_target is None else "target"
     tables = None
-    for stage in ("scene_meshes", "reconstruction"):
-        key = content_key(stage=stage, stage_version=stage_version, inputs=inputs,
-                          config={"reconstruction": config, "camera_to_target": frame_cfg})
-        keys[stage] = key
+    for stage, key in keys.items():
         if store.exists(stage, key):
             continue
         tables = tables or scene_to_tables(scene, camera_to_target)
         store.write(stage, key, tables[stage], stage_version=stage_version,
                     provenance={"inputs": inputs, "config": config, "seed": seed,
                                 "timings_s": dict(scene.timings_s),
-                                "extra": {"frame": "level" if frame_cfg is None else "target",
+                                "extra": {"frame": frame_cfg or "level",
                                           "name": scene.name}})
     return keys
 
@@ -139,3 +158,80 @@ def read_reconstruction(store, key: str) -> dict:
         "timings_s": dict(t["timings_s"]),
         "info": json.loads(t["info_json"]),
     }
+
+
+# ---------------------------------------------------------------------------------------------
+# The reconstruction's stages one by one (``depth_maps``, ``segmentations``, ``material_labels``)
+# ---------------------------------------------------------------------------------------------
+def _schema_table(schema, row: dict) -> pa.Table:
+    return pa.Table.from_pydict({name: pa.array([v], type=schema.schema.field(name).type)
+                                 for name, v in row.items()})
+
+
+def depth_to_table(name: str, depth, seconds: float) -> pa.Table:
+    """One-row ``depth_maps`` table of a :class:`~sim2radar.reconstruct.DepthResult`."""
+    from storage.schemas import DEPTH_MAPS
+
+    d = np.asarray(depth.depth_m, np.float32)
+    return _schema_table(DEPTH_MAPS, {
+        "name": name, "width": d.shape[1], "height": d.shape[0], "depth_m": d.ravel(),
+        "info_json": json.dumps(_jsonable(depth.info), sort_keys=True),
+        "seconds": float(seconds)})
+
+
+def depth_from_table(table: pa.Table):
+    """``(DepthResult, seconds)`` of a ``depth_maps`` table."""
+    from sim2radar.reconstruct.types import DepthResult
+
+    t = table.to_pylist()[0]
+    depth = np.asarray(t["depth_m"], np.float32).reshape(t["height"], t["width"])
+    return DepthResult(depth, json.loads(t["info_json"])), float(t["seconds"])
+
+
+def segments_to_table(name: str, segments, seconds: float) -> pa.Table:
+    """One-row ``segmentations`` table of a :class:`~sim2radar.reconstruct.Segments`."""
+    from storage.schemas import SEGMENTATIONS
+
+    ids = np.asarray(segments.segment_id, np.int32)
+    return _schema_table(SEGMENTATIONS, {
+        "name": name, "width": ids.shape[1], "height": ids.shape[0], "segment_id": ids.ravel(),
+        "labels": list(segments.labels), "scores": np.asarray(segments.scores, np.float32),
+        "up_cam": None if segments.up_cam is None else np.asarray(segments.up_cam, np.float64),
+        "door_boxes_level": np.asarray(segments.door_boxes_level, np.float32).tolist(),
+        "info_json": json.dumps(_jsonable(segments.info), sort_keys=True),
+        "seconds": float(seconds)})
+
+
+def segments_from_table(table: pa.Table):
+    """``(Segments, seconds)`` of a ``segmentations`` table."""
+    from sim2radar.reconstruct.types import Segments
+
+    t = table.to_pylist()[0]
+    seg = Segments(np.asarray(t["segment_id"], np.int32).reshape(t["height"], t["width"]),
+                   tuple(t["labels"]), np.asarray(t["scores"], np.float32),
+                   up_cam=None if t["up_cam"] is None else np.asarray(t["up_cam"], np.float64),
+                   door_boxes_level=np.asarray(t["door_boxes_level"], np.float32).reshape(-1, 7),
+                   info=json.loads(t["info_json"]))
+    return seg, float(t["seconds"])
+
+
+def materials_to_table(name: str, labels, fallbacks, seconds: float) -> pa.Table:
+    """One-row ``material_labels`` table of a list of
+    :class:`~sim2radar.reconstruct.MaterialLabel` (one per segment)."""
+    from storage.schemas import MATERIAL_LABELS
+
+    return _schema_table(MATERIAL_LABELS, {
+        "name": name, "materials": [x.material for x in labels],
+        "confidence": np.array([x.confidence for x in labels], np.float32),
+        "reasons": [x.reason for x in labels], "fallbacks": list(fallbacks),
+        "seconds": float(seconds)})
+
+
+def materials_from_table(table: pa.Table):
+    """``(labels, fallbacks, seconds)`` of a ``material_labels`` table."""
+    from sim2radar.reconstruct.types import MaterialLabel
+
+    t = table.to_pylist()[0]
+    labels = [MaterialLabel(m, float(c), r) for m, c, r in
+              zip(t["materials"], t["confidence"], t["reasons"], strict=True)]
+    return labels, list(t["fallbacks"]), float(t["seconds"])

@@ -524,3 +524,65 @@ EXPERIMENT_RUNS = register_schema(
         ]),
     )
 )
+
+
+# --- reconstruction stages one by one (the capture factory: tasks/capture.py) ---------------
+# Each stage of sim2radar.reconstruct.pipeline is its own cached artifact, so a run that
+# changes only the material backend re-labels materials without re-estimating depth.
+DEPTH_MAPS = register_schema(
+    ArtifactSchema(
+        stage="depth_maps",
+        version=1,
+        row="stage 1 of one RGB frame: metric depth",
+        description="(H, W) z-depth of a frame from the depth backend, with its diagnostics",
+        schema=pa.schema([
+            field("name", pa.string(), doc="frame / scene name"),
+            field("width", pa.int32(), unit="px"),
+            field("height", pa.int32(), unit="px"),
+            field("depth_m", pa.list_(pa.float32()), unit="m", doc="(H*W,) z-depth, 0 invalid"),
+            field("info_json", pa.string(), doc="depth backend diagnostics (JSON)"),
+            field("seconds", pa.float64(), unit="s", doc="stage wall time"),
+        ]),
+    )
+)
+
+SEGMENTATIONS = register_schema(
+    ArtifactSchema(
+        stage="segmentations",
+        version=1,
+        row="stage 2 of one RGB frame: segments with semantic labels",
+        description="segment per pixel, semantic class and score per segment, the "
+        "segmenter's gravity and measured doorway boxes",
+        schema=pa.schema([
+            field("name", pa.string(), doc="frame / scene name"),
+            field("width", pa.int32(), unit="px"),
+            field("height", pa.int32(), unit="px"),
+            field("segment_id", pa.list_(pa.int32()), doc="(H*W,) segment per pixel, -1 none"),
+            field("labels", pa.list_(pa.string()), doc="(S,) vocab.SEMANTIC_CLASSES"),
+            field("scores", pa.list_(pa.float32()), doc="(S,) label confidence in [0, 1]"),
+            field("up_cam", pa.list_(pa.float64()), nullable=True,
+                  doc="(3,) gravity up in the camera frame, or null (none measured)"),
+            field("door_boxes_level", pa.list_(_BOX7_F32), unit="m, rad",
+                  doc="(M, 7) doorways measured by the segmenter, level frame of up_cam"),
+            field("info_json", pa.string(), doc="segmenter diagnostics (JSON)"),
+            field("seconds", pa.float64(), unit="s", doc="stage wall time"),
+        ]),
+    )
+)
+
+MATERIAL_LABELS = register_schema(
+    ArtifactSchema(
+        stage="material_labels",
+        version=1,
+        row="stage 3 of one RGB frame: a material per segment",
+        description="material class, confidence and reason (rule or VLM reasoning) per segment",
+        schema=pa.schema([
+            field("name", pa.string(), doc="frame / scene name"),
+            field("materials", pa.list_(pa.string()), doc="(S,) vocab.MATERIAL_CLASSES"),
+            field("confidence", pa.list_(pa.float32()), doc="(S,) in [0, 1]"),
+            field("reasons", pa.list_(pa.string()), doc="(S,) why"),
+            field("fallbacks", pa.list_(pa.string()), doc="fallbacks recorded by the stage"),
+            field("seconds", pa.float64(), unit="s", doc="stage wall time"),
+        ]),
+    )
+)

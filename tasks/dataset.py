@@ -342,16 +342,13 @@ def frame_key(world_keys: dict[str, str], frame_index: int, geometry: str,
 
 
 def _reconstruction_keys(frame, camera_to_target: np.ndarray, config) -> dict[str, str]:
-    """Keys :func:`storage.reconstruction.write_scene_artifacts` gives this frame
-    (computed up front so a cached reconstruction is read instead of recomputed)."""
+    """Keys of this frame's reconstruction artifacts (computed up front so a cached
+    reconstruction is read instead of recomputed)."""
     from sim2radar.reconstruct.pipeline import STAGE_VERSION
+    from storage.reconstruction import reconstruction_keys
 
-    inputs = {"image": _digest(frame)}
-    cfg = {"reconstruction": config.to_dict(),
-           "camera_to_target": np.asarray(camera_to_target).round(9).tolist()}
-    return {stage: content_key(stage=stage, stage_version=STAGE_VERSION, inputs=inputs,
-                               config=cfg)
-            for stage in ("scene_meshes", "reconstruction")}
+    return reconstruction_keys({"image": _digest(frame)}, config.to_dict(), camera_to_target,
+                               stage_version=STAGE_VERSION)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -524,11 +521,9 @@ def _reconstructed_frame(frame, world_id, world_scene, store, spec,
         scene = reconstruct(FrameInput(frame.rgb, frame.intrinsics, frame.lidar_points, name=fid,
                                        **frame.rig_calibration),
                             spec.reconstruction, ground_truth=frame)
-        keys = write_scene_artifacts(
+        write_scene_artifacts(
             store, scene, inputs={"image": _digest(frame)}, config=spec.reconstruction.to_dict(),
             camera_to_target=cam_to_radar, seed=frame.seed, stage_version=STAGE_VERSION)
-        if keys != rkeys:  # the two key recipes must agree, or caching silently breaks
-            raise RuntimeError(f"{fid}: reconstruction keys {keys} differ from expected {rkeys}")
         meshes = scene.meshes_in(cam_to_radar)
         boxes = scene.door_boxes_in(cam_to_radar)
         rec_seconds = float(scene.timings_s.get("total", time.perf_counter() - t0))

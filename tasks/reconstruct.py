@@ -105,18 +105,14 @@ def reconstruct_image(
     out_dir : str, optional — where ``sheets/<name>.png`` and ``scenes/<name>/scene.yaml`` go.
     """
     from sim2radar.reconstruct import FrameInput, ReconstructionConfig, reconstruct
-    from storage import content_key
-    from storage.reconstruction import write_scene_artifacts
+    from storage.reconstruction import reconstruction_keys, write_scene_artifacts
 
     t0 = time.perf_counter()
     st = open_store(store)
     cfg = ReconstructionConfig.model_validate(config or {})
     cfg_dict = cfg.to_dict()
     rgb, k, pts, rig, note, inputs = _inputs(job)
-    keys = {stage: content_key(stage=stage, stage_version=RECONSTRUCTION_STAGE_VERSION,
-                               inputs=inputs,
-                               config={"reconstruction": cfg_dict, "camera_to_target": None})
-            for stage in ("scene_meshes", "reconstruction")}
+    keys = reconstruction_keys(inputs, cfg_dict, stage_version=RECONSTRUCTION_STAGE_VERSION)
     if not force and all(st.exists(s, key) for s, key in keys.items()):
         return ReconOutcome(job.name, job.image, "skipped", artifacts=keys,
                             timings_s={"total": time.perf_counter() - t0})
