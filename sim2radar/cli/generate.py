@@ -28,6 +28,22 @@ _CONFIG_KEYS = {"worlds", "first_seed", "frames", "geometry", "radar", "reconstr
                 "export_label_range_m"}
 
 
+#: Whole-number settings and their smallest allowed value (None: any integer).
+_INT_KEYS = {"worlds": 1, "first_seed": None, "frames": 1, "seed": None}
+
+
+def _whole_number(value: Any, where: str, minimum: int | None = None) -> int:
+    """``value`` as an int: an integer (or a float with no fractional part, e.g. ``4.0``);
+    anything else (a list, a word, ``2.5``, ``true``) raises ValueError naming ``where``."""
+    ok = isinstance(value, int) or (isinstance(value, float) and value.is_integer())
+    if isinstance(value, bool) or not ok:
+        raise ValueError(f"{where}: must be a whole number, got {value!r}; "
+                         f"write e.g. '{where.rsplit(': ', 1)[-1]}: {max(minimum or 0, 1)}'")
+    if minimum is not None and value < minimum:
+        raise ValueError(f"{where}: must be >= {minimum}, got {value!r}")
+    return int(value)
+
+
 def load_generate_config(path: str | Path) -> dict[str, Any]:
     """Read a generate YAML; relative radar/reconstruction file paths resolve against its folder.
 
@@ -50,6 +66,9 @@ def load_generate_config(path: str | Path) -> dict[str, Any]:
     for key in ("world", "rig"):
         if doc.get(key) is not None and not isinstance(doc[key], dict):
             raise ValueError(f"{path}: '{key}' must be a mapping of fields")
+    for key, minimum in _INT_KEYS.items():
+        if key in doc:
+            doc[key] = _whole_number(doc[key], f"{path}: {key}", minimum)
     for key in ("radar", "reconstruction"):
         value = doc.get(key)
         if isinstance(value, str) and value.endswith((".yaml", ".yml")) \

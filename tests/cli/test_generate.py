@@ -1,0 +1,38 @@
+"""`sim2radar generate`: a bad value in a generate YAML is one line naming the file, the field
+and the fix (exit 2), never a traceback or a silently truncated number."""
+
+from __future__ import annotations
+
+import pytest
+from typer.testing import CliRunner
+
+from sim2radar.cli import app
+from sim2radar.cli.generate import load_generate_config
+
+
+@pytest.mark.parametrize("line, field", [
+    ("worlds: [1]", "worlds"),       # was a TypeError traceback
+    ("worlds: two", "worlds"),       # was "invalid literal for int()", no file, no field
+    ("frames: 2.5", "frames"),       # was silently truncated to 2
+    ("first_seed: true", "first_seed"),
+    ("seed: '3'", "seed"),
+    ("worlds: 0", "worlds"),
+])
+def test_bad_whole_numbers_name_file_and_field(tmp_path, line, field):
+    cfg = tmp_path / "gen.yaml"
+    cfg.write_text(line + "\n")
+    res = CliRunner().invoke(app, ["generate", "--config", str(cfg), "--no-prefect",
+                                   "--out", str(tmp_path / "store")], env={"COLUMNS": "400"})
+    assert res.exit_code == 2, res.output
+    assert res.exception is None or isinstance(res.exception, SystemExit)
+    lines = res.output.strip().splitlines()
+    assert len(lines) == 1 and "Traceback" not in res.output, res.output
+    assert f"gen.yaml: {field}:" in lines[0], lines[0]
+    assert not (tmp_path / "store").exists()  # nothing ran
+
+
+def test_whole_floats_are_accepted(tmp_path):
+    cfg = tmp_path / "gen.yaml"
+    cfg.write_text("worlds: 2.0\nframes: 3\n")
+    doc = load_generate_config(cfg)
+    assert doc["worlds"] == 2 and isinstance(doc["worlds"], int) and doc["frames"] == 3
