@@ -27,7 +27,7 @@ from storage.schemas import RECONSTRUCTION as RECONSTRUCTION_SCHEMA
 __all__ = ["RECONSTRUCTION_SCHEMA", "scene_to_tables", "write_scene_artifacts",
            "read_reconstruction", "frame_digest", "reconstruction_keys", "depth_to_table",
            "depth_from_table", "segments_to_table", "segments_from_table", "materials_to_table",
-           "materials_from_table"]
+           "materials_from_table", "frame_input_digests", "stage_keys"]
 
 
 
@@ -90,6 +90,36 @@ def scene_to_tables(scene, camera_to_target: np.ndarray | None = None) -> dict[s
          for name, v in row.items()})
     return {"scene_meshes": meshes_to_table(scene.meshes_in(camera_to_target)),
             "reconstruction": table}
+
+
+def frame_input_digests(frame) -> dict[str, str]:
+    """Input digests of a :class:`~sim2radar.reconstruct.FrameInput` read from files (the
+    ``reconstruct`` flow and the capture factory): ``image`` (RGB [+ LiDAR] bytes) and
+    ``intrinsics`` (fx, fy, cx, cy, width, height + the rig calibration)."""
+    k = frame.intrinsics
+    kk = np.asarray([[k.fx, k.fy, k.cx, k.cy, k.width, k.height]], np.float32)
+    return {"image": frame_digest(frame.rgb, frame.lidar_points),
+            "intrinsics": frame_digest(kk, rig_calibration=frame.rig_calibration)}
+
+
+def stage_keys(inputs: dict[str, str], config: dict, *, stage_version: int = 1) -> dict[str, str]:
+    """Content keys of every artifact of one frame's reconstruction, stage by stage:
+    ``depth_maps`` (inputs + depth backend), ``segmentations`` (+ depth key + segmenter),
+    ``material_labels`` (+ segmentation key + material backend), and the final
+    ``scene_meshes`` / ``reconstruction`` (level frame, :func:`reconstruction_keys`). A change
+    of one backend re-keys its stage and the ones after it, not the ones before."""
+    common = {"rig_calibration": config.get("rig_calibration", True),
+              "max_depth_m": config.get("max_depth_m")}
+    depth = content_key(stage="depth_maps", stage_version=stage_version, inputs=inputs,
+                        config={"depth": config["depth"], **common})
+    seg = content_key(stage="segmentations", stage_version=stage_version,
+                      inputs={**inputs, "depth_maps": depth},
+                      config={"segments": config["segments"], **common})
+    mat = content_key(stage="material_labels", stage_version=stage_version,
+                      inputs={**inputs, "depth_maps": depth, "segmentations": seg},
+                      config={"materials": config["materials"], **common})
+    return {"depth_maps": depth, "segmentations": seg, "material_labels": mat,
+            **reconstruction_keys(inputs, config, stage_version=stage_version)}
 
 
 def reconstruction_keys(inputs: dict[str, str], config: dict,

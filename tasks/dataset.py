@@ -298,7 +298,7 @@ def resolve_spec(
 
 
 def _spec(spec: DatasetSpec | dict) -> DatasetSpec:
-    if isinstance(spec, DatasetSpec):
+    if not isinstance(spec, dict):  # a DatasetSpec, or a CaptureSpec (same export fields)
         return spec
     return resolve_spec(spec["frames_per_world"], spec["geometry"], spec["radar"],
                         spec["reconstruction"], spec["world"], spec["rig"], spec["seed"],
@@ -406,7 +406,9 @@ class WorldDatasetOutcome:
     error : str — world-level error, or a count of failed frames
     artifacts : dict — world stage -> key (``scene_meshes``, ``world_specs``, ``world_frames``)
     timings_s : dict — ``world`` (generate/render or cache check), ``frames``, ``total`` [s]
+        (a capture scene: wall seconds per stage)
     frames : list[FrameOutcome]
+    source : str — where the scene came from (manifest ``source``; default: the world seed)
     """
 
     world_id: str
@@ -416,6 +418,7 @@ class WorldDatasetOutcome:
     artifacts: dict[str, str] = dataclasses.field(default_factory=dict)
     timings_s: dict[str, float] = dataclasses.field(default_factory=dict)
     frames: list[FrameOutcome] = dataclasses.field(default_factory=list)
+    source: str = ""
 
     def to_dict(self) -> dict[str, Any]:
         d = jsonable(dataclasses.asdict(self))
@@ -737,13 +740,12 @@ def _provenance(spec, keys, df: DatasetFrame, geometry, rkeys) -> dict:
 def record_world_dataset(store, dataset: str, outcome: WorldDatasetOutcome) -> list[dict]:
     """Upsert the world's manifest row and one row per frame; returns the rows."""
     m = open_store(store).manifest(dataset)
+    source = outcome.source or f"sim2radar.worlds seed={outcome.seed}"
     rows = [m.upsert(outcome.world_id, outcome.status, error=outcome.error,
-                     artifacts=outcome.artifacts, timings_s=outcome.timings_s,
-                     source=f"sim2radar.worlds seed={outcome.seed}")]
+                     artifacts=outcome.artifacts, timings_s=outcome.timings_s, source=source)]
     for f in outcome.frames:
         rows.append(m.upsert(f.frame_id, f.status, error=f.error, artifacts=f.artifacts,
-                             timings_s=f.timings_s,
-                             source=f"sim2radar.worlds seed={f.seed} frame={f.frame_index}"))
+                             timings_s=f.timings_s, source=f"{source} frame={f.frame_index}"))
     return rows
 
 

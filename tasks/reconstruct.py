@@ -25,7 +25,13 @@ from prefect import task
 from prefect.cache_policies import NO_CACHE
 
 from sim2radar.reconstruct.pipeline import STAGE_VERSION
-from tasks.common import REMOTE_IO_RETRIES, REMOTE_IO_RETRY_DELAYS_S, jsonable, open_store
+from tasks.common import (
+    REMOTE_IO_RETRIES,
+    REMOTE_IO_RETRY_DELAYS_S,
+    jsonable,
+    open_store,
+    retry_transient_io,
+)
 
 __all__ = [
     "RECONSTRUCTION_STAGE_VERSION",
@@ -71,20 +77,17 @@ class ReconOutcome:
 
 
 def _inputs(job: ImageJob):
-    import numpy as np
-
     from sim2radar.camera import CameraIntrinsics
+    from sim2radar.reconstruct import FrameInput
     from sim2radar.reconstruct.inputs import load_image, load_lidar, load_rig_calibration
-    from storage.reconstruction import frame_digest
+    from storage.reconstruction import frame_input_digests
 
     rgb = load_image(Path(job.image))
     k = CameraIntrinsics.from_yaml(job.intrinsics)
     rig = load_rig_calibration(Path(job.intrinsics))
     pts, note = load_lidar(Path(job.lidar)) if job.lidar else (None, "")
-    digest = frame_digest(rgb, pts)
-    digest_k = frame_digest(np.asarray([[k.fx, k.fy, k.cx, k.cy, k.width, k.height]], np.float32),
-                            rig_calibration=rig)
-    return rgb, k, pts, rig, note, {"image": digest, "intrinsics": digest_k}
+    inputs = frame_input_digests(FrameInput(rgb, k, pts, name=job.name, **rig))
+    return rgb, k, pts, rig, note, inputs
 
 
 def reconstruct_image(
@@ -153,7 +156,8 @@ def reconstruct_image_task(job: ImageJob, store: str, config: dict | None = None
 
 
 @task(name="record-reconstruction", cache_policy=NO_CACHE, retries=REMOTE_IO_RETRIES,
-      retry_delay_seconds=REMOTE_IO_RETRY_DELAYS_S, persist_result=False)
+      retry_delay_seconds=REMOTE_IO_RETRY_DELAYS_S, retry_condition_fn=retry_transient_io,
+      persist_result=False)
 def record_recon_outcome_task(store: str, dataset: str, outcome: ReconOutcome) -> dict:
     """Prefect wrapper of :func:`record_recon_outcome` (retried: storage I/O)."""
     return record_recon_outcome(store, dataset, outcome)

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["frame_seed"]
+__all__ = ["frame_seed", "pose_seed", "scene_seed"]
 
 
 def frame_seed(run_seed: int, world_seed: int, frame_index: int) -> int:
@@ -14,4 +14,16 @@ def frame_seed(run_seed: int, world_seed: int, frame_index: int) -> int:
     :class:`numpy.random.SeedSequence` from (run seed, world seed, frame index).
     """
     ss = np.random.SeedSequence([int(run_seed), int(world_seed), int(frame_index), 0x5EED])
+    return int(ss.generate_state(1)[0])
+
+
+def scene_seed(digest: str) -> int:
+    """A capture scene's seed from the content digest of its inputs (hex string): the same
+    images give the same seed wherever and whenever they are processed."""
+    return int(str(digest)[:15], 16)
+
+
+def pose_seed(run_seed: int, scene_seed_: int) -> int:
+    """Seed of the radar-pose sampling of one capture scene, from (run seed, scene seed)."""
+    ss = np.random.SeedSequence([int(run_seed), int(scene_seed_), 0x9053])
     return int(ss.generate_state(1)[0])
