@@ -42,11 +42,18 @@ from storage.schemas import (
     register_schema,
     schema_names,
 )
-from storage.store import ArtifactNotFoundError, ArtifactStore
+from storage.store import (
+    ArtifactNotFoundError,
+    ArtifactStore,
+    check_writable,
+    is_transient_io_error,
+)
 
 __all__ = [
     "ArtifactStore",
     "ArtifactNotFoundError",
+    "check_writable",
+    "is_transient_io_error",
     "ArtifactSchema",
     "SchemaError",
     "Manifest",

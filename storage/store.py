@@ -13,16 +13,20 @@ final object appears whole when its upload/copy completes). A reader never sees 
 a killed run leaves only ``.tmp-*`` files, which ``exists``/``keys``/``read`` ignore.
 
 Remote I/O can flake: on non-local file systems every operation is retried ``io_retries`` times
-with exponential backoff (``OSError``/``TimeoutError``/``ConnectionError`` only; a missing file
-or a schema error is never retried). Local I/O is not retried.
+with exponential backoff (transient ``OSError``/``TimeoutError``/``ConnectionError`` only, see
+:func:`is_transient_io_error`; a missing file, a permission error, a full or read-only disk or
+a schema error is never retried). Local I/O is not retried. :func:`check_writable` tells up
+front whether a local store root can be written.
 """
 
 from __future__ import annotations
 
+import errno
 import json
 import logging
 import os
 import re
+import tempfile
 import time
 import uuid
 from collections.abc import Callable, Mapping
@@ -36,7 +40,13 @@ import pyarrow.parquet as pq
 from storage.provenance import PROVENANCE_KEY, build_provenance
 from storage.schemas import SchemaError, get_schema
 
-__all__ = ["ArtifactStore", "ArtifactNotFoundError", "SCHEMA_KEY"]
+__all__ = [
+    "ArtifactStore",
+    "ArtifactNotFoundError",
+    "SCHEMA_KEY",
+    "check_writable",
+    "is_transient_io_error",
+]
 
 log = logging.getLogger(__name__)
 
@@ -50,6 +60,68 @@ T = TypeVar("T")
 
 class ArtifactNotFoundError(FileNotFoundError):
     """No published artifact for (stage, key); the message names the path."""
+
+
+#: OSError subclasses that say the same thing on every attempt (retrying cannot help).
+_PERMANENT_OS_ERRORS = (FileNotFoundError, PermissionError, NotADirectoryError,
+                        IsADirectoryError, FileExistsError)
+#: errno values with the same meaning: no permission, read-only file system, disk/quota full,
+#: name too long.
+_PERMANENT_ERRNOS = frozenset({errno.EACCES, errno.EPERM, errno.EROFS, errno.ENOSPC,
+                               errno.EDQUOT, errno.ENAMETOOLONG, errno.ENOTDIR, errno.EISDIR})
+
+
+def is_transient_io_error(exc: BaseException) -> bool:
+    """True if ``exc`` is an I/O error that may succeed when tried again (a timeout, a dropped
+    connection, a remote store's 5xx as ``OSError``); False for everything else, including
+    local file-system errors that repeat on every attempt (permission denied, read-only file
+    system, disk full, a file where a folder should be, a missing file) and non-I/O errors
+    (schema, value, type errors).
+
+    The one rule behind both :class:`ArtifactStore`'s own retries and the Prefect task retries
+    of storage I/O (:mod:`tasks.common`).
+    """
+    if not isinstance(exc, OSError) or isinstance(exc, _PERMANENT_OS_ERRORS):
+        return False
+    return exc.errno not in _PERMANENT_ERRNOS
+
+
+def check_writable(root: str | os.PathLike) -> None:
+    """Check that a local store root can be written, before any work starts.
+
+    The root need not exist yet: its nearest existing ancestor must be a folder in which a file
+    can be created (the probe file is removed again; nothing else is created). Remote URIs
+    (``s3://``, ``gs://``, ``memory://``, ...) are not checked: that would need credentials and
+    network I/O; their errors surface on the first write.
+
+    Raises
+    ------
+    ValueError
+        If a file stands where the store (or one of its parent folders) should be.
+    PermissionError
+        If the folder cannot be written (permissions, read-only file system, ...); the message
+        names the path and what to do.
+    """
+    text = os.fspath(root)
+    if "://" in text and not text.startswith("file://"):
+        return
+    path = Path(text.removeprefix("file://")).absolute()
+    probe = path
+    while not probe.exists() and probe.parent != probe:
+        probe = probe.parent
+    if not probe.is_dir():
+        raise ValueError(f"store {path}: {probe} is a file, not a folder; choose a store path "
+                         "whose parents are folders")
+    try:
+        fd, tmp = tempfile.mkstemp(prefix=".write-check-", dir=probe)
+        os.close(fd)
+        os.unlink(tmp)
+    except OSError as exc:
+        where = "" if probe == path else f" (its nearest existing parent {probe})"
+        raise PermissionError(
+            f"store {path}{where} is not writable: {exc.strerror or exc}; choose a writable "
+            "folder or fix its permissions"
+        ) from None
 
 
 class ArtifactStore:
@@ -139,10 +211,8 @@ class ArtifactStore:
         for attempt in range(self.io_retries + 1):
             try:
                 return fn()
-            except (FileNotFoundError, SchemaError, ArtifactNotFoundError):
-                raise
             except (OSError, TimeoutError, ConnectionError) as exc:
-                if attempt == self.io_retries:
+                if attempt == self.io_retries or not is_transient_io_error(exc):
                     raise
                 log.warning(
                     "storage: %s failed (%s); retry %d/%d in %.1f s",

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import yaml
 
-from storage import ArtifactStore
+from storage import ArtifactStore, is_transient_io_error
 from storage.provenance import jsonable
 
 __all__ = [
@@ -22,6 +22,7 @@ __all__ = [
     "open_store",
     "REMOTE_IO_RETRIES",
     "REMOTE_IO_RETRY_DELAYS_S",
+    "retry_transient_io",
     "scene_id_for",
     "jsonable",
 ]
@@ -33,6 +34,20 @@ log = logging.getLogger(__name__)
 REMOTE_IO_RETRIES = 3
 #: Backoff between those retries [s].
 REMOTE_IO_RETRY_DELAYS_S = [1.0, 4.0, 16.0]
+
+
+def retry_transient_io(task, task_run, state) -> bool:
+    """Prefect ``retry_condition_fn`` of every task retried with :data:`REMOTE_IO_RETRIES`:
+    retry only errors that can flake (:func:`storage.is_transient_io_error`: timeouts, dropped
+    connections), never ones that repeat on every attempt (a read-only or unwritable store,
+    a full disk, a missing file, a schema or value error), which fail at once."""
+    exc = state.data if isinstance(state.data, BaseException) else None
+    if exc is None:
+        try:
+            exc = state.result(raise_on_failure=False)
+        except Exception:  # noqa: BLE001 - an unreadable result is not a reason to retry
+            return False
+    return isinstance(exc, BaseException) and is_transient_io_error(exc)
 
 
 def open_store(store: str | os.PathLike | ArtifactStore) -> ArtifactStore:

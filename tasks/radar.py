@@ -41,6 +41,7 @@ from tasks.common import (
     REMOTE_IO_RETRY_DELAYS_S,
     jsonable,
     open_store,
+    retry_transient_io,
     scene_id_for,
 )
 
@@ -402,6 +403,7 @@ def simulate_scene_task(
     cache_policy=NO_CACHE,
     retries=REMOTE_IO_RETRIES,
     retry_delay_seconds=REMOTE_IO_RETRY_DELAYS_S,
+    retry_condition_fn=retry_transient_io,
     persist_result=False,
 )
 def record_outcome_task(store: str, dataset: str, outcome: SceneOutcome) -> dict:

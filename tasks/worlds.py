@@ -30,7 +30,13 @@ from prefect import task
 from prefect.cache_policies import NO_CACHE
 
 from storage import ArtifactStore, content_key, meshes_to_table
-from tasks.common import REMOTE_IO_RETRIES, REMOTE_IO_RETRY_DELAYS_S, jsonable, open_store
+from tasks.common import (
+    REMOTE_IO_RETRIES,
+    REMOTE_IO_RETRY_DELAYS_S,
+    jsonable,
+    open_store,
+    retry_transient_io,
+)
 
 __all__ = [
     "WorldOutcome",
@@ -316,7 +322,8 @@ def generate_world_task(seed: int, n_frames: int, store: str, world_cfg: dict, r
 
 
 @task(name="record-world-manifest", cache_policy=NO_CACHE, retries=REMOTE_IO_RETRIES,
-      retry_delay_seconds=REMOTE_IO_RETRY_DELAYS_S, persist_result=False)
+      retry_delay_seconds=REMOTE_IO_RETRY_DELAYS_S, retry_condition_fn=retry_transient_io,
+      persist_result=False)
 def record_world_outcome_task(store: str, dataset: str, outcome: WorldOutcome) -> dict:
     """Prefect task around :func:`record_world_outcome` (retried: storage I/O)."""
     return record_world_outcome(store, dataset, outcome)

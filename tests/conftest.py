@@ -9,6 +9,9 @@ import pytest
 # Keep Prefect's state out of ~ and make it quiet; tests never need a running server.
 os.environ.setdefault("PREFECT_SERVER_ANALYTICS_ENABLED", "false")
 os.environ.setdefault("PREFECT_LOGGING_LEVEL", "WARNING")
+# CLI runs in tests keep Prefect's per-process temporary API instead of leaving a managed
+# server per temporary PREFECT_HOME (tests/cli/test_server.py tests the managed one).
+os.environ.setdefault("SIM2RADAR_PREFECT_SERVER", "ephemeral")
 
 
 def pytest_collection_modifyitems(config, items):
@@ -20,3 +23,51 @@ def pytest_collection_modifyitems(config, items):
     for item in items:
         if "gpu" in item.keywords:
             item.add_marker(skip)
+
+
+@pytest.fixture
+def unwritable_dir(tmp_path, monkeypatch):
+    """A folder in which nothing can be created (mode 0o555). Root ignores permission bits, so
+    when the process can still write there, creating files or folders inside it is refused
+    in this process (``open``/``os.open``/``os.mkdir`` raise ``PermissionError``)."""
+    import errno
+
+    folder = tmp_path / "read-only"
+    folder.mkdir()
+    folder.chmod(0o555)
+    try:
+        (folder / "probe").touch()
+    except PermissionError:
+        pass
+    else:
+        (folder / "probe").unlink()
+        import builtins
+
+        real_open, real_mkdir, real_builtin_open = os.open, os.mkdir, builtins.open
+        inside = str(folder) + os.sep
+
+        def refuse(path):
+            raise PermissionError(errno.EACCES, "Permission denied", os.fspath(path))
+
+        def open_(path, flags, *args, **kwargs):
+            writing = flags & (os.O_WRONLY | os.O_RDWR | os.O_CREAT)
+            if writing and os.fspath(path).startswith(inside):
+                refuse(path)
+            return real_open(path, flags, *args, **kwargs)
+
+        def mkdir_(path, *args, **kwargs):
+            if os.fspath(path).startswith(inside):
+                refuse(path)
+            return real_mkdir(path, *args, **kwargs)
+
+        def builtin_open(file, mode="r", *args, **kwargs):
+            if isinstance(file, str | os.PathLike) and os.fspath(file).startswith(inside) \
+                    and any(c in mode for c in "wax+"):
+                refuse(file)
+            return real_builtin_open(file, mode, *args, **kwargs)
+
+        monkeypatch.setattr(os, "open", open_)
+        monkeypatch.setattr(builtins, "open", builtin_open)
+        monkeypatch.setattr(os, "mkdir", mkdir_)
+    yield folder
+    folder.chmod(0o755)

@@ -19,7 +19,7 @@ from typing import Any
 import typer
 import yaml
 
-from sim2radar.cli._app import app
+from sim2radar.cli._app import app, exit_unless_writable
 
 __all__ = ["generate", "load_generate_config", "print_generate_summary", "run_generate"]
 
@@ -306,6 +306,7 @@ def generate(
 
     if not no_prefect:
         _prefect_env(verbose)  # before the config check below imports Prefect
+    exit_unless_writable(out)
     try:
         cfg = load_generate_config(config) if config is not None else {}
         rig = dict(cfg.get("rig") or {})

@@ -36,3 +36,19 @@ def test_whole_floats_are_accepted(tmp_path):
     cfg.write_text("worlds: 2.0\nframes: 3\n")
     doc = load_generate_config(cfg)
     assert doc["worlds"] == 2 and isinstance(doc["worlds"], int) and doc["frames"] == 3
+
+
+def test_unwritable_store_fails_up_front(tmp_path, unwritable_dir):
+    """A read-only store is one line naming it (exit 2) before any world is rendered, not a
+    run that retries every manifest write and dies with tracebacks."""
+    (tmp_path / "a_file").write_text("x")
+    for out, expect in ((unwritable_dir / "store", "not writable"),
+                        (tmp_path / "a_file" / "store", "is a file, not a folder")):
+        res = CliRunner().invoke(app, ["generate", "--out", str(out), "--no-prefect",
+                                       "--worlds", "1", "--frames", "1", "--width", "80",
+                                       "--height", "60", "--spp", "1", "--no-png"],
+                                 env={"COLUMNS": "400"})
+        assert res.exit_code == 2, res.output
+        lines = res.output.strip().splitlines()
+        assert len(lines) == 1 and lines[0].startswith("error: --out: "), res.output
+        assert str(out) in lines[0] and expect in lines[0], lines[0]

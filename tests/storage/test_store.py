@@ -186,3 +186,41 @@ def test_bad_keys_and_store_pickles(tmp_path):
         store.path("radar_points", "../etc/passwd")
     clone = pickle.loads(pickle.dumps(store))
     assert clone.root == store.root and clone.is_local
+
+
+def test_check_writable_names_the_path_and_the_fix(tmp_path, unwritable_dir, memory_root):
+    from storage import check_writable
+
+    check_writable(tmp_path / "new" / "store")  # missing folders are fine: a parent is writable
+    assert not (tmp_path / "new").exists()  # and the check created nothing
+    check_writable(memory_root)  # remote URIs are not probed
+    with pytest.raises(PermissionError) as info:
+        check_writable(unwritable_dir / "store")
+    msg = str(info.value)
+    assert str(unwritable_dir / "store") in msg and "not writable" in msg
+    assert "choose a writable folder or fix its permissions" in msg
+    (tmp_path / "a_file").write_text("x")
+    with pytest.raises(ValueError, match="a_file is a file, not a folder"):
+        check_writable(tmp_path / "a_file" / "store")
+
+
+def test_permanent_io_errors_are_not_retried(memory_root, monkeypatch):
+    import errno
+
+    from storage import is_transient_io_error
+
+    assert is_transient_io_error(ConnectionError("reset")) and is_transient_io_error(TimeoutError())
+    for exc in (PermissionError(errno.EACCES, "denied"), OSError(errno.EROFS, "read-only"),
+                OSError(errno.ENOSPC, "full"), FileNotFoundError("gone"), ValueError("bad")):
+        assert not is_transient_io_error(exc), exc
+    remote = ArtifactStore(memory_root, retry_backoff_s=0.0)
+    calls = {"n": 0}
+
+    def denied(path, **kw):
+        calls["n"] += 1
+        raise PermissionError(errno.EACCES, "Access Denied", path)
+
+    monkeypatch.setattr(remote.fs, "exists", denied)
+    with pytest.raises(PermissionError):
+        remote.exists("radar_points", KEY)
+    assert calls["n"] == 1  # no retries: the answer would be the same
