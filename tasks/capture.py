@@ -328,6 +328,8 @@ def simulate_stage(scene: CaptureScene, spec: CaptureSpec, store: str, keys: dic
                                                "radar_seed": df.stats.get("radar_seed")}})
                 fo.status = "ok"
             _fill_frame_outcome(fo, df)
+            fo.timings_s.pop("render", None)  # nothing rendered: a captured image
+            fo.label_match.clear()  # no ground truth to match labels against
         except Exception as exc:  # noqa: BLE001 - one broken frame must not stop the rest
             log.error("%s failed: %s: %s", fo.frame_id, type(exc).__name__, exc)
             fo.status, fo.error = "failed", f"[simulate] {type(exc).__name__}: {exc}"

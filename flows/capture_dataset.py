@@ -1,0 +1,268 @@
+"""Flow: a lab's RGB capture folder -> a radar dataset, one scene at a time, stage by stage.
+
+    from flows.capture_dataset import capture_dataset
+    summary = capture_dataset("captures/", store="out/store", dataset="lab",
+                              export_dir="out/openpcdet")
+
+Per scene (one RGB view) a ``capture-scene`` task runs :func:`tasks.capture.process_capture_scene`
+with every step as its own Prefect task (``depth``, ``segments``, ``materials``, ``scene``,
+``poses``, ``simulate`` per batch of ``frames_per_task`` radar poses), so the UI shows per scene
+which stage ran, was **Cached** (its artifact existed: the task ends in a ``Cached`` state), was
+retried or failed, and how long it took. Only ``materials`` is retried (backoff 2 s, 8 s) and
+only on network errors (the VLM server); deterministic and local-I/O failures fail at once.
+Manifest writes are retried (remote stores). The run publishes a progress artifact that moves
+as scenes finish and a table artifact (scenes ok/failed/skipped, frames, points per frame,
+seconds per stage).
+
+A failing scene is recorded ``failed`` with its stage and error and the others finish; a
+second run recomputes nothing. Scenes run one at a time by default (Mitsuba uses every core);
+``workers > 1`` uses threads, ``dask_address`` a Dask cluster (:func:`tasks.runners.task_runner`).
+"""
+
+from __future__ import annotations
+
+import os
+import time
+from typing import Any
+
+from prefect import flow, get_run_logger, task
+from prefect.cache_policies import NO_CACHE
+from prefect.futures import as_completed
+from prefect.states import Completed, State
+from prefect.task_runners import ThreadPoolTaskRunner
+
+from flows import _progress
+from sim2radar.factory.captures import CaptureScene, CaptureSpec, find_captures
+from storage import ArtifactStore
+from tasks import capture as steps
+from tasks.common import REMOTE_IO_RETRIES, REMOTE_IO_RETRY_DELAYS_S
+from tasks.dataset import (
+    WorldDatasetOutcome,
+    export_all,
+    record_world_dataset,
+    summarize_dataset,
+)
+
+__all__ = ["capture_dataset_flow", "capture_dataset", "progress_callback", "CAPTURE_DOMAIN",
+           "stage_table"]
+
+#: How capture exports label their domain in ``dataset.json``.
+CAPTURE_DOMAIN = "simulated from RGB captures (reconstructed geometry)"
+
+
+def _network_error(task, task_run, state) -> bool:
+    """Retry condition of the materials step: only errors of talking to a server (the VLM)."""
+    import urllib.error
+
+    try:
+        state.result()
+    except (ConnectionError, TimeoutError, urllib.error.URLError):
+        return True
+    except Exception:  # noqa: BLE001 - anything else is deterministic: do not retry
+        return False
+    return False
+
+
+def _cached_state(result):
+    """A step's return value as a Prefect state: ``Cached`` when its artifact existed."""
+    status = getattr(result, "status", None)
+    if status == "skipped":
+        return Completed(name="Cached", message=f"{result.stage}: artifact exists "
+                                                f"({result.key[:12]})", data=result)
+    return result
+
+
+def _step_task(stage: str, fn, **options):
+    def run_step(*args):
+        return _cached_state(fn(*args))
+
+    run_step.__name__ = f"{stage}_step"
+    return task(name=stage, cache_policy=NO_CACHE, persist_result=False, **options)(run_step)
+
+
+_STEP_TASKS = {
+    "depth": _step_task("depth", steps.depth_stage),
+    "segments": _step_task("segments", steps.segments_stage),
+    "materials": _step_task("materials", steps.materials_stage, retries=2,
+                            retry_delay_seconds=[2.0, 8.0], retry_condition_fn=_network_error),
+    "scene": _step_task("scene", steps.scene_stage),
+    "poses": _step_task("poses", steps.poses_stage),
+    "simulate": _step_task("simulate", steps.simulate_stage),
+}
+
+
+def _run_as_task(scene_id: str):
+    def run(stage: str, fn, *args):
+        t = _STEP_TASKS[stage]
+        suffix = f"-f{args[5][0]:03d}" if stage == "simulate" else ""
+        state = t.with_options(task_run_name=f"{scene_id}-{stage}{suffix}")(
+            *args, return_state=True)
+        result = state.result()  # raises the step's error when it failed
+        return result.result() if isinstance(result, State) else result  # a Cached state
+
+    return run
+
+
+@task(name="capture-scene", cache_policy=NO_CACHE, retries=0, persist_result=False)
+def capture_scene_task(scene: CaptureScene, spec: CaptureSpec, store: str,
+                       force: bool = False) -> WorldDatasetOutcome:
+    """One scene, every step a Prefect task (:func:`tasks.capture.process_capture_scene`)."""
+    return steps.process_capture_scene(scene, spec, store, force=force,
+                                       run=_run_as_task(scene.scene_id))
+
+
+@task(name="record-capture-manifest", cache_policy=NO_CACHE, retries=REMOTE_IO_RETRIES,
+      retry_delay_seconds=REMOTE_IO_RETRY_DELAYS_S, persist_result=False)
+def record_scene_task(store: str, dataset: str, outcome: WorldDatasetOutcome) -> list:
+    """Manifest rows of one scene and its frames (retried: storage I/O)."""
+    return record_world_dataset(store, dataset, outcome)
+
+
+def progress_callback(fn):
+    """Context manager: call ``fn(outcome)`` in this process after each scene finishes."""
+    return _progress.listen("capture_dataset", fn)
+
+
+def stage_table(outcomes: list[WorldDatasetOutcome]) -> list[dict[str, Any]]:
+    """One row per scene: status, frames, points per frame, wall seconds per step."""
+    rows = []
+    for o in outcomes:
+        pts = [f.n_points.get("reconstructed", 0) for f in o.frames
+               if "reconstructed" in f.n_points]
+        row = {"scene": o.world_id, "status": o.status,
+               "frames": sum(f.status != "failed" for f in o.frames),
+               "points_per_frame": round(sum(pts) / len(pts), 1) if pts else None}
+        for stage in steps.CAPTURE_STAGES + ("total",):
+            row[f"{stage}_s"] = round(o.timings_s[stage], 3) if stage in o.timings_s else None
+        row["error"] = o.error
+        rows.append(row)
+    return rows
+
+
+def _artifact_key(dataset: str, what: str) -> str:
+    import re
+
+    return re.sub(r"[^a-z0-9-]+", "-", f"captures-{dataset}-{what}".lower()).strip("-")[:100]
+
+
+@flow(name="capture-dataset", task_runner=ThreadPoolTaskRunner(max_workers=1), log_prints=False)
+def capture_dataset_flow(
+    scenes: list[CaptureScene],
+    spec: CaptureSpec,
+    store: str = "out/store",
+    dataset: str = "captures",
+    export_dir: str | None = None,
+    force: bool = False,
+) -> dict[str, Any]:
+    """Every capture scene through its steps into the store, the ``dataset`` manifest and
+    (with ``export_dir``) OpenPCDet's layout.
+
+    Returns
+    -------
+    dict — :func:`tasks.dataset.summarize_dataset` (+ ``export``, ``stage_table``)
+    """
+    from prefect.artifacts import (
+        create_progress_artifact,
+        create_table_artifact,
+        update_progress_artifact,
+    )
+
+    logger = get_run_logger()
+    st = ArtifactStore(store)
+    st.manifest(dataset)  # validates the name before any work
+    progress_id = create_progress_artifact(
+        progress=0.0, key=_artifact_key(dataset, "progress"),
+        description=f"capture dataset {dataset}: scenes finished of {len(scenes)}")
+    futures = {capture_scene_task.with_options(task_run_name=f"scene-{s.scene_id}").submit(
+        s, spec, store, force): i for i, s in enumerate(scenes)}
+    outcomes: dict[int, WorldDatasetOutcome] = {}
+    for fut in as_completed(list(futures)):
+        i = futures[fut]
+        result = fut.result(raise_on_failure=False)
+        if not isinstance(result, WorldDatasetOutcome):
+            error = result if isinstance(result, BaseException) else (
+                fut.state.message or repr(result))
+            text = f"{type(error).__name__}: {error}" if isinstance(error, BaseException) \
+                else str(error)
+            result = WorldDatasetOutcome(scenes[i].scene_id, -1, "failed", error=text,
+                                         source=scenes[i].folder)
+        record_scene_task(store, dataset, result)
+        outcomes[i] = result
+        if result.status == "failed":
+            logger.error("%s FAILED: %s", result.world_id, result.error)
+        else:
+            logger.info("%s: %s, %d frames", result.world_id, result.status, len(result.frames))
+        update_progress_artifact(progress_id, 100.0 * len(outcomes) / max(len(scenes), 1))
+        _progress.notify("capture_dataset", result)
+    ordered = [outcomes[i] for i in range(len(scenes))]
+    return _finish(st, dataset, spec, ordered, export_dir, publish=lambda rows, counts:
+                   create_table_artifact(
+                       table=rows, key=_artifact_key(dataset, "scenes"),
+                       description=f"capture dataset {dataset}: scenes {counts} (seconds per "
+                                   "step in this run; cached steps take milliseconds)"))
+
+
+def _finish(st, dataset: str, spec: CaptureSpec, outcomes: list[WorldDatasetOutcome],
+            export_dir: str | None, publish=None) -> dict[str, Any]:
+    summary = summarize_dataset(st, dataset, spec, outcomes)
+    summary["unit"], summary["ground_truth"] = "scenes", False
+    summary["stage_table"] = stage_table(outcomes)
+    if publish is not None:
+        publish(summary["stage_table"], summary["counts"])
+    if export_dir is not None:
+        summary["export"] = export_all(st, outcomes, export_dir, spec, domain=CAPTURE_DOMAIN)
+    return summary
+
+
+def capture_dataset_plain(scenes: list[CaptureScene], spec: CaptureSpec, store: str,
+                          dataset: str = "captures", *, export_dir: str | None = None,
+                          force: bool = False, on_scene=None) -> dict[str, Any]:
+    """The flow's semantics without the Prefect engine (``--no-prefect``, notebooks): the same
+    :func:`tasks.capture.process_capture_scene` per scene, with plain calls."""
+    st = ArtifactStore(store)
+    st.manifest(dataset)
+    outcomes = []
+    for s in scenes:
+        outcome = steps.process_capture_scene(s, spec, store, force=force)
+        record_world_dataset(st, dataset, outcome)
+        outcomes.append(outcome)
+        if on_scene is not None:
+            on_scene(outcome)
+    return _finish(st, dataset, spec, outcomes, export_dir)
+
+
+def capture_dataset(
+    captures: str | os.PathLike,
+    store: str | os.PathLike = "out/store",
+    dataset: str = "captures",
+    *,
+    export_dir: str | os.PathLike | None = None,
+    force: bool = False,
+    workers: int = 1,
+    dask_address: str | None = None,
+    use_prefect: bool = True,
+    on_scene=None,
+    **spec_fields: Any,
+) -> dict[str, Any]:
+    """Run the capture flow (or its plain loop) on every scene of a capture folder.
+
+    ``spec_fields`` are :class:`~sim2radar.factory.captures.CaptureSpec` fields (``radar``,
+    ``reconstruction``, ``poses``, ``labels``, ``seed``, ...), validated before any work.
+    """
+    from tasks.runners import task_runner
+
+    t0 = time.perf_counter()
+    spec = CaptureSpec(**spec_fields)
+    scenes = find_captures(captures)
+    export = None if export_dir is None else os.fspath(export_dir)
+    if not use_prefect:
+        summary = capture_dataset_plain(scenes, spec, os.fspath(store), dataset,
+                                        export_dir=export, force=force, on_scene=on_scene)
+    else:
+        runner = task_runner(workers, dask_address)
+        with progress_callback(on_scene or (lambda _o: None)):
+            summary = capture_dataset_flow.with_options(task_runner=runner)(
+                scenes=scenes, spec=spec, store=os.fspath(store), dataset=dataset,
+                export_dir=export, force=force)
+    summary["wall_s"] = time.perf_counter() - t0
+    return summary

@@ -1,0 +1,180 @@
+"""``sim2radar generate --captures DIR``: a lab's RGB capture folder -> a radar dataset, and
+``sim2radar worlds captures``: a sample capture folder rendered from procedural worlds.
+
+The folder layout is documented in :mod:`sim2radar.factory.captures`; the flow in
+:mod:`flows.capture_dataset`. Prefect and the flows are imported inside the commands.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import typer
+
+from sim2radar.cli.worlds import worlds_app
+
+__all__ = ["capture_settings", "generate_from_captures", "run_captures", "print_stage_table"]
+
+#: Generate settings that describe procedural worlds and mean nothing for a capture folder.
+PROCEDURAL_ONLY = ("worlds", "first_seed", "geometry", "world", "rig", "material_override")
+
+
+def capture_settings(cfg: dict[str, Any], config_path: Path | None, *, frames: int | None,
+                     radar: str | None, reconstruction: str | None,
+                     seed: int | None) -> dict[str, Any]:
+    """:class:`~sim2radar.factory.captures.CaptureSpec` fields from a generate YAML (already
+    read) and the command-line options (which win).
+
+    Raises
+    ------
+    ValueError naming the file and the setting that does not apply to captures.
+    """
+    where = f"{config_path}: " if config_path is not None else ""
+    bad = [k for k in PROCEDURAL_ONLY if cfg.get(k) is not None]
+    if bad:
+        raise ValueError(f"{where}{bad} describe procedural worlds; a capture folder run takes "
+                         "radar, reconstruction, seed, class_name, labels, poses, frames, "
+                         "export_label_range_m, dataset")
+    poses = dict(cfg.get("poses") or {})
+    n = frames if frames is not None else cfg.get("frames")
+    if n is not None:
+        poses["frames"] = n
+    out: dict[str, Any] = {
+        "radar": radar or cfg.get("radar", "ti-mmwcas"),
+        "reconstruction": reconstruction or cfg.get("reconstruction"),
+        "poses": poses,
+        "seed": seed if seed is not None else cfg.get("seed", 0),
+        "class_name": cfg.get("class_name", "door"),
+        "labels": cfg.get("labels") or {},
+    }
+    if "export_label_range_m" in cfg:
+        from sim2radar.cli.generate import _label_range
+
+        out["export_label_range_m"] = _label_range(cfg["export_label_range_m"])
+    return out
+
+
+def run_captures(captures: Path, *, store: str, dataset: str, settings: dict[str, Any],
+                 export_dir: str | None, png_dir: Path | None, force: bool, workers: int,
+                 dask_address: str | None, use_prefect: bool, verbose: bool,
+                 show_progress: bool = True) -> dict[str, Any]:
+    """Run the capture flow (or its plain loop) with a progress bar; write BEV PNGs; return
+    the summary (failures counted, never raised)."""
+    if use_prefect:
+        from sim2radar.cli.simulate import _prefect_env
+
+        _prefect_env(verbose)
+    from rich.progress import Progress
+
+    from flows.capture_dataset import capture_dataset
+    from sim2radar.cli.generate import _progress_columns
+    from sim2radar.factory.captures import find_captures
+
+    n_scenes = len(find_captures(captures))
+    with Progress(*_progress_columns(), disable=not show_progress, transient=False) as progress:
+        bar = progress.add_task("starting" + (" Prefect" if use_prefect else ""), total=n_scenes)
+
+        def on_scene(outcome) -> None:
+            pts = ",".join(str(f.n_points.get("reconstructed", "-")) for f in outcome.frames)
+            progress.update(bar, advance=1,
+                            description=f"{outcome.world_id}: {outcome.status} ({pts} pts)")
+
+        summary = capture_dataset(captures, store, dataset, export_dir=export_dir, force=force,
+                                  workers=workers, dask_address=dask_address,
+                                  use_prefect=use_prefect, on_scene=on_scene, **settings)
+    summary["pngs"] = []
+    if png_dir is not None:
+        from sim2radar.factory.captures import CaptureSpec
+        from tasks.dataset import outcomes_from_summary, world_bev_pngs
+
+        summary["pngs"] = world_bev_pngs(store, outcomes_from_summary(summary), png_dir,
+                                         CaptureSpec(**settings))
+    return summary
+
+
+def print_stage_table(summary: dict[str, Any]) -> None:
+    """Seconds per step and scene (this run's wall time; a cached step takes milliseconds)."""
+    from rich.console import Console
+    from rich.table import Table
+
+    rows = summary.get("stage_table") or []
+    if not rows:
+        return
+    table = Table(title="capture scenes: seconds per step (this run)")
+    cols = [c for c in rows[0] if c != "error"]
+    for c in cols:
+        table.add_column(c, justify="left" if c in ("scene", "status") else "right")
+    for r in rows:
+        table.add_row(*("-" if r[c] is None else str(r[c]) for c in cols))
+    Console().print(table)
+
+
+@worlds_app.command("captures")
+def worlds_captures(
+    out: Path = typer.Option(Path("out/captures"), "--out", "-o",
+                             help="Capture folder to write (one sub-folder per scene)."),
+    worlds: int = typer.Option(5, "--worlds", "-n", help="Scenes (one per world seed)."),
+    first_seed: int = typer.Option(0, help="Seed of the first world."),
+    width: int = typer.Option(320, help="Image width [px]."),
+    height: int = typer.Option(240, help="Image height [px]."),
+    spp: int = typer.Option(16, help="RGB samples per pixel."),
+    no_lidar: bool = typer.Option(False, "--no-lidar", help="Write no lidar.npy."),
+) -> None:
+    """Write a sample capture folder rendered from procedural worlds (RGB + intrinsics with
+    the rig calibration + LiDAR; no ground truth), the layout `generate --captures` reads."""
+    from sim2radar.factory.captures import write_capture_folder
+
+    if worlds < 1:
+        typer.secho("error: --worlds must be >= 1", fg="red", err=True)
+        raise typer.Exit(2)
+    folders = write_capture_folder(out, range(first_seed, first_seed + worlds),
+                                   rig={"width": width, "height": height, "spp": spp},
+                                   lidar=not no_lidar)
+    typer.echo(f"wrote {len(folders)} capture scene(s) to {out}")
+
+
+def generate_from_captures(captures: Path, *, config: Path | None, out: str,
+                           dataset: str | None, frames: int | None, radar: str | None,
+                           reconstruction: str | None, seed: int | None,
+                           export_openpcdet: Path | None, png_dir: Path | None, no_png: bool,
+                           force: bool, strict: bool, workers: int, dask: str | None,
+                           no_prefect: bool, json_out: Path | None, verbose: bool,
+                           procedural: dict[str, Any]) -> None:
+    """The ``generate --captures`` branch: validate everything (exit 2 naming the file and
+    field), run, print the summary and the seconds per step, exit 1 under ``--strict`` when a
+    scene failed."""
+    from sim2radar.cli.generate import finish_generate, load_generate_config
+    from sim2radar.cli.simulate import _default_png_dir
+
+    try:
+        given = [name for name, v in procedural.items() if v is not None]
+        if given:
+            raise ValueError(f"{given} describe procedural worlds; drop them with --captures")
+        if workers < 1:
+            raise ValueError(f"--workers must be >= 1, got {workers}")
+        if dask and no_prefect:
+            raise ValueError("--dask needs the Prefect engine: drop --no-prefect")
+        cfg = load_generate_config(config) if config is not None else {}
+        settings = capture_settings(cfg, config, frames=frames, radar=radar,
+                                    reconstruction=reconstruction, seed=seed)
+        from sim2radar.factory.captures import CaptureSpec, find_captures
+
+        CaptureSpec(**settings)  # every field checked before any work
+        find_captures(captures)
+        if dask:
+            from tasks.runners import task_runner
+
+            task_runner(workers, dask)
+    except (ValueError, FileNotFoundError, ImportError) as exc:
+        typer.secho(f"error: {exc}", fg="red", err=True)
+        raise typer.Exit(2) from None
+    if png_dir is None and not no_png:
+        png_dir = _default_png_dir(out)
+    summary = run_captures(
+        captures, store=out, dataset=dataset or cfg.get("dataset", "captures"),
+        settings=settings, export_dir=None if export_openpcdet is None else str(export_openpcdet),
+        png_dir=None if no_png else png_dir, force=force, workers=workers, dask_address=dask,
+        use_prefect=not no_prefect, verbose=verbose)
+    print_stage_table(summary)
+    finish_generate(summary, json_out, strict)
