@@ -35,7 +35,7 @@ from flows import _progress
 from sim2radar.factory.captures import CaptureScene, CaptureSpec, find_captures
 from storage import ArtifactStore
 from tasks import capture as steps
-from tasks.common import REMOTE_IO_RETRIES, REMOTE_IO_RETRY_DELAYS_S
+from tasks.common import REMOTE_IO_RETRIES, REMOTE_IO_RETRY_DELAYS_S, retry_transient_io
 from tasks.dataset import (
     WorldDatasetOutcome,
     export_all,
@@ -112,7 +112,8 @@ def capture_scene_task(scene: CaptureScene, spec: CaptureSpec, store: str,
 
 
 @task(name="record-capture-manifest", cache_policy=NO_CACHE, retries=REMOTE_IO_RETRIES,
-      retry_delay_seconds=REMOTE_IO_RETRY_DELAYS_S, persist_result=False)
+      retry_delay_seconds=REMOTE_IO_RETRY_DELAYS_S, retry_condition_fn=retry_transient_io,
+      persist_result=False)
 def record_scene_task(store: str, dataset: str, outcome: WorldDatasetOutcome) -> list:
     """Manifest rows of one scene and its frames (retried: storage I/O)."""
     return record_world_dataset(store, dataset, outcome)
