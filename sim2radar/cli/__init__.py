@@ -22,6 +22,7 @@ from sim2radar.cli import experiment as _experiment  # noqa: E402,F401  isort: s
 from sim2radar.cli import demo as _demo  # noqa: E402,F401  isort: skip
 from sim2radar.cli import gap as _gap  # noqa: E402,F401  isort: skip
 from sim2radar.cli import dashboard as _dashboard  # noqa: E402,F401  isort: skip
+from sim2radar.cli import server as _server  # noqa: E402,F401  isort: skip
 
 __all__ = ["app", "main"]
 

@@ -2,7 +2,8 @@
 
 Prefect and the flows are imported inside the commands, so ``sim2radar --help`` stays fast.
 Prefect state goes to ``./.prefect`` unless ``PREFECT_HOME`` or ``PREFECT_API_URL`` is set
-(then your own Prefect profile / server is used).
+(then your own Prefect profile / server is used); flows report to the local server that
+:mod:`sim2radar.cli.server` keeps running for that ``PREFECT_HOME``.
 """
 
 from __future__ import annotations
@@ -18,11 +19,16 @@ from sim2radar.cli._app import app
 
 
 def _prefect_env(verbose: bool) -> None:
-    """Project-local Prefect state and quiet logs, unless the user configured Prefect."""
+    """Project-local Prefect state, quiet logs and the managed local API server (started on
+    first use, reused after), unless the user configured Prefect. Call before Prefect is
+    imported."""
+    from sim2radar.cli.server import use_managed_server
+
     if not os.environ.get("PREFECT_HOME") and not os.environ.get("PREFECT_API_URL"):
         os.environ["PREFECT_HOME"] = str(Path.cwd() / ".prefect")
     os.environ.setdefault("PREFECT_SERVER_ANALYTICS_ENABLED", "false")
     os.environ.setdefault("PREFECT_LOGGING_LEVEL", "INFO" if verbose else "WARNING")
+    use_managed_server()
 
 
 def run_scenes(

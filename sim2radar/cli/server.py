@@ -1,0 +1,397 @@
+"""The local Prefect API server the CLI's flows report to: one per ``PREFECT_HOME``.
+
+Without ``PREFECT_API_URL``, a Prefect flow starts a temporary ("ephemeral") API server in a
+child process: ~10 s on every command, a child that outlives a killed run (SIGKILL or SIGTERM
+skip Prefect's ``atexit`` clean-up, so the uvicorn process is re-parented to PID 1), and two
+runs starting at once on a fresh ``PREFECT_HOME`` can migrate the same SQLite database
+together and crash. The CLI therefore keeps **one long-lived server per** ``PREFECT_HOME``
+instead (:func:`ensure_server`), reused by every later command:
+
+* the first command starts ``uvicorn prefect.server.api.server:create_app`` (what
+  ``prefect server start`` runs: API, UI and services) on ``127.0.0.1`` and a free port, in
+  its own session (a signal to the command's process group does not reach it), logging to
+  ``PREFECT_HOME/sim2radar-server.log``, and records ``pid``/``port`` in
+  ``PREFECT_HOME/sim2radar-server.json``;
+* every command checks that record under an exclusive ``fcntl`` lock on
+  ``PREFECT_HOME/sim2radar-server.lock``, so concurrent first starts start (and migrate) once
+  and the others wait for that server; a record whose process died, or that is another
+  process now, or another Prefect version, is replaced by a fresh server;
+* ``sim2radar server stop`` (:func:`stop_server`) ends it; ``status`` / ``start`` report it.
+
+A killed command therefore leaves no process of its own behind: the managed server is the only
+one, and the next command reuses it. ``SIM2RADAR_PREFECT_SERVER=ephemeral`` restores
+Prefect's own per-command server (and its problems); a ``PREFECT_API_URL`` in the environment
+or in the active Prefect profile always wins (your own server). Only the CLI calls this: the
+library and the flows never start servers, and nothing here imports Prefect.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import http.client
+import importlib.metadata
+import json
+import os
+import signal
+import socket
+import subprocess
+import sys
+import time
+from collections.abc import Iterator
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import typer
+
+from sim2radar.cli._app import app
+
+__all__ = ["MODE_ENV", "ServerError", "ServerState", "ensure_server", "prefect_home",
+           "read_state", "server_status", "stop_server", "use_managed_server"]
+
+MODE_ENV = "SIM2RADAR_PREFECT_SERVER"  # "managed" (default) or "ephemeral"
+STATE_FILE = "sim2radar-server.json"
+LOCK_FILE = "sim2radar-server.lock"
+LOG_FILE = "sim2radar-server.log"
+HOST = "127.0.0.1"  # loopback only: the API has no authentication
+STARTUP_TIMEOUT_S = 120.0  # a fresh database migrates first (~10 s idle, more on busy cores)
+STOP_TIMEOUT_S = 15.0  # SIGTERM -> graceful uvicorn shutdown; SIGKILL after this
+_APP = "prefect.server.api.server:create_app"
+
+
+class ServerError(RuntimeError):
+    """The managed server could not be started (the message ends with its log's tail)."""
+
+
+@dataclass(frozen=True)
+class ServerState:
+    """The record of a managed server, as kept in ``PREFECT_HOME/sim2radar-server.json``.
+
+    Attributes
+    ----------
+    pid : process id of the uvicorn process
+    port : TCP port on 127.0.0.1
+    prefect_version : the Prefect version that started it (another one restarts it)
+    started_at : start time [s since the epoch]
+    home : the ``PREFECT_HOME`` it serves
+    """
+
+    pid: int
+    port: int
+    prefect_version: str
+    started_at: float
+    home: str
+
+    @property
+    def api_url(self) -> str:
+        """What ``PREFECT_API_URL`` is set to."""
+        return f"http://{HOST}:{self.port}/api"
+
+    @property
+    def ui_url(self) -> str:
+        return f"http://{HOST}:{self.port}"
+
+
+# --- the record and its lock -------------------------------------------------------------
+
+
+def prefect_home() -> Path:
+    """``PREFECT_HOME`` as the CLI uses it: the environment's, else ``./.prefect``."""
+    return Path(os.environ.get("PREFECT_HOME") or Path.cwd() / ".prefect").expanduser().resolve()
+
+
+@contextlib.contextmanager
+def _locked(home: Path) -> Iterator[None]:
+    """Hold the exclusive lock of ``home``'s server record (released when a holder dies)."""
+    import fcntl
+
+    home.mkdir(parents=True, exist_ok=True)
+    with open(home / LOCK_FILE, "a") as fh:
+        fcntl.flock(fh, fcntl.LOCK_EX)
+        try:
+            yield
+        finally:
+            fcntl.flock(fh, fcntl.LOCK_UN)
+
+
+def read_state(home: str | os.PathLike) -> ServerState | None:
+    """The server record of ``home``, or None (no record, or an unreadable one)."""
+    try:
+        doc = json.loads((Path(home) / STATE_FILE).read_text())
+        return ServerState(int(doc["pid"]), int(doc["port"]), str(doc["prefect_version"]),
+                           float(doc["started_at"]), str(doc["home"]))
+    except (OSError, ValueError, KeyError, TypeError):
+        return None
+
+
+def _write_state(home: Path, state: ServerState) -> None:
+    from sim2radar.fileio import write_json
+
+    write_json(home / STATE_FILE, {**asdict(state), "api_url": state.api_url})
+
+
+def _clear_state(home: Path) -> None:
+    (home / STATE_FILE).unlink(missing_ok=True)
+
+
+# --- the process ------------------------------------------------------------------------
+
+
+def _alive(pid: int) -> bool:
+    """Whether ``pid`` runs (a zombie child of ours is reaped and counts as dead)."""
+    with contextlib.suppress(ChildProcessError, OSError):
+        if os.waitpid(pid, os.WNOHANG)[0] == pid:
+            return False
+    try:
+        with open(f"/proc/{pid}/stat") as fh:
+            return fh.read().rsplit(")", 1)[1].split()[0] != "Z"
+    except FileNotFoundError:
+        return False
+    except OSError:  # no /proc (not Linux): ask the kernel
+        try:
+            os.kill(pid, 0)
+        except ProcessLookupError:
+            return False
+        except PermissionError:
+            return True
+        return True
+
+
+def _is_ours(state: ServerState) -> bool:
+    """Whether the record's process is still the server it started (not a reused pid)."""
+    if not _alive(state.pid):
+        return False
+    try:
+        args = Path(f"/proc/{state.pid}/cmdline").read_bytes().split(b"\0")
+    except OSError:
+        return True  # no /proc: trust the pid and the health check
+    return _APP.encode() in args and str(state.port).encode() in args
+
+
+def _healthy(port: int, timeout_s: float = 2.0) -> bool:
+    """``GET /api/health`` answers 200."""
+    conn = http.client.HTTPConnection(HOST, port, timeout=timeout_s)
+    try:
+        conn.request("GET", "/api/health")
+        return conn.getresponse().status == 200
+    except (OSError, http.client.HTTPException):
+        return False
+    finally:
+        conn.close()
+
+
+def _wait_healthy(state: ServerState, timeout_s: float) -> bool:
+    """Poll the health endpoint until it answers, the process dies or ``timeout_s`` passes."""
+    deadline = time.monotonic() + timeout_s
+    while True:
+        if _healthy(state.port):
+            return True
+        if not _is_ours(state) or time.monotonic() > deadline:
+            return False
+        time.sleep(0.1)
+
+
+def _terminate(pid: int, timeout_s: float = STOP_TIMEOUT_S) -> None:
+    """SIGTERM ``pid``, then SIGKILL if it has not exited within ``timeout_s``."""
+    for sig, wait_s in ((signal.SIGTERM, timeout_s), (signal.SIGKILL, 5.0)):
+        with contextlib.suppress(ProcessLookupError):
+            os.kill(pid, sig)
+        deadline = time.monotonic() + wait_s
+        while time.monotonic() < deadline:
+            if not _alive(pid):
+                return
+            time.sleep(0.05)
+
+
+def _free_port() -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+        s.bind((HOST, 0))
+        return s.getsockname()[1]
+
+
+def _log_tail(home: Path, n_chars: int = 2000) -> str:
+    try:
+        return (home / LOG_FILE).read_text(errors="replace")[-n_chars:]
+    except OSError:
+        return ""
+
+
+def _prefect_version() -> str:
+    return importlib.metadata.version("prefect")
+
+
+def _spawn(home: Path, port: int) -> ServerState:
+    """Start a detached server on ``port`` (own session, stdin closed, output to the log)."""
+    env = {**os.environ, "PREFECT_HOME": str(home), "PREFECT__SERVER_FINAL": "1"}
+    env.pop("PREFECT_API_URL", None)
+    env.setdefault("PREFECT_SERVER_ANALYTICS_ENABLED", "false")
+    args = [sys.executable, "-m", "uvicorn", "--factory", _APP, "--host", HOST,
+            "--port", str(port), "--log-level", "warning", "--lifespan", "on"]
+    with open(home / LOG_FILE, "a") as log:
+        log.write(f"--- {time.strftime('%Y-%m-%d %H:%M:%S')} sim2radar: starting the Prefect "
+                  f"server on {HOST}:{port}\n")
+        log.flush()
+        proc = subprocess.Popen(args, cwd=home, env=env, stdin=subprocess.DEVNULL, stdout=log,
+                                stderr=subprocess.STDOUT, start_new_session=True)
+    # the server outlives this process on purpose; no Popen warning about it at exit
+    proc.returncode = 0
+    return ServerState(proc.pid, port, _prefect_version(), time.time(), str(home))
+
+
+def ensure_server(home: str | os.PathLike | None = None, *,
+                  timeout_s: float = STARTUP_TIMEOUT_S) -> tuple[ServerState, bool]:
+    """The healthy managed server of ``home`` (default :func:`prefect_home`), started if needed.
+
+    Returns ``(state, started)``: ``started`` is True when this call started it. Safe to call
+    from many processes at once: one starts the server, the others wait for it.
+
+    Raises
+    ------
+    ServerError when no server answered within ``timeout_s`` [s] (three tries on fresh ports).
+    """
+    home = Path(home).expanduser().resolve() if home is not None else prefect_home()
+    with _locked(home):
+        state = read_state(home)
+        if state is not None:
+            if state.prefect_version != _prefect_version() and _is_ours(state):
+                _terminate(state.pid)  # started by another Prefect: its schema may differ
+            elif _is_ours(state):
+                # a live record: healthy at once, or still starting (a run killed while it
+                # waited), or hung (replaced)
+                age_s = max(0.0, time.time() - state.started_at)
+                if _wait_healthy(state, max(5.0, timeout_s - age_s)):
+                    return state, False
+                _terminate(state.pid)
+            _clear_state(home)
+        for _ in range(3):
+            state = _spawn(home, _free_port())
+            _write_state(home, state)  # before waiting: a killed starter leaves a known pid
+            if _wait_healthy(state, timeout_s):
+                return state, True
+            _terminate(state.pid)  # exited (e.g. the port was taken meanwhile) or timed out
+            _clear_state(home)
+    raise ServerError(f"the local Prefect server in {home} did not start within {timeout_s:.0f} s; "
+                      f"{home / LOG_FILE} ends with:\n{_log_tail(home)}")
+
+
+def server_status(home: str | os.PathLike | None = None) -> tuple[ServerState | None, bool]:
+    """``(state, healthy)`` of ``home``'s managed server; state None when none runs."""
+    home = Path(home).expanduser().resolve() if home is not None else prefect_home()
+    state = read_state(home)
+    if state is None or not _is_ours(state):
+        return None, False
+    return state, _healthy(state.port)
+
+
+def stop_server(home: str | os.PathLike | None = None, *,
+                timeout_s: float = STOP_TIMEOUT_S) -> ServerState | None:
+    """Stop ``home``'s managed server (SIGTERM, SIGKILL after ``timeout_s`` [s]) and remove
+    its record; returns the stopped server's record, None when none ran."""
+    home = Path(home).expanduser().resolve() if home is not None else prefect_home()
+    if not home.is_dir():
+        return None
+    with _locked(home):  # waits for a server being started to be recorded
+        state = read_state(home)
+        running = state is not None and _is_ours(state)
+        if running:
+            _terminate(state.pid, timeout_s)
+        _clear_state(home)
+    return state if running else None
+
+
+# --- the CLI's choice -------------------------------------------------------------------
+
+
+def _profile_api_url(home: Path) -> str | None:
+    """``PREFECT_API_URL`` of the active profile in Prefect's ``profiles.toml``, if any."""
+    import tomllib
+
+    path = Path(os.environ.get("PREFECT_PROFILES_PATH") or home / "profiles.toml").expanduser()
+    try:
+        doc = tomllib.loads(path.read_text())
+    except (OSError, ValueError):
+        return None
+    name = os.environ.get("PREFECT_PROFILE") or doc.get("active") or "ephemeral"
+    profile = (doc.get("profiles") or {}).get(name) or {}
+    return profile.get("PREFECT_API_URL") or None
+
+
+def use_managed_server() -> None:
+    """Point this process's Prefect at the managed server of ``PREFECT_HOME`` (starting it if
+    needed) by setting ``PREFECT_API_URL``; call before anything imports Prefect.
+
+    Does nothing when ``PREFECT_API_URL`` is set (your own server, or an earlier call), when
+    the active Prefect profile sets it, when ``SIM2RADAR_PREFECT_SERVER=ephemeral``, or when
+    Prefect is already imported (its settings are fixed then: e.g. a test harness's server).
+    A server that cannot start exits with status 1 and its log's tail.
+    """
+    mode = os.environ.get(MODE_ENV, "managed").strip().lower() or "managed"
+    if mode not in ("managed", "ephemeral"):
+        typer.secho(f"error: {MODE_ENV}={mode!r}: expected 'managed' or 'ephemeral'",
+                    fg="red", err=True)
+        raise typer.Exit(2)
+    if mode == "ephemeral" or os.environ.get("PREFECT_API_URL") or "prefect" in sys.modules:
+        return
+    home = prefect_home()
+    if _profile_api_url(home):
+        return
+    try:
+        state, started = ensure_server(home)
+    except ServerError as exc:
+        typer.secho(f"error: {exc}\n(`--no-prefect` runs without Prefect; "
+                    f"{MODE_ENV}=ephemeral uses Prefect's temporary server)", fg="red", err=True)
+        raise typer.Exit(1) from None
+    os.environ["PREFECT_API_URL"] = state.api_url
+    if started:
+        typer.secho(f"started the local Prefect server {state.ui_url} (pid {state.pid}, "
+                    f"PREFECT_HOME {home}); later commands reuse it, `sim2radar server stop` "
+                    f"stops it", dim=True, err=True)
+
+
+# --- sim2radar server ... ---------------------------------------------------------------
+
+server_app = typer.Typer(
+    help="The local Prefect server that commands report to (one per PREFECT_HOME).",
+    no_args_is_help=True,
+)
+app.add_typer(server_app, name="server")
+
+_HOME_HELP = "PREFECT_HOME of the server [default: $PREFECT_HOME, else ./.prefect]."
+
+
+def _describe(state: ServerState) -> str:
+    up_s = max(0.0, time.time() - state.started_at)
+    return (f"{state.ui_url} (API {state.api_url}), pid {state.pid}, up {up_s / 60:.0f} min, "
+            f"Prefect {state.prefect_version}, PREFECT_HOME {state.home}")
+
+
+@server_app.command("start")
+def start_cmd(home: Path | None = typer.Option(None, "--home", help=_HOME_HELP)) -> None:
+    """Start the server now (commands otherwise start it on first use); print its address."""
+    try:
+        state, started = ensure_server(home)
+    except ServerError as exc:
+        typer.secho(f"error: {exc}", fg="red", err=True)
+        raise typer.Exit(1) from None
+    typer.echo(f"{'started' if started else 'running'}: {_describe(state)}")
+
+
+@server_app.command("status")
+def status_cmd(home: Path | None = typer.Option(None, "--home", help=_HOME_HELP)) -> None:
+    """Print the server's address, pid and uptime. Exit status 1 when none runs."""
+    state, healthy = server_status(home)
+    if state is None:
+        typer.echo(f"no managed Prefect server for {Path(home).resolve() if home else prefect_home()}")
+        raise typer.Exit(1)
+    typer.echo(f"{'running' if healthy else 'NOT ANSWERING'}: {_describe(state)}")
+    if not healthy:
+        raise typer.Exit(1)
+
+
+@server_app.command("stop")
+def stop_cmd(home: Path | None = typer.Option(None, "--home", help=_HOME_HELP)) -> None:
+    """Stop the server (its flow-run history stays in PREFECT_HOME's database)."""
+    state = stop_server(home)
+    if state is None:
+        typer.echo("no managed Prefect server was running")
+    else:
+        typer.echo(f"stopped the Prefect server on port {state.port} (pid {state.pid})")

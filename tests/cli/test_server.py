@@ -1,0 +1,198 @@
+"""The managed local Prefect server (``sim2radar/cli/server.py``): one per ``PREFECT_HOME``.
+
+Issue #16: a killed ``generate`` left Prefect's temporary API server (uvicorn) running,
+re-parented to PID 1; five runs started at once on a fresh ``PREFECT_HOME`` crashed (SQLite
+"duplicate column name" while two servers migrated one database, then "Timed out while
+attempting to connect to ephemeral Prefect API server"). Here, real ``sim2radar generate``
+processes on one fresh ``PREFECT_HOME``: five at once all finish and share one server; a run
+killed by SIGKILL or SIGTERM leaves no process but that server; ``sim2radar server stop``
+leaves none. A process belongs to a run when its environment holds the run's
+``PREFECT_HOME`` (Linux ``/proc``). Every server is stopped at teardown; 127.0.0.1 only.
+About 1 min on 2 cores (one server start, six tiny runs).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
+
+import pytest
+from typer.testing import CliRunner
+
+from sim2radar.cli import app
+from sim2radar.cli import server as srv
+
+REPO = Path(__file__).resolve().parents[2]
+CLI = [sys.executable, "-c", "from sim2radar.cli import main; main()"]
+# the smallest real run: one world, 80 x 60 px at 2 spp, ground-truth geometry
+TINY = ["--worlds", "1", "--width", "80", "--height", "60", "--spp", "2",
+        "--geometry", "ground_truth", "--no-png"]
+
+pytestmark = pytest.mark.skipif(not Path("/proc/self/environ").exists(),
+                                reason="finds a run's processes through Linux /proc")
+
+
+def _env(home: Path) -> dict[str, str]:
+    env = {**os.environ, "PREFECT_HOME": str(home), srv.MODE_ENV: "managed",
+           "PREFECT_SERVER_ANALYTICS_ENABLED": "false"}
+    env.pop("PREFECT_API_URL", None)
+    return env
+
+
+def _processes_of(home: Path) -> dict[int, str]:
+    """Every live process started with ``PREFECT_HOME=home``: pid -> command line."""
+    entry = f"PREFECT_HOME={home}".encode()
+    found = {}
+    for proc in Path("/proc").iterdir():
+        if not proc.name.isdigit() or int(proc.name) == os.getpid():
+            continue
+        try:
+            if entry in (proc / "environ").read_bytes().split(b"\0"):
+                found[int(proc.name)] = (proc / "cmdline").read_bytes().replace(b"\0", b" ").decode()
+        except OSError:  # gone meanwhile, or not ours to read
+            continue
+    return found
+
+
+def _settled(home: Path, expected: set[int], timeout_s: float = 15.0) -> dict[int, str]:
+    """The processes of ``home`` once they are ``expected`` (or after ``timeout_s``)."""
+    deadline = time.monotonic() + timeout_s
+    while (found := _processes_of(home)).keys() != expected and time.monotonic() < deadline:
+        time.sleep(0.2)
+    return found
+
+
+def _generate(home: Path, store: Path, *extra: str) -> subprocess.CompletedProcess:
+    return subprocess.run([*CLI, "generate", *TINY, "--out", str(store), *extra], cwd=REPO,
+                          env=_env(home), capture_output=True, text=True, timeout=300)
+
+
+@pytest.fixture(scope="module")
+def five_at_once(tmp_path_factory):
+    """Five ``generate`` runs started together on one fresh PREFECT_HOME (own stores)."""
+    root = tmp_path_factory.mktemp("server")
+    home = (root / "prefect").resolve()
+    assert not home.exists()
+    try:
+        with ThreadPoolExecutor(5) as pool:
+            runs = list(pool.map(lambda i: _generate(home, root / f"store{i}", "--frames", "1"),
+                                 range(5)))
+        yield home, runs
+    finally:
+        srv.stop_server(home)
+        for pid in _processes_of(home):  # anything left over, even after a failure
+            os.kill(pid, signal.SIGKILL)
+
+
+def test_five_concurrent_first_starts_all_finish_on_one_server(five_at_once):
+    home, runs = five_at_once
+    for run in runs:
+        assert run.returncode == 0, run.stdout[-2000:] + run.stderr[-3000:]
+        assert "frames: 1 computed" in run.stdout
+    state, healthy = srv.server_status(home)
+    assert state is not None and healthy
+    # exactly one run started the server (and migrated the database); the others reused it
+    assert sum("started the local Prefect server" in r.stderr for r in runs) == 1
+    assert _settled(home, {state.pid}).keys() == {state.pid}
+    assert state.api_url.startswith("http://127.0.0.1:")
+
+
+@pytest.mark.parametrize("sig", [signal.SIGKILL, signal.SIGTERM], ids=["SIGKILL", "SIGTERM"])
+def test_a_killed_generate_leaves_no_process_but_the_managed_server(five_at_once, tmp_path, sig):
+    home, _ = five_at_once
+    server, _ = srv.ensure_server(home)
+    store, opd = tmp_path / "store", tmp_path / "openpcdet"
+    proc = subprocess.Popen([*CLI, "generate", *TINY, "--frames", "4", "--out", str(store),
+                             "--export-openpcdet", str(opd)], cwd=REPO, env=_env(home),
+                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                            start_new_session=True)
+    try:  # kill it inside the flow: after its world, before its four frames are done
+        deadline = time.monotonic() + 120
+        while not list(store.glob("world_specs/*.parquet")) and proc.poll() is None \
+                and time.monotonic() < deadline:
+            time.sleep(0.05)
+    finally:
+        os.kill(proc.pid, sig)  # the run's process only, as a scheduler or `kill PID` does
+        proc.wait(timeout=60)
+    assert proc.returncode == -sig, "the run ended before it was killed"
+    left = _settled(home, {server.pid})
+    assert left.keys() == {server.pid}, left
+    assert srv.server_status(home) == (server, True)  # the next run reuses it
+
+
+def test_server_stop_leaves_no_process_and_a_dead_server_is_replaced(five_at_once, tmp_path):
+    home, _ = five_at_once
+    cli = ["server", "status", "--home", str(home)]
+    runner = CliRunner()
+    res = runner.invoke(app, cli)
+    assert res.exit_code == 0 and "running: http://127.0.0.1:" in res.output, res.output
+    # a server that died between commands (its record is stale) is replaced by the next one
+    old, _ = srv.server_status(home)
+    os.kill(old.pid, signal.SIGKILL)
+    _settled(home, set())
+    run = _generate(home, tmp_path / "store", "--frames", "1")
+    assert run.returncode == 0, run.stderr[-3000:]
+    new, healthy = srv.server_status(home)
+    assert healthy and new.pid != old.pid and "started the local Prefect server" in run.stderr
+    res = runner.invoke(app, ["server", "stop", "--home", str(home)])
+    assert res.exit_code == 0 and f"pid {new.pid}" in res.output, res.output
+    assert _settled(home, set()) == {}
+    assert not (home / srv.STATE_FILE).exists()
+    res = runner.invoke(app, cli)
+    assert res.exit_code == 1 and "no managed Prefect server" in res.output
+
+
+# --- no server started below ------------------------------------------------------------
+
+
+def test_a_stale_record_never_names_another_process(tmp_path):
+    """A recorded pid that now belongs to an unrelated process is not 'the server': status
+    says none runs and stop does not signal it."""
+    other = subprocess.Popen(["sleep", "30"])
+    try:
+        home = tmp_path / "prefect"
+        home.mkdir()
+        record = {"pid": other.pid, "port": 1, "prefect_version": "3.8.8",
+                  "started_at": time.time(), "home": str(home)}
+        (home / srv.STATE_FILE).write_text(json.dumps(record))
+        assert srv.server_status(home) == (None, False)
+        assert srv.stop_server(home) is None
+        assert other.poll() is None and not (home / srv.STATE_FILE).exists()
+    finally:
+        other.kill()
+        other.wait()
+
+
+def test_the_users_own_prefect_settings_win(tmp_path, monkeypatch):
+    """No server is started (nor PREFECT_API_URL changed) when the user configured one, chose
+    the ephemeral mode, or Prefect is already imported; a bad mode exits 2."""
+    import typer
+
+    started = []
+    monkeypatch.setattr(srv, "ensure_server", lambda *a, **k: started.append(a))
+    monkeypatch.setenv("PREFECT_HOME", str(tmp_path))
+    monkeypatch.setenv(srv.MODE_ENV, "managed")
+    monkeypatch.setenv("PREFECT_API_URL", "http://127.0.0.1:4200/api")
+    srv.use_managed_server()
+    monkeypatch.delenv("PREFECT_API_URL")
+    monkeypatch.setenv(srv.MODE_ENV, "ephemeral")
+    srv.use_managed_server()
+    monkeypatch.setenv(srv.MODE_ENV, "managed")
+    (tmp_path / "profiles.toml").write_text(
+        'active = "mine"\n[profiles.mine]\nPREFECT_API_URL = "http://10.0.0.1:4200/api"\n')
+    monkeypatch.delitem(sys.modules, "prefect", raising=False)
+    srv.use_managed_server()
+    (tmp_path / "profiles.toml").unlink()
+    monkeypatch.setitem(sys.modules, "prefect", sys)  # "already imported"
+    srv.use_managed_server()
+    assert started == [] and "PREFECT_API_URL" not in os.environ
+    monkeypatch.setenv(srv.MODE_ENV, "sometimes")
+    with pytest.raises(typer.Exit) as info:
+        srv.use_managed_server()
+    assert info.value.exit_code == 2
