@@ -18,7 +18,7 @@ import numpy as np
 
 from sim2radar.boxes import box_corners
 
-__all__ = ["bev_png", "box_corners_xy"]
+__all__ = ["bev_png", "box_corners_xy", "frames_bev_png"]
 
 
 def box_corners_xy(boxes: np.ndarray) -> np.ndarray:
@@ -125,3 +125,32 @@ def bev_png(
         path.parent.mkdir(parents=True, exist_ok=True)
         path.write_bytes(data)
     return data
+
+
+def frames_bev_png(frames: Sequence, path: str | Path, *, class_name: str = "door",
+                   title: str = "") -> Path:
+    """A bird's-eye view of a sequence of radar frames (``DatasetFrame``-like: ``points``,
+    ``boxes``, ``gt_boxes``, ``radar_to_world``, ``geometry``): every frame's points and labels
+    moved into the first frame's radar frame, ground-truth doors drawn as ``gt`` (left out for
+    ``ground_truth`` frames, whose labels are those doors). Framed on the points and boxes
+    with 1 m margin, the radar at the origin always in view."""
+    from sim2radar.boxes import transform_boxes
+
+    ref_inv = np.linalg.inv(frames[0].radar_to_world)
+    pts, boxes, labels = [], [], []
+    for df in frames:
+        m = ref_inv @ df.radar_to_world
+        p = np.asarray(df.points, np.float32).copy()
+        p[:, :3] = p[:, :3] @ m[:3, :3].T + m[:3, 3]
+        pts.append(p)
+        for b, lab in ((df.boxes, class_name), (df.gt_boxes, "gt")):
+            if len(b) and not (df.geometry == "ground_truth" and lab == "gt"):
+                boxes.append(transform_boxes(b, m, period="full"))
+                labels += [lab] * len(b)
+    pts_all = np.concatenate(pts) if pts else np.zeros((0, 4), np.float32)
+    box_all = np.concatenate(boxes) if boxes else np.zeros((0, 7), np.float32)
+    xy = np.concatenate([pts_all[:, :2], box_all[:, :2], np.zeros((1, 2))])
+    lo, hi = xy.min(axis=0) - 1.0, xy.max(axis=0) + 1.0
+    bev_png(pts_all, boxes=box_all, box_labels=labels, extent_m=(lo[0], hi[0], lo[1], hi[1]),
+            title=f"{title}: {len(frames)} frames, {len(pts_all)} points", path=path)
+    return Path(path)

@@ -39,7 +39,6 @@ from __future__ import annotations
 
 import dataclasses
 import logging
-import math
 import os
 import time
 from collections.abc import Callable, Sequence
@@ -50,8 +49,8 @@ import numpy as np
 from prefect import task
 from prefect.cache_policies import NO_CACHE
 
-from sim2radar.boxes import transform_boxes
 from sim2radar.datasets.splits import split_groups as split_worlds
+from sim2radar.evaluate.dataset import LABEL_IOU_THRESHOLD
 from sim2radar.factory.frames import NEAR_BOX_MARGIN_M, DatasetFrame, points_near_boxes
 from sim2radar.factory.labels import (
     DEFAULT_POINT_CLOUD_RANGE_M,
@@ -107,8 +106,6 @@ DATASET_STAGE_VERSION = 2
 GEOMETRIES = ("ground_truth", "reconstructed")
 #: Short tags used in frame ids and artifact maps.
 _TAG = {"ground_truth": "gt", "reconstructed": "rec"}
-#: 3D IoU at which a label counts as matching a ground-truth door (the paper's AP threshold).
-LABEL_IOU_THRESHOLD = 0.3
 
 
 
@@ -614,15 +611,9 @@ def _fill_frame_outcome(fo: FrameOutcome, df: DatasetFrame) -> None:
 
 
 def _compare(gt: DatasetFrame, rec: DatasetFrame) -> dict[str, float]:
-    """Sim-vs-GT figures of one frame: points ratio (reconstructed / ground truth) and the
-    symmetric Chamfer distance [m] between the two radar point clouds."""
-    from sim2radar.evaluate.reconstruction import chamfer_distance
+    from sim2radar.evaluate.dataset import compare_frames
 
-    n_gt, n_rec = len(gt.points), len(rec.points)
-    return {
-        "points_ratio": float(n_rec / n_gt) if n_gt else float("nan"),
-        "chamfer_m": chamfer_distance(rec.points, gt.points),
-    }
+    return compare_frames(gt.points, rec.points)
 
 
 def generate_world_dataset(
@@ -749,17 +740,6 @@ def record_world_dataset(store, dataset: str, outcome: WorldDatasetOutcome) -> l
     return rows
 
 
-def _mean(values) -> float:
-    v = [float(x) for x in values if x is not None and math.isfinite(float(x))]
-    return float(np.mean(v)) if v else float("nan")
-
-
-def _ratio(frames: list[FrameOutcome], geometry: str, denominator: str) -> float:
-    tp = sum(f.label_match.get(geometry, {}).get("tp", 0) for f in frames)
-    n = sum(f.label_match.get(geometry, {}).get(denominator, 0) for f in frames)
-    return tp / n if n else float("nan")
-
-
 def summarize_dataset(store, dataset: str, spec: DatasetSpec | dict,
                       outcomes: list[WorldDatasetOutcome]) -> dict[str, Any]:
     """The run summary: counts, per-geometry table and per-stage seconds.
@@ -775,25 +755,13 @@ def summarize_dataset(store, dataset: str, spec: DatasetSpec | dict,
     ``seconds_per_frame`` -> {stage: mean [s]}, ``comparison`` (both geometries:
     ``points_ratio``, ``chamfer_m`` means and per frame), ``worlds`` (outcome dicts).
     """
+    from sim2radar.evaluate.dataset import geometry_metrics, stage_seconds
+
     spec = _spec(spec)
     st = open_store(store)
     frames = [f for o in outcomes for f in o.frames]
-    per_geometry = {}
-    for g in spec.geometries:
-        done = [f for f in frames if g in f.n_points]
-        near = [n for f in done for n in f.gt_points_near.get(g, [])]
-        per_geometry[g] = {
-            "frames": len(done),
-            "points_per_frame": _mean(f.n_points[g] for f in done),
-            "labels_per_frame": _mean(f.n_labels[g] for f in done),
-            "gt_doors_per_frame": _mean(f.n_gt_doors for f in done),
-            "frac_frames_with_label": _mean(f.n_labels[g] > 0 for f in done),
-            "frac_gt_doors_with_points": _mean(n > 0 for n in near),
-            "label_recall": _ratio(done, g, "n_gt"),
-            "label_precision": _ratio(done, g, "n_pred"),
-        }
-    stages = sorted({s for f in frames for s in f.timings_s})
-    seconds = {s: _mean(f.timings_s[s] for f in frames if s in f.timings_s) for s in stages}
+    per_geometry = geometry_metrics(frames, spec.geometries)
+    seconds = stage_seconds(frames)
     comp = [f for f in frames if f.comparison]
     summary: dict[str, Any] = {
         "store": st.root,
@@ -807,9 +775,11 @@ def summarize_dataset(store, dataset: str, spec: DatasetSpec | dict,
         "manifest": st._join("manifests", dataset),
     }
     if comp:
+        from sim2radar.evaluate.dataset import finite_mean
+
         summary["comparison"] = {
-            "points_ratio": _mean(f.comparison["points_ratio"] for f in comp),
-            "chamfer_m": _mean(f.comparison["chamfer_m"] for f in comp),
+            "points_ratio": finite_mean(f.comparison["points_ratio"] for f in comp),
+            "chamfer_m": finite_mean(f.comparison["chamfer_m"] for f in comp),
             "frames": {f.frame_id: f.comparison for f in comp},
         }
     return summary
@@ -928,9 +898,10 @@ def export_store_dataset(store, dataset: str, geometry: str, export_dir: str | o
 
 def world_bev_pngs(store, outcomes: list[WorldDatasetOutcome], png_dir: str | os.PathLike,
                    spec: DatasetSpec | dict) -> list[str]:
-    """One bird's-eye-view PNG per world and geometry: every frame's radar points and labels
-    moved into the first frame's radar frame (ground-truth doors dashed via their label)."""
-    from sim2radar.visualize import bev_png
+    """One bird's-eye-view PNG per world (or capture scene) and geometry
+    (:func:`sim2radar.visualize.frames_bev_png`): every frame's radar points and labels in the
+    first frame's radar frame."""
+    from sim2radar.visualize import frames_bev_png
 
     spec = _spec(spec)
     st = open_store(store)
@@ -939,28 +910,10 @@ def world_bev_pngs(store, outcomes: list[WorldDatasetOutcome], png_dir: str | os
         for g in spec.geometries:
             dfs = [read_dataset_frame(st, f.artifacts[f"dataset_frames/{g}"])
                    for f in o.frames if g in f.n_points]
-            if not dfs:
-                continue
-            ref_inv = np.linalg.inv(dfs[0].radar_to_world)
-            pts, boxes, labels = [], [], []
-            for df in dfs:
-                m = ref_inv @ df.radar_to_world
-                p = df.points.copy()
-                p[:, :3] = p[:, :3] @ m[:3, :3].T + m[:3, 3]
-                pts.append(p)
-                for b, lab in ((df.boxes, spec.class_name), (df.gt_boxes, "gt")):
-                    if len(b) and not (g == "ground_truth" and lab == "gt"):
-                        boxes.append(transform_boxes(b, m, period="full"))
-                        labels += [lab] * len(b)
-            pts_all = np.concatenate(pts) if pts else np.zeros((0, 4), np.float32)
-            box_all = np.concatenate(boxes) if boxes else np.zeros((0, 7), np.float32)
-            path = Path(png_dir) / f"{o.world_id}_{_TAG[g]}.png"
-            xy = np.concatenate([pts_all[:, :2], box_all[:, :2], np.zeros((1, 2))])
-            lo, hi = xy.min(axis=0) - 1.0, xy.max(axis=0) + 1.0
-            bev_png(pts_all, boxes=box_all, box_labels=labels, extent_m=(lo[0], hi[0], lo[1], hi[1]),
-                    title=f"{o.world_id} [{g}]: {len(dfs)} frames, {len(pts_all)} points",
-                    path=path)
-            out.append(str(path))
+            if dfs:
+                path = Path(png_dir) / f"{o.world_id}_{_TAG[g]}.png"
+                out.append(str(frames_bev_png(dfs, path, class_name=spec.class_name,
+                                              title=f"{o.world_id} [{g}]")))
     return out
 
 

@@ -131,7 +131,7 @@ class CaptureSpec(BaseModel):
     class_name: str = "door"
     seed: int = 0
     export_label_range_m: tuple[float, ...] | None = DEFAULT_POINT_CLOUD_RANGE_M
-    frames_per_task: int = Field(8, ge=1, le=10_000)
+    frames_per_task: int = Field(18, ge=1, le=10_000)
 
     #: The export helpers shared with the procedural path read these.
     geometries: tuple[str, ...] = ("reconstructed",)
