@@ -1,4 +1,9 @@
-"""The shared Typer application that every command module registers on."""
+"""The shared Typer application that every command module registers on, and the helpers every
+command shares (the store check, quiet consoles for recorded failures)."""
+
+import contextlib
+import logging
+from collections.abc import Iterable
 
 import typer
 
@@ -26,3 +31,40 @@ def exit_unless_writable(store: str, option: str = "--out") -> None:
     except (ValueError, PermissionError) as exc:
         typer.secho(f"error: {option}: {exc}", fg="red", err=True)
         raise typer.Exit(2) from None
+
+
+class _RecordedTaskFailures(logging.Filter):
+    """Drops, from a console handler, the ERROR records Prefect's task engine writes when one
+    of ``task_names`` fails (the exception with its traceback, then "Finished in state
+    Failed"): the flow records that failure in the manifest and the command prints it in its
+    summary, so on the console it is noise. The API handler still sends them to the UI."""
+
+    def __init__(self, task_names: Iterable[str]) -> None:
+        super().__init__()
+        self.task_names = frozenset(task_names)
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        return not (record.levelno >= logging.ERROR and record.name == "prefect.task_runs"
+                    and getattr(record, "task_name", None) in self.task_names)
+
+
+@contextlib.contextmanager
+def quiet_recorded_failures(task_names: Iterable[str], verbose: bool = False):
+    """While a flow runs: keep the tracebacks of failed ``task_names`` (per-scene tasks whose
+    failure the flow records as ``failed`` in the manifest) off Prefect's console handlers.
+    The task runs stay Failed in Prefect, with their tracebacks in the UI's logs; ``verbose``
+    keeps them on the console too. Call after Prefect is imported (its logging is set up)."""
+    if verbose:
+        yield
+        return
+    from prefect.logging.handlers import PrefectConsoleHandler
+
+    handlers = [h for h in logging.getLogger().handlers if isinstance(h, PrefectConsoleHandler)]
+    quiet = _RecordedTaskFailures(task_names)
+    for handler in handlers:
+        handler.addFilter(quiet)
+    try:
+        yield
+    finally:
+        for handler in handlers:
+            handler.removeFilter(quiet)

@@ -27,7 +27,7 @@ from typing import Any
 
 import typer
 
-from sim2radar.cli._app import app
+from sim2radar.cli._app import app, exit_unless_writable
 
 __all__ = ["demo", "run_demo"]
 
@@ -157,6 +157,7 @@ def demo(
     from sim2radar.cli.generate import print_generate_summary
     from sim2radar.cli.simulate import _prefect_env
 
+    exit_unless_writable(str(out))
     _prefect_env(verbose)
     rig = {k: v for k, v in (("width", width), ("height", height), ("spp", spp)) if v is not None}
     try:

@@ -16,7 +16,7 @@ from typing import Any
 
 import typer
 
-from sim2radar.cli._app import app
+from sim2radar.cli._app import app, exit_unless_writable
 
 __all__ = ["sweep", "run_sweep", "print_sweep_summary"]
 
@@ -133,6 +133,7 @@ def sweep(
     """
     from sim2radar.datasets import DatasetError
 
+    exit_unless_writable(store, "--store")
     overrides: dict[str, Any] = {}
     try:
         if trials is not None:

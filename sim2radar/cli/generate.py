@@ -304,9 +304,9 @@ def generate(
     """
     from sim2radar.cli.simulate import _default_png_dir, _prefect_env
 
+    exit_unless_writable(out)
     if not no_prefect:
         _prefect_env(verbose)  # before the config check below imports Prefect
-    exit_unless_writable(out)
     try:
         cfg = load_generate_config(config) if config is not None else {}
         rig = dict(cfg.get("rig") or {})

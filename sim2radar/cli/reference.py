@@ -16,7 +16,7 @@ from pathlib import Path
 
 import typer
 
-from sim2radar.cli._app import app
+from sim2radar.cli._app import app, exit_unless_writable
 
 __all__ = ["reference"]
 
@@ -51,6 +51,7 @@ def reference(
     from sim2radar.cli.simulate import _default_png_dir, _prefect_env
     from sim2radar.factory.reference import DOMAIN_LABEL
 
+    exit_unless_writable(out)
     if not no_prefect:
         _prefect_env(verbose)
     try:

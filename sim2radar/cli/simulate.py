@@ -15,7 +15,7 @@ from typing import Any
 
 import typer
 
-from sim2radar.cli._app import app
+from sim2radar.cli._app import app, exit_unless_writable, quiet_recorded_failures
 
 
 def _prefect_env(verbose: bool) -> None:
@@ -69,7 +69,8 @@ def run_scenes(
             _prefect_env(verbose)
             from flows.simulate import progress_callback, run_simulation
 
-            with progress_callback(on_scene):
+            # a broken scene is recorded as failed and printed in the summary: no traceback
+            with progress_callback(on_scene), quiet_recorded_failures(["simulate-scene"], verbose):
                 return run_simulation(
                     scene_strs,
                     radar=radar,
@@ -143,6 +144,7 @@ def simulate(
     """
     from sim2radar.radar import RadarConfigError, load_radar_config
 
+    exit_unless_writable(out)
     try:
         load_radar_config(radar)
     except RadarConfigError as exc:

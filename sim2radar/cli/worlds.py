@@ -11,7 +11,7 @@ from pathlib import Path
 
 import typer
 
-from sim2radar.cli._app import app
+from sim2radar.cli._app import app, exit_unless_writable
 
 worlds_app = typer.Typer(help="Procedural indoor worlds rendered by Mitsuba.", no_args_is_help=True)
 app.add_typer(worlds_app, name="worlds")
@@ -87,6 +87,7 @@ def generate(
     """Generate N worlds x M frames into the artifact store (world specs, meshes, frames;
     with --radar also radar point clouds), with a manifest; cached by content key (a second
     run recomputes nothing)."""
+    exit_unless_writable(out)
     world_cfg, rig = _configs(config, width, height, spp)
     seeds = list(range(first_seed, first_seed + worlds))
     if no_prefect:

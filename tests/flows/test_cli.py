@@ -3,6 +3,10 @@
 from __future__ import annotations
 
 import json
+import os
+import subprocess
+import sys
+from pathlib import Path
 
 from typer.testing import CliRunner
 
@@ -61,3 +65,30 @@ def test_simulate_exit_codes_and_outputs(plate_scene, broken_scenes, tmp_path):
     assert again.exit_code == 1 and "0 computed, 1 cached (skipped), 1 failed" in again.output
     bad = runner.invoke(app, ["simulate", str(plate_scene), "--radar", "no-such-radar", "--out", str(store)])
     assert bad.exit_code == 2 and "presets" in bad.output
+
+
+def test_simulate_bad_scene_is_recorded_without_a_traceback(prefect_server, plate_scene,
+                                                             broken_scenes, tmp_path):
+    """Through the Prefect engine, as a user runs it (a subprocess: Prefect's own console
+    logging): a broken scene is a failed manifest row and one line of the summary while the
+    others finish, and no traceback is printed."""
+    from prefect.settings import PREFECT_API_URL
+
+    repo = Path(__file__).resolve().parents[2]
+    store = tmp_path / "store"
+    env = {**os.environ, "PREFECT_API_URL": PREFECT_API_URL.value(), "COLUMNS": "400",
+           "PREFECT_LOGGING_LEVEL": "WARNING", "PYTHONPATH": str(repo)}
+    args = ["simulate", str(plate_scene), str(broken_scenes["missing"]),
+            str(broken_scenes["unknown"]), "--out", str(store), "--no-png"]
+    proc = subprocess.run([sys.executable, "-c", "from sim2radar.cli import main; main()", *args],
+                          cwd=tmp_path, env=env, capture_output=True, text=True, timeout=300)
+    output = proc.stdout + proc.stderr
+    assert proc.returncode == 0, output
+    assert "Traceback" not in output and "Finished in state Failed" not in output, output
+    assert "1 computed, 0 cached (skipped), 2 failed" in output
+    assert "wall.ply: mesh file not found" in output
+    rows = {r["scene_id"]: r for r in ArtifactStore(store).manifest("default").rows()}
+    assert rows["plate"]["status"] == "ok"
+    assert rows["missing_mesh"]["status"] == "failed"
+    assert "wall.ply: mesh file not found" in rows["missing_mesh"]["error"]
+    assert "unobtainium" in rows["unknown_material"]["error"]
