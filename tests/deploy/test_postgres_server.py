@@ -12,7 +12,7 @@ in-process run would use, with the metal end door detected where it stands.
 
 Every process (postgres, the Prefect server, the worker and its flow-run children) is
 stopped at teardown, also on failure. ``make setup`` installs ``postgresql`` with apt; the
-test is skipped only on a machine without apt. About 1 min on 2 cores.
+test is skipped only on a machine without apt. 30–45 s on 2 cores.
 """
 
 from __future__ import annotations
