@@ -63,24 +63,43 @@ class CameraIntrinsics:
 
     @classmethod
     def from_yaml(cls, path: str | Path) -> CameraIntrinsics:
-        """Read ``fx, fy, cx, cy, width, height`` (or ``K: 3x3`` + ``width, height``) from YAML."""
-        from sim2radar.configio import read_yaml_mapping
+        """Read ``fx, fy, cx, cy, width, height`` (or ``K: 3x3`` + ``width, height``) from YAML.
+
+        Raises
+        ------
+        FileNotFoundError if the file is missing; ValueError naming the file, the field and the
+        fix for a missing field, a non-number (``cx: [120.0]``) or a fractional image size
+        (``width: 240.7``).
+        """
+        from sim2radar.configio import read_yaml_mapping, real_number, whole_number
 
         path = Path(path)
         doc = read_yaml_mapping(path, what="intrinsics file", missing_error=FileNotFoundError,
                                 expect="a mapping with fx, fy, cx, cy, width, height")
         try:
+            size = [whole_number(doc[k], path, k, minimum=1, example=e)
+                    for k, e in (("width", 640), ("height", 480))]
             if "K" in doc:
-                return cls.from_matrix(np.asarray(doc["K"]), int(doc["width"]), int(doc["height"]))
-            return cls(*(float(doc[k]) for k in ("fx", "fy", "cx", "cy")),
-                       int(doc["width"]), int(doc["height"]))
+                try:
+                    kmat = np.asarray(doc["K"], dtype=np.float64)
+                except (TypeError, ValueError):
+                    kmat = None
+                if kmat is None or kmat.shape != (3, 3) or not np.isfinite(kmat).all():
+                    raise ValueError(f"{path}: K: must be a 3x3 matrix of numbers [px], got "
+                                     f"{doc['K']!r}; write e.g. 'K: [[fx, 0, cx], [0, fy, cy], "
+                                     "[0, 0, 1]]'")
+                return cls.from_matrix(kmat, *size)
+            return cls(*(real_number(doc[k], path, k, unit="px", example=e)
+                         for k, e in (("fx", 500.0), ("fy", 500.0), ("cx", 320.0),
+                                      ("cy", 240.0))), *size)
         except KeyError as exc:
             raise ValueError(
                 f"{path}: missing field {exc.args[0]!r}; need fx, fy, cx, cy, width, height "
                 "(or K and width, height)"
             ) from None
-        except ValueError as exc:
-            raise ValueError(f"{path}: {exc}") from None
+        except ValueError as exc:  # __post_init__'s checks (fx <= 0, ...) name no file
+            msg = str(exc)
+            raise ValueError(msg if msg.startswith(f"{path}: ") else f"{path}: {msg}") from None
 
     @property
     def matrix(self) -> np.ndarray:

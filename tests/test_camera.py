@@ -26,3 +26,29 @@ def test_invalid_intrinsics_name_the_field(tmp_path):
     p.write_text("fx: 500\nfy: 500\ncx: 320\nwidth: 640\nheight: 480\n")
     with pytest.raises(ValueError, match="missing field 'cy'"):
         CameraIntrinsics.from_yaml(p)
+
+
+GOOD_K = {"fx": "500", "fy": "500", "cx": "320", "cy": "240", "width": "640", "height": "480"}
+
+
+@pytest.mark.parametrize("key, value, message", [
+    ("cx", "[120.0]", "cx: must be a number [px], got [120.0]"),  # was a TypeError traceback
+    ("fx", "five", "fx: must be a number [px], got 'five'"),
+    ("width", "240.7", "width: must be a whole number, got 240.7"),  # was truncated to 240
+    ("height", "true", "height: must be a whole number, got True"),
+    ("K", "[[1, 2], [3]]", "K: must be a 3x3 matrix"),
+])
+def test_bad_intrinsics_values_name_file_field_and_fix(tmp_path, key, value, message):
+    p = tmp_path / "k.yaml"
+    p.write_text("".join(f"{k}: {v}\n" for k, v in {**GOOD_K, key: value}.items()))
+    with pytest.raises(ValueError) as info:
+        CameraIntrinsics.from_yaml(p)
+    msg = str(info.value)
+    assert msg.startswith(f"{p}: {message}") and "write e.g." in msg, msg
+
+
+def test_whole_float_image_sizes_are_accepted(tmp_path):
+    p = tmp_path / "k.yaml"
+    p.write_text("".join(f"{k}: {v}\n" for k, v in {**GOOD_K, "width": "640.0"}.items()))
+    k = CameraIntrinsics.from_yaml(p)
+    assert k.width == 640 and isinstance(k.width, int) and k.cx == 320.0

@@ -20,6 +20,7 @@ import typer
 import yaml
 
 from sim2radar.cli._app import app, exit_unless_writable
+from sim2radar.configio import whole_number
 
 __all__ = ["generate", "load_generate_config", "print_generate_summary", "run_generate"]
 
@@ -30,18 +31,6 @@ _CONFIG_KEYS = {"worlds", "first_seed", "frames", "geometry", "radar", "reconstr
 
 #: Whole-number settings and their smallest allowed value (None: any integer).
 _INT_KEYS = {"worlds": 1, "first_seed": None, "frames": 1, "seed": None}
-
-
-def _whole_number(value: Any, where: str, minimum: int | None = None) -> int:
-    """``value`` as an int: an integer (or a float with no fractional part, e.g. ``4.0``);
-    anything else (a list, a word, ``2.5``, ``true``) raises ValueError naming ``where``."""
-    ok = isinstance(value, int) or (isinstance(value, float) and value.is_integer())
-    if isinstance(value, bool) or not ok:
-        raise ValueError(f"{where}: must be a whole number, got {value!r}; "
-                         f"write e.g. '{where.rsplit(': ', 1)[-1]}: {max(minimum or 0, 1)}'")
-    if minimum is not None and value < minimum:
-        raise ValueError(f"{where}: must be >= {minimum}, got {value!r}")
-    return int(value)
 
 
 def load_generate_config(path: str | Path) -> dict[str, Any]:
@@ -68,7 +57,7 @@ def load_generate_config(path: str | Path) -> dict[str, Any]:
             raise ValueError(f"{path}: '{key}' must be a mapping of fields")
     for key, minimum in _INT_KEYS.items():
         if key in doc:
-            doc[key] = _whole_number(doc[key], f"{path}: {key}", minimum)
+            doc[key] = whole_number(doc[key], path, key, minimum=minimum)
     for key in ("radar", "reconstruction"):
         value = doc.get(key)
         if isinstance(value, str) and value.endswith((".yaml", ".yml")) \
