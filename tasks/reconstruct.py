@@ -16,8 +16,10 @@ reconstruction is deterministic; the VLM backend retries its own HTTP calls.
 from __future__ import annotations
 
 import dataclasses
+import logging
 import os
 import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -38,12 +40,15 @@ __all__ = [
     "ImageJob",
     "ReconOutcome",
     "reconstruct_image",
+    "reconstruct_images_plain",
     "record_recon_outcome",
     "reconstruct_image_task",
     "record_recon_outcome_task",
     "failed_outcome",
     "summarize_recon",
 ]
+
+log = logging.getLogger(__name__)
 
 #: The reconstruction output's version (bumped in the pipeline when the output of the same
 #: inputs changes).
@@ -97,6 +102,8 @@ def reconstruct_image(
     *,
     out_dir: str | None = None,
     force: bool = False,
+    sheet_dir: str | os.PathLike | None = None,
+    backends: tuple | None = None,
 ) -> ReconOutcome:
     """Reconstruct one frame into ``store`` (skips if its artifacts exist, unless ``force``).
 
@@ -106,6 +113,9 @@ def reconstruct_image(
     store : path/URI or :class:`storage.ArtifactStore`
     config : dict — a :class:`ReconstructionConfig` as a dict (default: the builtin preset).
     out_dir : str, optional — where ``sheets/<name>.png`` and ``scenes/<name>/scene.yaml`` go.
+    sheet_dir : where ``<name>.png`` goes instead of ``out_dir/sheets``.
+    backends : the config's backends, built once for many frames
+        (:func:`sim2radar.reconstruct.build_backends`; default: built here).
     """
     from sim2radar.reconstruct import FrameInput, ReconstructionConfig, reconstruct
     from storage.reconstruction import reconstruction_keys, write_scene_artifacts
@@ -122,16 +132,18 @@ def reconstruct_image(
     if force:
         for s, key in keys.items():
             st.delete(s, key)
-    scene = reconstruct(FrameInput(rgb, k, pts, name=job.name, **rig), cfg)
+    scene = reconstruct(FrameInput(rgb, k, pts, name=job.name, **rig), cfg, backends=backends)
     if note:
         scene.info["fallbacks"].append(note)
     written = write_scene_artifacts(st, scene, inputs=inputs, config=cfg_dict,
                                     stage_version=RECONSTRUCTION_STAGE_VERSION)
     if out_dir:
+        scene.write_scene(Path(out_dir) / "scenes" / job.name)
+    if out_dir or sheet_dir:
         from sim2radar.reconstruct.sheet import stage_sheet
 
-        scene.write_scene(Path(out_dir) / "scenes" / job.name)
-        stage_sheet(scene, Path(out_dir) / "sheets" / f"{job.name}.png", lidar_points=pts)
+        sheets = Path(sheet_dir) if sheet_dir else Path(out_dir) / "sheets"
+        stage_sheet(scene, sheets / f"{job.name}.png", lidar_points=pts)
     timings = dict(scene.timings_s)
     timings["task_total"] = time.perf_counter() - t0
     labels = {lbl: scene.segment_labels.count(lbl) for lbl in sorted(set(scene.segment_labels))}
@@ -139,6 +151,40 @@ def reconstruct_image(
                         summary=jsonable({"segments": labels, "meshes": len(scene.meshes),
                                           "door_boxes": len(scene.door_boxes),
                                           "fallbacks": scene.info["fallbacks"]}))
+
+
+def reconstruct_images_plain(
+    jobs: list[ImageJob],
+    store,
+    dataset: str = "reconstruction",
+    config: dict | None = None,
+    *,
+    out_dir: str | None = None,
+    sheet_dir: str | os.PathLike | None = None,
+    force: bool = False,
+    backends: tuple | None = None,
+    on_frame: Callable[[ReconOutcome], None] | None = None,
+) -> dict[str, Any]:
+    """The ``reconstruct-frames`` flow's semantics without the Prefect engine (``sim2radar
+    reconstruct``, notebooks): frames one after another, each recorded in the ``dataset``
+    manifest as ``ok``, ``skipped`` (cached) or ``failed`` (with its error) while the others
+    finish; ``on_frame(outcome)`` after each. Returns :func:`summarize_recon`'s dict."""
+    st = open_store(store)
+    st.manifest(dataset)  # validates the name before any work
+    outcomes = []
+    for job in jobs:
+        try:
+            outcome = reconstruct_image(job, st, config, out_dir=out_dir, force=force,
+                                        sheet_dir=sheet_dir, backends=backends)
+        except Exception as exc:  # noqa: BLE001 - a broken frame must not stop the others
+            # info: the outcome carries the error, and the caller reports it (once)
+            log.info("frame %s failed: %s: %s", job.name, type(exc).__name__, exc)
+            outcome = failed_outcome(job, exc)
+        record_recon_outcome(st, dataset, outcome)
+        outcomes.append(outcome)
+        if on_frame is not None:
+            on_frame(outcome)
+    return summarize_recon(outcomes, st, dataset)
 
 
 def record_recon_outcome(store, dataset: str, outcome: ReconOutcome) -> dict:
@@ -171,5 +217,7 @@ def failed_outcome(job: ImageJob, error: BaseException | str) -> ReconOutcome:
 
 def summarize_recon(outcomes: list[ReconOutcome], store, dataset: str) -> dict[str, Any]:
     counts = {s: sum(o.status == s for o in outcomes) for s in ("ok", "skipped", "failed")}
-    return {"store": os.fspath(open_store(store).root), "dataset": dataset, "counts": counts,
-            "frames": [dataclasses.asdict(o) for o in outcomes]}
+    st = open_store(store)
+    return {"store": os.fspath(st.root), "dataset": dataset, "counts": counts,
+            "frames": [dataclasses.asdict(o) for o in outcomes],
+            "manifest": st._join("manifests", dataset)}

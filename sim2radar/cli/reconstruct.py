@@ -15,7 +15,7 @@ from pathlib import Path
 
 import typer
 
-from sim2radar.cli._app import app
+from sim2radar.cli._app import app, exit_unless_writable
 
 
 @app.command("reconstruct")
@@ -37,33 +37,35 @@ def reconstruct_cmd(
                                    help="Where PNG sheets go (default: next to the store)."),
     radar: str = typer.Option(None, "--radar",
                               help="Also simulate radar points on the scene with this preset."),
+    dataset: str = typer.Option("reconstruction", "--dataset", help="Manifest (dataset) name."),
+    force: bool = typer.Option(False, help="Recompute frames even when cached."),
 ) -> None:
-    """Reconstruct material-labelled 3D scenes from RGB [+ LiDAR] and store them."""
+    """Reconstruct material-labelled 3D scenes from RGB [+ LiDAR] and store them.
+
+    Every frame is a manifest row of --dataset: ok, skipped (cached by content key: a second
+    run recomputes nothing) or failed with its error, while the others finish. Exit status: 0,
+    1 when a frame failed, 2 for bad arguments (intrinsics, config, store).
+    """
     import numpy as np
     from rich.console import Console
 
     from sim2radar.camera import CameraIntrinsics
-    from sim2radar.reconstruct import (
-        FrameInput,
-        ReconstructionConfig,
-        ReconstructionInputError,
-        build_backends,
-        reconstruct,
-    )
-    from sim2radar.reconstruct.inputs import load_image, load_lidar, load_rig_calibration
-    from sim2radar.reconstruct.sheet import stage_sheet
-    from storage import ArtifactStore
-    from storage.reconstruction import frame_digest, write_scene_artifacts
+    from sim2radar.reconstruct import ReconstructionConfig, build_backends
+    from sim2radar.reconstruct.inputs import load_rig_calibration
+    from storage import ArtifactStore, meshes_from_table
+    from tasks.reconstruct import ImageJob, reconstruct_images_plain
 
+    exit_unless_writable(str(out))
     console = Console()
-    try:
-        k = CameraIntrinsics.from_yaml(intrinsics)
-    except (FileNotFoundError, ValueError) as exc:
-        raise typer.BadParameter(str(exc), param_hint="--intrinsics") from None
-    try:
-        rig = load_rig_calibration(intrinsics)
-    except ValueError as exc:
-        raise typer.BadParameter(str(exc), param_hint="--intrinsics") from None
+    for option, check in (  # one intrinsics file for every image: a bad one is a bad argument
+            ("--intrinsics", lambda: (CameraIntrinsics.from_yaml(intrinsics),
+                                      load_rig_calibration(intrinsics))),
+            ("--dataset", lambda: ArtifactStore(str(out)).manifest(dataset))):
+        try:
+            check()
+        except (FileNotFoundError, ValueError) as exc:
+            typer.secho(f"error: {option}: {exc}", fg="red", err=True)
+            raise typer.Exit(2) from None
     lidar = list(lidar or [])
     if lidar and len(lidar) != len(images):
         raise typer.BadParameter(
@@ -87,41 +89,42 @@ def reconstruct_cmd(
 
         radar_cfg = load_radar_config(radar)
 
-    failures = 0
-    for i, image in enumerate(images):
-        name = image.stem
-        try:
-            rgb = load_image(image)
-            pts, note = load_lidar(lidar[i]) if lidar else (None, "")
-            if note:
-                console.print(f"[yellow]{name}: {note}")
-            frame = FrameInput(rgb, k, pts, name=name, **rig)
-            scene = reconstruct(frame, cfg, backends=backends)
-        except (ReconstructionInputError, ValueError) as exc:
-            failures += 1
-            console.print(f"[red]{name}: failed: {exc}")
-            continue
-        inputs = {"image": frame_digest(rgb, pts, frame.rig_calibration)}
-        keys = write_scene_artifacts(store, scene, inputs=inputs, config=cfg.to_dict())
-        scene_yaml = scene.write_scene(base / "scenes" / name)
-        sheet = sheets / f"{name}.png"
-        stage_sheet(scene, sheet, lidar_points=pts)
-        labels = {lbl: scene.segment_labels.count(lbl) for lbl in sorted(set(scene.segment_labels))}
-        console.print(
-            f"[green]{name}[/]: {scene.n_segments} segments {labels}, {len(scene.meshes)} meshes, "
-            f"{len(scene.door_boxes)} door box(es), {scene.timings_s['total']:.2f} s"
-        )
-        for f in scene.info["fallbacks"]:
-            console.print(f"  fallback: {f}")
+    def on_frame(outcome) -> None:
+        name, keys = outcome.name, outcome.artifacts
+        if outcome.status == "failed":
+            console.print(f"[red]{name}: failed: {outcome.error}", soft_wrap=True)
+            return
+        if outcome.status == "skipped":
+            console.print(f"[green]{name}[/]: skipped (cached)")
+        else:
+            info = outcome.summary
+            console.print(
+                f"[green]{name}[/]: {sum(info['segments'].values())} segments "
+                f"{info['segments']}, {info['meshes']} meshes, {info['door_boxes']} door "
+                f"box(es), {outcome.timings_s['total']:.2f} s")
+            for f in info["fallbacks"]:
+                console.print(f"  fallback: {f}")
         console.print(f"  artifacts: reconstruction/{keys['reconstruction']}, "
                       f"scene_meshes/{keys['scene_meshes']} in {store.root}")
-        console.print(f"  scene: {scene_yaml}   sheet: {sheet}")
-        if radar_cfg is not None:
+        console.print(f"  scene: {base / 'scenes' / name / 'scene.yaml'}   "
+                      f"sheet: {sheets / f'{name}.png'}")
+        if radar_cfg is not None:  # on the stored level-frame meshes: cached frames too
             from sim2radar.radar import simulate_frame
 
-            points = simulate_frame(scene.meshes_in(None), radar_cfg).points
+            meshes = meshes_from_table(store.read("scene_meshes", keys["scene_meshes"]))
+            points = simulate_frame(meshes, radar_cfg).points
+            (base / "scenes" / name).mkdir(parents=True, exist_ok=True)
             np.save(base / "scenes" / name / "radar_points.npy", points)
             console.print(f"  radar ({radar}): {len(points)} points (radar at the camera, "
                           "level frame) -> radar_points.npy")
-    if failures:
+
+    jobs = [ImageJob(str(image), str(intrinsics), str(lidar[i]) if lidar else None)
+            for i, image in enumerate(images)]
+    summary = reconstruct_images_plain(
+        jobs, store, dataset, cfg.to_dict(), out_dir=str(base), sheet_dir=str(sheets),
+        force=force, backends=backends, on_frame=on_frame)
+    c = summary["counts"]
+    console.print(f"[bold]{c['ok']} computed, {c['skipped']} cached (skipped), "
+                  f"{c['failed']} failed[/bold] — manifest: {summary['manifest']}")
+    if c["failed"]:
         raise typer.Exit(code=1)
