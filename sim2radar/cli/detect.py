@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
-from typing import Annotated
+from typing import Annotated, NoReturn
 
 import typer
 
@@ -38,15 +38,27 @@ def train(
         cfg = load_config(config)
     except (FileNotFoundError, ValueError) as exc:
         raise typer.BadParameter(str(exc), param_hint="CONFIG") from exc
-    res = run_train(cfg, out_dir=out, init_encoder_from=pretrained_encoder, seed=seed,
-                    data_dir=data, epochs=epochs, resume=resume, device=device)
+    try:  # a malformed dataset, a wrong checkpoint, a resume mismatch: the message says which
+        res = run_train(cfg, out_dir=out, init_encoder_from=pretrained_encoder, seed=seed,
+                        data_dir=data, epochs=epochs, resume=resume, device=device)
+    except (FileNotFoundError, ValueError) as exc:
+        _exit_bad_input(exc)
     last = res.history[-1] if res.history else {}
     typer.echo(f"trained {res.epochs} epochs ({res.steps} steps) in {res.seconds:.1f} s; "
                f"final loss {last.get('total', float('nan')):.4f}; checkpoint {res.checkpoint}")
     if evaluate_split:
-        ap = evaluate_checkpoint(res.checkpoint, data_dir=data, split=evaluate_split,
-                                 device=device)
+        try:
+            ap = evaluate_checkpoint(res.checkpoint, data_dir=data, split=evaluate_split,
+                                     device=device)
+        except (FileNotFoundError, ValueError) as exc:
+            _exit_bad_input(exc)
         typer.echo(json.dumps(ap, indent=1))
+
+
+def _exit_bad_input(exc: Exception) -> NoReturn:
+    """One line naming the file and the fix (the library's message), exit status 2."""
+    typer.secho(f"error: {exc}", fg="red", err=True)
+    raise typer.Exit(2) from None
 
 
 @app.command()
@@ -60,7 +72,10 @@ def evaluate(
     """KITTI-protocol 3D / BEV AP (R11, R40; IoU 0.3 and 0.5) of a checkpoint on a split."""
     from sim2radar.detect.train import evaluate_checkpoint
 
-    res = evaluate_checkpoint(checkpoint, data_dir=data, split=split, device=device)
+    try:
+        res = evaluate_checkpoint(checkpoint, data_dir=data, split=split, device=device)
+    except (FileNotFoundError, ValueError) as exc:
+        _exit_bad_input(exc)
     for key, value in res.items():
         typer.echo(f"{key:14s} {value:8.2f}")
     if json_out is not None:

@@ -273,7 +273,41 @@ def train(
     Returns
     -------
     TrainResult
+
+    A run that fails before its first checkpoint removes the run folder (and the parents) it
+    created, so a bad dataset or config leaves no empty run behind; a folder that existed
+    before, or holds a checkpoint to resume from, is kept.
     """
+    out_dir = Path(out_dir)
+    with _run_folder(out_dir):
+        return _train(config, train_ids, out_dir, init_encoder_from, seed, data_dir=data_dir,
+                      epochs=epochs, resume=resume, device=device, frames=frames,
+                      on_epoch_end=on_epoch_end)
+
+
+@contextlib.contextmanager
+def _run_folder(out_dir: Path):
+    """Create ``out_dir`` (and missing parents) for a run; if the run raises before writing a
+    checkpoint, remove what it created: its ``config.json`` and the folders, innermost first,
+    each only if then empty."""
+    created = [p for p in (out_dir, *out_dir.parents) if not p.exists()]
+    out_dir.mkdir(parents=True, exist_ok=True)
+    try:
+        yield
+    except BaseException:
+        if created and not any(out_dir.glob("*.pt")):
+            (out_dir / "config.json").unlink(missing_ok=True)
+            for folder in created:
+                try:
+                    folder.rmdir()
+                except OSError:  # not empty: someone else's files are in there
+                    break
+        raise
+
+
+def _train(config, train_ids, out_dir: Path, init_encoder_from, seed, *, data_dir, epochs,
+           resume, device, frames, on_epoch_end) -> TrainResult:
+    """:func:`train` inside its run folder."""
     t_start = time.perf_counter()
     cfg = load_config(config) if isinstance(config, (str, Path)) else config
     if seed is not None:
@@ -281,8 +315,6 @@ def train(
     if epochs is not None:
         cfg = cfg.with_updates(optimization={"epochs": int(epochs)})
     encoder_ckpt = init_encoder_from if init_encoder_from is not None else cfg.pretrained_encoder
-    out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
     dev = _resolve_device(cfg, device)
     rt, opt_cfg, mcfg = cfg.runtime, cfg.optimization, cfg.model
     if rt.num_threads and dev.type == "cpu":

@@ -39,3 +39,22 @@ def test_train_then_evaluate_from_config(tmp_path):
     # a wide terminal: Typer's rich error box truncates long paths at 80 columns
     r = runner.invoke(app, ["train", str(tmp_path / "missing.yaml")], env={"COLUMNS": "400"})
     assert r.exit_code == 2 and "detector config not found" in r.output, r.output
+
+
+def test_train_on_a_malformed_label_is_one_line_and_leaves_no_run(tmp_path):
+    runner = CliRunner()
+    data = tmp_path / "data"
+    r = runner.invoke(app, ["detect-demo-data", str(data), "--n-train", "2", "--n-val", "1",
+                            "--n-test", "1"])
+    assert r.exit_code == 0, r.output
+    label = data / "labels" / "000000.txt"
+    label.write_text(label.read_text() + "1 2 3 door\n")
+    cfg = tmp_path / "cfg.yaml"
+    cfg.write_text("data: {root: data}\nruntime: {device: cpu, progress: false}\n")
+    r = runner.invoke(app, ["train", str(cfg), "--out", str(tmp_path / "run")],
+                      env={"COLUMNS": "400"})
+    assert r.exit_code == 2, r.output
+    lines = r.output.strip().splitlines()
+    assert len(lines) == 1 and "Traceback" not in r.output, r.output
+    assert f"error: {label}:" in lines[0] and "expected 8 fields" in lines[0], lines[0]
+    assert not (tmp_path / "run").exists()

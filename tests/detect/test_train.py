@@ -317,3 +317,30 @@ def test_a_checkpoint_carrying_code_is_refused_without_running_it(tmp_path):
         with pytest.raises(ValueError, match="refused to load"):
             load()
     assert not marker.exists()
+
+
+def test_a_failed_run_leaves_no_empty_run_folder(tmp_path):
+    """A run that fails before its first checkpoint removes the folders it created; a folder
+    that existed before, or that holds a checkpoint to resume from, stays."""
+    root = tmp_path / "data"
+    write_synthetic_dataset(root, n_train=2, n_val=1, n_test=1, seed=5, points_per_frame=300)
+    (root / "labels" / "000000.txt").write_text("1 2 3 door\n")  # a malformed label line
+    cfg = small_config(data=dict(root=root), optimization=dict(batch_size=2, epochs=2))
+    with pytest.raises(ValueError, match=r"000000.txt:1: expected 8 fields"):
+        train(cfg, out_dir=tmp_path / "runs" / "new")
+    assert not (tmp_path / "runs").exists()  # the run folder and its parent were new
+    (tmp_path / "mine").mkdir()
+    (tmp_path / "mine" / "notes.txt").write_text("keep")
+    with pytest.raises(ValueError):
+        train(cfg, out_dir=tmp_path / "mine")
+    assert (tmp_path / "mine" / "notes.txt").is_file()
+    # a failure after epoch 1's checkpoint keeps the run, resumable
+    frames = make_door_frames(2, seed=6, points_per_frame=300)
+
+    def fail_in_epoch_2(epoch, model):
+        if epoch == 2:
+            raise RuntimeError("interrupted")
+
+    with pytest.raises(RuntimeError, match="interrupted"):
+        train(cfg, out_dir=tmp_path / "late", frames=frames, on_epoch_end=fail_in_epoch_2)
+    assert (tmp_path / "late" / "last.pt").is_file()
