@@ -17,6 +17,7 @@ from sim2radar.cli import worlds as _worlds  # noqa: E402,F401  isort: skip
 from sim2radar.cli import detect as _detect  # noqa: E402,F401  isort: skip
 from sim2radar.cli import reconstruct as _reconstruct  # noqa: E402,F401  isort: skip
 from sim2radar.cli import generate as _generate  # noqa: E402,F401  isort: skip
+from sim2radar.cli import captures as _captures  # noqa: E402,F401  isort: skip
 from sim2radar.cli import reference as _reference  # noqa: E402,F401  isort: skip
 from sim2radar.cli import experiment as _experiment  # noqa: E402,F401  isort: skip
 from sim2radar.cli import demo as _demo  # noqa: E402,F401  isort: skip

@@ -26,7 +26,7 @@ __all__ = ["generate", "load_generate_config", "print_generate_summary", "run_ge
 
 _CONFIG_KEYS = {"worlds", "first_seed", "frames", "geometry", "radar", "reconstruction", "seed",
                 "class_name", "world", "rig", "dataset", "labels", "material_override",
-                "export_label_range_m"}
+                "export_label_range_m", "poses"}
 
 
 #: Whole-number settings and their smallest allowed value (None: any integer).
@@ -200,7 +200,8 @@ def print_generate_summary(summary: dict[str, Any]) -> None:
     console = Console()
     c, fc = summary["counts"], summary["frame_counts"]
     console.print(
-        f"[bold]worlds: {c['ok']} computed, {c['skipped']} cached, {c['failed']} failed; "
+        f"[bold]{summary.get('unit', 'worlds')}: {c['ok']} computed, {c['skipped']} cached, "
+        f"{c['failed']} failed; "
         f"frames: {fc['ok']} computed, {fc['skipped']} cached, {fc['failed']} failed[/bold] "
         f"— dataset {summary['dataset']!r}"
     )
@@ -224,6 +225,8 @@ def print_generate_summary(summary: dict[str, Any]) -> None:
             ("label recall (3D IoU 0.3)", "label_recall", ".0%"),
             ("label precision (3D IoU 0.3)", "label_precision", ".0%"))
     for name, key, fmt in rows:
+        if not summary.get("ground_truth", True) and ("GT" in name or "label_" in key):
+            continue  # a capture folder has no ground truth to compare with
         table.add_row(name, *(_fmt(summary["geometry"][g][key], fmt) for g in geoms))
     console.print(table)
     secs = summary.get("seconds_per_frame", {})
@@ -244,6 +247,10 @@ def print_generate_summary(summary: dict[str, Any]) -> None:
 
 @app.command()
 def generate(
+    captures: Path | None = typer.Option(
+        None, "--captures", help="A capture folder of RGB scenes (rgb.png + intrinsics.yaml "
+        "[+ lidar.npy] per sub-folder) instead of procedural worlds; --frames = radar poses "
+        "per scene."),
     worlds: int | None = typer.Option(None, "--worlds", "-n", help="Number of worlds [default 4]."),
     frames: int | None = typer.Option(None, "--frames", "-m", help="Frames per world [default 4]."),
     out: str = typer.Option("out/store", "--out", "-o",
@@ -296,6 +303,18 @@ def generate(
     exit_unless_writable(out)
     if not no_prefect:
         _prefect_env(verbose)  # before the config check below imports Prefect
+    if captures is not None:
+        from sim2radar.cli.captures import generate_from_captures
+
+        generate_from_captures(
+            captures, config=config, out=out, dataset=dataset, frames=frames, radar=radar,
+            reconstruction=reconstruction, seed=seed, export_openpcdet=export_openpcdet,
+            png_dir=png_dir, no_png=no_png, force=force, strict=strict, workers=workers,
+            dask=dask, no_prefect=no_prefect, json_out=json_out, verbose=verbose,
+            procedural={"--worlds": worlds, "--first-seed": first_seed, "--geometry": geometry,
+                        "--width": width, "--height": height, "--spp": spp,
+                        "--material-override": material_override})
+        return
     try:
         cfg = load_generate_config(config) if config is not None else {}
         rig = dict(cfg.get("rig") or {})
