@@ -163,7 +163,10 @@ def generate_from_captures(captures: Path, *, config: Path | None, out: str,
         CaptureSpec(**settings)  # every field checked before any work
         find_captures(captures)
         if dask:
+            from sim2radar.cli.simulate import _prefect_env
             from tasks.runners import task_runner
+
+            _prefect_env(verbose)  # before Prefect is imported
 
             task_runner(workers, dask)
     except (ValueError, FileNotFoundError, ImportError) as exc:

@@ -301,8 +301,6 @@ def generate(
     from sim2radar.cli.simulate import _default_png_dir, _prefect_env
 
     exit_unless_writable(out)
-    if not no_prefect:
-        _prefect_env(verbose)  # before the config check below imports Prefect
     if captures is not None:
         from sim2radar.cli.captures import generate_from_captures
 
@@ -315,6 +313,8 @@ def generate(
                         "--width": width, "--height": height, "--spp": spp,
                         "--material-override": material_override})
         return
+    if not no_prefect:
+        _prefect_env(verbose)  # before the config check below imports Prefect
     try:
         cfg = load_generate_config(config) if config is not None else {}
         rig = dict(cfg.get("rig") or {})
