@@ -21,7 +21,8 @@ import statistics
 import tempfile
 import time
 
-from tasks.dataset import generate_dataset_plain, resolve_spec
+from sim2radar.factory.spec import resolve_spec
+from tasks.dataset import generate_dataset_plain
 
 N_FRAMES = int(os.environ.get("SIM2RADAR_BENCH_GENERATE_FRAMES", "3"))
 WORLD_SEED = 0

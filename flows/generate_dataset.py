@@ -33,6 +33,7 @@ from prefect.futures import as_completed
 from prefect.task_runners import ThreadPoolTaskRunner
 
 from flows import _progress
+from sim2radar.factory.spec import resolve_spec
 from storage import ArtifactStore
 from tasks.dataset import (
     WorldDatasetOutcome,
@@ -40,7 +41,6 @@ from tasks.dataset import (
     failed_world_outcome,
     generate_world_dataset_task,
     record_world_dataset_task,
-    resolve_spec,
     summarize_dataset,
 )
 from tasks.runners import task_runner

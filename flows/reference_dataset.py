@@ -34,7 +34,7 @@ def reference_spec(frames_per_world: int = 10, radar: Any = REFERENCE_RADAR, wor
                    rig: Any = None, seed: int = 0, labels: Any = None):
     """The :class:`tasks.dataset.DatasetSpec` of a reference dataset: ground-truth geometry,
     the reference radar, no RGB / LiDAR rendering."""
-    from tasks.dataset import resolve_spec
+    from sim2radar.factory.spec import resolve_spec
 
     return resolve_spec(frames_per_world, "ground_truth", radar, None, world, rig, seed,
                         labels=labels, render_rgb=False)

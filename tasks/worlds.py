@@ -85,17 +85,9 @@ class WorldOutcome:
 
 
 def _configs(world_cfg, rig):
-    from sim2radar.worlds import RigConfig, WorldConfig, make_rig_config, make_world_config
+    from sim2radar.worlds.config import resolve_world_configs
 
-    if world_cfg is None:
-        world_cfg = WorldConfig()
-    elif isinstance(world_cfg, dict):
-        world_cfg = make_world_config(world_cfg)
-    if rig is None:
-        rig = RigConfig()
-    elif isinstance(rig, dict):
-        rig = make_rig_config(rig)
-    return world_cfg, rig
+    return resolve_world_configs(world_cfg, rig)
 
 
 def world_keys(seed: int, n_frames: int, world_cfg=None, rig=None,

@@ -125,7 +125,8 @@ def run_generate(
         _prefect_env(verbose)
     from rich.progress import Progress
 
-    from tasks.dataset import generate_dataset_plain, resolve_spec, world_bev_pngs
+    from sim2radar.factory.spec import resolve_spec
+    from tasks.dataset import generate_dataset_plain, world_bev_pngs
 
     spec = resolve_spec(frames, geometry, radar, reconstruction, world, rig, seed, class_name,
                         labels, material_override, _label_range(export_label_range_m),
@@ -344,7 +345,7 @@ def generate(
             material_override=material_override or cfg.get("material_override"),
             export_label_range_m=cfg.get("export_label_range_m", "detector"),
         )
-        from tasks.dataset import resolve_spec
+        from sim2radar.factory.spec import resolve_spec
 
         # validate every config before any work (bad field -> exit 2 with its name)
         resolve_spec(params["frames"], params["geometry"], params["radar"],

@@ -1,6 +1,9 @@
-"""The dataset factory's own logic, independent of Prefect: labelling rules (door visibility to
-the radar, the detector's range filter), seed recipes and the reference-radar frame pipeline.
-``tasks/`` wraps these with caching and store I/O; ``flows/`` composes the tasks."""
+"""The dataset factory's own logic, independent of Prefect and of the store: the run
+specification (:mod:`.spec`), labelling rules (door visibility to the radar, the detector's
+range filter: :mod:`.labels`), seed recipes (:mod:`.seeds`), dataset frames (:mod:`.frames`),
+the capture folder and radar poses in reconstructed free space (:mod:`.captures`) and the
+reference radar (:mod:`.reference`). ``tasks/`` wraps these with keys, caching, store I/O and
+outcome records; ``flows/`` composes the tasks."""
 
 from sim2radar.factory.labels import (
     LabelConfig,

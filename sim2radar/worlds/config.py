@@ -32,6 +32,7 @@ __all__ = [
     "load_worlds_config",
     "make_world_config",
     "make_rig_config",
+    "resolve_world_configs",
     "radar_view",
     "LAYOUTS",
     "DOOR_STATES",
@@ -397,3 +398,17 @@ def load_worlds_config(path: str | Path) -> tuple[WorldConfig, RigConfig]:
         make_world_config(doc.get("world"), source=str(path)),
         make_rig_config(doc.get("rig"), source=str(path)),
     )
+
+
+def resolve_world_configs(world_cfg=None, rig=None) -> tuple[WorldConfig, RigConfig]:
+    """(WorldConfig, RigConfig) from config objects, dicts of their fields or None (defaults);
+    a bad field raises :class:`WorldConfigError` naming it."""
+    if world_cfg is None:
+        world_cfg = WorldConfig()
+    elif isinstance(world_cfg, dict):
+        world_cfg = make_world_config(world_cfg)
+    if rig is None:
+        rig = RigConfig()
+    elif isinstance(rig, dict):
+        rig = make_rig_config(rig)
+    return world_cfg, rig

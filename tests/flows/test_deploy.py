@@ -41,7 +41,7 @@ def test_generate_deployments_resolve_to_the_factory_job(monkeypatch):
     from prefect.client.schemas.schedules import CronSchedule
     from prefect.flows import load_flow_from_entrypoint
 
-    from tasks.dataset import resolve_spec
+    from sim2radar.factory.spec import resolve_spec
 
     monkeypatch.chdir(REPO)
     nightly = _deployment("nightly-generate")

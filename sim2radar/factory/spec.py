@@ -1,0 +1,240 @@
+"""The run specification of the procedural-world factory: :class:`DatasetSpec` (frames per world,
+geometries, radar, reconstruction, world, rig, seed, label rule, ...), its validation and
+resolution (:func:`resolve_spec`), and what an export says about itself
+(:func:`dataset_metadata`). Pure configuration: no store, no Prefect."""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from sim2radar.factory.labels import (
+    DEFAULT_POINT_CLOUD_RANGE_M,
+    LabelConfig,
+    boxes_in_point_cloud_range,
+)
+
+__all__ = ["GEOMETRIES", "DatasetSpec", "resolve_spec", "as_spec", "dataset_metadata"]
+
+#: Geometry modes: radar simulated on the world's meshes, or on meshes reconstructed from RGB.
+GEOMETRIES = ("ground_truth", "reconstructed")
+
+
+@dataclasses.dataclass(frozen=True)
+class DatasetSpec:
+    """Resolved configuration of a dataset run (everything but the world seeds and the store).
+
+    Attributes
+    ----------
+    frames_per_world : int — frames along each world's trajectory.
+    geometries : tuple[str, ...] — subset of :data:`GEOMETRIES`.
+    radar : RadarConfig
+    reconstruction : ReconstructionConfig
+    world : WorldConfig
+    rig : RigConfig — its radar FOV/range (for the door flags) match ``radar``.
+    seed : int — run seed: trajectories and radar noise derive from it.
+    class_name : str — label class of door boxes (the detector's ``class_names``).
+    labels : LabelConfig — a door is a label when the radar sees enough of its doorway.
+    material_override : str or None — simulate every mesh as this material (the
+        "one material" ablation: what the material step contributes); None keeps each mesh's.
+    export_label_range_m : (6,) or None — OpenPCDet exports keep only labels whose centre lies
+        in this point-cloud range [m] (the detector's; None keeps every label).
+    render_rgb : bool — path trace RGB and cast LiDAR for the world frames (needed by
+        ``reconstructed``; a ground-truth-only run such as the reference radar can skip it).
+    """
+
+    frames_per_world: int
+    geometries: tuple[str, ...]
+    radar: Any
+    reconstruction: Any
+    world: Any
+    rig: Any
+    seed: int = 0
+    class_name: str = "door"
+    labels: LabelConfig = LabelConfig()
+    material_override: str | None = None
+    export_label_range_m: tuple[float, ...] | None = DEFAULT_POINT_CLOUD_RANGE_M
+    render_rgb: bool = True
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-able form (what the Prefect flow passes to its tasks)."""
+        return {
+            "frames_per_world": self.frames_per_world,
+            "geometry": list(self.geometries),
+            "radar": self.radar.to_dict(),
+            "reconstruction": self.reconstruction.to_dict(),
+            "world": self.world.model_dump(mode="json"),
+            "rig": self.rig.model_dump(mode="json"),
+            "seed": self.seed,
+            "class_name": self.class_name,
+            "labels": self.labels.model_dump(),
+            "material_override": self.material_override,
+            "export_label_range_m": (None if self.export_label_range_m is None
+                                     else list(self.export_label_range_m)),
+            "render_rgb": self.render_rgb,
+        }
+
+
+def _geometries(geometry: str | Sequence[str]) -> tuple[str, ...]:
+    if isinstance(geometry, str):
+        geometry = list(GEOMETRIES) if geometry == "both" else [geometry]
+    out = tuple(dict.fromkeys(geometry))
+    bad = [g for g in out if g not in GEOMETRIES]
+    if bad or not out:
+        raise ValueError(
+            f"geometry: unknown mode(s) {bad or list(geometry)}; use 'ground_truth', "
+            "'reconstructed' or 'both'"
+        )
+    return out
+
+
+def _reconstruction_config(value):
+    from sim2radar.reconstruct import ReconstructionConfig
+
+    if value is None:
+        return ReconstructionConfig()
+    if isinstance(value, ReconstructionConfig):
+        return value
+    if isinstance(value, dict):
+        try:
+            return ReconstructionConfig.model_validate(value)
+        except Exception as exc:
+            raise ValueError(f"reconstruction config: {exc}") from None
+    text = os.fspath(value)
+    if Path(text).suffix in (".yaml", ".yml") or Path(text).is_file():
+        return ReconstructionConfig.from_yaml(text)
+    return ReconstructionConfig.preset(text)
+
+
+def _radar_config(value):
+    from sim2radar.radar import RadarConfig, load_radar_config
+
+    if isinstance(value, RadarConfig):
+        return value
+    if isinstance(value, dict):
+        return RadarConfig.model_validate(value)
+    return load_radar_config(value)
+
+
+def _rig_for_radar(rig, radar):
+    """``rig`` with radar FOV/range fields set so its door flags describe ``radar``."""
+    from sim2radar.worlds import radar_view
+
+    want = (float(radar.azimuth_fov_deg), float(radar.elevation_fov_deg), float(radar.max_range_m))
+    if np.allclose(radar_view(rig), want, rtol=1e-9, atol=1e-9):
+        return rig  # unchanged -> the same world_frames keys as a plain worlds run
+    return rig.model_copy(update={"radar_azimuth_fov_deg": want[0],
+                                  "radar_elevation_fov_deg": want[1],
+                                  "radar_max_range_m": want[2]})
+
+
+def resolve_spec(
+    frames_per_world: int = 4,
+    geometry: str | Sequence[str] = "reconstructed",
+    radar: Any = "ti-mmwcas",
+    reconstruction: Any = None,
+    world: Any = None,
+    rig: Any = None,
+    seed: int = 0,
+    class_name: str = "door",
+    labels: Any = None,
+    material_override: str | None = None,
+    export_label_range_m: Any = DEFAULT_POINT_CLOUD_RANGE_M,
+    render_rgb: bool = True,
+) -> DatasetSpec:
+    """Validate and resolve a run's configuration.
+
+    Parameters
+    ----------
+    frames_per_world : int >= 1
+    geometry : ``ground_truth``, ``reconstructed``, ``both`` or a list of modes
+    radar : preset name, YAML path, :class:`~sim2radar.radar.RadarConfig` or its dict
+    reconstruction : :class:`~sim2radar.reconstruct.ReconstructionConfig`, its dict, a YAML path
+        or a preset name (``builtin``, ``oracle``, ``builtin-oracle-depth``); None = built-in
+        backends with LiDAR (lidar / builtin / prior)
+    world, rig : WorldConfig / RigConfig or dicts of their fields (None = defaults)
+    seed : int — run seed
+    class_name : str — class of the door labels
+    labels : LabelConfig or its dict (None = defaults: visibility >= 0.2)
+    material_override : a material name for every mesh (one-material ablation) or None
+    export_label_range_m : (6,) point-cloud range of the exported labels, or None
+    render_rgb : bool — False only for ground-truth-only runs (no RGB, no LiDAR rendered)
+
+    Raises
+    ------
+    ValueError (incl. WorldConfigError, RadarConfigError) naming the bad field.
+    """
+    from sim2radar.worlds.config import resolve_world_configs
+
+    if int(frames_per_world) < 1:
+        raise ValueError(f"frames_per_world must be >= 1, got {frames_per_world}")
+    if not class_name or any(c.isspace() for c in class_name):
+        raise ValueError(f"class_name must be a non-empty word, got {class_name!r}")
+    radar_cfg = _radar_config(radar)
+    world_cfg, rig_cfg = resolve_world_configs(world, rig)
+    if material_override is not None:
+        from sim2radar.em import get_material
+
+        try:
+            material_override = get_material(material_override).name
+        except KeyError as exc:
+            raise ValueError(f"material_override: {exc}") from None
+    label_cfg = labels if isinstance(labels, LabelConfig) else LabelConfig.model_validate(
+        labels or {})
+    if not render_rgb and "reconstructed" in _geometries(geometry):
+        raise ValueError("render_rgb: the reconstructed geometry needs RGB and LiDAR frames")
+    if export_label_range_m is not None:
+        boxes_in_point_cloud_range(np.zeros((0, 7)), export_label_range_m)  # validates
+        export_label_range_m = tuple(float(v) for v in export_label_range_m)
+    return DatasetSpec(
+        frames_per_world=int(frames_per_world),
+        geometries=_geometries(geometry),
+        radar=radar_cfg,
+        reconstruction=_reconstruction_config(reconstruction),
+        world=world_cfg,
+        rig=_rig_for_radar(rig_cfg, radar_cfg),
+        seed=int(seed),
+        class_name=class_name,
+        labels=label_cfg,
+        material_override=material_override,
+        export_label_range_m=export_label_range_m,
+        render_rgb=bool(render_rgb),
+    )
+
+
+def as_spec(spec: DatasetSpec | dict) -> DatasetSpec:
+    """``spec`` as a :class:`DatasetSpec` (from its :meth:`~DatasetSpec.to_dict`, the form
+    Prefect passes between tasks); a spec object (DatasetSpec, or a capture run's
+    ``CaptureSpec``, which has the same export fields) is returned as it is."""
+    if not isinstance(spec, dict):
+        return spec
+    return resolve_spec(spec["frames_per_world"], spec["geometry"], spec["radar"],
+                        spec["reconstruction"], spec["world"], spec["rig"], spec["seed"],
+                        spec.get("class_name", "door"), spec.get("labels"),
+                        spec.get("material_override"),
+                        spec.get("export_label_range_m", DEFAULT_POINT_CLOUD_RANGE_M),
+                        spec.get("render_rgb", True))
+
+
+def dataset_metadata(spec: DatasetSpec, geometry: str, domain: str | None = None) -> dict:
+    """What a dataset export says about itself (``dataset.json``): its domain, radar and the
+    rules its labels follow."""
+    radar = spec.radar
+    return {
+        "domain": domain or (f"simulated ({radar.fidelity} radar {radar.name!r}, {geometry} "
+                             "geometry" + (f", every material {spec.material_override}"
+                                           if spec.material_override else "") + ")"),
+        "radar": radar.name, "radar_fidelity": radar.fidelity,
+        "radar_config_hash": radar.content_hash(),
+        "material_override": spec.material_override,
+        "label_rule": (f"doors the radar sees (>= {spec.labels.min_visibility:g} of the "
+                       "doorway unoccluded, in FOV and range)"
+                       + (" on the reconstructed geometry" if geometry == "reconstructed"
+                          else "")),
+        "class_name": spec.class_name, "run_seed": spec.seed,
+    }
