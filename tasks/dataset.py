@@ -55,9 +55,8 @@ from sim2radar.factory.frames import NEAR_BOX_MARGIN_M, DatasetFrame, points_nea
 from sim2radar.factory.labels import (
     DEFAULT_POINT_CLOUD_RANGE_M,
     boxes_in_point_cloud_range,
-    radar_visibility,
-    scene_ray_caster,
 )
+from sim2radar.factory.pipeline import frame_id_for, with_material
 from sim2radar.factory.seeds import frame_seed
 from sim2radar.factory.spec import (
     GEOMETRIES,
@@ -69,7 +68,13 @@ from sim2radar.factory.spec import (
 from storage import ArtifactStore, content_key, meshes_from_table
 from storage.frames import dataset_frame_from_table, dataset_frame_to_table
 from storage.schemas import DATASET_FRAMES as DATASET_FRAMES_SCHEMA
-from tasks.common import REMOTE_IO_RETRIES, REMOTE_IO_RETRY_DELAYS_S, jsonable, open_store
+from tasks.common import (
+    REMOTE_IO_RETRIES,
+    REMOTE_IO_RETRY_DELAYS_S,
+    jsonable,
+    open_store,
+    retry_transient_io,
+)
 
 __all__ = [
     "DATASET_STAGE_VERSION",
@@ -115,13 +120,6 @@ _TAG = {"ground_truth": "gt", "reconstructed": "rec"}
 # ---------------------------------------------------------------------------------------------
 # Keys and ids
 # ---------------------------------------------------------------------------------------------
-def frame_id_for(seed: int, frame_index: int) -> str:
-    """``world_<seed 6 digits>_f<index 3 digits>`` (OpenPCDet frame id and manifest row)."""
-    from storage.worlds import world_id_for
-
-    return f"{world_id_for(seed)}_f{int(frame_index):03d}"
-
-
 def frame_key(world_keys: dict[str, str], frame_index: int, geometry: str,
               spec: DatasetSpec) -> str:
     """Content key of one ``dataset_frames`` artifact."""
@@ -255,67 +253,16 @@ def read_dataset_frame(store: str | os.PathLike | ArtifactStore, key: str) -> Da
     return dataset_frame_from_table(open_store(store).read("dataset_frames", key))
 
 
-def _gt_labels(frame, world_scene, spec: DatasetSpec):
-    """Ground-truth doors the radar sees (on the world's meshes): boxes (radar frame), their
-    door indices and visibilities."""
-    from sim2radar.worlds import radar_view
-
-    boxes = np.asarray(frame.door_boxes_radar, np.float32).reshape(-1, 7)
-    vis = radar_visibility(boxes, scene_ray_caster(world_scene, frame.radar_to_world),
-                           radar_view(spec.rig), spec.labels)
-    idx = np.flatnonzero(vis >= spec.labels.min_visibility).astype(np.int32)
-    return boxes[idx], idx, vis[idx].astype(np.float32)
-
-
-def _with_material(meshes, material: str | None):
-    """The meshes, every one made of ``material`` (None: unchanged)."""
-    if material is None:
-        return meshes
-    return [dataclasses.replace(m, material=material) for m in meshes]
-
-
-def _render_seconds(frame) -> float:
-    """Render wall time of a world frame [s] (``total_s`` of the renderer's timings)."""
-    t = frame.timings_s or {}
-    return float(t.get("total_s", t.get("render_s", 0.0)))
-
-
-def _simulate(scene, radar, pose, seed):
-    from sim2radar.radar import simulate_scene_frame
-
-    return simulate_scene_frame(scene, radar, pose, seed=seed)
-
-
-def _ground_truth_frame(frame, world_id, world_scene, radar_scene, spec,
-                        radar_seed) -> DatasetFrame:
-    t0 = time.perf_counter()
-    rf = _simulate(radar_scene, spec.radar, frame.radar_to_world, radar_seed)
-    sim_s = time.perf_counter() - t0
-    gt, idx, vis = _gt_labels(frame, world_scene, spec)
-    return DatasetFrame(
-        frame_id=frame_id_for(frame.seed, frame.frame_index), world_id=world_id,
-        seed=frame.seed, frame_index=frame.frame_index, geometry="ground_truth",
-        radar_to_world=frame.radar_to_world, points=rf.points, doppler_mps=rf.doppler_mps,
-        boxes=gt, box_labels=(spec.class_name,) * len(gt), label_visibility=vis,
-        gt_boxes=gt, gt_door_index=idx, gt_points_near=points_near_boxes(rf.points, gt),
-        gt_visibility=vis, n_triangles=radar_scene.n_triangles,
-        timings_s={"render": _render_seconds(frame), "simulate": sim_s},
-        stats={"radar": rf.stats, "radar_seed": radar_seed},
-    )
-
-
 def _reconstructed_frame(frame, world_id, world_scene, store, spec,
                          radar_seed) -> tuple[DatasetFrame, dict[str, str]]:
-    from sim2radar.radar import RadarScene
-    from sim2radar.reconstruct import FrameInput, reconstruct
+    """The paper's pipeline on one world frame, its reconstruction read from the store when
+    cached (else computed and stored under :func:`_reconstruction_keys`)."""
+    from sim2radar.factory.pipeline import reconstruct_world_frame, reconstructed_frame
     from sim2radar.reconstruct.pipeline import STAGE_VERSION
-    from sim2radar.worlds import radar_view
     from storage.reconstruction import read_reconstruction, write_scene_artifacts
 
-    fid = frame_id_for(frame.seed, frame.frame_index)
     cam_to_radar = np.linalg.inv(frame.radar_to_world) @ frame.camera_to_world
     rkeys = _reconstruction_keys(frame, cam_to_radar, spec.reconstruction)
-    t0 = time.perf_counter()
     if all(store.exists(s, k) for s, k in rkeys.items()):
         meshes = meshes_from_table(store.read("scene_meshes", rkeys["scene_meshes"]))
         rec = read_reconstruction(store, rkeys["reconstruction"])
@@ -323,11 +270,8 @@ def _reconstructed_frame(frame, world_id, world_scene, store, spec,
         rec_seconds = float(rec["timings_s"].get("total", 0.0))
         info = {"fallbacks": rec["info"].get("fallbacks", []), "cached": True}
     else:
-        # the rig's calibration (camera pitch and height on the level rig) goes with the frame,
-        # as a real rig's would; ``reconstruction.rig_calibration: false`` ignores it
-        scene = reconstruct(FrameInput(frame.rgb, frame.intrinsics, frame.lidar_points, name=fid,
-                                       **frame.rig_calibration),
-                            spec.reconstruction, ground_truth=frame)
+        t0 = time.perf_counter()
+        scene = reconstruct_world_frame(frame, spec.reconstruction)
         write_scene_artifacts(
             store, scene, inputs={"image": _digest(frame)}, config=spec.reconstruction.to_dict(),
             camera_to_target=cam_to_radar, seed=frame.seed, stage_version=STAGE_VERSION)
@@ -336,32 +280,10 @@ def _reconstructed_frame(frame, world_id, world_scene, store, spec,
         rec_seconds = float(scene.timings_s.get("total", time.perf_counter() - t0))
         info = {"fallbacks": scene.info.get("fallbacks", []), "cached": False,
                 "n_segments": scene.n_segments}
-    if not meshes:
-        raise ValueError(f"{fid}: reconstruction produced no meshes; nothing for the radar")
-    boxes = np.asarray(boxes, np.float32).reshape(-1, 7)
-    n_fitted = int(len(boxes))
-    t0 = time.perf_counter()
-    radar_scene = RadarScene(_with_material(meshes, spec.material_override))
-    rf = _simulate(radar_scene, spec.radar, None, radar_seed)
-    sim_s = time.perf_counter() - t0
-    # the reconstructed doors the radar sees on the reconstructed geometry are the labels
-    vis = radar_visibility(boxes, scene_ray_caster(radar_scene), radar_view(spec.rig), spec.labels)
-    keep = vis >= spec.labels.min_visibility
-    boxes, vis = boxes[keep], vis[keep].astype(np.float32)
-    gt, idx, gt_vis = _gt_labels(frame, world_scene, spec)
-    out = DatasetFrame(
-        frame_id=fid, world_id=world_id, seed=frame.seed, frame_index=frame.frame_index,
-        geometry="reconstructed", radar_to_world=frame.radar_to_world, points=rf.points,
-        doppler_mps=rf.doppler_mps, boxes=boxes, box_labels=(spec.class_name,) * len(boxes),
-        label_visibility=vis, gt_boxes=gt, gt_door_index=idx,
-        gt_points_near=points_near_boxes(rf.points, gt), gt_visibility=gt_vis,
-        n_triangles=radar_scene.n_triangles,
-        timings_s={"render": _render_seconds(frame),
-                   "reconstruct": rec_seconds, "simulate": sim_s},
-        stats={"radar": rf.stats, "radar_seed": radar_seed, "reconstruction": info,
-               "reconstruction_keys": rkeys, "n_boxes_fitted": n_fitted},
-    )
-    return out, rkeys
+    df = reconstructed_frame(frame, world_id, world_scene, spec, radar_seed, meshes=meshes,
+                             door_boxes=boxes, reconstruct_s=rec_seconds,
+                             stats={"reconstruction": info, "reconstruction_keys": rkeys})
+    return df, rkeys
 
 
 def _digest(frame) -> str:
@@ -396,7 +318,7 @@ class _WorldInputs:
             from sim2radar.radar import RadarScene
 
             meshes = meshes_from_table(self.store.read("scene_meshes", self.keys["scene_meshes"]))
-            self._radar_scene = RadarScene(_with_material(meshes, self.material_override))
+            self._radar_scene = RadarScene(with_material(meshes, self.material_override))
         return self._radar_scene
 
 
@@ -512,7 +434,9 @@ def _compute_frame(inputs: _WorldInputs, k: int, geometry: str, world_id: str,
     radar_seed = frame_seed(spec.seed, frame.seed, k)
     scene = inputs.radar_scene()  # the world's meshes: the GT radar and the labels' visibility
     if geometry == "ground_truth":
-        return _ground_truth_frame(frame, world_id, scene, scene, spec, radar_seed), {}
+        from sim2radar.factory.pipeline import ground_truth_frame
+
+        return ground_truth_frame(frame, world_id, scene, spec, radar_seed), {}
     return _reconstructed_frame(frame, world_id, scene, store, spec, radar_seed)
 
 
@@ -797,7 +721,8 @@ def generate_world_dataset_task(seed: int, spec: dict, store: str, force: bool =
 
 
 @task(name="record-dataset-manifest", cache_policy=NO_CACHE, retries=REMOTE_IO_RETRIES,
-      retry_delay_seconds=REMOTE_IO_RETRY_DELAYS_S, persist_result=False)
+      retry_delay_seconds=REMOTE_IO_RETRY_DELAYS_S, retry_condition_fn=retry_transient_io,
+      persist_result=False)
 def record_world_dataset_task(store: str, dataset: str, outcome: WorldDatasetOutcome) -> list:
     """Prefect task around :func:`record_world_dataset` (retried: storage I/O)."""
     return record_world_dataset(store, dataset, outcome)

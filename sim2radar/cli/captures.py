@@ -80,9 +80,17 @@ def run_captures(captures: Path, *, store: str, dataset: str, settings: dict[str
             progress.update(bar, advance=1,
                             description=f"{outcome.world_id}: {outcome.status} ({pts} pts)")
 
-        summary = capture_dataset(captures, store, dataset, export_dir=export_dir, force=force,
-                                  workers=workers, dask_address=dask_address,
-                                  use_prefect=use_prefect, on_scene=on_scene, **settings)
+        from contextlib import nullcontext
+
+        from sim2radar.cli._app import quiet_recorded_failures
+        from tasks.capture import CAPTURE_STAGES
+
+        quiet = (quiet_recorded_failures(["capture-scene", *CAPTURE_STAGES], verbose)
+                 if use_prefect else nullcontext())
+        with quiet:
+            summary = capture_dataset(captures, store, dataset, export_dir=export_dir,
+                                      force=force, workers=workers, dask_address=dask_address,
+                                      use_prefect=use_prefect, on_scene=on_scene, **settings)
     summary["pngs"] = []
     if png_dir is not None:
         from sim2radar.factory.captures import CaptureSpec

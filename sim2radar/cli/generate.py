@@ -152,7 +152,10 @@ def run_generate(
             from tasks.runners import task_runner
 
             runner = task_runner(workers, dask_address)
-            with progress_callback(on_world):
+            from sim2radar.cli._app import quiet_recorded_failures
+
+            with progress_callback(on_world), \
+                    quiet_recorded_failures(["generate-world-dataset"], verbose):
                 try:
                     summary = generate_dataset_flow.with_options(
                         task_runner=runner, name=flow_name)(

@@ -24,6 +24,10 @@ def capture_folder(tmp_path_factory):
     broken.mkdir()
     (broken / "rgb.png").write_bytes(b"this is not a png")
     shutil.copy(root / "scene_001" / "intrinsics.yaml", broken / "intrinsics.yaml")
+    no_lidar = root / "scene_nolidar"  # the default depth backend needs LiDAR
+    no_lidar.mkdir()
+    for name in ("rgb.png", "intrinsics.yaml"):
+        shutil.copy(root / "scene_002" / name, no_lidar / name)
     return root
 
 
@@ -46,13 +50,14 @@ def test_capture_folder_to_radar_dataset_stage_by_stage(prefect_server, capture_
     store_root, export = tmp_path / "store", tmp_path / "openpcdet"
     first = capture_dataset(capture_folder, store_root, "lab", export_dir=export,
                             poses={"frames": FRAMES}, frames_per_task=2)
-    assert first["counts"] == {"ok": 2, "skipped": 0, "failed": 1}
+    assert first["counts"] == {"ok": 2, "skipped": 0, "failed": 2}
     assert first["frame_counts"] == {"ok": 2 * FRAMES, "skipped": 0, "failed": 0}
     store = ArtifactStore(store_root)
     rows = {r["scene_id"]: r for r in store.manifest("lab").rows()}
     assert rows["scene_broken"]["status"] == "failed"
     assert "[inputs]" in rows["scene_broken"]["error"]
     assert "rgb.png: not a readable image" in rows["scene_broken"]["error"]
+    assert rows["scene_nolidar"]["error"].startswith("[depth]")
     assert {f"scene_001_f{k:03d}" for k in range(FRAMES)} <= set(rows)
     for stage in ("depth_maps", "segmentations", "material_labels", "scene_meshes",
                   "reconstruction"):
@@ -64,6 +69,7 @@ def test_capture_folder_to_radar_dataset_stage_by_stage(prefect_server, capture_
         assert states[f"scene_001-{stage}"] == "Completed", stage
     assert states["scene_001-simulate-f000"] == states["scene_001-simulate-f002"] == "Completed"
     assert "scene_broken-depth" not in states  # its inputs failed before any step
+    assert states["scene_nolidar-depth"] == "Failed" and "scene_nolidar-segments" not in states
 
     # the OpenPCDet export: every frame's points and labels, the domain in dataset.json
     meta = json.loads((export / "dataset.json").read_text())
@@ -78,7 +84,7 @@ def test_capture_folder_to_radar_dataset_stage_by_stage(prefect_server, capture_
     # a second run computes nothing: every step ends Cached, the frames are read back
     second = capture_dataset(capture_folder, store_root, "lab", export_dir=export,
                              poses={"frames": FRAMES}, frames_per_task=2)
-    assert second["counts"] == {"ok": 0, "skipped": 2, "failed": 1}
+    assert second["counts"] == {"ok": 0, "skipped": 2, "failed": 2}
     states = _task_runs()
     for stage in ("depth", "segments", "materials", "scene"):
         assert states[f"scene_002-{stage}"] == "Cached", stage

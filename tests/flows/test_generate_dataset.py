@@ -121,7 +121,7 @@ def test_second_run_recomputes_nothing(run, monkeypatch):
     def boom(*a, **k):
         raise AssertionError("recomputed a cached frame")
 
-    monkeypatch.setattr(td, "_simulate", boom)
+    monkeypatch.setattr("sim2radar.radar.simulate_scene_frame", boom)
     monkeypatch.setattr("sim2radar.reconstruct.reconstruct", boom)
     monkeypatch.setattr("sim2radar.worlds.render_frame", boom)
     files = sorted(p for p in (run["root"] / "store").rglob("*.parquet")
