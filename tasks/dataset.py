@@ -617,11 +617,9 @@ def export_store_dataset(store, dataset: str, geometry: str, export_dir: str | o
                          f"geometry with {dataset}:ground_truth or {dataset}:reconstructed")
     first = read_dataset_frame(store, frames[0].artifacts[f"dataset_frames/{geometry}"])
     fidelity = (first.stats.get("radar") or {}).get("fidelity", "raytrace")
-    from sim2radar.factory.reference import DOMAIN_LABEL
+    from sim2radar.factory.reference import stored_dataset_domain
 
-    # the signal-level radar on ground-truth geometry is the reference radar: a proxy
-    domain = (DOMAIN_LABEL if fidelity == "signal" and geometry == "ground_truth"
-              else f"simulated ({fidelity} radar, {geometry} geometry)")
+    domain = stored_dataset_domain(fidelity, geometry)
     return export_openpcdet(store, outcomes, export_dir, geometry, seed=seed,
                             with_doppler=fidelity == "signal",
                             metadata={"domain": domain, "source": f"store dataset {dataset!r}"})

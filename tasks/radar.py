@@ -29,6 +29,7 @@ import numpy as np
 from prefect import task
 from prefect.cache_policies import NO_CACHE
 
+from sim2radar.factory.seeds import scene_file_frame_seed
 from storage import (
     ArtifactStore,
     content_key,
@@ -128,12 +129,6 @@ def scene_keys(scene_path: str | os.PathLike, radar, seed: int = 0) -> dict[str,
     return {"scene_meshes": scene_key, "radar_points": radar_key, "scene_files": digest}
 
 
-def _frame_seed(seed: int, scene_key: str, frame_index: int) -> int:
-    """Independent per-frame seed from (run seed, scene, frame) (NumPy SeedSequence)."""
-    entropy = [int(seed), int(scene_key[:8], 16), int(frame_index)]
-    return int(np.random.SeedSequence(entropy).generate_state(1)[0])
-
-
 def simulate_scene(
     scene_path: str | os.PathLike,
     radar: Any = "ti-mmwcas",
@@ -222,7 +217,8 @@ def _compute(scene_path, scene_id, cfg, store, keys, seed, timings, simulate_fn)
     points, seconds, stats = [], [], []
     for k, pose in enumerate(scene.radar_poses):
         t0 = time.perf_counter()
-        frame = simulate_fn(geometry, cfg, pose, seed=_frame_seed(seed, keys["scene_meshes"], k))
+        frame = simulate_fn(geometry, cfg, pose,
+                            seed=scene_file_frame_seed(seed, keys["scene_meshes"], k))
         seconds.append(time.perf_counter() - t0)
         pts = np.asarray(frame.points, dtype=np.float32).reshape(-1, 4)
         points.append(pts)

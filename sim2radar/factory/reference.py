@@ -24,6 +24,7 @@ from sim2radar.datasets.splits import split_groups
 
 __all__ = [
     "DOMAIN_LABEL",
+    "stored_dataset_domain",
     "PAPER_SPLIT_FRAMES",
     "REFERENCE_FIRST_SEED",
     "ReferencePlan",
@@ -62,6 +63,15 @@ class ReferencePlan:
     def split_frames(self) -> dict[str, int]:
         """Frames per split."""
         return {k: int(sum(self.frames_by_seed[s] for s in v)) for k, v in self.splits.items()}
+
+
+def stored_dataset_domain(fidelity: str, geometry: str) -> str:
+    """The domain of frames already in a store, from their radar fidelity and geometry: the
+    signal-level radar on ground-truth geometry is the reference radar (:data:`DOMAIN_LABEL`,
+    a proxy for measured radar); anything else is simulated."""
+    if fidelity == "signal" and geometry == "ground_truth":
+        return DOMAIN_LABEL
+    return f"simulated ({fidelity} radar, {geometry} geometry)"
 
 
 def plan_reference(

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["frame_seed", "pose_seed", "scene_seed"]
+__all__ = ["frame_seed", "pose_seed", "scene_seed", "scene_file_frame_seed"]
 
 
 def frame_seed(run_seed: int, world_seed: int, frame_index: int) -> int:
@@ -27,3 +27,10 @@ def pose_seed(run_seed: int, scene_seed_: int) -> int:
     """Seed of the radar-pose sampling of one capture scene, from (run seed, scene seed)."""
     ss = np.random.SeedSequence([int(run_seed), int(scene_seed_), 0x9053])
     return int(ss.generate_state(1)[0])
+
+
+def scene_file_frame_seed(run_seed: int, scene_key: str, frame_index: int) -> int:
+    """Radar seed of one pose of a scene file (``sim2radar simulate``), from (run seed, the
+    scene's content key (hex), frame index)."""
+    entropy = [int(run_seed), int(scene_key[:8], 16), int(frame_index)]
+    return int(np.random.SeedSequence(entropy).generate_state(1)[0])

@@ -35,3 +35,11 @@ def test_bad_plans_are_refused_with_the_field_named():
         plan_reference(0, worlds=0)
     with pytest.raises(ValueError, match="first_seed"):
         plan_reference(-1)
+
+
+def test_stored_dataset_domain_names_the_reference_radar_only_on_ground_truth():
+    from sim2radar.factory.reference import DOMAIN_LABEL, stored_dataset_domain
+
+    assert stored_dataset_domain("signal", "ground_truth") == DOMAIN_LABEL
+    assert stored_dataset_domain("signal", "reconstructed").startswith("simulated (signal")
+    assert stored_dataset_domain("raytrace", "ground_truth").startswith("simulated (raytrace")
