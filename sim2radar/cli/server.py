@@ -336,8 +336,9 @@ def use_managed_server() -> None:
         return
     try:
         state, started = ensure_server(home)
-    except ServerError as exc:
-        typer.secho(f"error: {exc}\n(`--no-prefect` runs without Prefect; "
+    except (ServerError, OSError) as exc:
+        why = exc if isinstance(exc, ServerError) else f"PREFECT_HOME {home}: {exc.strerror}"
+        typer.secho(f"error: {why}\n(`--no-prefect` runs without Prefect; "
                     f"{MODE_ENV}=ephemeral uses Prefect's temporary server)", fg="red", err=True)
         raise typer.Exit(1) from None
     os.environ["PREFECT_API_URL"] = state.api_url
@@ -369,7 +370,7 @@ def start_cmd(home: Path | None = typer.Option(None, "--home", help=_HOME_HELP))
     """Start the server now (commands otherwise start it on first use); print its address."""
     try:
         state, started = ensure_server(home)
-    except ServerError as exc:
+    except (ServerError, OSError) as exc:
         typer.secho(f"error: {exc}", fg="red", err=True)
         raise typer.Exit(1) from None
     typer.echo(f"{'started' if started else 'running'}: {_describe(state)}")

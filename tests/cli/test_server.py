@@ -108,11 +108,11 @@ def test_a_killed_generate_leaves_no_process_but_the_managed_server(five_at_once
     home, _ = five_at_once
     server, _ = srv.ensure_server(home)
     store, opd = tmp_path / "store", tmp_path / "openpcdet"
-    proc = subprocess.Popen([*CLI, "generate", *TINY, "--frames", "4", "--out", str(store),
+    proc = subprocess.Popen([*CLI, "generate", *TINY, "--frames", "8", "--out", str(store),
                              "--export-openpcdet", str(opd)], cwd=REPO, env=_env(home),
                             stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
                             start_new_session=True)
-    try:  # kill it inside the flow: after its world, before its four frames are done
+    try:  # kill it inside the flow: after its world, before its eight frames are done
         deadline = time.monotonic() + 120
         while not list(store.glob("world_specs/*.parquet")) and proc.poll() is None \
                 and time.monotonic() < deadline:
