@@ -14,46 +14,7 @@ import typer
 
 from sim2radar.cli.worlds import worlds_app
 
-__all__ = ["capture_settings", "generate_from_captures", "run_captures", "print_stage_table"]
-
-#: Generate settings that describe procedural worlds and mean nothing for a capture folder.
-PROCEDURAL_ONLY = ("worlds", "first_seed", "geometry", "world", "rig", "material_override")
-
-
-def capture_settings(cfg: dict[str, Any], config_path: Path | None, *, frames: int | None,
-                     radar: str | None, reconstruction: str | None,
-                     seed: int | None) -> dict[str, Any]:
-    """:class:`~sim2radar.factory.captures.CaptureSpec` fields from a generate YAML (already
-    read) and the command-line options (which win).
-
-    Raises
-    ------
-    ValueError naming the file and the setting that does not apply to captures.
-    """
-    where = f"{config_path}: " if config_path is not None else ""
-    bad = [k for k in PROCEDURAL_ONLY if cfg.get(k) is not None]
-    if bad:
-        raise ValueError(f"{where}{bad} describe procedural worlds; a capture folder run takes "
-                         "radar, reconstruction, seed, class_name, labels, poses, frames, "
-                         "export_label_range_m, dataset")
-    poses = dict(cfg.get("poses") or {})
-    n = frames if frames is not None else cfg.get("frames")
-    if n is not None:
-        poses["frames"] = n
-    out: dict[str, Any] = {
-        "radar": radar or cfg.get("radar", "ti-mmwcas"),
-        "reconstruction": reconstruction or cfg.get("reconstruction"),
-        "poses": poses,
-        "seed": seed if seed is not None else cfg.get("seed", 0),
-        "class_name": cfg.get("class_name", "door"),
-        "labels": cfg.get("labels") or {},
-    }
-    if "export_label_range_m" in cfg:
-        from sim2radar.cli.generate import _label_range
-
-        out["export_label_range_m"] = _label_range(cfg["export_label_range_m"])
-    return out
-
+__all__ = ["generate_from_captures", "run_captures", "print_stage_table"]
 
 def run_captures(captures: Path, *, store: str, dataset: str, settings: dict[str, Any],
                  export_dir: str | None, png_dir: Path | None, force: bool, workers: int,
@@ -164,9 +125,10 @@ def generate_from_captures(captures: Path, *, config: Path | None, out: str,
         if dask and no_prefect:
             raise ValueError("--dask needs the Prefect engine: drop --no-prefect")
         cfg = load_generate_config(config) if config is not None else {}
+        from sim2radar.factory.captures import CaptureSpec, capture_settings, find_captures
+
         settings = capture_settings(cfg, config, frames=frames, radar=radar,
                                     reconstruction=reconstruction, seed=seed)
-        from sim2radar.factory.captures import CaptureSpec, find_captures
 
         CaptureSpec(**settings)  # every field checked before any work
         find_captures(captures)

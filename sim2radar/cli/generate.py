@@ -17,54 +17,12 @@ from pathlib import Path
 from typing import Any
 
 import typer
-import yaml
 
 from sim2radar.cli._app import app, exit_unless_writable
-from sim2radar.configio import whole_number
+from sim2radar.factory.spec import label_range as _label_range
+from sim2radar.factory.spec import load_generate_config
 
 __all__ = ["generate", "load_generate_config", "print_generate_summary", "run_generate"]
-
-_CONFIG_KEYS = {"worlds", "first_seed", "frames", "geometry", "radar", "reconstruction", "seed",
-                "class_name", "world", "rig", "dataset", "labels", "material_override",
-                "export_label_range_m", "poses"}
-
-
-#: Whole-number settings and their smallest allowed value (None: any integer).
-_INT_KEYS = {"worlds": 1, "first_seed": None, "frames": 1, "seed": None}
-
-
-def load_generate_config(path: str | Path) -> dict[str, Any]:
-    """Read a generate YAML; relative radar/reconstruction file paths resolve against its folder.
-
-    Raises
-    ------
-    ValueError naming the file and the bad key.
-    """
-    path = Path(path)
-    if not path.is_file():
-        raise ValueError(f"{path}: config file not found")
-    try:
-        doc = yaml.safe_load(path.read_text()) or {}
-    except yaml.YAMLError as exc:
-        raise ValueError(f"{path}: invalid YAML: {exc}") from None
-    if not isinstance(doc, dict):
-        raise ValueError(f"{path}: expected a mapping of settings")
-    unknown = sorted(set(doc) - _CONFIG_KEYS)
-    if unknown:
-        raise ValueError(f"{path}: unknown key(s) {unknown}; allowed: {sorted(_CONFIG_KEYS)}")
-    for key in ("world", "rig"):
-        if doc.get(key) is not None and not isinstance(doc[key], dict):
-            raise ValueError(f"{path}: '{key}' must be a mapping of fields")
-    for key, minimum in _INT_KEYS.items():
-        if key in doc:
-            doc[key] = whole_number(doc[key], path, key, minimum=minimum)
-    for key in ("radar", "reconstruction"):
-        value = doc.get(key)
-        if isinstance(value, str) and value.endswith((".yaml", ".yml")) \
-                and not Path(value).is_absolute():
-            doc[key] = str((path.parent / value).resolve())
-    return doc
-
 
 def _progress_columns():
     from rich.progress import BarColumn, MofNCompleteColumn, TextColumn, TimeElapsedColumn
@@ -172,13 +130,6 @@ def run_generate(
 
         summary["pngs"] = world_bev_pngs(store, outcomes_from_summary(summary), png_dir, spec)
     return summary
-
-
-def _label_range(value: Any):
-    """``"detector"`` -> the paper's PointPillars point-cloud range; a list or None as given."""
-    from sim2radar.factory.labels import DEFAULT_POINT_CLOUD_RANGE_M
-
-    return DEFAULT_POINT_CLOUD_RANGE_M if value == "detector" else value
 
 
 def _fmt(v: float, spec: str = ".1f") -> str:

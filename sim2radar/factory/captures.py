@@ -54,6 +54,7 @@ from sim2radar.factory.labels import (
 __all__ = [
     "CaptureScene",
     "CaptureSpec",
+    "capture_settings",
     "PoseSampling",
     "find_captures",
     "load_capture_frame",
@@ -182,6 +183,46 @@ class CaptureSpec(BaseModel):
         """(azimuth FOV [deg], elevation FOV [deg], max range [m]) of the radar."""
         r = self.radar
         return float(r.azimuth_fov_deg), float(r.elevation_fov_deg), float(r.max_range_m)
+
+
+#: Generate settings that describe procedural worlds and mean nothing for a capture folder.
+PROCEDURAL_ONLY = ("worlds", "first_seed", "geometry", "world", "rig", "material_override")
+
+
+def capture_settings(cfg: dict[str, Any], config_path: str | os.PathLike | None, *,
+                     frames: int | None, radar: str | None, reconstruction: str | None,
+                     seed: int | None) -> dict[str, Any]:
+    """:class:`~sim2radar.factory.captures.CaptureSpec` fields from a generate YAML (already
+    read) and the command-line options (which win).
+
+    Raises
+    ------
+    ValueError naming the file and the setting that does not apply to captures.
+    """
+    where = f"{config_path}: " if config_path is not None else ""
+    bad = [k for k in PROCEDURAL_ONLY if cfg.get(k) is not None]
+    if bad:
+        raise ValueError(f"{where}{bad} describe procedural worlds; a capture folder run takes "
+                         "radar, reconstruction, seed, class_name, labels, poses, frames, "
+                         "export_label_range_m, dataset")
+    poses = dict(cfg.get("poses") or {})
+    n = frames if frames is not None else cfg.get("frames")
+    if n is not None:
+        poses["frames"] = n
+    out: dict[str, Any] = {
+        "radar": radar or cfg.get("radar", "ti-mmwcas"),
+        "reconstruction": reconstruction or cfg.get("reconstruction"),
+        "poses": poses,
+        "seed": seed if seed is not None else cfg.get("seed", 0),
+        "class_name": cfg.get("class_name", "door"),
+        "labels": cfg.get("labels") or {},
+    }
+    if "export_label_range_m" in cfg:
+        from sim2radar.factory.spec import label_range
+
+        out["export_label_range_m"] = label_range(cfg["export_label_range_m"])
+    return out
+
 
 
 # ---------------------------------------------------------------------------------------------

@@ -12,14 +12,17 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import yaml
 
+from sim2radar.configio import whole_number
 from sim2radar.factory.labels import (
     DEFAULT_POINT_CLOUD_RANGE_M,
     LabelConfig,
     boxes_in_point_cloud_range,
 )
 
-__all__ = ["GEOMETRIES", "DatasetSpec", "resolve_spec", "as_spec", "dataset_metadata"]
+__all__ = ["GEOMETRIES", "DatasetSpec", "resolve_spec", "as_spec", "dataset_metadata",
+           "GENERATE_CONFIG_KEYS", "load_generate_config", "label_range"]
 
 #: Geometry modes: radar simulated on the world's meshes, or on meshes reconstructed from RGB.
 GEOMETRIES = ("ground_truth", "reconstructed")
@@ -238,3 +241,56 @@ def dataset_metadata(spec: DatasetSpec, geometry: str, domain: str | None = None
                           else "")),
         "class_name": spec.class_name, "run_seed": spec.seed,
     }
+
+
+# ---------------------------------------------------------------------------------------------
+# The generate YAML (configs/generate/*.yaml)
+# ---------------------------------------------------------------------------------------------
+#: Settings a generate YAML (``sim2radar generate --config``) may hold.
+GENERATE_CONFIG_KEYS = {"worlds", "first_seed", "frames", "geometry", "radar", "reconstruction", "seed",
+                "class_name", "world", "rig", "dataset", "labels", "material_override",
+                "export_label_range_m", "poses"}
+
+
+#: Whole-number settings and their smallest allowed value (None: any integer).
+_INT_KEYS = {"worlds": 1, "first_seed": None, "frames": 1, "seed": None}
+
+
+def load_generate_config(path: str | Path) -> dict[str, Any]:
+    """Read a generate YAML; relative radar/reconstruction file paths resolve against its folder.
+
+    Raises
+    ------
+    ValueError naming the file and the bad key.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise ValueError(f"{path}: config file not found")
+    try:
+        doc = yaml.safe_load(path.read_text()) or {}
+    except yaml.YAMLError as exc:
+        raise ValueError(f"{path}: invalid YAML: {exc}") from None
+    if not isinstance(doc, dict):
+        raise ValueError(f"{path}: expected a mapping of settings")
+    unknown = sorted(set(doc) - GENERATE_CONFIG_KEYS)
+    if unknown:
+        raise ValueError(f"{path}: unknown key(s) {unknown}; allowed: {sorted(GENERATE_CONFIG_KEYS)}")
+    for key in ("world", "rig"):
+        if doc.get(key) is not None and not isinstance(doc[key], dict):
+            raise ValueError(f"{path}: '{key}' must be a mapping of fields")
+    for key, minimum in _INT_KEYS.items():
+        if key in doc:
+            doc[key] = whole_number(doc[key], path, key, minimum=minimum)
+    for key in ("radar", "reconstruction"):
+        value = doc.get(key)
+        if isinstance(value, str) and value.endswith((".yaml", ".yml")) \
+                and not Path(value).is_absolute():
+            doc[key] = str((path.parent / value).resolve())
+    return doc
+
+
+def label_range(value: Any):
+    """``"detector"`` -> the paper's PointPillars point-cloud range; a list or None as given."""
+    from sim2radar.factory.labels import DEFAULT_POINT_CLOUD_RANGE_M
+
+    return DEFAULT_POINT_CLOUD_RANGE_M if value == "detector" else value
