@@ -11,7 +11,13 @@ import math
 
 import numpy as np
 
+#: Depth ``dy`` [m] of a doorway box through its wall when it is not measured. The procedural
+#: worlds' doorway box spans the wall (0.10–0.20 m, ``WorldConfig.wall_thickness_m``) plus the
+#: door frame's 1 cm lip on each face (:mod:`sim2radar.worlds.frame`): 0.17 m is the mean.
+DOOR_THICKNESS_M = 0.17
+
 __all__ = [
+    "DOOR_THICKNESS_M",
     "as_boxes",
     "wrap_heading",
     "transform_boxes",

@@ -25,8 +25,8 @@ import math
 
 import numpy as np
 
+from sim2radar.boxes import DOOR_THICKNESS_M, transform_boxes, wrap_heading
 from sim2radar.boxes import box_corners as _box_corners
-from sim2radar.boxes import transform_boxes
 
 __all__ = ["DoorFitConfig", "fit_door_box", "fit_door_boxes", "dedupe_boxes", "transform_boxes",
            "box_corners"]
@@ -40,7 +40,7 @@ class DoorFitConfig:
     ----------
     thickness_m : float [m] — box thickness ``dy`` when the doorway's depth is not seen: a
         door box is the doorway box, wall + 2 cm deep (procedural worlds: wall 0.10–0.20 m, so
-        0.12–0.22 m; 0.17 m is the mean, ``sim2radar/worlds/frame.py``).
+        0.12–0.22 m; the mean, :data:`sim2radar.boxes.DOOR_THICKNESS_M`, is the default).
     face_to_center_m : float [m] — how far behind the visible door face the box centre lies when
         no wall is seen next to the door.
     wall_search_m : float [m] — wall points within this distance of the door plane (and within
@@ -62,7 +62,7 @@ class DoorFitConfig:
         part lost). 0 disables both.
     """
 
-    thickness_m: float = 0.17
+    thickness_m: float = DOOR_THICKNESS_M
     face_to_center_m: float = 0.0
     wall_search_m: float = 0.35
     merge_gap_m: float = 0.2
@@ -76,8 +76,9 @@ class DoorFitConfig:
 
 
 def _wrap_half(angle: float | np.ndarray):
-    """Fold an angle into (−π/2, π/2]."""
-    a = (np.asarray(angle) + np.pi / 2) % np.pi - np.pi / 2
+    """Fold an angle into (−π/2, π/2] (:func:`sim2radar.boxes.wrap_heading`, with −π/2 taken
+    to +π/2)."""
+    a = wrap_heading(angle)
     a = np.where(np.isclose(a, -np.pi / 2), np.pi / 2, a)
     return float(a) if np.ndim(a) == 0 else a
 

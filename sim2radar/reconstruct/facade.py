@@ -46,6 +46,7 @@ import math
 import cv2
 import numpy as np
 
+from sim2radar.boxes import DOOR_THICKNESS_M, wrap_heading
 from sim2radar.camera import project
 
 __all__ = ["FacadeConfig", "FacadeDoor", "WallPlane", "find_facade_doors", "wall_raster"]
@@ -69,7 +70,8 @@ class FacadeConfig:
     above_cover_max : float — a post's edge coverage above the lintel must stay below this.
     lintel_cover : float — fraction of the span's seen lintel cells with a horizontal edge.
     min_seen : float — fraction of the doorway's cells that must be seen (on or behind the plane).
-    thickness_m : float [m] — doorway box depth behind the wall face.
+    thickness_m : float [m] — doorway box depth behind the wall face
+        (:data:`sim2radar.boxes.DOOR_THICKNESS_M`).
     face_band_m : float [m] — the wall face is measured on the cells up to this far beside the
         doorway and above its lintel (:func:`_wall_face`).
     nominal_top_m : float [m] — doorway top assumed when the lintel is out of view (above the
@@ -92,7 +94,7 @@ class FacadeConfig:
     above_cover_max: float = 0.45
     lintel_cover: float = 0.45
     min_seen: float = 0.5
-    thickness_m: float = 0.17
+    thickness_m: float = DOOR_THICKNESS_M
     face_band_m: float = 0.4
     nominal_top_m: float = 2.16
     min_post_seen_m: float = 1.3
@@ -285,7 +287,7 @@ def find_facade_doors(plane: WallPlane, floor_z: float, ceil_z: float, level_rot
     h, w = points_level.shape[:2]
     n = np.asarray(plane.normal, np.float64)
     a = plane.along
-    heading = (math.atan2(a[1], a[0]) + math.pi / 2) % math.pi - math.pi / 2
+    heading = float(wrap_heading(math.atan2(a[1], a[0])))
     for score, ja, jb, t in chosen:
         # a doorway cut by the image border runs past the raster's last seen column
         sa, sb = r.s[0] + c * ja, r.s[0] + c * jb

@@ -56,6 +56,7 @@ import math
 import cv2
 import numpy as np
 
+from sim2radar.boxes import DOOR_THICKNESS_M, wrap_heading
 from sim2radar.reconstruct.backproject import (
     FloorPlane,
     column_extent,
@@ -248,8 +249,9 @@ class BuiltinSegments:
     and the measured top adds up to ~0.1 m: a taller rectangle standing on the floor is a
     wall's surface, e.g. a wall facing the camera and cut by the image's top border),
     ``floor_tolerance_m`` (0.25), ``offset_thresh_m`` (0.015; plane-offset step
-    between neighbours, plus 0.4 % of the depth), ``door_thickness_m`` (0.17; depth of the
-    doorway boxes measured from wall openings), ``below_floor_m`` (0.08; points this far below
+    between neighbours, plus 0.4 % of the depth), ``door_thickness_m`` (0.17,
+    :data:`sim2radar.boxes.DOOR_THICKNESS_M`; depth of the doorway boxes measured from wall
+    openings), ``below_floor_m`` (0.08; points this far below
     the floor / above the ceiling are floor / ceiling), ``door_partial`` (True: tall planar
     fragments standing near the floor are doors), ``door_bottom_max_m`` (0.75; an opening of
     door height whose bottom is lower than this is a door, higher a window), ``grow_colour``
@@ -275,7 +277,7 @@ class BuiltinSegments:
         door_height_m: tuple[float, float] = (1.85, 2.3),
         floor_tolerance_m: float = 0.25,
         offset_thresh_m: float = 0.015,
-        door_thickness_m: float = 0.17,
+        door_thickness_m: float = DOOR_THICKNESS_M,
         fill_no_depth: bool = True,
         below_floor_m: float = 0.08,
         door_partial: bool = True,
@@ -895,8 +897,7 @@ class BuiltinSegments:
                 if kind == "door":
                     th = self.door_thickness_m
                     cxy = 0.5 * (a0 + a1) * along[:2] + (d - th / 2) * nrm[:2]
-                    heading = math.atan2(along[1], along[0])
-                    heading = (heading + math.pi / 2) % math.pi - math.pi / 2
+                    heading = wrap_heading(math.atan2(along[1], along[0]))
                     boxes.append([float(cxy[0]), float(cxy[1]), float(floor_z + top / 2),
                                   float(width), th, float(top), float(heading)])
         return regions, labels, scores, boxes

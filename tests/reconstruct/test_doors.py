@@ -150,3 +150,20 @@ def test_dedupe_keeps_the_wider_of_overlapping_boxes_in_one_wall():
     assert not np.any(np.isclose(out[:, 3], 0.39))
     assert np.allclose(out[0], door)  # input order kept
     assert dedupe_boxes(np.zeros((0, 7))).shape == (0, 7)
+
+
+def test_door_thickness_is_one_constant_the_worlds_mean_doorway_depth():
+    """The doorway box spans its wall plus the frame's 1 cm lip on each face: the worlds' wall
+    thickness range + 2 cm, whose middle is the default depth of every reconstructed doorway
+    box (door fitting, facade doors, wall openings)."""
+    from sim2radar.boxes import DOOR_THICKNESS_M
+    from sim2radar.reconstruct.facade import FacadeConfig
+    from sim2radar.reconstruct.segment_builtin import BuiltinSegments
+    from sim2radar.worlds import WorldConfig, generate_world
+
+    lo, hi = (t + 0.02 for t in WorldConfig().wall_thickness_m)
+    assert DOOR_THICKNESS_M == pytest.approx((lo + hi) / 2, abs=1e-9)
+    depths = [door.box_world[4] for seed in range(3) for door in generate_world(seed).doors]
+    assert depths and all(lo - 1e-6 <= dy <= hi + 1e-6 for dy in depths)
+    assert DoorFitConfig().thickness_m == FacadeConfig().thickness_m == DOOR_THICKNESS_M
+    assert BuiltinSegments().door_thickness_m == DOOR_THICKNESS_M
