@@ -243,19 +243,32 @@ def capture_dataset(
     dask_address: str | None = None,
     use_prefect: bool = True,
     on_scene=None,
+    retry_failed: bool = False,
     **spec_fields: Any,
 ) -> dict[str, Any]:
     """Run the capture flow (or its plain loop) on every scene of a capture folder.
 
     ``spec_fields`` are :class:`~sim2radar.factory.captures.CaptureSpec` fields (``radar``,
     ``reconstruction``, ``poses``, ``labels``, ``seed``, ...), validated before any work.
+    ``retry_failed``: only the scenes the ``dataset`` manifest records as failed run; the
+    export then holds every frame the manifest lists.
     """
+    from tasks.common import failed_scene_ids
     from tasks.runners import task_runner
 
     t0 = time.perf_counter()
     spec = CaptureSpec(**spec_fields)
     scenes = find_captures(captures)
     export = None if export_dir is None else os.fspath(export_dir)
+    whole_export = None
+    if retry_failed:
+        failed = set(failed_scene_ids(store, dataset))
+        scenes = [s for s in scenes if s.scene_id in failed]
+        whole_export, export = export, None
+        if not scenes:
+            summary = _finish(ArtifactStore(os.fspath(store)), dataset, spec, [], None)
+            summary["wall_s"] = time.perf_counter() - t0
+            return summary
     if not use_prefect:
         summary = capture_dataset_plain(scenes, spec, os.fspath(store), dataset,
                                         export_dir=export, force=force, on_scene=on_scene)
@@ -265,5 +278,11 @@ def capture_dataset(
             summary = capture_dataset_flow.with_options(task_runner=runner)(
                 scenes=scenes, spec=spec, store=os.fspath(store), dataset=dataset,
                 export_dir=export, force=force)
+    if whole_export is not None:
+        from tasks.dataset import outcomes_from_manifest
+
+        st = ArtifactStore(os.fspath(store))
+        summary["export"] = export_all(st, outcomes_from_manifest(st, dataset), whole_export,
+                                       spec, domain=CAPTURE_DOMAIN)
     summary["wall_s"] = time.perf_counter() - t0
     return summary

@@ -263,16 +263,17 @@ def poses_stage(scene: CaptureScene, spec: CaptureSpec, store: str, keys: dict) 
     return {"poses": poses.tolist(), **info, "seconds": time.perf_counter() - t0}
 
 
-def capture_frame_key(keys: dict, frame_index: int, spec: CaptureSpec,
+def capture_frame_key(keys: dict, scene_id: str, frame_index: int, spec: CaptureSpec,
                       radar_yaml_digest: str) -> str:
     """Content key of one capture frame's ``dataset_frames`` artifact: the scene's
-    reconstruction keys, the frame index, and everything its pose, radar and labels depend on
+    reconstruction keys, its id (the frame carries it: two folders holding the same images
+    are two scenes), the frame index, and everything its pose, radar and labels depend on
     (pose sampling, radar.yaml, radar, run seed, label rule)."""
     return content_key(
         stage="dataset_frames", stage_version=DATASET_STAGE_VERSION,
         inputs={"scene_meshes": keys["scene_meshes"], "reconstruction": keys["reconstruction"],
                 "radar_yaml": radar_yaml_digest},
-        config={"source": "capture", "frame_index": int(frame_index),
+        config={"source": "capture", "scene": scene_id, "frame_index": int(frame_index),
                 "poses": spec.poses.model_dump(mode="json"), "radar": spec.radar.to_dict(),
                 "seed": spec.seed, "class_name": spec.class_name,
                 "labels": spec.labels.model_dump()},
@@ -302,7 +303,7 @@ def simulate_stage(scene: CaptureScene, spec: CaptureSpec, store: str, keys: dic
     for k, pose in zip(indices, poses, strict=True):
         fo = FrameOutcome(f"{scene.scene_id}_f{int(k):03d}", scene.scene_id, -1, int(k),
                           "skipped")
-        key = capture_frame_key(keys, k, spec, yaml_digest)
+        key = capture_frame_key(keys, scene.scene_id, k, spec, yaml_digest)
         fo.artifacts.update({"dataset_frames/reconstructed": key,
                              "reconstruction/scene_meshes": keys["scene_meshes"],
                              "reconstruction/reconstruction": keys["reconstruction"]})
@@ -344,7 +345,8 @@ def _cached_frames(scene: CaptureScene, spec: CaptureSpec, store: str,
     yaml_digest = _radar_yaml_digest(scene)
     n = spec.poses.frames if scene.radar is None or read_radar_yaml(scene.radar)["poses"] is None \
         else len(read_radar_yaml(scene.radar)["poses"])
-    frame_keys = [capture_frame_key(keys, k, spec, yaml_digest) for k in range(n)]
+    frame_keys = [capture_frame_key(keys, scene.scene_id, k, spec, yaml_digest)
+                  for k in range(n)]
     if not all(st.exists("dataset_frames", key) for key in frame_keys):
         return None
     return simulate_stage(scene, spec, store, keys, [None] * n, list(range(n)))

@@ -9,6 +9,7 @@ from __future__ import annotations
 import glob
 import logging
 import os
+import re
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -18,6 +19,8 @@ from storage import ArtifactStore, is_transient_io_error
 from storage.provenance import jsonable
 
 __all__ = [
+    "FRAME_ROW",
+    "failed_scene_ids",
     "expand_scenes",
     "open_store",
     "REMOTE_IO_RETRIES",
@@ -48,6 +51,27 @@ def retry_transient_io(task, task_run, state) -> bool:
         except Exception:  # noqa: BLE001 - an unreadable result is not a reason to retry
             return False
     return isinstance(exc, BaseException) and is_transient_io_error(exc)
+
+
+#: A frame's manifest row id: ``<scene or world id>_f<frame index, 3+ digits>``.
+FRAME_ROW = re.compile(r"^(.+)_f(\d{3,})$")
+
+
+def failed_scene_ids(store, dataset: str) -> list[str]:
+    """Ids of the scenes (worlds, capture scenes; not their frame rows) the ``dataset``
+    manifest records as ``failed``: what ``--retry-failed`` reruns.
+
+    Raises
+    ------
+    ValueError — the dataset has no manifest rows (naming the store and the datasets it has).
+    """
+    st = open_store(store)
+    rows = st.manifest(dataset).rows()
+    if not rows:
+        raise ValueError(f"store {st.root}: dataset {dataset!r} has no manifest rows, nothing "
+                         f"to retry; known datasets: {st.manifests()}")
+    return sorted(r["scene_id"] for r in rows
+                  if r["status"] == "failed" and not FRAME_ROW.match(r["scene_id"]))
 
 
 def open_store(store: str | os.PathLike | ArtifactStore) -> ArtifactStore:

@@ -69,8 +69,10 @@ from storage import ArtifactStore, content_key, meshes_from_table
 from storage.frames import dataset_frame_from_table, dataset_frame_to_table
 from storage.schemas import DATASET_FRAMES as DATASET_FRAMES_SCHEMA
 from tasks.common import (
+    FRAME_ROW,
     REMOTE_IO_RETRIES,
     REMOTE_IO_RETRY_DELAYS_S,
+    failed_scene_ids,
     jsonable,
     open_store,
     retry_transient_io,
@@ -99,6 +101,7 @@ __all__ = [
     "world_bev_pngs",
     "outcomes_from_manifest",
     "export_store_dataset",
+    "failed_world_seeds",
     "generate_world_dataset_task",
     "record_world_dataset_task",
     "points_near_boxes",
@@ -592,9 +595,10 @@ def outcomes_from_manifest(store, dataset: str) -> list[WorldDatasetOutcome]:
                          f"known datasets: {st.manifests()}")
     worlds: dict[str, WorldDatasetOutcome] = {}
     for r in rows:
-        if "_f" not in r["scene_id"] or r["status"] == "failed":
+        m = FRAME_ROW.match(r["scene_id"])
+        if m is None or r["status"] == "failed":
             continue
-        world_id, k = r["scene_id"].rsplit("_f", 1)
+        world_id, k = m.group(1), m.group(2)
         o = worlds.setdefault(world_id, WorldDatasetOutcome(world_id, -1, "skipped"))
         fo = FrameOutcome(r["scene_id"], world_id, -1, int(k), r["status"],
                           artifacts=dict(r["artifacts"]))
@@ -603,6 +607,14 @@ def outcomes_from_manifest(store, dataset: str) -> list[WorldDatasetOutcome]:
                 fo.n_points[name.split("/", 1)[1]] = -1  # present; the count is in the frame
         o.frames.append(fo)
     return [worlds[w] for w in sorted(worlds)]
+
+
+def failed_world_seeds(store, dataset: str) -> list[int]:
+    """Seeds of the worlds the ``dataset`` manifest records as failed (``--retry-failed``)."""
+    import re
+
+    ids = failed_scene_ids(store, dataset)
+    return sorted(int(m.group(1)) for i in ids if (m := re.match(r"^world_(\d+)$", i)))
 
 
 def export_store_dataset(store, dataset: str, geometry: str, export_dir: str | os.PathLike,

@@ -19,7 +19,7 @@ __all__ = ["generate_from_captures", "run_captures", "print_stage_table"]
 def run_captures(captures: Path, *, store: str, dataset: str, settings: dict[str, Any],
                  export_dir: str | None, png_dir: Path | None, force: bool, workers: int,
                  dask_address: str | None, use_prefect: bool, verbose: bool,
-                 show_progress: bool = True) -> dict[str, Any]:
+                 show_progress: bool = True, retry_failed: bool = False) -> dict[str, Any]:
     """Run the capture flow (or its plain loop) with a progress bar; write BEV PNGs; return
     the summary (failures counted, never raised)."""
     if use_prefect:
@@ -51,7 +51,8 @@ def run_captures(captures: Path, *, store: str, dataset: str, settings: dict[str
         with quiet:
             summary = capture_dataset(captures, store, dataset, export_dir=export_dir,
                                       force=force, workers=workers, dask_address=dask_address,
-                                      use_prefect=use_prefect, on_scene=on_scene, **settings)
+                                      use_prefect=use_prefect, on_scene=on_scene,
+                                      retry_failed=retry_failed, **settings)
     summary["pngs"] = []
     if png_dir is not None:
         from sim2radar.factory.captures import CaptureSpec
@@ -109,7 +110,7 @@ def generate_from_captures(captures: Path, *, config: Path | None, out: str,
                            export_openpcdet: Path | None, png_dir: Path | None, no_png: bool,
                            force: bool, strict: bool, workers: int, dask: str | None,
                            no_prefect: bool, json_out: Path | None, verbose: bool,
-                           procedural: dict[str, Any]) -> None:
+                           procedural: dict[str, Any], retry_failed: bool = False) -> None:
     """The ``generate --captures`` branch: validate everything (exit 2 naming the file and
     field), run, print the summary and the seconds per step, exit 1 under ``--strict`` when a
     scene failed."""
@@ -148,6 +149,6 @@ def generate_from_captures(captures: Path, *, config: Path | None, out: str,
         captures, store=out, dataset=dataset or cfg.get("dataset", "captures"),
         settings=settings, export_dir=None if export_openpcdet is None else str(export_openpcdet),
         png_dir=None if no_png else png_dir, force=force, workers=workers, dask_address=dask,
-        use_prefect=not no_prefect, verbose=verbose)
+        use_prefect=not no_prefect, verbose=verbose, retry_failed=retry_failed)
     print_stage_table(summary)
     finish_generate(summary, json_out, strict)

@@ -62,6 +62,7 @@ def run_generate(
     export_doppler: bool = False,
     domain: str | None = None,
     flow_name: str = "generate-dataset",
+    export_whole_dataset: bool = False,
 ) -> dict[str, Any]:
     """Run the generate-dataset flow (or its plain loop) with a progress bar; write BEV PNGs.
 
@@ -71,6 +72,8 @@ def run_generate(
 
     ``render_rgb``, ``frames_by_seed``, ``splits``, ``export_doppler``, ``domain`` and
     ``flow_name`` serve the reference dataset (:mod:`flows.reference_dataset`).
+    ``export_whole_dataset`` (``--retry-failed``): the export holds every frame the dataset's
+    manifest lists, not only this run's worlds.
 
     Returns the flow's summary (``pngs`` added); failures are counted in it, never raised
     (with ``strict`` the Prefect run is marked failed; the CLI exits with status 1).
@@ -91,6 +94,7 @@ def run_generate(
                         render_rgb)
     extras = {"frames_by_seed": frames_by_seed, "splits": splits,
               "export_doppler": export_doppler, "domain": domain}
+    whole_export, export_dir = (export_dir, None) if export_whole_dataset else (None, export_dir)
     with Progress(*_progress_columns(), disable=not show_progress, transient=False) as progress:
         bar = progress.add_task("starting" + (" Prefect" if use_prefect else ""),
                                 total=len(seeds))
@@ -124,6 +128,12 @@ def run_generate(
         else:
             summary = generate_dataset_plain(seeds, spec, store, dataset, export_dir=export_dir,
                                              force=force, on_world=on_world, **extras)
+    if whole_export is not None:
+        from tasks.dataset import export_all, outcomes_from_manifest
+
+        summary["export"] = export_all(store, outcomes_from_manifest(store, dataset),
+                                       whole_export, spec, splits=splits,
+                                       with_doppler=export_doppler, domain=domain)
     summary["pngs"] = []
     if png_dir is not None:
         from tasks.dataset import outcomes_from_summary
@@ -150,6 +160,7 @@ def finish_generate(summary: dict[str, Any], json_out: Path | None, strict: bool
 def print_generate_summary(summary: dict[str, Any]) -> None:
     """Human summary: counts, per-geometry table, seconds per stage, where things went."""
     from rich.console import Console
+    from rich.markup import escape
     from rich.table import Table
 
     console = Console()
@@ -163,10 +174,11 @@ def print_generate_summary(summary: dict[str, Any]) -> None:
     for w in summary["worlds"]:
         if w["status"] != "failed":
             continue
-        console.print(f"  [red]✗ {w['world_id']}[/red]: {w['error']}")
+        # errors carry "[stage]" prefixes: escaped, or rich would take them for markup
+        console.print(f"  [red]✗ {w['world_id']}[/red]: {escape(w['error'])}")
         for f in w["frames"]:
             if f["status"] == "failed":
-                console.print(f"      [red]{f['frame_id']}[/red]: {f['error']}")
+                console.print(f"      [red]{f['frame_id']}[/red]: {escape(f['error'])}")
     table = Table(title="dataset summary (means per frame)")
     table.add_column("")
     geoms = list(summary["geometry"])
@@ -245,6 +257,10 @@ def generate(
                                     help="Run the plain loop without the Prefect engine."),
     json_out: Path | None = typer.Option(None, "--json", help="Also write the summary as JSON."),
     verbose: bool = typer.Option(False, "--verbose", "-v", help="Show Prefect's logs."),
+    retry_failed: bool = typer.Option(
+        False, "--retry-failed", help="Rerun only the worlds (capture scenes) the dataset's "
+        "manifest records as failed (same --config/options as the first run); the export "
+        "covers the whole dataset."),
 ) -> None:
     """Generate a radar dataset from procedural worlds: render, reconstruct (or use the
     ground-truth geometry), simulate the radar, store points + door boxes, export.
@@ -264,7 +280,7 @@ def generate(
             reconstruction=reconstruction, seed=seed, export_openpcdet=export_openpcdet,
             png_dir=png_dir, no_png=no_png, force=force, strict=strict, workers=workers,
             dask=dask, no_prefect=no_prefect, json_out=json_out, verbose=verbose,
-            procedural={"--worlds": worlds, "--first-seed": first_seed, "--geometry": geometry,
+            retry_failed=retry_failed, procedural={"--worlds": worlds, "--first-seed": first_seed, "--geometry": geometry,
                         "--width": width, "--height": height, "--spp": spp,
                         "--material-override": material_override})
         return
@@ -306,16 +322,25 @@ def generate(
                      params["reconstruction"], params["world"], params["rig"], params["seed"],
                      params["class_name"], params["labels"], params["material_override"],
                      _label_range(params["export_label_range_m"]))
+        dataset_name = dataset or cfg.get("dataset", "generated")
+        seeds = list(range(first, first + n_worlds))
+        if retry_failed:
+            from tasks.dataset import failed_world_seeds
+
+            seeds = failed_world_seeds(out, dataset_name)
     except (ValueError, FileNotFoundError, ImportError) as exc:
         typer.secho(f"error: {exc}", fg="red", err=True)
         raise typer.Exit(2) from None
+    if retry_failed and not seeds:
+        typer.echo(f"dataset {dataset_name!r}: no world is recorded as failed; nothing to retry")
+        return
     if png_dir is None and not no_png:
         png_dir = _default_png_dir(out)
     summary = run_generate(
-        list(range(first, first + n_worlds)), store=out,
-        dataset=dataset or cfg.get("dataset", "generated"),
+        seeds, store=out, dataset=dataset_name,
         export_dir=None if export_openpcdet is None else str(export_openpcdet),
         png_dir=None if no_png else png_dir, force=force, strict=strict, workers=workers,
-        dask_address=dask, use_prefect=not no_prefect, verbose=verbose, **params,
+        dask_address=dask, use_prefect=not no_prefect, verbose=verbose,
+        export_whole_dataset=retry_failed, **params,
     )
     finish_generate(summary, json_out, strict)
