@@ -567,7 +567,16 @@ def export_openpcdet(store, outcomes: list[WorldDatasetOutcome], export_dir: str
     write_dataset(root, frames, by_split)
     out = {"root": str(root), "frames": len(frames), "labels": n_labels,
            "labels_dropped_out_of_range": n_dropped,
-           "splits": {k: len(v) for k, v in by_split.items()}}
+           "splits": {k: len(v) for k, v in by_split.items()}, "warnings": []}
+    empty = [k for k, v in by_split.items() if not v]
+    if frames and empty:
+        n_groups = len(set(world_of.values()))
+        out["warnings"].append(
+            f"split(s) {empty} are empty: {n_groups} world(s)/scene(s) cannot fill train, val "
+            "and test (the split is by world); generate more worlds or scenes, or train with "
+            "another split")
+    for w in out["warnings"]:
+        log.warning("%s: %s", root, w)
     from datetime import UTC, datetime
 
     from sim2radar.datasets import write_metadata

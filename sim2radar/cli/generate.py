@@ -208,6 +208,8 @@ def print_generate_summary(summary: dict[str, Any]) -> None:
     console.print(f"manifest: {summary['manifest']}")
     for g, e in (summary.get("export") or {}).items():
         console.print(f"openpcdet \\[{g}]: {e['root']} ({e['frames']} frames, splits {e['splits']})")
+        for w in e.get("warnings", []):
+            console.print(f"  [yellow]warning:[/yellow] {escape(w)}")
     if summary.get("pngs"):
         console.print(f"pictures: {Path(summary['pngs'][0]).parent} ({len(summary['pngs'])} PNG)")
 

@@ -14,6 +14,7 @@ file (and line) at fault and what to change.
 
 from __future__ import annotations
 
+import logging
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -35,6 +36,8 @@ __all__ = [
     "read_metadata",
     "write_metadata",
 ]
+
+log = logging.getLogger(__name__)
 
 #: Optional description of a dataset folder (JSON): its ``domain`` ("measured", "proxy-real
 #: (reference radar simulation)", "simulated (...)"), the radar, how labels were chosen, worlds
@@ -219,7 +222,13 @@ def write_split(root: str | Path, split: str, ids: Sequence[str]) -> None:
 def write_dataset(
     root: str | Path, frames: Iterable[Frame], splits: Mapping[str, Sequence[str]]
 ) -> OpenPCDetDataset:
-    """Write frames and split files; every split id must be one of the written frames."""
+    """Write frames and split files; every split id must be one of the written frames.
+
+    The folder then holds exactly this dataset: ``points/*.npy`` and ``labels/*.txt`` of frames
+    not written now (left by an earlier, larger export into the same folder) and split files
+    not given are removed (logged), so no stale frame lies next to the splits. Other files in
+    the folder are left alone.
+    """
     root = Path(root)
     written = set()
     for f in frames:
@@ -230,6 +239,14 @@ def write_dataset(
         if unknown:
             raise DatasetError(f"split {name!r} lists frames that were not written: {unknown[:5]}")
         write_split(root, name, ids)
+    stale = [p for sub, suffix in (("points", ".npy"), ("labels", ".txt"))
+             for p in sorted((root / sub).glob(f"*{suffix}")) if p.stem not in written]
+    stale += [p for p in sorted((root / "ImageSets").glob("*.txt")) if p.stem not in splits]
+    for p in stale:
+        p.unlink()
+    if stale:
+        log.warning("%s: removed %d stale file(s) of an earlier export (e.g. %s)", root,
+                    len(stale), stale[0].relative_to(root))
     return OpenPCDetDataset(root)
 
 

@@ -58,3 +58,7 @@ def test_capture_folder_to_openpcdet_in_one_command(one_scene, tmp_path):
     assert np.load(export / "points" / f"{ids[0]}.npy").shape[1] == 4
     assert "seconds per step" in res.output and "GT doors" not in res.output
     assert (tmp_path / "bev" / "scene_004_rec.png").is_file()
+    # one scene cannot fill val and test: said, not silent
+    assert "warning:" in res.output and "are empty" in res.output
+    meta = json.loads((export / "dataset.json").read_text())
+    assert any("['val', 'test'] are empty" in w for w in meta["warnings"])

@@ -77,3 +77,16 @@ def test_synthetic_frames_look_like_ifr():
     np.testing.assert_allclose(b[:, 2] - b[:, 5] / 2, -1.05, atol=1e-5)  # on the floor
     again = make_door_frames(5, seed=1)
     np.testing.assert_array_equal(frames[3].points, again[3].points)
+
+
+def test_a_smaller_export_into_the_same_folder_leaves_no_stale_frames(tmp_path):
+    rng = np.random.default_rng(0)
+    big = [Frame(f"f{i}", rng.normal(size=(5, 4)).astype(np.float32), np.zeros((0, 7)), ())
+           for i in range(4)]
+    write_dataset(tmp_path, big, {"train": ["f0", "f1"], "val": ["f2"], "test": ["f3"]})
+    (tmp_path / "notes.md").write_text("mine")
+    ds = write_dataset(tmp_path, big[:2], {"train": ["f0"], "test": ["f1"]})
+    assert sorted(p.stem for p in (tmp_path / "points").glob("*.npy")) == ["f0", "f1"]
+    assert sorted(p.stem for p in (tmp_path / "labels").glob("*.txt")) == ["f0", "f1"]
+    assert ds.splits() == ["test", "train"]  # val.txt of the earlier export is gone
+    assert (tmp_path / "notes.md").read_text() == "mine"  # other files are left alone
