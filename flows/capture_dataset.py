@@ -28,10 +28,10 @@ from typing import Any
 from prefect import flow, get_run_logger, task
 from prefect.cache_policies import NO_CACHE
 from prefect.futures import as_completed
-from prefect.states import Completed, State
 from prefect.task_runners import ThreadPoolTaskRunner
 
 from flows import _progress
+from flows._steps import run_as_tasks
 from sim2radar.factory.captures import CaptureScene, CaptureSpec, find_captures
 from storage import ArtifactStore
 from tasks import capture as steps
@@ -50,57 +50,8 @@ __all__ = ["capture_dataset_flow", "capture_dataset", "progress_callback", "CAPT
 CAPTURE_DOMAIN = "simulated from RGB captures (reconstructed geometry)"
 
 
-def _network_error(task, task_run, state) -> bool:
-    """Retry condition of the materials step: only errors of talking to a server (the VLM)."""
-    import urllib.error
-
-    try:
-        state.result()
-    except (ConnectionError, TimeoutError, urllib.error.URLError):
-        return True
-    except Exception:  # noqa: BLE001 - anything else is deterministic: do not retry
-        return False
-    return False
-
-
-def _cached_state(result):
-    """A step's return value as a Prefect state: ``Cached`` when its artifact existed."""
-    status = getattr(result, "status", None)
-    if status == "skipped":
-        return Completed(name="Cached", message=f"{result.stage}: artifact exists "
-                                                f"({result.key[:12]})", data=result)
-    return result
-
-
-def _step_task(stage: str, fn, **options):
-    def run_step(*args):
-        return _cached_state(fn(*args))
-
-    run_step.__name__ = f"{stage}_step"
-    return task(name=stage, cache_policy=NO_CACHE, persist_result=False, **options)(run_step)
-
-
-_STEP_TASKS = {
-    "depth": _step_task("depth", steps.depth_stage),
-    "segments": _step_task("segments", steps.segments_stage),
-    "materials": _step_task("materials", steps.materials_stage, retries=2,
-                            retry_delay_seconds=[2.0, 8.0], retry_condition_fn=_network_error),
-    "scene": _step_task("scene", steps.scene_stage),
-    "poses": _step_task("poses", steps.poses_stage),
-    "simulate": _step_task("simulate", steps.simulate_stage),
-}
-
-
-def _run_as_task(scene_id: str):
-    def run(stage: str, fn, *args):
-        t = _STEP_TASKS[stage]
-        suffix = f"-f{args[5][0]:03d}" if stage == "simulate" else ""
-        state = t.with_options(task_run_name=f"{scene_id}-{stage}{suffix}")(
-            *args, return_state=True)
-        result = state.result()  # raises the step's error when it failed
-        return result.result() if isinstance(result, State) else result  # a Cached state
-
-    return run
+def _simulate_batch_name(stage: str, args: tuple) -> str:
+    return f"-f{args[5][0]:03d}" if stage == "simulate" else ""
 
 
 @task(name="capture-scene", cache_policy=NO_CACHE, retries=0, persist_result=False)
@@ -108,7 +59,7 @@ def capture_scene_task(scene: CaptureScene, spec: CaptureSpec, store: str,
                        force: bool = False) -> WorldDatasetOutcome:
     """One scene, every step a Prefect task (:func:`tasks.capture.process_capture_scene`)."""
     return steps.process_capture_scene(scene, spec, store, force=force,
-                                       run=_run_as_task(scene.scene_id))
+                                       run=run_as_tasks(scene.scene_id, _simulate_batch_name))
 
 
 @task(name="record-capture-manifest", cache_policy=NO_CACHE, retries=REMOTE_IO_RETRIES,

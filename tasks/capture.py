@@ -15,9 +15,7 @@ the same keys ``sim2radar reconstruct``'s flow gives the same image), and one
 
 from __future__ import annotations
 
-import dataclasses
 import logging
-import threading
 import time
 from collections.abc import Callable
 from typing import Any
@@ -44,16 +42,12 @@ from tasks.dataset import (
     _fill_frame_outcome,
     read_dataset_frame,
 )
+from tasks.steps import FrameSource, call_step, reconstruction_steps
 
 __all__ = [
     "CAPTURE_STAGES",
-    "StageResult",
     "process_capture_scene",
     "capture_frame_key",
-    "depth_stage",
-    "segments_stage",
-    "materials_stage",
-    "scene_stage",
     "poses_stage",
     "simulate_stage",
 ]
@@ -64,167 +58,18 @@ log = logging.getLogger(__name__)
 CAPTURE_STAGES = ("depth", "segments", "materials", "scene", "poses", "simulate")
 
 
-@dataclasses.dataclass
-class StageResult:
-    """What one step did: ``status`` ``ok`` (computed) or ``skipped`` (cached), its artifact
-    key, wall seconds in this run and the stage's compute seconds (stored with the artifact)."""
-
-    stage: str
-    status: str
-    key: str = ""
-    seconds: float = 0.0
-    compute_s: float = 0.0
-
-
-# ---------------------------------------------------------------------------------------------
-# Helpers: one frame's inputs and backends
-# ---------------------------------------------------------------------------------------------
-_BACKENDS = threading.local()
-
-
-def _backends(config) -> tuple:
-    """The (depth, segments, materials) backends of ``config``, built once per thread (model
-    files load once; the built-in segmenter keeps per-call state, so threads do not share)."""
-    from sim2radar.reconstruct import build_backends
-
-    cache = getattr(_BACKENDS, "cache", None)
-    if cache is None:
-        cache = _BACKENDS.cache = {}
-    key = repr(config.to_dict())
-    if key not in cache:
-        cache[key] = build_backends(config)
-    return cache[key]
-
-
-def _frame(scene: CaptureScene, spec: CaptureSpec):
-    frame, note = load_capture_frame(scene)
-    if not spec.reconstruction.rig_calibration:
-        frame = frame.without_rig_calibration()
-    return frame, note
-
-
-def _keys(scene: CaptureScene, spec: CaptureSpec) -> tuple[dict[str, str], dict[str, str], str]:
-    """(input digests, artifact keys of every reconstruction stage, note) of a scene."""
+def _source(scene: CaptureScene, spec: CaptureSpec) -> tuple[FrameSource, dict[str, str]]:
+    """The scene as a :class:`~tasks.steps.FrameSource` (reconstruction in the level frame)
+    and every key of the scene: input digests + the reconstruction steps' artifact keys."""
     from sim2radar.reconstruct.pipeline import STAGE_VERSION
     from storage.reconstruction import frame_input_digests, stage_keys
 
-    frame, note = load_capture_frame(scene)
+    frame, _ = load_capture_frame(scene)
     inputs = frame_input_digests(frame)
-    return inputs, stage_keys(inputs, spec.reconstruction.to_dict(),
-                              stage_version=STAGE_VERSION), note
-
-
-def _write(st, stage: str, key: str, table, scene: CaptureScene, spec: CaptureSpec,
-           inputs: dict, seconds: float) -> None:
-    from sim2radar.reconstruct.pipeline import STAGE_VERSION
-
-    st.write(stage, key, table, stage_version=STAGE_VERSION,
-             provenance={"inputs": inputs, "config": spec.reconstruction.to_dict(),
-                         "seed": spec.seed, "timings_s": {stage: seconds},
-                         "extra": {"scene": scene.scene_id, "folder": scene.folder}})
-
-
-# ---------------------------------------------------------------------------------------------
-# The steps (plain functions; flows/capture_dataset.py wraps each in a Prefect task)
-# ---------------------------------------------------------------------------------------------
-def depth_stage(scene: CaptureScene, spec: CaptureSpec, store: str, keys: dict) -> StageResult:
-    """Stage 1, metric depth -> ``depth_maps``."""
-    from sim2radar.reconstruct.pipeline import estimate_depth
-    from storage.reconstruction import depth_from_table, depth_to_table
-
-    t0, st, key = time.perf_counter(), open_store(store), keys["depth_maps"]
-    if st.exists("depth_maps", key):
-        _, compute_s = depth_from_table(st.read("depth_maps", key))
-        return StageResult("depth", "skipped", key, time.perf_counter() - t0, compute_s)
-    frame, _ = _frame(scene, spec)
-    depth = estimate_depth(frame, spec.reconstruction, _backends(spec.reconstruction)[0])
-    seconds = time.perf_counter() - t0
-    _write(st, "depth_maps", key, depth_to_table(scene.scene_id, depth, seconds), scene, spec,
-           {"image": keys.get("image", "")}, seconds)
-    return StageResult("depth", "ok", key, time.perf_counter() - t0, seconds)
-
-
-def segments_stage(scene: CaptureScene, spec: CaptureSpec, store: str, keys: dict) -> StageResult:
-    """Stage 2, segments with semantic labels -> ``segmentations``."""
-    from sim2radar.reconstruct.pipeline import segment_image
-    from storage.reconstruction import depth_from_table, segments_from_table, segments_to_table
-
-    t0, st, key = time.perf_counter(), open_store(store), keys["segmentations"]
-    if st.exists("segmentations", key):
-        _, compute_s = segments_from_table(st.read("segmentations", key))
-        return StageResult("segments", "skipped", key, time.perf_counter() - t0, compute_s)
-    frame, _ = _frame(scene, spec)
-    depth, _ = depth_from_table(st.read("depth_maps", keys["depth_maps"]))
-    t1 = time.perf_counter()
-    seg = segment_image(frame, depth, _backends(spec.reconstruction)[1])
-    seconds = time.perf_counter() - t1
-    _write(st, "segmentations", key, segments_to_table(scene.scene_id, seg, seconds), scene, spec,
-           {"depth_maps": keys["depth_maps"]}, seconds)
-    return StageResult("segments", "ok", key, time.perf_counter() - t0, seconds)
-
-
-def materials_stage(scene: CaptureScene, spec: CaptureSpec, store: str,
-                    keys: dict) -> StageResult:
-    """Stage 3, a material per segment (the VLM's or the prior's) -> ``material_labels``."""
-    from sim2radar.reconstruct.pipeline import label_materials
-    from storage.reconstruction import (
-        depth_from_table,
-        materials_from_table,
-        materials_to_table,
-        segments_from_table,
-    )
-
-    t0, st, key = time.perf_counter(), open_store(store), keys["material_labels"]
-    if st.exists("material_labels", key):
-        _, _, compute_s = materials_from_table(st.read("material_labels", key))
-        return StageResult("materials", "skipped", key, time.perf_counter() - t0, compute_s)
-    frame, _ = _frame(scene, spec)
-    depth, _ = depth_from_table(st.read("depth_maps", keys["depth_maps"]))
-    seg, _ = segments_from_table(st.read("segmentations", keys["segmentations"]))
-    t1 = time.perf_counter()
-    labels, fallbacks = label_materials(frame, depth, seg, spec.reconstruction,
-                                        _backends(spec.reconstruction)[2])
-    seconds = time.perf_counter() - t1
-    _write(st, "material_labels", key,
-           materials_to_table(scene.scene_id, labels, fallbacks, seconds), scene, spec,
-           {"segmentations": keys["segmentations"]}, seconds)
-    return StageResult("materials", "ok", key, time.perf_counter() - t0, seconds)
-
-
-def scene_stage(scene: CaptureScene, spec: CaptureSpec, store: str, keys: dict) -> StageResult:
-    """Stage 4, meshes + door boxes in the level frame -> ``scene_meshes`` + ``reconstruction``."""
-    from sim2radar.reconstruct.pipeline import STAGE_VERSION, build_scene
-    from storage.reconstruction import (
-        depth_from_table,
-        materials_from_table,
-        read_reconstruction,
-        segments_from_table,
-        write_scene_artifacts,
-    )
-
-    t0, st = time.perf_counter(), open_store(store)
-    key = keys["reconstruction"]
-    if st.exists("reconstruction", key) and st.exists("scene_meshes", keys["scene_meshes"]):
-        compute_s = float(read_reconstruction(st, key)["timings_s"].get("total", 0.0))
-        return StageResult("scene", "skipped", key, time.perf_counter() - t0, compute_s)
-    frame, note = _frame(scene, spec)
-    depth, t_depth = depth_from_table(st.read("depth_maps", keys["depth_maps"]))
-    seg, t_seg = segments_from_table(st.read("segmentations", keys["segmentations"]))
-    labels, fallbacks, t_mat = materials_from_table(st.read("material_labels",
-                                                            keys["material_labels"]))
-    t1 = time.perf_counter()
-    rec = build_scene(frame, depth, seg, labels, spec.reconstruction,
-                      timings_s={"depth": t_depth, "segments": t_seg, "materials": t_mat},
-                      fallbacks=fallbacks + ([note] if note else []))
-    seconds = time.perf_counter() - t1
-    rec.timings_s["total"] = t_depth + t_seg + t_mat + seconds
-    if not rec.meshes:
-        raise ValueError(f"{scene.folder}: the reconstruction has no meshes; nothing for the "
-                         "radar (check the image and the depth: LiDAR in view?)")
-    write_scene_artifacts(st, rec, inputs={k: keys[k] for k in ("image", "intrinsics")},
-                          config=spec.reconstruction.to_dict(), seed=spec.seed,
-                          stage_version=STAGE_VERSION)
-    return StageResult("scene", "ok", key, time.perf_counter() - t0, seconds)
+    keys = stage_keys(inputs, spec.reconstruction.to_dict(), stage_version=STAGE_VERSION)
+    src = FrameSource(scene.scene_id, scene.folder, lambda: load_capture_frame(scene), inputs,
+                      keys, seed=spec.seed)
+    return src, {**inputs, **keys}
 
 
 def _radar_scene(st, keys: dict):
@@ -355,13 +200,9 @@ def _cached_frames(scene: CaptureScene, spec: CaptureSpec, store: str,
 # ---------------------------------------------------------------------------------------------
 # One scene
 # ---------------------------------------------------------------------------------------------
-def _call(stage: str, fn: Callable, *args) -> Any:
-    return fn(*args)
-
-
 def process_capture_scene(scene: CaptureScene, spec: CaptureSpec, store: str, *,
                           force: bool = False,
-                          run: Callable[..., Any] = _call) -> WorldDatasetOutcome:
+                          run: Callable[..., Any] = call_step) -> WorldDatasetOutcome:
     """Make (or find cached) every artifact of one capture scene, step by step.
 
     ``run(stage, fn, *args)`` calls each step: the plain call by default, a Prefect task in
@@ -376,37 +217,36 @@ def process_capture_scene(scene: CaptureScene, spec: CaptureSpec, store: str, *,
     """
     t0 = time.perf_counter()
     out = WorldDatasetOutcome(scene.scene_id, -1, "skipped", source=scene.folder)
-    stage = "inputs"
+    current = ["inputs"]  # the step running, for the error
+
+    def step(stage: str, fn: Callable, *args) -> Any:
+        current[0] = stage
+        return run(stage, fn, *args)
+
     computed = False
     try:
-        inputs, keys, _ = _keys(scene, spec)
-        keys = {**inputs, **keys}
-        out.artifacts = {s: keys[s] for s in ("depth_maps", "segmentations", "material_labels",
-                                              "scene_meshes", "reconstruction")}
-        for stage, fn in (("depth", depth_stage), ("segments", segments_stage),
-                          ("materials", materials_stage), ("scene", scene_stage)):
-            res = run(stage, fn, scene, spec, store, keys)
-            out.timings_s[stage] = res.seconds
+        src, keys = _source(scene, spec)
+        out.artifacts = dict(src.keys)
+        for name, res in reconstruction_steps(src, spec.reconstruction, store, step).items():
+            out.timings_s[name] = res.seconds
             computed |= res.status == "ok"
-        stage = "simulate"
+        current[0] = "simulate"
         cached = None if force else _cached_frames(scene, spec, store, keys)
         if cached is not None:
             out.frames = cached
         else:
-            stage = "poses"
-            p = run("poses", poses_stage, scene, spec, store, keys)
+            p = step("poses", poses_stage, scene, spec, store, keys)
             out.timings_s["poses"] = p["seconds"]
-            stage = "simulate"
             t1 = time.perf_counter()
             poses, b = p["poses"], spec.frames_per_task
             for i in range(0, len(poses), b):
                 idx = list(range(i, min(i + b, len(poses))))
-                out.frames += run("simulate", simulate_stage, scene, spec, store, keys,
-                                  poses[i:i + b], idx, force)
+                out.frames += step("simulate", simulate_stage, scene, spec, store, keys,
+                                   poses[i:i + b], idx, force)
             out.timings_s["simulate"] = time.perf_counter() - t1
     except Exception as exc:  # noqa: BLE001 - one broken scene must not stop the others
-        log.error("%s [%s] failed: %s: %s", scene.scene_id, stage, type(exc).__name__, exc)
-        out.status, out.error = "failed", f"[{stage}] {type(exc).__name__}: {exc}"
+        log.error("%s [%s] failed: %s: %s", scene.scene_id, current[0], type(exc).__name__, exc)
+        out.status, out.error = "failed", f"[{current[0]}] {type(exc).__name__}: {exc}"
     out.timings_s["total"] = time.perf_counter() - t0
     if out.status != "failed":
         computed |= any(f.status == "ok" for f in out.frames)

@@ -1,0 +1,74 @@
+"""The factory's steps as Prefect tasks: one task per step of a scene (render, depth,
+segments, materials, scene, poses, simulate), each ending **Cached** when its artifact already
+existed, so the UI shows per scene which step ran, was cached, retried or failed.
+
+The step functions themselves (:mod:`tasks.steps`, :mod:`tasks.capture`, :mod:`tasks.dataset`)
+take a ``run(stage, fn, *args)`` callable: plain calls without Prefect, :func:`run_as_tasks` in
+a flow. Steps are called inside their scene's task (nested task runs, in that worker), so their
+arguments never leave the process. Only ``materials`` is retried (backoff 2 s, 8 s) and only on
+network errors (the VLM server); deterministic and local-I/O failures fail at once.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any
+
+from prefect import task
+from prefect.cache_policies import NO_CACHE
+from prefect.states import Completed, State
+
+__all__ = ["STEP_NAMES", "run_as_tasks"]
+
+#: Every step's task name (the Prefect UI's task names).
+STEP_NAMES = ("render", "depth", "segments", "materials", "scene", "poses", "simulate")
+
+
+def _network_error(task, task_run, state) -> bool:
+    """Retry condition of the materials step: only errors of talking to a server (the VLM)."""
+    import urllib.error
+
+    try:
+        state.result()
+    except (ConnectionError, TimeoutError, urllib.error.URLError):
+        return True
+    except Exception:  # noqa: BLE001 - anything else is deterministic: do not retry
+        return False
+    return False
+
+
+def _as_state(result):
+    """A step's return value as a Prefect state: ``Cached`` when its artifact existed (a result
+    with ``status == "skipped"``)."""
+    if getattr(result, "status", None) == "skipped":
+        what = getattr(result, "stage", "") or type(result).__name__
+        return Completed(name="Cached", message=f"{what}: artifact exists", data=result)
+    return result
+
+
+def _step_task(stage: str, **options):
+    def step(fn: Callable, args: tuple):
+        return _as_state(fn(*args))
+
+    step.__name__ = f"{stage}_step"
+    return task(name=stage, cache_policy=NO_CACHE, persist_result=False, **options)(step)
+
+
+_TASKS = {stage: _step_task(stage) for stage in STEP_NAMES if stage != "materials"}
+_TASKS["materials"] = _step_task("materials", retries=2, retry_delay_seconds=[2.0, 8.0],
+                                 retry_condition_fn=_network_error)
+
+
+def run_as_tasks(prefix: str, name_of: Callable[[str, tuple], str] | None = None):
+    """A ``run(stage, fn, *args)`` that calls ``fn(*args)`` as the step's Prefect task, named
+    ``<prefix>-<stage><name_of(stage, args)>``; a failed step raises its error, a cached one
+    returns its result."""
+
+    def run(stage: str, fn: Callable, *args) -> Any:
+        suffix = name_of(stage, args) if name_of is not None else ""
+        state = _TASKS[stage].with_options(task_run_name=f"{prefix}-{stage}{suffix}")(
+            fn, args, return_state=True)
+        result = state.result()  # raises the step's error when it failed
+        return result.result() if isinstance(result, State) else result  # a Cached state
+
+    return run
