@@ -6,7 +6,9 @@ OpenPCDet's custom layout.
     summary = generate_dataset(n_worlds=4, frames_per_world=8, store="out/store",
                                dataset="nightly", geometry="both", export_dir="out/openpcdet")
 
-One task per world seed (``generate_world_dataset_task``), gathered as they complete; each
+One task per world seed (``generate_world_dataset_task``), its steps (render, reconstruction
+steps per frame, simulate per frame and geometry) as nested tasks that end **Cached** when
+their artifact exists (:mod:`flows._steps`); worlds are gathered as they complete; each
 world's outcome (world row + one row per frame) goes into the dataset manifest. A second run
 with the same inputs recomputes nothing (every frame ``skipped`` by content key). A failing
 world or frame is recorded as ``failed`` with its error and the others finish; ``strict=True``
@@ -28,18 +30,20 @@ import os
 from collections.abc import Callable, Sequence
 from typing import Any
 
-from prefect import flow, get_run_logger
+from prefect import flow, get_run_logger, task
+from prefect.cache_policies import NO_CACHE
 from prefect.futures import as_completed
 from prefect.task_runners import ThreadPoolTaskRunner
 
 from flows import _progress
+from flows._steps import run_as_tasks
 from sim2radar.factory.spec import resolve_spec
 from storage import ArtifactStore
 from tasks.dataset import (
     WorldDatasetOutcome,
     export_all,
     failed_world_outcome,
-    generate_world_dataset_task,
+    generate_world_dataset,
     record_world_dataset_task,
     summarize_dataset,
 )
@@ -71,6 +75,27 @@ def progress_callback(fn: Callable[[WorldDatasetOutcome], None]):
 
 def _notify_progress(outcome: WorldDatasetOutcome) -> None:
     _progress.notify("generate_dataset", outcome)
+
+
+def _step_name(stage: str, args: tuple) -> str:
+    """Task-run name suffix of a world's step: the frame (and geometry) it works on."""
+    if stage == "simulate":
+        return f"-f{int(args[1]):03d}-{args[2]}"
+    if stage == "render":
+        return ""
+    return "-" + args[0].name.rsplit("_", 1)[-1]  # a FrameSource named world_<seed>_f<k>
+
+
+@task(name="generate-world-dataset", cache_policy=NO_CACHE, retries=0, persist_result=False)
+def generate_world_dataset_task(seed: int, spec: dict, store: str, force: bool = False,
+                                n_frames: int | None = None) -> WorldDatasetOutcome:
+    """One world, every step a Prefect task (:func:`tasks.dataset.generate_world_dataset`):
+    ``render``, per frame ``depth``/``segments``/``materials``/``scene`` (reconstructed, when
+    not cached) and ``simulate`` per geometry. No retries: the steps are deterministic."""
+    from storage.worlds import world_id_for
+
+    return generate_world_dataset(seed, spec, store, force=force, n_frames=n_frames,
+                                  run=run_as_tasks(world_id_for(seed), _step_name))
 
 
 @flow(name="generate-dataset", task_runner=ThreadPoolTaskRunner(max_workers=1), log_prints=False)

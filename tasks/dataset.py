@@ -77,6 +77,7 @@ from tasks.common import (
     open_store,
     retry_transient_io,
 )
+from tasks.steps import call_step, reconstruction_steps
 
 __all__ = [
     "DATASET_STAGE_VERSION",
@@ -102,7 +103,6 @@ __all__ = [
     "outcomes_from_manifest",
     "export_store_dataset",
     "failed_world_seeds",
-    "generate_world_dataset_task",
     "record_world_dataset_task",
     "points_near_boxes",
     "NEAR_BOX_MARGIN_M",
@@ -256,35 +256,42 @@ def read_dataset_frame(store: str | os.PathLike | ArtifactStore, key: str) -> Da
     return dataset_frame_from_table(open_store(store).read("dataset_frames", key))
 
 
-def _reconstructed_frame(frame, world_id, world_scene, store, spec,
-                         radar_seed) -> tuple[DatasetFrame, dict[str, str]]:
-    """The paper's pipeline on one world frame, its reconstruction read from the store when
-    cached (else computed and stored under :func:`_reconstruction_keys`)."""
-    from sim2radar.factory.pipeline import reconstruct_world_frame, reconstructed_frame
+def _world_frame_source(frame, world_id: str, spec: DatasetSpec):
+    """A world frame as a :class:`~tasks.steps.FrameSource`: its reconstruction goes into the
+    rig's radar frame (``inv(radar_to_world) @ camera_to_world``); ``oracle`` backends get the
+    frame as ground truth."""
+    from sim2radar.factory.pipeline import world_frame_input
     from sim2radar.reconstruct.pipeline import STAGE_VERSION
-    from storage.reconstruction import read_reconstruction, write_scene_artifacts
+    from storage.reconstruction import stage_keys
+    from tasks.steps import FrameSource
+
+    cam_to_radar = np.linalg.inv(frame.radar_to_world) @ frame.camera_to_world
+    inputs = {"image": _digest(frame)}
+    keys = {**stage_keys(inputs, spec.reconstruction.to_dict(), stage_version=STAGE_VERSION),
+            **_reconstruction_keys(frame, cam_to_radar, spec.reconstruction)}
+    return FrameSource(frame_id_for(frame.seed, frame.frame_index),
+                       f"{world_id} frame {frame.frame_index}",
+                       lambda: (world_frame_input(frame), ""), inputs, keys,
+                       camera_to_target=cam_to_radar, ground_truth=frame, seed=frame.seed)
+
+
+def _reconstructed_frame(frame, world_id, world_scene, store, spec, radar_seed,
+                         fresh: bool = False) -> tuple[DatasetFrame, dict[str, str]]:
+    """The paper's pipeline on one world frame, from its reconstruction in the store (made by
+    the reconstruction steps before; ``fresh``: in this run)."""
+    from sim2radar.factory.pipeline import reconstructed_frame
+    from storage.reconstruction import read_reconstruction
 
     cam_to_radar = np.linalg.inv(frame.radar_to_world) @ frame.camera_to_world
     rkeys = _reconstruction_keys(frame, cam_to_radar, spec.reconstruction)
-    if all(store.exists(s, k) for s, k in rkeys.items()):
-        meshes = meshes_from_table(store.read("scene_meshes", rkeys["scene_meshes"]))
-        rec = read_reconstruction(store, rkeys["reconstruction"])
-        boxes = rec["door_boxes"]
-        rec_seconds = float(rec["timings_s"].get("total", 0.0))
-        info = {"fallbacks": rec["info"].get("fallbacks", []), "cached": True}
-    else:
-        t0 = time.perf_counter()
-        scene = reconstruct_world_frame(frame, spec.reconstruction)
-        write_scene_artifacts(
-            store, scene, inputs={"image": _digest(frame)}, config=spec.reconstruction.to_dict(),
-            camera_to_target=cam_to_radar, seed=frame.seed, stage_version=STAGE_VERSION)
-        meshes = scene.meshes_in(cam_to_radar)
-        boxes = scene.door_boxes_in(cam_to_radar)
-        rec_seconds = float(scene.timings_s.get("total", time.perf_counter() - t0))
-        info = {"fallbacks": scene.info.get("fallbacks", []), "cached": False,
-                "n_segments": scene.n_segments}
+    meshes = meshes_from_table(store.read("scene_meshes", rkeys["scene_meshes"]))
+    rec = read_reconstruction(store, rkeys["reconstruction"])
+    info = {"fallbacks": rec["info"].get("fallbacks", []), "cached": not fresh}
+    if fresh:
+        info["n_segments"] = len(rec["segment_labels"])
     df = reconstructed_frame(frame, world_id, world_scene, spec, radar_seed, meshes=meshes,
-                             door_boxes=boxes, reconstruct_s=rec_seconds,
+                             door_boxes=rec["door_boxes"],
+                             reconstruct_s=float(rec["timings_s"].get("total", 0.0)),
                              stats={"reconstruction": info, "reconstruction_keys": rkeys})
     return df, rkeys
 
@@ -356,8 +363,13 @@ def generate_world_dataset(
     force: bool = False,
     keep_frames: bool = False,
     n_frames: int | None = None,
+    run: Callable[..., Any] = call_step,
 ) -> WorldDatasetOutcome:
-    """Make (or find cached) every dataset frame of world ``seed``.
+    """Make (or find cached) every dataset frame of world ``seed``, step by step: ``render``
+    (the world's artifacts), per frame the reconstruction's steps (``reconstructed``, when its
+    reconstruction is not cached: :func:`tasks.steps.reconstruction_steps`) and ``simulate``
+    per frame and geometry, each through ``run(stage, fn, *args)`` (plain calls, or Prefect
+    tasks in :mod:`flows.generate_dataset`).
 
     Parameters
     ----------
@@ -375,15 +387,13 @@ def generate_world_dataset(
     a failing frame is recorded in its FrameOutcome and does not raise.
     """
     from storage.worlds import world_id_for
-    from tasks.worlds import generate_world_artifacts
 
     t_start = time.perf_counter()
     spec = as_spec(spec)
     st = open_store(store)
     world_id = world_id_for(seed)
     n_frames = spec.frames_per_world if n_frames is None else int(n_frames)
-    wo = generate_world_artifacts(int(seed), n_frames, st, spec.world, spec.rig,
-                                  trajectory_seed=spec.seed, rgb=spec.render_rgb)
+    wo = run("render", render_world, int(seed), n_frames, st, spec)
     keys = dict(wo.artifacts)
     inputs = _WorldInputs(st, keys, spec.material_override)
     timings = {"world": time.perf_counter() - t_start}
@@ -403,10 +413,15 @@ def generate_world_dataset(
                     df = read_dataset_frame(st, key)
                     rkeys = df.stats.get("reconstruction_keys") or {}
                 else:
-                    df, rkeys = _compute_frame(inputs, k, geometry, world_id, st, spec)
-                    st.write("dataset_frames", key, dataset_frame_to_table(df),
-                             stage_version=DATASET_STAGE_VERSION,
-                             provenance=_provenance(spec, keys, df, geometry, rkeys))
+                    fresh = False
+                    if geometry == "reconstructed":
+                        src = _world_frame_source(inputs.frames()[k], world_id, spec)
+                        if not all(st.exists(s, src.keys[s])
+                                   for s in ("scene_meshes", "reconstruction")):
+                            steps = reconstruction_steps(src, spec.reconstruction, st, run)
+                            fresh = steps["scene"].status == "ok"
+                    df, rkeys = run("simulate", simulate_world_frame, inputs, k, geometry,
+                                    world_id, st, spec, key, fresh)
                     fo.status = "ok" if fo.status != "failed" else "failed"
                     computed_any = True
                 fo.artifacts.update({f"reconstruction/{s}": v for s, v in rkeys.items()})
@@ -431,16 +446,35 @@ def generate_world_dataset(
     return WorldDatasetOutcome(world_id, int(seed), status, error, keys, timings, frames_out)
 
 
-def _compute_frame(inputs: _WorldInputs, k: int, geometry: str, world_id: str,
-                   store: ArtifactStore, spec: DatasetSpec) -> tuple[DatasetFrame, dict]:
+def render_world(seed: int, n_frames: int, store, spec: DatasetSpec):
+    """The ``render`` step: the world's meshes, spec and rendered frames
+    (:func:`tasks.worlds.generate_world_artifacts`, the keys of ``sim2radar worlds
+    generate``: worlds rendered before are reused)."""
+    from tasks.worlds import generate_world_artifacts
+
+    return generate_world_artifacts(int(seed), n_frames, store, spec.world, spec.rig,
+                                    trajectory_seed=spec.seed, rgb=spec.render_rgb)
+
+
+def simulate_world_frame(inputs: _WorldInputs, k: int, geometry: str, world_id: str,
+                         store: ArtifactStore, spec: DatasetSpec, key: str,
+                         fresh: bool = False) -> tuple[DatasetFrame, dict]:
+    """The ``simulate`` step of one world frame and geometry: the radar frame with its labels
+    (:mod:`sim2radar.factory.pipeline`), written as ``dataset_frames/<key>``; returns it and
+    its reconstruction keys (``reconstructed``: the reconstruction must be in the store)."""
     frame = inputs.frames()[k]
     radar_seed = frame_seed(spec.seed, frame.seed, k)
     scene = inputs.radar_scene()  # the world's meshes: the GT radar and the labels' visibility
     if geometry == "ground_truth":
         from sim2radar.factory.pipeline import ground_truth_frame
 
-        return ground_truth_frame(frame, world_id, scene, spec, radar_seed), {}
-    return _reconstructed_frame(frame, world_id, scene, store, spec, radar_seed)
+        df, rkeys = ground_truth_frame(frame, world_id, scene, spec, radar_seed), {}
+    else:
+        df, rkeys = _reconstructed_frame(frame, world_id, scene, store, spec, radar_seed, fresh)
+    store.write("dataset_frames", key, dataset_frame_to_table(df),
+                stage_version=DATASET_STAGE_VERSION,
+                provenance=_provenance(spec, inputs.keys, df, geometry, rkeys))
+    return df, rkeys
 
 
 def _provenance(spec, keys, df: DatasetFrame, geometry, rkeys) -> dict:
@@ -732,13 +766,6 @@ def export_all(store, outcomes, export_dir, spec: DatasetSpec | dict, *,
 # Prefect tasks: the radar and reconstruction are deterministic -> no retries (fail fast with
 # the real error); manifest writes are storage I/O -> retried. Caching is by content key.
 # ---------------------------------------------------------------------------------------------
-@task(name="generate-world-dataset", cache_policy=NO_CACHE, retries=0, persist_result=False)
-def generate_world_dataset_task(seed: int, spec: dict, store: str, force: bool = False,
-                                n_frames: int | None = None) -> WorldDatasetOutcome:
-    """Prefect task around :func:`generate_world_dataset`."""
-    return generate_world_dataset(seed, spec, store, force=force, n_frames=n_frames)
-
-
 @task(name="record-dataset-manifest", cache_policy=NO_CACHE, retries=REMOTE_IO_RETRIES,
       retry_delay_seconds=REMOTE_IO_RETRY_DELAYS_S, retry_condition_fn=retry_transient_io,
       persist_result=False)

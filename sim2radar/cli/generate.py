@@ -114,10 +114,11 @@ def run_generate(
             from tasks.runners import task_runner
 
             runner = task_runner(workers, dask_address)
+            from flows._steps import STEP_NAMES
             from sim2radar.cli._app import quiet_recorded_failures
 
             with progress_callback(on_world), \
-                    quiet_recorded_failures(["generate-world-dataset"], verbose):
+                    quiet_recorded_failures(["generate-world-dataset", *STEP_NAMES], verbose):
                 try:
                     summary = generate_dataset_flow.with_options(
                         task_runner=runner, name=flow_name)(

@@ -23,7 +23,8 @@ from sim2radar.factory.frames import DatasetFrame, points_near_boxes
 from sim2radar.factory.labels import radar_visibility, scene_ray_caster
 
 __all__ = ["frame_id_for", "with_material", "ground_truth_labels", "ground_truth_frame",
-           "reconstruct_world_frame", "reconstructed_frame", "render_seconds"]
+           "world_frame_input", "reconstruct_world_frame", "reconstructed_frame",
+           "render_seconds"]
 
 
 def frame_id_for(seed: int, frame_index: int) -> str:
@@ -80,17 +81,23 @@ def ground_truth_frame(frame, world_id: str, world_scene, spec, radar_seed: int)
     )
 
 
-def reconstruct_world_frame(frame, config):
-    """:func:`sim2radar.reconstruct.reconstruct` on a world frame's RGB + LiDAR, with the rig's
-    calibration (camera pitch and height on the level rig) as a real rig's would come
-    (``reconstruction.rig_calibration: false`` ignores it); ``oracle`` backends get the frame's
-    ground truth."""
-    from sim2radar.reconstruct import FrameInput, reconstruct
+def world_frame_input(frame):
+    """A world frame's RGB + LiDAR as the reconstruction's input, with the rig's calibration
+    (camera pitch and height on the level rig) as a real rig's would come
+    (``reconstruction.rig_calibration: false`` ignores it)."""
+    from sim2radar.reconstruct import FrameInput
 
-    fid = frame_id_for(frame.seed, frame.frame_index)
-    return reconstruct(FrameInput(frame.rgb, frame.intrinsics, frame.lidar_points, name=fid,
-                                  **frame.rig_calibration),
-                       config, ground_truth=frame)
+    return FrameInput(frame.rgb, frame.intrinsics, frame.lidar_points,
+                      name=frame_id_for(frame.seed, frame.frame_index), **frame.rig_calibration)
+
+
+def reconstruct_world_frame(frame, config):
+    """:func:`sim2radar.reconstruct.reconstruct` on :func:`world_frame_input` in one call;
+    ``oracle`` backends get the frame's ground truth. (The factory runs the same stages as
+    separate cached steps: ``tasks/steps.py``.)"""
+    from sim2radar.reconstruct import reconstruct
+
+    return reconstruct(world_frame_input(frame), config, ground_truth=frame)
 
 
 def reconstructed_frame(frame, world_id: str, world_scene, spec, radar_seed: int, *, meshes,

@@ -122,7 +122,8 @@ def test_second_run_recomputes_nothing(run, monkeypatch):
         raise AssertionError("recomputed a cached frame")
 
     monkeypatch.setattr("sim2radar.radar.simulate_scene_frame", boom)
-    monkeypatch.setattr("sim2radar.reconstruct.reconstruct", boom)
+    for stage in ("estimate_depth", "segment_image", "label_materials", "build_scene"):
+        monkeypatch.setattr(f"sim2radar.reconstruct.pipeline.{stage}", boom)
     monkeypatch.setattr("sim2radar.worlds.render_frame", boom)
     files = sorted(p for p in (run["root"] / "store").rglob("*.parquet")
                    if "manifests" not in p.parts)
@@ -138,7 +139,8 @@ def test_radar_change_resimulates_without_reconstructing(run, monkeypatch):
     def boom(*a, **k):
         raise AssertionError("reconstruction should come from the store")
 
-    monkeypatch.setattr("sim2radar.reconstruct.reconstruct", boom)
+    for stage in ("estimate_depth", "segment_image", "label_materials", "build_scene"):
+        monkeypatch.setattr(f"sim2radar.reconstruct.pipeline.{stage}", boom)
     spec = _spec(radar=RADAR.with_updates(ray_spacing_deg=0.6), geometry="reconstructed")
     out = td.generate_world_dataset(SEED, spec, run["store"])
     assert out.status == "ok" and all(f.status == "ok" for f in out.frames)
@@ -152,16 +154,16 @@ def test_radar_change_resimulates_without_reconstructing(run, monkeypatch):
 
 
 def test_failed_frame_recorded_others_kept(run, monkeypatch):
-    import sim2radar.reconstruct as rec
+    import sim2radar.reconstruct.pipeline as rec
 
-    real = rec.reconstruct
+    real = rec.segment_image
 
     def flaky(frame, *a, **k):
         if frame.name.endswith("_f001"):
             raise rec.ReconstructionInputError(f"{frame.name}: no segments in this image")
         return real(frame, *a, **k)
 
-    monkeypatch.setattr(rec, "reconstruct", flaky)
+    monkeypatch.setattr(rec, "segment_image", flaky)
     spec = _spec(reconstruction={"max_depth_m": 25.0}, geometry="reconstructed")
     out = td.generate_world_dataset(SEED, spec, run["store"])
     td.record_world_dataset(run["store"], "flaky", out)
