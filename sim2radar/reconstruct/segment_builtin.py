@@ -67,6 +67,10 @@ from sim2radar.reconstruct.backproject import (
     surface_normals,
 )
 from sim2radar.reconstruct.facade import FacadeConfig, WallPlane, find_facade_doors
+from sim2radar.reconstruct.segment_builtin_thresholds import (
+    SegmenterThresholds,
+    config_from_options,
+)
 from sim2radar.reconstruct.types import (
     SEGMENT_BACKENDS,
     DepthResult,
@@ -75,7 +79,8 @@ from sim2radar.reconstruct.types import (
     Segments,
 )
 
-__all__ = ["BuiltinSegments", "SegmentGeometry", "region_geometry", "footprint_gap_m"]
+__all__ = ["BuiltinSegments", "SegmentGeometry", "SegmenterThresholds", "region_geometry",
+           "footprint_gap_m"]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -259,8 +264,10 @@ class BuiltinSegments:
     ((0.12, 0.7); a vertical region this far in front of a large wall is furniture),
     ``proud_split`` (True: such pixels inside a wall's own region are split off too),
     ``lidar_floor`` (True: floor plane and up from the raw LiDAR returns when given), ``facade``
-    (True: door frames on rectified wall planes, step 8) and ``facade_options`` (a dict of
-    :class:`~sim2radar.reconstruct.facade.FacadeConfig` fields).
+    (True: door frames on rectified wall planes, step 8), ``facade_options`` (a dict of
+    :class:`~sim2radar.reconstruct.facade.FacadeConfig` fields) and ``thresholds`` (a dict of
+    :class:`~sim2radar.reconstruct.segment_builtin_thresholds.SegmenterThresholds` fields: every
+    other threshold of the steps, named with its unit).
     """
 
     def __init__(
@@ -288,6 +295,7 @@ class BuiltinSegments:
         lidar_floor: bool = True,
         facade: bool = True,
         facade_options: dict | None = None,
+        thresholds: dict | None = None,
     ) -> None:
         self.normal_thresh_deg = float(normal_thresh_deg)
         self.colour_thresh = float(colour_thresh)
@@ -310,13 +318,10 @@ class BuiltinSegments:
         self.proud_split = bool(proud_split)
         self.lidar_floor = bool(lidar_floor)
         self.facade = bool(facade)
-        known = {f.name for f in dataclasses.fields(FacadeConfig)}
-        unknown = sorted(set(facade_options or {}) - known)
-        if unknown:
-            raise ValueError(f"segments.options.facade_options: unknown field(s) {unknown}; "
-                             f"known: {sorted(known)}")
-        self.facade_config = FacadeConfig(**{
-            key: tuple(v) if isinstance(v, list) else v for key, v in (facade_options or {}).items()})
+        self.facade_config = config_from_options(FacadeConfig, facade_options,
+                                                 "segments.options.facade_options")
+        self.thresholds = config_from_options(SegmenterThresholds, thresholds,
+                                              "segments.options.thresholds")
         self._pixel_angle: float | None = None
 
     # -- stage entry ------------------------------------------------------------------------
@@ -329,7 +334,7 @@ class BuiltinSegments:
             )
         points = points_from_depth(depth_m, k)
         valid = np.isfinite(points).all(axis=-1)
-        if valid.sum() < 16:
+        if valid.sum() < self.thresholds.min_valid_px:
             raise ReconstructionInputError(
                 f"{frame.name}: no segments — the depth map has {int(valid.sum())} valid pixels; "
                 "check the depth backend (LiDAR in view? model output?)"
@@ -392,14 +397,15 @@ class BuiltinSegments:
                         info={**info, "n_segments": len(labels)})
 
     # -- steps ------------------------------------------------------------------------------
-    @staticmethod
-    def _lab(rgb: np.ndarray, width: int) -> np.ndarray:
-        sigma = max(0.8, width / 320)
+    def _lab(self, rgb: np.ndarray, width: int) -> np.ndarray:
+        cfg = self.thresholds
+        sigma = max(cfg.colour_blur_sigma_px, width / cfg.colour_blur_ref_width_px)
         blur = cv2.GaussianBlur(rgb, (0, 0), sigma)
         lab = cv2.cvtColor(blur.astype(np.float32) / 255.0, cv2.COLOR_RGB2LAB)
         return lab  # L in [0, 100], a/b in about [-127, 127]
 
     def _regions(self, points, normals, lab, valid, focal_px, up=None) -> np.ndarray:
+        cfg = self.thresholds
         z = np.where(valid, points[..., 2], np.nan)
         # orientation class per pixel (vertical / facing up / facing down / oblique): a hard
         # boundary where a smoothed depth map bends gradually from a wall into the floor
@@ -408,11 +414,11 @@ class BuiltinSegments:
         with np.errstate(invalid="ignore"):
             nz = normals @ np.asarray(up, np.float64)
         orient = np.full(z.shape, 3, np.int8)
-        orient[np.abs(nz) < math.sin(math.radians(30))] = 0
-        orient[nz > math.cos(math.radians(30))] = 1
-        orient[nz < -math.cos(math.radians(30))] = 2
+        orient[np.abs(nz) < math.sin(math.radians(cfg.orient_class_deg))] = 0
+        orient[nz > math.cos(math.radians(cfg.orient_class_deg))] = 1
+        orient[nz < -math.cos(math.radians(cfg.orient_class_deg))] = 2
         cos_n = math.cos(math.radians(self.normal_thresh_deg))
-        jump = math.tan(math.radians(self.max_incidence_deg)) / focal_px + 0.02
+        jump = math.tan(math.radians(self.max_incidence_deg)) / focal_px + cfg.depth_jump_rel
 
         def broken(sl_a, sl_b):
             za, zb = z[sl_a], z[sl_b]
@@ -423,7 +429,7 @@ class BuiltinSegments:
                 # plane-offset step: a door proud of / set into a coplanar wall
                 off = np.abs(np.sum(normals[sl_a] * points[sl_a], axis=-1)
                              - np.sum(normals[sl_b] * points[sl_b], axis=-1))
-                do = off > self.offset_thresh_m + 0.004 * np.minimum(za, zb)
+                do = off > self.offset_thresh_m + cfg.offset_step_per_m * np.minimum(za, zb)
             do_ = orient[sl_a] != orient[sl_b]
             return dj | dn | dc | do | do_ | ~(valid[sl_a] & valid[sl_b])
 
@@ -432,7 +438,7 @@ class BuiltinSegments:
         edge[:-1, :] |= broken((slice(None, -1), slice(None)), (slice(1, None), slice(None)))
         core = valid & ~edge
         n, cc, stats, _ = cv2.connectedComponentsWithStats(core.astype(np.uint8), connectivity=4)
-        min_px = max(4, int(self.min_region_frac * valid.size))
+        min_px = max(cfg.min_region_px, int(self.min_region_frac * valid.size))
         keep = stats[:, cv2.CC_STAT_AREA] >= min_px
         keep[0] = False
         lut = np.full(n, -1, np.int64)
@@ -440,19 +446,23 @@ class BuiltinSegments:
         labels = lut[cc]
         return _fill_nearest(labels, valid)
 
-    @staticmethod
-    def _level(pl, nl, up: bool) -> float | None:
+    def _level(self, pl, nl, up: bool) -> float | None:
         """Median height of pixels on horizontal surfaces facing up (floor) or down (ceiling)."""
+        cfg = self.thresholds
         with np.errstate(invalid="ignore"):
-            sel = (nl[..., 2] > 0.95) & (pl[..., 2] < -0.3) if up else \
-                  (nl[..., 2] < -0.95) & (pl[..., 2] > 0.2)
-        if sel.sum() < 20:
+            if up:
+                sel = ((nl[..., 2] > cfg.level_normal_cos)
+                       & (pl[..., 2] < -cfg.floor_below_camera_m))
+            else:
+                sel = ((nl[..., 2] < -cfg.level_normal_cos)
+                       & (pl[..., 2] > cfg.ceiling_above_camera_m))
+        if sel.sum() < cfg.level_min_px:
             return None
         return float(np.median(pl[..., 2][sel]))
 
     def _door_like(self, g: SegmentGeometry, floor_z: float | None) -> bool:
         """Door-sized vertical rectangle standing on the floor (before labelling)."""
-        if floor_z is None or g.vertical_cos > 0.4:
+        if floor_z is None or g.vertical_cos > self.thresholds.door_like_max_vertical_cos:
             return False
         return (g.z_min_m < floor_z + self.floor_tolerance_m
                 and self.door_height_m[0] <= g.height_m <= self.door_height_m[1]
@@ -462,7 +472,7 @@ class BuiltinSegments:
         n = int(regions.max()) + 1
         if n <= 1:
             return regions
-        for _ in range(3):
+        for _ in range(self.thresholds.merge_passes):
             n = int(regions.max()) + 1
             flat = regions.ravel()
             ok = flat >= 0
@@ -488,7 +498,8 @@ class BuiltinSegments:
                     continue
                 for i in (a, b):
                     if geo[i] is None:
-                        geo[i] = region_geometry(pl, regions == i, max_points=1500,
+                        geo[i] = region_geometry(pl, regions == i,
+                                                 max_points=self.thresholds.quick_fit_points,
                                                  pixel_angle_rad=self._pixel_angle)
                 ga, gb = geo[a], geo[b]
                 if ga.n_px < 3 or gb.n_px < 3:
@@ -512,39 +523,43 @@ class BuiltinSegments:
         return regions
 
     def _label(self, regions, pl, rgb, floor_z_known=None):
+        cfg = self.thresholds
         n = int(regions.max()) + 1
         geos = [region_geometry(pl, regions == i, pixel_angle_rad=self._pixel_angle)
                 for i in range(n)]
         hsv = cv2.cvtColor(rgb, cv2.COLOR_RGB2HSV)
-        red = (((hsv[..., 0] < 8) | (hsv[..., 0] > 170)) & (hsv[..., 1] > 140)
-               & (hsv[..., 2] > 50))
+        red = (((hsv[..., 0] < cfg.red_hue[0]) | (hsv[..., 0] > cfg.red_hue[1]))
+               & (hsv[..., 1] > cfg.red_min_saturation) & (hsv[..., 2] > cfg.red_min_value))
         flat = regions.ravel()
         ok = flat >= 0
         value = np.bincount(flat[ok], hsv[..., 2].ravel()[ok] / 255.0, minlength=n) / np.maximum(
             np.bincount(flat[ok], minlength=n), 1)
         red_frac = np.bincount(flat[ok], red.ravel()[ok], minlength=n) / np.maximum(
             np.bincount(flat[ok], minlength=n), 1)
-        cos_h = math.cos(math.radians(25))
-        sin_v = math.sin(math.radians(25))
+        cos_h = math.cos(math.radians(cfg.label_tilt_deg))
+        sin_v = math.sin(math.radians(cfg.label_tilt_deg))
         # floor and ceiling levels: the largest up-/down-facing horizontal regions
-        ups = [g for g in geos if g.vertical_cos > cos_h and g.normal[2] > 0 and g.centroid[2] < -0.3]
-        downs = [g for g in geos if g.vertical_cos > cos_h and g.normal[2] < 0 and g.centroid[2] > 0.2]
+        ups = [g for g in geos if g.vertical_cos > cos_h and g.normal[2] > 0
+               and g.centroid[2] < -cfg.floor_below_camera_m]
+        downs = [g for g in geos if g.vertical_cos > cos_h and g.normal[2] < 0
+                 and g.centroid[2] > cfg.ceiling_above_camera_m]
         zs = pl[..., 2][np.isfinite(pl[..., 2])]
         if floor_z_known is not None:
             floor_z = floor_z_known
         elif ups:
             floor_z = max(ups, key=lambda g: g.n_px).centroid[2]
         else:
-            floor_z = float(np.percentile(zs, 1))
+            floor_z = float(np.percentile(zs, cfg.level_fallback_pct))
         ceil_z = (max(downs, key=lambda g: g.n_px).centroid[2] if downs
-                  else float(np.percentile(zs, 99)))
+                  else float(np.percentile(zs, 100 - cfg.level_fallback_pct)))
         tol = self.floor_tolerance_m
         n_valid = int(np.isfinite(pl[..., 2]).sum())
         labels, scores = [], []
         for i, g in enumerate(geos):
             label, score = "clutter", 0.4
             size = max(g.width_m, g.height_m)
-            if red_frac[i] > 0.5 and size < 1.2:
+            if (red_frac[i] > cfg.extinguisher_min_red_frac
+                    and size < cfg.extinguisher_max_size_m):
                 label, score = "fire_extinguisher", 0.7
             elif g.vertical_cos > cos_h:
                 if g.normal[2] > 0 and g.centroid[2] < floor_z + tol:
@@ -554,10 +569,10 @@ class BuiltinSegments:
             elif g.vertical_cos < sin_v:
                 label, score = self._vertical_label(g, floor_z, ceil_z, bool(downs),
                                                     float(value[i]))
-            elif g.n_px > 0.02 * n_valid:
+            elif g.n_px > cfg.oblique_min_frac * n_valid:
                 # a large surface with an oblique fitted normal (depth bent near the image
                 # border, where the LiDAR does not reach): the structure it leans towards
-                if g.vertical_cos < 0.75:
+                if g.vertical_cos < cfg.oblique_wall_max_cos:
                     label, score = "wall", 0.4
                 elif g.normal[2] > 0 and g.centroid[2] < 0:
                     label, score = "floor", 0.4
@@ -587,10 +602,11 @@ class BuiltinSegments:
         to door height and turned from the wall, ``clutter`` otherwise. Returns the regions,
         labels, scores and the region ids turned to clutter (the door growing step skips
         them)."""
+        cfg = self.thresholds
         lo, hi = self.proud_m
         valid = np.isfinite(pl).all(axis=-1)
         counts = np.bincount(regions[regions >= 0], minlength=len(labels))
-        walls = self._wall_extents(regions, labels, pl, 0.02, 8)
+        walls = self._wall_extents(regions, labels, pl, cfg.wall_min_frac, cfg.wall_top_n)
         labels, scores = list(labels), list(scores)
         proud: set[int] = set()
         if self.proud_split:
@@ -603,16 +619,17 @@ class BuiltinSegments:
                     front = pl @ nrm - d
                 blob = (regions == wi) & valid & (front > lo) & (front < hi)
                 blob = cv2.morphologyEx(blob.astype(np.uint8), cv2.MORPH_OPEN,
-                                        np.ones((5, 5), np.uint8))
+                                        np.ones((cfg.proud_open_px,) * 2, np.uint8))
                 n_cc, cc, stats, _ = cv2.connectedComponentsWithStats(blob, connectivity=4)
                 for c in range(1, n_cc):
-                    if stats[c, cv2.CC_STAT_AREA] < 0.002 * h * w:
+                    if stats[c, cv2.CC_STAT_AREA] < cfg.proud_split_min_frac * h * w:
                         continue
                     blob_c = cc == c
                     regions[blob_c] = len(labels)
                     g = region_geometry(pl, blob_c, pixel_angle_rad=self._pixel_angle)
-                    if (np.percentile(pl[..., 2][blob_c], 99) - floor_z >= self.door_height_m[0]
-                            and not self._parallel(g.normal, nrm)):
+                    top = np.percentile(pl[..., 2][blob_c], cfg.proud_top_pct) - floor_z
+                    if (top >= self.door_height_m[0]
+                            and not self._parallel(g.normal, nrm, cfg.parallel_deg)):
                         # up to door height and turned from the wall: an open leaf swung out of
                         # its doorway when it is door-sized; either way no longer part of the
                         # wall's plane
@@ -625,61 +642,65 @@ class BuiltinSegments:
                     scores.append(0.5)
             counts = np.bincount(regions[regions >= 0], minlength=len(labels))
         for i, lbl in enumerate(labels):
-            if lbl not in ("door", "wall", "window") or counts[i] < 100:
+            if lbl not in ("door", "wall", "window") or counts[i] < cfg.proud_min_px:
                 continue
             pts = pl[(regions == i) & valid]
-            if len(pts) < 50:
+            if len(pts) < cfg.proud_min_points:
                 continue
-            top = np.percentile(pts[:, 2], 99) - floor_z
+            top = np.percentile(pts[:, 2], cfg.proud_top_pct) - floor_z
             tall = top >= self.door_height_m[0]
             if tall and (top > self.door_height_m[1] or (regions[0] == i).any()):
                 continue  # up to the ceiling, or its top not seen: a wall
             normal = region_geometry(pl, regions == i).normal if tall else None
             for wi, nrm, d, along, (s0, s1) in walls:
-                if counts[i] >= counts[wi] or (tall and not self._parallel(normal, nrm)):
+                if counts[i] >= counts[wi] or (
+                        tall and not self._parallel(normal, nrm, cfg.parallel_deg)):
                     continue
                 sa = pts @ along
-                if ((sa > s0 - 0.1) & (sa < s1 + 0.1)).mean() < 0.8:
+                margin = cfg.proud_extent_margin_m
+                if ((sa > s0 - margin) & (sa < s1 + margin)).mean() < cfg.proud_within_frac:
                     continue
-                f10, f50 = np.percentile(pts @ nrm - d, [10, 50])
-                if lo <= f50 <= hi and f10 > 0.03:
+                f10, f50 = np.percentile(pts @ nrm - d, [cfg.proud_front_pct, 50])
+                if lo <= f50 <= hi and f10 > cfg.proud_min_front_m:
                     labels[i], scores[i] = "clutter", 0.5
                     proud.add(i)
                     break
         return regions, labels, scores, proud
 
-    def _flush_with_walls(self, regions, labels, pl, skip=frozenset(), tol_m: float = 0.05):
+    def _flush_with_walls(self, regions, labels, pl, skip=frozenset()):
         """Wall pieces too small for a wall by size — the strips a handrail, a window or a
         shadow cut out of a wall, below the size the vertical rule calls ``wall`` — are
         ``clutter`` only if they stand apart from the walls: a vertical region whose points lie
-        on a large wall's plane (80 % within ``tol_m`` + 1 % of their range) and within its
-        extent is that wall (furniture stands proud of it, :meth:`_proud_of_walls`)."""
+        on a large wall's plane (80 % within ``flush_tol_m`` + 1 % of their range) and within
+        its extent is that wall (furniture stands proud of it, :meth:`_proud_of_walls`)."""
+        cfg = self.thresholds
         labels = list(labels)
         valid = np.isfinite(pl).all(axis=-1)
-        walls = self._wall_extents(regions, labels, pl, 0.02, 8)
+        walls = self._wall_extents(regions, labels, pl, cfg.wall_min_frac, cfg.wall_top_n)
         if not walls:
             return labels
         for i, lbl in enumerate(labels):
             if lbl != "clutter" or i in skip:
                 continue
             m = (regions == i) & valid
-            if m.sum() < 50:
+            if m.sum() < cfg.flush_min_px:
                 continue
             pts = pl[m]
             g = region_geometry(pl, m, pixel_angle_rad=self._pixel_angle)
-            if g.vertical_cos > 0.3:
+            if g.vertical_cos > cfg.flush_max_vertical_cos:
                 continue
-            tol = tol_m + 0.01 * np.linalg.norm(pts, axis=1)
+            tol = cfg.flush_tol_m + cfg.flush_tol_per_m * np.linalg.norm(pts, axis=1)
+            margin = cfg.flush_extent_margin_m
             for _, nrm, d, along, (s0, s1) in walls:
                 sa = pts @ along
-                on = (np.abs(pts @ nrm - d) < tol) & (sa > s0 - 0.1) & (sa < s1 + 0.1)
-                if on.mean() >= 0.8:
+                on = (np.abs(pts @ nrm - d) < tol) & (sa > s0 - margin) & (sa < s1 + margin)
+                if on.mean() >= cfg.flush_on_frac:
                     labels[i] = "wall"
                     break
         return labels
 
     @staticmethod
-    def _parallel(normal: np.ndarray, wall_normal: np.ndarray, max_deg: float = 10.0) -> bool:
+    def _parallel(normal: np.ndarray, wall_normal: np.ndarray, max_deg: float) -> bool:
         """The region's plane faces the same way as the wall's (within ``max_deg``): standing
         proud of the wall, it is a cabinet's front, not a door leaf swung out of its doorway
         (turned by the swing angle; a leaf swung against the wall is only its thickness proud)."""
@@ -696,6 +717,7 @@ class BuiltinSegments:
         the pixels within its image columns that are connected to it and of its colour
         (ΔE < ``grow_colour``) are taken; if that grown region is a door (door width, top at
         door height, below the ceiling) it becomes a ``door`` region."""
+        cfg = self.thresholds
         n = len(labels)
         flat = regions.ravel()
         ok = flat >= 0
@@ -703,7 +725,7 @@ class BuiltinSegments:
         n_valid = int(np.isfinite(pl[..., 2]).sum())
         col = np.stack([np.bincount(flat[ok], lab[..., c].ravel()[ok], minlength=n)
                         for c in range(3)], 1) / np.maximum(cnt, 1)[:, None]
-        big_wall = np.array([lbl == "wall" and cnt[i] >= 0.02 * n_valid
+        big_wall = np.array([lbl == "wall" and cnt[i] >= cfg.wall_min_frac * n_valid
                              for i, lbl in enumerate(labels)], bool)
         labels, scores = list(labels), list(scores)
         regions = regions.copy()
@@ -711,14 +733,17 @@ class BuiltinSegments:
         taken = np.zeros((h, w), bool)
         for i in np.argsort(-cnt):
             i = int(i)
-            if (cnt[i] < 100 or labels[i] not in ("clutter", "wall", "window") or big_wall[i]
+            if (cnt[i] < cfg.grow_min_px or labels[i] not in ("clutter", "wall", "window")
+                    or big_wall[i]
                     or i in skip):
                 continue
             mask = regions == i
             if (mask & taken).any():
                 continue
-            g = region_geometry(pl, mask, max_points=1500, pixel_angle_rad=self._pixel_angle)
-            if (g.vertical_cos > 0.3 or g.z_min_m > floor_z + self.door_bottom_max_m
+            g = region_geometry(pl, mask, max_points=cfg.quick_fit_points,
+                                pixel_angle_rad=self._pixel_angle)
+            if (g.vertical_cos > cfg.grow_max_vertical_cos
+                    or g.z_min_m > floor_z + self.door_bottom_max_m
                     or g.width_m > self.door_width_m[1]):
                 continue
             ys, xs = np.nonzero(mask)
@@ -740,10 +765,12 @@ class BuiltinSegments:
                 continue
             gg = region_geometry(pl, grown, pixel_angle_rad=self._pixel_angle)
             top = gg.z_max_m - floor_z
-            if (gg.vertical_cos < 0.3 and gg.z_min_m < floor_z + self.door_bottom_max_m
-                    and self.door_height_m[0] - 0.1 <= top <= self.door_height_m[1] + 0.1
+            slack = cfg.door_top_slack_m
+            if (gg.vertical_cos < cfg.grow_max_vertical_cos
+                    and gg.z_min_m < floor_z + self.door_bottom_max_m
+                    and self.door_height_m[0] - slack <= top <= self.door_height_m[1] + slack
                     and self.door_width_m[0] <= gg.width_m <= self.door_width_m[1]
-                    and gg.z_max_m < ceil_z - 0.1):
+                    and gg.z_max_m < ceil_z - cfg.below_ceiling_m):
                 regions[grown] = i
                 labels[i] = "door"
                 scores[i] = 0.5
@@ -765,32 +792,34 @@ class BuiltinSegments:
         Either way the ray must cross the floor (ceiling) plane in front of every large wall
         plane; otherwise it sees that wall. ``rays`` (H, W, 3) are the level-frame viewing directions (camera z = 1).
         """
+        cfg = self.thresholds
         valid = np.isfinite(pl).all(axis=-1)
         h = valid.shape[0]
         rng = np.linalg.norm(np.where(valid[..., None], pl, 0), axis=-1)
-        tol = self.below_floor_m + 0.01 * rng
+        tol = self.below_floor_m + cfg.below_floor_per_m * rng
         with np.errstate(invalid="ignore"):
             floor_px = valid & (pl[..., 2] < floor_z - tol)
             ceil_px = valid & (pl[..., 2] > ceil_z + tol)
         rows = np.arange(h)[:, None]
         first, last = column_extent(valid)
         if self.fill_no_depth:
-            floor_px |= ~valid & (rows > last[None, :]) & (rays[..., 2] < -0.02)
-            ceil_px |= ~valid & (rows < first[None, :]) & (rays[..., 2] > 0.02)
+            floor_px |= ~valid & (rows > last[None, :]) & (rays[..., 2] < -cfg.fill_ray_slope)
+            ceil_px |= ~valid & (rows < first[None, :]) & (rays[..., 2] > cfg.fill_ray_slope)
         # the ray must reach the floor (ceiling) plane in front of every large wall plane:
         # otherwise the pixel sees the wall's lower (upper) part
-        walls = self._large_walls(regions, labels, pl, 0.01, 8)
+        walls = self._large_walls(regions, labels, pl, cfg.floor_wall_min_frac,
+                                  cfg.floor_wall_top_n)
         for px, level in ((floor_px, floor_z), (ceil_px, ceil_z)):
             with np.errstate(invalid="ignore", divide="ignore"):
                 t = level / rays[..., 2]
             q = rays * t[..., None]
             for _, (nrm, d, _, _) in walls:
                 with np.errstate(invalid="ignore"):
-                    px &= ~(q @ nrm < d - 0.05)
+                    px &= ~(q @ nrm < d - cfg.floor_wall_margin_m)
         labels, scores = list(labels), list(scores)
         regions = regions.copy()
         for px, name in ((floor_px, "floor"), (ceil_px, "ceiling")):
-            if px.sum() < 10:
+            if px.sum() < cfg.min_segment_px:
                 continue
             ids = [i for i, lab in enumerate(labels) if lab == name]
             if ids:
@@ -807,7 +836,7 @@ class BuiltinSegments:
         """Doors and windows set into walls: pixels seen *behind* a wall plane through a
         rectangle of the wall (a recessed leaf, a window pane, or a room through an open door).
 
-        For each large wall region, every other pixel whose point lies 3 cm – 4 m behind the
+        For each large wall region, every other pixel whose point lies 4 cm – 4 m behind the
         wall plane and whose viewing ray crosses the plane inside the wall's extent is a
         candidate; connected candidates form an opening, measured on the wall plane (width
         along the wall, bottom and top height), when the wall frames it left and right (the
@@ -819,17 +848,18 @@ class BuiltinSegments:
         Returns the updated regions, labels, scores and a list of door boxes (level frame,
         ``x y z dx dy dz heading``).
         """
+        cfg = self.thresholds
         h, w = regions.shape
         valid = np.isfinite(pl).all(axis=-1)
         n_reg = int(regions.max()) + 1
         counts = np.bincount(regions[regions >= 0], minlength=n_reg)
         walls = [i for i in np.argsort(-counts) if labels[i] == "wall"
-                 and counts[i] > 0.01 * valid.sum()]
+                 and counts[i] > cfg.opening_wall_min_frac * valid.sum()]
         boxes: list[list[float]] = []
         used = np.zeros((h, w), bool)
         labels, scores = list(labels), list(scores)
         is_wall = np.isin(regions, walls)
-        for wi in walls[:6]:
+        for wi in walls[:cfg.opening_max_walls]:
             mask = regions == wi
             plane = self._wall_plane(pl, mask)
             if plane is None:
@@ -837,7 +867,8 @@ class BuiltinSegments:
             nrm, d, g, wp = plane
             along = np.array([-nrm[1], nrm[0], 0.0])
             s_w = wp @ along
-            s0, s1 = np.percentile(s_w, [0.5, 99.5])
+            s0, s1 = np.percentile(s_w, [cfg.opening_wall_extent_pct,
+                                         100 - cfg.opening_wall_extent_pct])
             npd = pl @ nrm
             with np.errstate(invalid="ignore", divide="ignore"):
                 behind = d - npd  # > 0 behind the wall
@@ -845,13 +876,18 @@ class BuiltinSegments:
             sq, zq = q @ along, q[..., 2]
             # (pixels of the wall region itself count too: a recessed leaf of a similar colour
             # may have been merged into the wall)
-            cand = (valid & ~used & (behind > 0.04) & (behind < 4.0)
-                    & (sq > s0 + 0.02) & (sq < s1 - 0.02) & (zq > floor_z - 0.1)
-                    & (zq < g.z_max_m + 0.05))
-            cand = cv2.morphologyEx(cand.astype(np.uint8), cv2.MORPH_OPEN, np.ones((2, 2), np.uint8))
+            inset = cfg.opening_inset_m
+            cand = (valid & ~used & (behind > cfg.opening_plane_tol_m)
+                    & (behind < cfg.opening_max_behind_m)
+                    & (sq > s0 + inset) & (sq < s1 - inset)
+                    & (zq > floor_z - cfg.opening_below_floor_m)
+                    & (zq < g.z_max_m + cfg.opening_above_wall_m))
+            cand = cv2.morphologyEx(cand.astype(np.uint8), cv2.MORPH_OPEN,
+                                    np.ones((cfg.opening_open_px,) * 2, np.uint8))
             n_cc, cc, stats, _ = cv2.connectedComponentsWithStats(cand, connectivity=8)
             for c in range(1, n_cc):
-                if stats[c, cv2.CC_STAT_AREA] < max(30, 0.001 * h * w):
+                if stats[c, cv2.CC_STAT_AREA] < max(cfg.opening_min_px,
+                                                    cfg.opening_min_frac * h * w):
                     continue
                 m = cc == c
                 # the opening must be framed by this wall left and right of it: pixels of the
@@ -862,34 +898,40 @@ class BuiltinSegments:
                 rows = np.flatnonzero(m.any(axis=1))
                 mid = rows[len(rows) // 2]
                 quart = rows[[len(rows) // 4, len(rows) // 2, 3 * len(rows) // 4]]
-                coplanar = is_wall[quart] & (np.abs(behind[quart]) < 0.04)
-                left_wall = (mask[mid, max(0, x0 - 6):x0].any() or x0 == 0
-                             or coplanar[:, max(0, x0 - 6):x0].any(1).all())
-                right_wall = (mask[mid, x1:min(w, x1 + 6)].any() or x1 == w
-                              or coplanar[:, x1:min(w, x1 + 6)].any(1).all())
+                coplanar = is_wall[quart] & (np.abs(behind[quart]) < cfg.opening_plane_tol_m)
+                fp = cfg.opening_frame_px
+                left_wall = (mask[mid, max(0, x0 - fp):x0].any() or x0 == 0
+                             or coplanar[:, max(0, x0 - fp):x0].any(1).all())
+                right_wall = (mask[mid, x1:min(w, x1 + fp)].any() or x1 == w
+                              or coplanar[:, x1:min(w, x1 + fp)].any(1).all())
                 if not (left_wall and right_wall):
                     continue
                 ss, zz = sq[m], zq[m]
-                a0, a1 = np.percentile(ss, [1, 99])
-                b0, b1 = np.percentile(zz, [1, 99])
+                pct = [cfg.opening_extent_pct, 100 - cfg.opening_extent_pct]
+                a0, a1 = np.percentile(ss, pct)
+                b0, b1 = np.percentile(zz, pct)
                 width, bottom, top = a1 - a0, b0 - floor_z, b1 - floor_z
-                recess = m & (behind < 0.35)
+                recess = m & (behind < cfg.recess_max_m)
                 kind = None
                 # doors stand on the floor, windows have a sill (>= 0.8 m in the procedural
                 # worlds); LiDAR-completed depth often loses an opening's lowest band, so a
                 # door-height opening whose bottom is below ``door_bottom_max_m`` is a door
+                slack = cfg.door_top_slack_m
+                sill, win_w, win_h = (cfg.opening_window_bottom_m, cfg.window_width_m,
+                                      cfg.opening_window_height_m)
                 if (bottom < self.door_bottom_max_m
-                        and self.door_width_m[0] <= width <= self.door_width_m[1] + 0.15
-                        and self.door_height_m[0] - 0.1 <= top <= self.door_height_m[1] + 0.1
-                        and b1 < ceil_z - 0.1):
+                        and self.door_width_m[0] <= width
+                        <= self.door_width_m[1] + cfg.opening_door_width_slack_m
+                        and self.door_height_m[0] - slack <= top <= self.door_height_m[1] + slack
+                        and b1 < ceil_z - cfg.below_ceiling_m):
                     kind = "door"
-                elif (max(0.4, self.door_bottom_max_m) < bottom < 1.4 and 0.4 <= width <= 3.0
-                      and 0.4 <= b1 - b0 <= 2.0):
+                elif (max(sill[0], self.door_bottom_max_m) < bottom < sill[1]
+                      and win_w[0] <= width <= win_w[1] and win_h[0] <= b1 - b0 <= win_h[1]):
                     kind = "window"
                 if kind is None:
                     continue
                 used |= m
-                if recess.sum() >= 10:
+                if recess.sum() >= cfg.min_segment_px:
                     regions = regions.copy()
                     regions[recess] = len(labels)
                     labels.append(kind)
@@ -902,21 +944,23 @@ class BuiltinSegments:
                                   float(width), th, float(top), float(heading)])
         return regions, labels, scores, boxes
 
-    def _wall_plane(self, pl, mask, min_points: int = 10):
+    def _wall_plane(self, pl, mask):
         """Vertical plane ``nrm · p = d`` of a wall region (``nrm`` horizontal, facing the
         camera, ``d`` the median offset of its points), its geometry and its valid points; None
-        when the region is not vertical, lies within 0.3 m of the camera, or has fewer than
-        ``min_points`` pixels with depth (a region grown over pixels the LiDAR missed)."""
+        when the region is not vertical, lies within ``wall_min_distance_m`` of the camera, or
+        has fewer than ``wall_min_points`` pixels with depth (a region grown over pixels the
+        LiDAR missed)."""
+        cfg = self.thresholds
         wp = pl[mask & np.isfinite(pl).all(axis=-1)]
-        if len(wp) < min_points:
+        if len(wp) < cfg.wall_min_points:
             return None
         g = region_geometry(pl, mask, pixel_angle_rad=self._pixel_angle)
-        if g.vertical_cos > 0.2:
+        if g.vertical_cos > cfg.wall_max_vertical_cos:
             return None
         nrm = np.array([g.normal[0], g.normal[1], 0.0])
         nrm /= np.linalg.norm(nrm)
         d = float(np.median(wp @ nrm))
-        return None if d > -0.3 else (nrm, d, g, wp)
+        return None if d > -cfg.wall_min_distance_m else (nrm, d, g, wp)
 
     def _large_walls(self, regions, labels, pl, min_frac: float, top: int):
         """``(region id, (nrm, d, geometry, points))`` of the ``wall`` regions among the
@@ -935,39 +979,49 @@ class BuiltinSegments:
 
     def _wall_extents(self, regions, labels, pl, min_frac: float, top: int):
         """``(region id, nrm, d, along, (s0, s1))`` of :meth:`_large_walls`: the horizontal
-        along-wall axis and the 1st–99th percentile extent of the wall's points along it [m]."""
+        along-wall axis and the extent of the wall's points along it (percentiles
+        ``wall_extent_pct``, 100 − that) [m]."""
+        pct = [self.thresholds.wall_extent_pct, 100 - self.thresholds.wall_extent_pct]
         out = []
         for wi, (nrm, d, _, wp) in self._large_walls(regions, labels, pl, min_frac, top):
             along = np.array([-nrm[1], nrm[0], 0.0])
-            s0, s1 = np.percentile(wp @ along, [1, 99])
+            s0, s1 = np.percentile(wp @ along, pct)
             out.append((wi, nrm, d, along, (float(s0), float(s1))))
         return out
 
     def _wall_planes(self, regions, labels, pl) -> list[WallPlane]:
         """Planes of the large vertical ``wall`` regions (coplanar ones merged), with the
-        along-wall extent of their pixels widened by 1.2 m (a door may split its wall).
+        along-wall extent of their pixels widened by ``facade_wall_pad_m`` (a door may split
+        its wall).
 
-        Regions within 0.1 m of each other are one wall; its face is the front-most of them
+        Regions within ``facade_coplanar_deg`` and ``facade_coplanar_m`` of each other are one
+        wall; its face is the front-most of them
         (the largest offset: normals face the camera). A closed leaf is recessed a few
         centimetres behind its wall's face and a double door's leaves can outnumber the wall
         pixels around them: on the leaves' plane the frame around them lies in front of it
         (occluded cells) and the facade search would not see its posts."""
+        cfg = self.thresholds
+        pad = cfg.facade_wall_pad_m
+        cos_c = math.cos(math.radians(cfg.facade_coplanar_deg))
         planes: list[WallPlane] = []
-        for _, nrm, d, _, (s0, s1) in self._wall_extents(regions, labels, pl, 0.01, 10):
+        for _, nrm, d, _, (s0, s1) in self._wall_extents(regions, labels, pl,
+                                                         cfg.facade_wall_min_frac,
+                                                         cfg.facade_wall_top_n):
             for j, q in enumerate(planes):
-                if q.normal @ nrm > math.cos(math.radians(10)) and abs(q.offset_m - d) < 0.1:
+                if q.normal @ nrm > cos_c and abs(q.offset_m - d) < cfg.facade_coplanar_m:
                     lo, hi = q.s_range_m
                     planes[j] = WallPlane(q.normal, max(q.offset_m, d),
-                                          (min(lo, s0 - 1.2), max(hi, s1 + 1.2)))
+                                          (min(lo, s0 - pad), max(hi, s1 + pad)))
                     break
             else:
-                planes.append(WallPlane(nrm, d, (s0 - 1.2, s1 + 1.2)))
+                planes.append(WallPlane(nrm, d, (s0 - pad, s1 + pad)))
         return planes
 
     def _facade_doors(self, regions, labels, scores, pl, rot, k, rgb, floor_z, ceil_z):
         """Doorways found by their frames on the rectified wall planes
         (:mod:`sim2radar.reconstruct.facade`); their pixels become ``door`` segments."""
-        lab = cv2.cvtColor(cv2.GaussianBlur(rgb, (0, 0), 0.8).astype(np.float32) / 255.0,
+        sigma = self.thresholds.facade_blur_sigma_px
+        lab = cv2.cvtColor(cv2.GaussianBlur(rgb, (0, 0), sigma).astype(np.float32) / 255.0,
                            cv2.COLOR_RGB2LAB)[..., 0]
         grad = (cv2.Sobel(lab, cv2.CV_32F, 1, 0, ksize=3) / 8.0,
                 cv2.Sobel(lab, cv2.CV_32F, 0, 1, ksize=3) / 8.0)
@@ -984,7 +1038,7 @@ class BuiltinSegments:
                 keep = np.isin(regions, [i for i, lbl in enumerate(labels)
                                          if lbl in ("wall", "clutter", "window", "door")])
                 m &= keep
-                if m.sum() >= 10:
+                if m.sum() >= self.thresholds.min_segment_px:
                     regions[m] = len(labels)
                     labels.append("door")
                     scores.append(0.6 + 0.3 * door.score)
@@ -992,39 +1046,47 @@ class BuiltinSegments:
 
     def _vertical_label(self, g: SegmentGeometry, floor_z: float, ceil_z: float,
                         ceiling_seen: bool, brightness: float = 1.0) -> tuple[str, float]:
+        cfg = self.thresholds
         tol = self.floor_tolerance_m
         on_floor = g.z_min_m < floor_z + tol
-        below_ceiling = g.z_max_m < ceil_z - 0.1 or not ceiling_seen
+        below_ceiling = g.z_max_m < ceil_z - cfg.below_ceiling_m or not ceiling_seen
         w_lo, w_hi = self.door_width_m
         h_lo, h_hi = self.door_height_m
         if g.touches_border:  # partly out of view: accept narrower / shorter rectangles
-            w_lo, h_lo = 0.25, h_lo * 0.8
+            w_lo, h_lo = cfg.cut_door_min_width_m, h_lo * cfg.cut_door_height_frac
         rel_bottom = g.z_min_m - floor_z
         # cut by the top border and by a side border, neither the height nor the width is
         # seen: a wall close to the camera fills the same corner of the image, so the size
         # rules below have no evidence of a door (the facade search still finds its frame)
         sized = not ("t" in g.borders and ("l" in g.borders or "r" in g.borders))
         if (sized and on_floor and below_ceiling and w_lo <= g.width_m <= w_hi
-                and h_lo <= g.height_m <= h_hi and g.fill > 0.5):
+                and h_lo <= g.height_m <= h_hi and g.fill > cfg.door_min_fill):
             return "door", float(min(0.9, 0.5 + 0.4 * g.fill))
-        if (sized and self.door_partial and g.z_min_m < floor_z + 0.6 and below_ceiling
-                and 0.3 <= g.width_m <= w_hi and 1.1 <= g.height_m <= h_hi
-                and g.z_max_m - floor_z <= h_hi + 0.1 and g.fill > 0.6 and g.planarity < 0.03):
+        if (sized and self.door_partial and g.z_min_m < floor_z + cfg.fragment_max_bottom_m
+                and below_ceiling and cfg.fragment_min_width_m <= g.width_m <= w_hi
+                and cfg.fragment_min_height_m <= g.height_m <= h_hi
+                and g.z_max_m - floor_z <= h_hi + cfg.door_top_slack_m
+                and g.fill > cfg.fragment_min_fill and g.planarity < cfg.fragment_max_rms_m):
             # a door fragment: LiDAR completion smears the leaf's lower / upper band into the
             # wall or floor; tall, narrow, planar and near the floor (its box is completed to
             # the floor and the doorway height by the door fit)
             return "door", 0.4
-        if (g.width_m > 0.8 and g.height_m < 0.2 and 0.6 < rel_bottom < 1.2):
+        rail = cfg.handrail_bottom_m
+        if (g.width_m > cfg.handrail_min_length_m and g.height_m < cfg.handrail_max_height_m
+                and rail[0] < rel_bottom < rail[1]):
             return "handrail", 0.6
-        if (0.4 < rel_bottom < 1.5 and below_ceiling and 0.4 <= g.width_m <= 3.0
-                and 0.4 <= g.height_m <= 1.8 and g.fill > 0.6 and g.planarity < 0.02):
-            if brightness >= 0.55:  # glass shows daylight or reflections: bright
+        sill, win_w, win_h = cfg.window_bottom_m, cfg.window_width_m, cfg.window_height_m
+        if (sill[0] < rel_bottom < sill[1] and below_ceiling and win_w[0] <= g.width_m <= win_w[1]
+                and win_h[0] <= g.height_m <= win_h[1] and g.fill > cfg.window_min_fill
+                and g.planarity < cfg.window_max_rms_m):
+            if brightness >= cfg.window_min_brightness:  # glass shows daylight or reflections
                 return "window", 0.5
             top = g.z_max_m - floor_z
-            if sized and h_lo <= top <= h_hi + 0.1 and w_lo <= g.width_m <= w_hi:
+            if (sized and h_lo <= top <= h_hi + cfg.door_top_slack_m
+                    and w_lo <= g.width_m <= w_hi):
                 # the upper part of a door whose lower part was split off: door-height top
                 return "door", 0.4
-        if g.height_m > 1.0 or g.width_m > 1.5:
+        if g.height_m > cfg.wall_min_height_m or g.width_m > cfg.wall_min_width_m:
             return "wall", 0.8
         return "clutter", 0.4
 
