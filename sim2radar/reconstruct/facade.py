@@ -245,6 +245,9 @@ def find_facade_doors(plane: WallPlane, floor_z: float, ceil_z: float, level_rot
     pairs: dict[tuple[int, int], tuple[float, int, int, int]] = {}
     wmin, wmax = (int(round(x / c)) for x in config.door_width_m)
     tz = range(iz(config.top_m[0]), min(iz(config.top_m[1]), len(r.z) - 1) + 1)
+    if not tz:
+        # the raster (floor to ceiling) ends below the lowest lintel: no doorway of door height
+        return []
     for ia, (a0, a1) in enumerate(runs):
         for ib, (b0, b1) in enumerate(runs[ia + 1:], start=ia + 1):
             ja, jb = min(a0 + 2, a1), max(b1 - 2, b0)  # outer frame edges

@@ -466,3 +466,20 @@ def test_room_lower_than_the_nominal_door_top_is_searched_without_error():
     low_ceiling = FLOOR_Z + 2.0
     assert low_ceiling - FLOOR_Z < FacadeConfig().nominal_top_m
     assert find_facade_doors(plane, FLOOR_Z, low_ceiling, ROT, k, pts, _grad(lum)) == []
+
+
+@pytest.mark.parametrize("border", [False, True])
+def test_ceiling_below_the_lowest_lintel_gives_no_door_and_no_error(border):
+    """A ceiling measured 1.94 m above the floor (below ``top_m[0]``, 1.95 m: e.g. a bulkhead
+    taken for the ceiling) leaves no raster row where a lintel could be: a door frame, whole or
+    cut by the image border, is then no doorway of door height, not an empty reduction (found
+    on a 320×240 procedural frame)."""
+    if border:
+        lum, pts = _render(K_FRONT, [_wall(FRONT, _frame(2.3, 3.3))])
+        plane, k, grad = FRONT, K_FRONT, _grad(lum)
+    else:
+        plane, k, _, pts, grad = _door_scene("front")
+    low_ceiling = FLOOR_Z + 1.94
+    assert low_ceiling - FLOOR_Z < FacadeConfig().top_m[0]
+    assert find_facade_doors(plane, FLOOR_Z, low_ceiling, ROT, k, pts, grad) == []
+    assert _doors(plane, k, pts, grad)  # the same frame under the scene's ceiling is a door
