@@ -18,7 +18,7 @@ import numpy as np
 
 from sim2radar.boxes import box_corners
 
-__all__ = ["bev_png", "box_corners_xy", "frames_bev_png"]
+__all__ = ["bev_png", "box_corners_xy", "frames_bev_png", "scene_extent"]
 
 
 def box_corners_xy(boxes: np.ndarray) -> np.ndarray:
@@ -149,8 +149,19 @@ def frames_bev_png(frames: Sequence, path: str | Path, *, class_name: str = "doo
                 labels += [lab] * len(b)
     pts_all = np.concatenate(pts) if pts else np.zeros((0, 4), np.float32)
     box_all = np.concatenate(boxes) if boxes else np.zeros((0, 7), np.float32)
-    xy = np.concatenate([pts_all[:, :2], box_all[:, :2], np.zeros((1, 2))])
-    lo, hi = xy.min(axis=0) - 1.0, xy.max(axis=0) + 1.0
-    bev_png(pts_all, boxes=box_all, box_labels=labels, extent_m=(lo[0], hi[0], lo[1], hi[1]),
+    bev_png(pts_all, boxes=box_all, box_labels=labels, extent_m=scene_extent(pts_all, box_all),
             title=f"{title}: {len(frames)} frames, {len(pts_all)} points", path=path)
     return Path(path)
+
+
+def scene_extent(points: np.ndarray, boxes: np.ndarray, margin_m: float = 1.0
+                 ) -> tuple[float, float, float, float]:
+    """(x_min, x_max, y_min, y_max) [m] framing a picture on the scene rather than the radar's
+    full range: the points' and box centres' x, y and the radar at the origin, plus
+    ``margin_m``."""
+    pts = np.asarray(points, np.float32)
+    pts_xy = pts[:, :2] if pts.ndim == 2 else np.zeros((0, 2), np.float32)
+    b = np.asarray(boxes, np.float32).reshape(-1, 7)
+    xy = np.concatenate([pts_xy, b[:, :2], np.zeros((1, 2), np.float32)])
+    lo, hi = xy.min(axis=0) - margin_m, xy.max(axis=0) + margin_m
+    return float(lo[0]), float(hi[0]), float(lo[1]), float(hi[1])

@@ -282,7 +282,7 @@ def render_scene_pngs(
 
     Files are named ``<scene_id>_f<frame>.png``; returns their paths.
     """
-    from sim2radar.visualize import bev_png
+    from sim2radar.visualize import bev_png, scene_extent
 
     frames = radar_frames_from_table(store.read("radar_points", radar_key))
     fov_deg, max_range_m = _radar_view(cfg) if cfg is not None else (None, None)
@@ -292,11 +292,7 @@ def render_scene_pngs(
         path = Path(png_dir) / f"{sid}_f{f.frame_index:03d}.png"
         pts = f.points
         # frame the picture on the scene, not the radar's full range
-        extent = None
-        if len(pts) or len(f.boxes):
-            xy = np.concatenate([pts[:, :2], f.boxes[:, :2].astype(np.float32), np.zeros((1, 2))])
-            lo, hi = xy.min(axis=0) - 1.0, xy.max(axis=0) + 1.0
-            extent = (lo[0], hi[0], lo[1], hi[1])
+        extent = scene_extent(pts, f.boxes) if len(pts) or len(f.boxes) else None
         bev_png(
             pts,
             boxes=f.boxes,

@@ -55,3 +55,14 @@ def test_bad_input_is_named():
         bev_png(np.zeros((5, 2)))
     with pytest.raises(ValueError, match="box labels"):
         bev_png(np.zeros((0, 3)), boxes=np.zeros((1, 7)) + 1, box_labels=[])
+
+
+def test_scene_extent_frames_points_boxes_and_the_radar():
+    import numpy as np
+
+    from sim2radar.visualize import scene_extent
+
+    pts = np.array([[2.0, -1.0, 0, 0], [5.0, 3.0, 0, 0]], np.float32)
+    boxes = np.array([[7.0, 0.0, 1, 1, 0.2, 2, 0]], np.float32)
+    assert scene_extent(pts, boxes) == (-1.0, 8.0, -2.0, 4.0)  # x from the radar at 0 to 7 + 1
+    assert scene_extent(np.zeros((0, 4)), np.zeros((0, 7)), margin_m=0.5) == (-0.5, 0.5, -0.5, 0.5)
