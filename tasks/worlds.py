@@ -205,26 +205,14 @@ def generate_world_artifacts(
 
 def _simulate_radar(world, frames, radar, store, keys, seed, world_id) -> None:
     """Radar point clouds of every frame on the world's ground-truth geometry."""
-    import numpy as np
-
-    from sim2radar.factory import LabelConfig, frame_seed, radar_visibility, scene_ray_caster
-    from sim2radar.radar import RadarConfig, RadarScene, load_radar_config, simulate_frame
+    from sim2radar.factory import LabelConfig
+    from sim2radar.factory.pipeline import world_radar_frames
+    from sim2radar.radar import RadarConfig, load_radar_config
     from storage import radar_frames_to_table
 
     radar_cfg = radar if isinstance(radar, RadarConfig) else load_radar_config(radar)
-    scene = RadarScene(list(world.meshes))
-    view = (radar_cfg.azimuth_fov_deg, radar_cfg.elevation_fov_deg, radar_cfg.max_range_m)
     labels = LabelConfig()
-    points, seconds, boxes = [], [], []
-    for f in frames:
-        t0 = time.perf_counter()
-        result = simulate_frame(scene, radar_cfg, f.radar_to_world,
-                                seed=frame_seed(0, seed, f.frame_index))
-        seconds.append(time.perf_counter() - t0)
-        points.append(np.asarray(result.points, np.float32).reshape(-1, 4))
-        vis = radar_visibility(f.door_boxes_radar, scene_ray_caster(scene, f.radar_to_world),
-                               view, labels)
-        boxes.append(f.door_boxes_radar[vis >= labels.min_visibility])
+    points, seconds, boxes = world_radar_frames(world.meshes, frames, radar_cfg, labels)
     table = radar_frames_to_table(
         scene_id=world_id, radar_to_world=[f.radar_to_world for f in frames], points=points,
         boxes=boxes, box_labels=[["door"] * len(b) for b in boxes], sim_seconds=seconds)

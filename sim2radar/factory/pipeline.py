@@ -24,7 +24,7 @@ from sim2radar.factory.labels import radar_visibility, scene_ray_caster
 
 __all__ = ["frame_id_for", "with_material", "ground_truth_labels", "ground_truth_frame",
            "world_frame_input", "reconstruct_world_frame", "reconstructed_frame",
-           "render_seconds"]
+           "render_seconds", "world_radar_frames"]
 
 
 def frame_id_for(seed: int, frame_index: int) -> str:
@@ -139,3 +139,29 @@ def reconstructed_frame(frame, world_id: str, world_scene, spec, radar_seed: int
                    "simulate": sim_s},
         stats={"radar": rf.stats, "radar_seed": radar_seed, **stats, "n_boxes_fitted": n_fitted},
     )
+
+
+def world_radar_frames(meshes, frames, radar, labels=None):
+    """Radar point clouds of a world's frames on its ground-truth ``meshes`` (``sim2radar
+    worlds generate --radar``): per frame the points (N, 4), the simulation seconds and the
+    door boxes (radar frame) the radar sees (``labels``, default :class:`LabelConfig`; the
+    radar's own FOV and range). Radar seeds: :func:`~sim2radar.factory.seeds.frame_seed` with
+    run seed 0."""
+    from sim2radar.factory.labels import LabelConfig
+    from sim2radar.factory.seeds import frame_seed
+    from sim2radar.radar import RadarScene, simulate_frame
+
+    labels = labels or LabelConfig()
+    scene = RadarScene(list(meshes))
+    view = (radar.azimuth_fov_deg, radar.elevation_fov_deg, radar.max_range_m)
+    points, seconds, boxes = [], [], []
+    for f in frames:
+        t0 = time.perf_counter()
+        result = simulate_frame(scene, radar, f.radar_to_world,
+                                seed=frame_seed(0, f.seed, f.frame_index))
+        seconds.append(time.perf_counter() - t0)
+        points.append(np.asarray(result.points, np.float32).reshape(-1, 4))
+        vis = radar_visibility(f.door_boxes_radar, scene_ray_caster(scene, f.radar_to_world),
+                               view, labels)
+        boxes.append(f.door_boxes_radar[vis >= labels.min_visibility])
+    return points, seconds, boxes
