@@ -46,6 +46,11 @@ No learned weights. The method, step by step:
    pixels become ``door`` segments (``facade=False`` turns this off, ``facade_options`` sets
    :class:`~sim2radar.reconstruct.facade.FacadeConfig`). A doorway cut by the image border is
    found from its one seen post and a lintel running from it to the border.
+
+The keyword options of :class:`BuiltinSegments` name the main thresholds; every other number
+the steps compare against is a field of
+:class:`~sim2radar.reconstruct.segment_builtin_thresholds.SegmenterThresholds`, grouped by step,
+with its unit (``thresholds`` option).
 """
 
 from __future__ import annotations
