@@ -27,6 +27,7 @@ import math
 
 import numpy as np
 
+from sim2radar.boxes import wrap_heading
 from sim2radar.mesh import MaterialMesh
 from sim2radar.vocab import MATERIAL_CLASSES, SEMANTIC_CLASSES
 from sim2radar.worlds.appearance import sample_appearance
@@ -430,7 +431,7 @@ def generate_world(seed: int, config: WorldConfig | None = None) -> World:
         cl = (lo + hi) / 2
         cw = rot @ cl + origin
         # boxes are symmetric under a half turn: report headings in [-pi/2, pi/2)
-        heading = (yaw_u + math.pi / 2) % math.pi - math.pi / 2
+        heading = float(wrap_heading(yaw_u))
         box = (float(cw[0]), float(cw[1]), float(cw[2]), float(hi[0] - lo[0]),
                float(hi[1] - lo[1]), float(hi[2] - lo[2]), float(heading))
         doors.append(DoorSpec(
