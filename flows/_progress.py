@@ -1,4 +1,5 @@
-"""Progress callbacks from a running flow to its caller (progress bars in the CLI).
+"""Progress callbacks from a running flow to its caller (progress bars in the CLI), and the keys
+of the artifacts flows publish in Prefect (progress, tables).
 
 Each flow module has its own channel. A flow body reports an outcome with
 ``notify(channel, outcome)``; a caller listens with ``with listen(channel, fn): ...``. Flows call
@@ -31,3 +32,11 @@ def notify(channel: str, outcome: Any) -> None:
     """Report one finished unit of work (a scene, a world) to the listeners of ``channel``."""
     for fn in list(_LISTENERS.get(channel, ())):
         fn(outcome)
+
+
+def artifact_key(*parts: str) -> str:
+    """A Prefect artifact key from ``parts`` (lowercase letters, digits and dashes, at most
+    100 characters), e.g. ``artifact_key("sweep", name, "progress")``."""
+    import re
+
+    return re.sub(r"[^a-z0-9-]+", "-", "-".join(parts).lower()).strip("-")[:100]

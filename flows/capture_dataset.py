@@ -91,12 +91,6 @@ def stage_table(outcomes: list[WorldDatasetOutcome]) -> list[dict[str, Any]]:
     return rows
 
 
-def _artifact_key(dataset: str, what: str) -> str:
-    import re
-
-    return re.sub(r"[^a-z0-9-]+", "-", f"captures-{dataset}-{what}".lower()).strip("-")[:100]
-
-
 @flow(name="capture-dataset", task_runner=ThreadPoolTaskRunner(max_workers=1), log_prints=False)
 def capture_dataset_flow(
     scenes: list[CaptureScene],
@@ -123,7 +117,7 @@ def capture_dataset_flow(
     st = ArtifactStore(store)
     st.manifest(dataset)  # validates the name before any work
     progress_id = create_progress_artifact(
-        progress=0.0, key=_artifact_key(dataset, "progress"),
+        progress=0.0, key=_progress.artifact_key("captures", dataset, "progress"),
         description=f"capture dataset {dataset}: scenes finished of {len(scenes)}")
     futures = {capture_scene_task.with_options(task_run_name=f"scene-{s.scene_id}").submit(
         s, spec, store, force): i for i, s in enumerate(scenes)}
@@ -149,7 +143,7 @@ def capture_dataset_flow(
     ordered = [outcomes[i] for i in range(len(scenes))]
     return _finish(st, dataset, spec, ordered, export_dir, publish=lambda rows, counts:
                    create_table_artifact(
-                       table=rows, key=_artifact_key(dataset, "scenes"),
+                       table=rows, key=_progress.artifact_key("captures", dataset, "scenes"),
                        description=f"capture dataset {dataset}: scenes {counts} (seconds per "
                                    "step in this run; cached steps take milliseconds)"))
 

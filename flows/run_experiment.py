@@ -57,12 +57,6 @@ def progress_callback(fn: Callable[[dict], None]):
     return _progress.listen("run_experiment", fn)
 
 
-def _artifact_key(name: str, what: str) -> str:
-    import re
-
-    return re.sub(r"[^a-z0-9-]+", "-", f"sweep-{name}-{what}".lower()).strip("-")[:100]
-
-
 @flow(name="run-experiment", log_prints=False)
 def run_experiment_flow(plan: dict) -> dict[str, Any]:
     """Run a prepared sweep (:func:`tasks.experiment.prepare_sweep`'s ``plan``): every
@@ -81,7 +75,7 @@ def run_experiment_flow(plan: dict) -> dict[str, Any]:
     runs, pretrains = plan["runs"], plan["pretrains"]
     total = len(runs)
     progress_id = create_progress_artifact(
-        progress=0.0, key=_artifact_key(name, "progress"),
+        progress=0.0, key=_progress.artifact_key("sweep", name, "progress"),
         description=f"sweep {name}: finished training runs of {total}")
     rows: dict[str, dict] = {}
 
@@ -134,9 +128,11 @@ def run_experiment_flow(plan: dict) -> dict[str, Any]:
 
     ordered = [rows[k] for k in sorted(rows, key=lambda k: _order(rows[k]))]
     summary = finish_sweep(plan, ordered)
-    create_table_artifact(table=summary["table_rows"], key=_artifact_key(name, "results"),
+    create_table_artifact(table=summary["table_rows"],
+                          key=_progress.artifact_key("sweep", name, "results"),
                           description=f"sweep {name}: {summary['metric']} per cell")
-    create_markdown_artifact(markdown=summary["markdown"], key=_artifact_key(name, "summary"),
+    create_markdown_artifact(markdown=summary["markdown"],
+                             key=_progress.artifact_key("sweep", name, "summary"),
                              description=f"sweep {name}: results")
     logger.info("sweep %s: %s runs; results %s; dashboard %s", name, summary["counts"],
                 summary["results_md"], summary["dashboard"])

@@ -28,3 +28,24 @@ def test_world_steps_are_tasks_and_a_rerun_is_cached(prefect_server, tmp_path):
     assert states["world_000003-render"] == "Cached"
     # the frame and its reconstruction are cached: no reconstruction or simulate step runs
     assert not any("depth" in n or "simulate" in n for n in states)
+
+
+def test_a_run_publishes_a_world_table_and_a_finished_progress_artifact(prefect_server, tmp_path):
+    import json
+
+    from prefect.client.orchestration import get_client
+    from prefect.client.schemas.filters import ArtifactFilter
+
+    from flows.generate_dataset import generate_dataset
+
+    generate_dataset(n_worlds=1, frames_per_world=1, store=tmp_path / "store",
+                     dataset="table-run", geometry="ground_truth", rig=RIG, first_seed=4)
+    with get_client(sync_client=True) as client:
+        arts = {a.key: a for a in client.read_artifacts(artifact_filter=ArtifactFilter(
+            key={"any_": ["generate-table-run-worlds", "generate-table-run-progress"]}))}
+    progress = arts["generate-table-run-progress"]
+    assert float(progress.data) == 100.0
+    table = arts["generate-table-run-worlds"].data
+    rows = json.loads(table) if isinstance(table, str) else table
+    assert rows[0]["world"] == "world_000004" and rows[0]["status"] == "ok"
+    assert rows[0]["frames"] == 1 and rows[0]["simulate_ground_truth_s"] > 0
