@@ -39,12 +39,13 @@ from flows import _progress
 from flows._steps import run_as_tasks
 from sim2radar.factory.spec import resolve_spec
 from storage import ArtifactStore
+from tasks.common import REMOTE_IO_RETRIES, REMOTE_IO_RETRY_DELAYS_S, retry_transient_io
 from tasks.dataset import (
     WorldDatasetOutcome,
     export_all,
     failed_world_outcome,
     generate_world_dataset,
-    record_world_dataset_task,
+    record_world_dataset,
     summarize_dataset,
 )
 from tasks.runners import task_runner
@@ -75,6 +76,15 @@ def progress_callback(fn: Callable[[WorldDatasetOutcome], None]):
 
 def _notify_progress(outcome: WorldDatasetOutcome) -> None:
     _progress.notify("generate_dataset", outcome)
+
+
+@task(name="record-dataset-manifest", cache_policy=NO_CACHE, retries=REMOTE_IO_RETRIES,
+      retry_delay_seconds=REMOTE_IO_RETRY_DELAYS_S, retry_condition_fn=retry_transient_io,
+      persist_result=False)
+def record_world_dataset_task(store: str, dataset: str, outcome: WorldDatasetOutcome) -> list:
+    """Manifest rows of one world and its frames (retried only on transient storage errors;
+    the radar and the reconstruction are deterministic and are never retried)."""
+    return record_world_dataset(store, dataset, outcome)
 
 
 def world_table(outcomes: list[WorldDatasetOutcome]) -> list[dict[str, Any]]:

@@ -46,8 +46,6 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from prefect import task
-from prefect.cache_policies import NO_CACHE
 
 from sim2radar.datasets.splits import split_groups as split_worlds
 from sim2radar.evaluate.dataset import LABEL_IOU_THRESHOLD
@@ -70,12 +68,9 @@ from storage.frames import dataset_frame_from_table, dataset_frame_to_table
 from storage.schemas import DATASET_FRAMES as DATASET_FRAMES_SCHEMA
 from tasks.common import (
     FRAME_ROW,
-    REMOTE_IO_RETRIES,
-    REMOTE_IO_RETRY_DELAYS_S,
     failed_scene_ids,
     jsonable,
     open_store,
-    retry_transient_io,
 )
 from tasks.steps import call_step, reconstruction_steps
 
@@ -103,7 +98,6 @@ __all__ = [
     "outcomes_from_manifest",
     "export_store_dataset",
     "failed_world_seeds",
-    "record_world_dataset_task",
     "points_near_boxes",
     "NEAR_BOX_MARGIN_M",
 ]
@@ -760,15 +754,3 @@ def export_all(store, outcomes, export_dir, spec: DatasetSpec | dict, *,
     return {g: export_openpcdet(store, outcomes, Path(export_dir) / g, g, **opts,
                                 metadata=dataset_metadata(spec, g, domain))
             for g in spec.geometries}
-
-
-# ---------------------------------------------------------------------------------------------
-# Prefect tasks: the radar and reconstruction are deterministic -> no retries (fail fast with
-# the real error); manifest writes are storage I/O -> retried. Caching is by content key.
-# ---------------------------------------------------------------------------------------------
-@task(name="record-dataset-manifest", cache_policy=NO_CACHE, retries=REMOTE_IO_RETRIES,
-      retry_delay_seconds=REMOTE_IO_RETRY_DELAYS_S, retry_condition_fn=retry_transient_io,
-      persist_result=False)
-def record_world_dataset_task(store: str, dataset: str, outcome: WorldDatasetOutcome) -> list:
-    """Prefect task around :func:`record_world_dataset` (retried: storage I/O)."""
-    return record_world_dataset(store, dataset, outcome)

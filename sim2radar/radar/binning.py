@@ -74,7 +74,6 @@ import math
 
 import numpy as np
 import scipy.fft
-import scipy.signal
 
 from sim2radar.radar.config import RadarConfig
 
@@ -176,6 +175,8 @@ class ArrayGeometry:
         n = np.round(self.x_half_wl + self.x_shift).astype(np.int64)
         span = int(n.max()) + 1
         du = float(self.u_az[1] - self.u_az[0]) if len(self.u_az) > 1 else 1.0
+        import scipy.signal  # imported here: ~0.5 s, only needed once a scene is traced
+
         czt = scipy.signal.CZT(span, len(self.u_az), w=np.exp(-1j * math.pi * du),
                                a=np.exp(1j * math.pi * float(self.u_az[0])))
         post = np.exp(1j * math.pi * self.x_shift * self.u_az)  # e^{-j pi (n - shift) u}
