@@ -48,3 +48,25 @@ def test_compare_frames_points_ratio_and_chamfer():
     assert c["points_ratio"] == 0.5
     assert c["chamfer_m"] > 0
     assert math.isnan(compare_frames(gt[:0], rec)["points_ratio"])
+
+
+def test_labels_equal_to_the_ground_truth_match_one_to_one_without_the_iou():
+    from sim2radar.evaluate.reconstruction import match_boxes
+
+    boxes = np.array([[3, 1, 1, 1, 0.2, 2, 0.1], [3, 1.5, 1, 1, 0.2, 2, 0.1],
+                      [6, -2, 1, 0.9, 0.17, 2.1, 1.5]])
+    fast = match_boxes(boxes, boxes.copy())
+    full = match_boxes(boxes, boxes.copy(), ignore=np.zeros((0, 7)))  # the IoU path
+    assert fast["tp"] == full["tp"] == 3 and fast["n_pred"] == full["n_pred"] == 3
+    np.testing.assert_allclose(fast["ious"], full["ious"], atol=1e-6)
+
+
+def test_dataset_figures_and_the_factory_tasks_do_not_import_torch():
+    import subprocess
+    import sys
+
+    code = ("import sys, tasks.dataset, sim2radar.evaluate.dataset, sim2radar.evaluate; "
+            "print('torch' in sys.modules)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         check=True)
+    assert out.stdout.strip() == "False", out.stderr
