@@ -43,8 +43,8 @@ from tasks.dataset import (
     summarize_dataset,
 )
 
-__all__ = ["capture_dataset_flow", "capture_dataset", "progress_callback", "CAPTURE_DOMAIN",
-           "stage_table"]
+__all__ = ["capture_dataset_flow", "capture_dataset", "capture_dataset_job", "progress_callback",
+           "CAPTURE_DOMAIN", "stage_table"]
 
 #: How capture exports label their domain in ``dataset.json``.
 CAPTURE_DOMAIN = "simulated from RGB captures (reconstructed geometry)"
@@ -231,3 +231,40 @@ def capture_dataset(
                                        spec, domain=CAPTURE_DOMAIN)
     summary["wall_s"] = time.perf_counter() - t0
     return summary
+
+
+@flow(name="capture-dataset-job", log_prints=False)
+def capture_dataset_job(
+    captures: str = "captures",
+    store: str = "out/store",
+    dataset: str = "captures",
+    export_dir: str | None = None,
+    radar: str | dict = "ti-mmwcas",
+    reconstruction: str | dict | None = None,
+    poses: dict | None = None,
+    labels: dict | None = None,
+    seed: int = 0,
+    class_name: str = "door",
+    force: bool = False,
+    retry_failed: bool = False,
+    workers: int = 1,
+    dask_address: str | None = None,
+) -> dict[str, Any]:
+    """Deployment entry point (``deploy/prefect.yaml``): a capture folder through
+    :func:`capture_dataset` as a subflow. Parameters are JSON values: ``radar`` a preset name,
+    YAML path or RadarConfig fields; ``reconstruction`` a preset name, YAML path, fields or
+    None (built-in backends: the capture needs ``lidar.npy``; a YAML with ``moge`` does not);
+    ``poses`` / ``labels`` fields of :class:`~sim2radar.factory.captures.PoseSampling` /
+    :class:`~sim2radar.factory.labels.LabelConfig`. Relative paths resolve against the worker's
+    working directory. ``retry_failed`` reruns only the scenes the manifest records as failed.
+    """
+    import importlib
+
+    # run the package's copy (a deployment loads this file as a top-level module, whose
+    # objects Dask workers could not import by reference): see flows/generate_dataset.py
+    package = importlib.import_module("flows.capture_dataset")
+    return package.capture_dataset(
+        captures, store, dataset, export_dir=export_dir, force=force, workers=workers,
+        dask_address=dask_address, retry_failed=retry_failed, radar=radar,
+        reconstruction=reconstruction, poses=poses or {}, labels=labels or {}, seed=seed,
+        class_name=class_name)

@@ -27,7 +27,7 @@ def test_deployments_point_at_real_flows_with_valid_parameters(monkeypatch):
             CronSchedule(cron=sched["cron"], timezone=sched.get("timezone"))
         assert dep["work_pool"]["name"]
     assert {"nightly-radar", "radar-on-demand", "nightly-generate", "generate-on-demand",
-            "weekly-reference", "sweep-on-demand"} <= names
+            "weekly-reference", "sweep-on-demand", "captures-on-demand"} <= names
     nightly = next(d for d in doc["deployments"] if d["name"] == "nightly-radar")
     assert nightly["schedules"][0]["cron"] == "0 2 * * *"
 
@@ -78,3 +78,18 @@ def test_expand_scenes_folders_globs_and_files(tmp_path):
     assert got == [str(tmp_path / "a" / "one.yaml"), str(tmp_path / "a" / "two.yaml"), missing]
     with pytest.raises(FileNotFoundError, match="no scene files"):
         expand_scenes([str(tmp_path / "none" / "*.yaml")])
+
+
+def test_the_captures_deployment_resolves_to_a_capture_spec(monkeypatch):
+    from prefect.flows import load_flow_from_entrypoint
+
+    from sim2radar.factory.captures import CaptureSpec
+
+    monkeypatch.chdir(REPO)
+    dep = _deployment("captures-on-demand")
+    flow = load_flow_from_entrypoint(dep["entrypoint"])
+    assert flow.name == "capture-dataset-job"
+    params = flow.validate_parameters(dep["parameters"])
+    spec = CaptureSpec(radar=params["radar"], reconstruction=params["reconstruction"],
+                       poses=params["poses"], seed=params["seed"])
+    assert spec.poses.frames == 54 and spec.reconstruction.depth.name == "lidar"
