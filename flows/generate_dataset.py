@@ -7,7 +7,7 @@ OpenPCDet's custom layout.
                                dataset="nightly", geometry="both", export_dir="out/openpcdet")
 
 One task per world seed (``generate_world_dataset_task``), its steps (render, reconstruction
-steps per frame, simulate per frame and geometry) as nested tasks that end **Cached** when
+steps per frame, one simulate per geometry) as nested tasks that end **Cached** when
 their artifact exists (:mod:`flows._steps`); worlds are gathered as they complete; each
 world's outcome (world row + one row per frame) goes into the dataset manifest. A second run
 with the same inputs recomputes nothing (every frame ``skipped`` by content key). A failing
@@ -108,8 +108,8 @@ def world_table(outcomes: list[WorldDatasetOutcome]) -> list[dict[str, Any]]:
 
 def _step_name(stage: str, args: tuple) -> str:
     """Task-run name suffix of a world's step: the frame (and geometry) it works on."""
-    if stage == "simulate":
-        return f"-f{int(args[1]):03d}-{args[2]}"
+    if stage == "simulate":  # the world's frames still to compute, in one geometry
+        return f"-{args[2]}"
     if stage == "render":
         return ""
     return "-" + args[0].name.rsplit("_", 1)[-1]  # a FrameSource named world_<seed>_f<k>
@@ -120,7 +120,7 @@ def generate_world_dataset_task(seed: int, spec: dict, store: str, force: bool =
                                 n_frames: int | None = None) -> WorldDatasetOutcome:
     """One world, every step a Prefect task (:func:`tasks.dataset.generate_world_dataset`):
     ``render``, per frame ``depth``/``segments``/``materials``/``scene`` (reconstructed, when
-    not cached) and ``simulate`` per geometry. No retries: the steps are deterministic."""
+    not cached) and one ``simulate`` per geometry. No retries: the steps are deterministic."""
     from storage.worlds import world_id_for
 
     return generate_world_dataset(seed, spec, store, force=force, n_frames=n_frames,

@@ -361,9 +361,9 @@ def generate_world_dataset(
 ) -> WorldDatasetOutcome:
     """Make (or find cached) every dataset frame of world ``seed``, step by step: ``render``
     (the world's artifacts), per frame the reconstruction's steps (``reconstructed``, when its
-    reconstruction is not cached: :func:`tasks.steps.reconstruction_steps`) and ``simulate``
-    per frame and geometry, each through ``run(stage, fn, *args)`` (plain calls, or Prefect
-    tasks in :mod:`flows.generate_dataset`).
+    reconstruction is not cached: :func:`tasks.steps.reconstruction_steps`) and one
+    ``simulate`` per geometry for the frames still to compute, each through
+    ``run(stage, fn, *args)`` (plain calls, or Prefect tasks in :mod:`flows.generate_dataset`).
 
     Parameters
     ----------
@@ -392,46 +392,66 @@ def generate_world_dataset(
     inputs = _WorldInputs(st, keys, spec.material_override)
     timings = {"world": time.perf_counter() - t_start}
     computed_any = wo.status == "ok"
-    frames_out = []
+    frames_out = [FrameOutcome(frame_id_for(seed, k), world_id, int(seed), k, "skipped")
+                  for k in range(n_frames)]
+    decoded: list[dict[str, DatasetFrame]] = [{} for _ in range(n_frames)]
+    errors: list[list[str]] = [[] for _ in range(n_frames)]
+
+    def fail(k: int, geometry: str, error: str) -> None:
+        log.error("%s [%s] failed: %s", frames_out[k].frame_id, geometry, error)
+        errors[k].append(f"[{geometry}] {error}")
+
+    def done(k: int, df: DatasetFrame, rkeys: dict) -> None:
+        fo = frames_out[k]
+        fo.artifacts.update({f"reconstruction/{s}": v for s, v in rkeys.items()})
+        decoded[k][df.geometry] = df
+        _fill_frame_outcome(fo, df)
+
     t_frames = time.perf_counter()
-    for k in range(n_frames):
-        fo = FrameOutcome(frame_id_for(seed, k), world_id, int(seed), k, "skipped")
+    # cached frames are read back; the others get their reconstruction steps (per frame) ...
+    todo: dict[str, list[int]] = {g: [] for g in spec.geometries}
+    fresh: dict[int, bool] = {}
+    for k, fo in enumerate(frames_out):
         fo.artifacts.update({f"world/{s}": v for s, v in keys.items()})
-        decoded: dict[str, DatasetFrame] = {}
-        errors = []
         for geometry in spec.geometries:
             key = frame_key(keys, k, geometry, spec)
             fo.artifacts[f"dataset_frames/{geometry}"] = key
             try:
                 if not force and st.exists("dataset_frames", key):
                     df = read_dataset_frame(st, key)
-                    rkeys = df.stats.get("reconstruction_keys") or {}
-                else:
-                    fresh = False
-                    if geometry == "reconstructed":
-                        src = _world_frame_source(inputs.frames()[k], world_id, spec)
-                        if not all(st.exists(s, src.keys[s])
-                                   for s in ("scene_meshes", "reconstruction")):
-                            steps = reconstruction_steps(src, spec.reconstruction, st, run)
-                            fresh = steps["scene"].status == "ok"
-                    df, rkeys = run("simulate", simulate_world_frame, inputs, k, geometry,
-                                    world_id, st, spec, key, fresh)
-                    fo.status = "ok" if fo.status != "failed" else "failed"
-                    computed_any = True
-                fo.artifacts.update({f"reconstruction/{s}": v for s, v in rkeys.items()})
-                decoded[geometry] = df
-                _fill_frame_outcome(fo, df)
+                    done(k, df, df.stats.get("reconstruction_keys") or {})
+                    continue
+                if geometry == "reconstructed":
+                    src = _world_frame_source(inputs.frames()[k], world_id, spec)
+                    fresh[k] = False
+                    if not all(st.exists(s, src.keys[s]) for s in ("scene_meshes",
+                                                                   "reconstruction")):
+                        steps = reconstruction_steps(src, spec.reconstruction, st, run)
+                        fresh[k] = steps["scene"].status == "ok"
+                todo[geometry].append(k)
             except Exception as exc:  # noqa: BLE001 - one broken frame must not stop the rest
-                log.error("%s [%s] failed: %s: %s", fo.frame_id, geometry,
-                          type(exc).__name__, exc)
-                errors.append(f"[{geometry}] {type(exc).__name__}: {exc}")
-        if errors:
-            fo.status, fo.error = "failed", "; ".join(errors)
-        if len(decoded) == 2:
-            fo.comparison = _compare(decoded["ground_truth"], decoded["reconstructed"])
+                fail(k, geometry, f"{type(exc).__name__}: {exc}")
+    # ... then one simulate step per geometry for the world's frames still to compute
+    for geometry, ks in todo.items():
+        if not ks:
+            continue
+        jobs = [(k, frames_out[k].artifacts[f"dataset_frames/{geometry}"], fresh.get(k, False))
+                for k in ks]
+        for k, df, rkeys, error in run("simulate", simulate_world_frames, inputs, jobs,
+                                       geometry, world_id, st, spec):
+            if error:
+                fail(k, geometry, error)
+                continue
+            frames_out[k].status = "ok"
+            computed_any = True
+            done(k, df, rkeys)
+    for k, fo in enumerate(frames_out):
+        if errors[k]:
+            fo.status, fo.error = "failed", "; ".join(errors[k])
+        if len(decoded[k]) == 2:
+            fo.comparison = _compare(decoded[k]["ground_truth"], decoded[k]["reconstructed"])
         if keep_frames:
-            fo.data = decoded  # type: ignore[attr-defined]
-        frames_out.append(fo)
+            fo.data = decoded[k]  # type: ignore[attr-defined]
     timings["frames"] = time.perf_counter() - t_frames
     timings["total"] = time.perf_counter() - t_start
     n_failed = sum(f.status == "failed" for f in frames_out)
@@ -450,25 +470,38 @@ def render_world(seed: int, n_frames: int, store, spec: DatasetSpec):
                                     trajectory_seed=spec.seed, rgb=spec.render_rgb)
 
 
-def simulate_world_frame(inputs: _WorldInputs, k: int, geometry: str, world_id: str,
-                         store: ArtifactStore, spec: DatasetSpec, key: str,
-                         fresh: bool = False) -> tuple[DatasetFrame, dict]:
-    """The ``simulate`` step of one world frame and geometry: the radar frame with its labels
-    (:mod:`sim2radar.factory.pipeline`), written as ``dataset_frames/<key>``; returns it and
-    its reconstruction keys (``reconstructed``: the reconstruction must be in the store)."""
+def simulate_world_frames(inputs: _WorldInputs, jobs: list[tuple[int, str, bool]],
+                          geometry: str, world_id: str, store: ArtifactStore,
+                          spec: DatasetSpec) -> list[tuple[int, Any, dict, str]]:
+    """The ``simulate`` step of a world's frames in one geometry: per ``(frame index, key,
+    fresh)`` the radar frame with its labels (:mod:`sim2radar.factory.pipeline`), written as
+    ``dataset_frames/<key>`` (``reconstructed``: the reconstruction must be in the store,
+    ``fresh`` when made in this run). Returns ``(k, frame, reconstruction keys, error)`` per
+    job; a failing frame gets its error and the others go on."""
+    out = []
+    for k, key, fresh in jobs:
+        try:
+            df, rkeys = _simulate_world_frame(inputs, k, geometry, world_id, store, spec, fresh)
+            store.write("dataset_frames", key, dataset_frame_to_table(df),
+                        stage_version=DATASET_STAGE_VERSION,
+                        provenance=_provenance(spec, inputs.keys, df, geometry, rkeys))
+            out.append((k, df, rkeys, ""))
+        except Exception as exc:  # noqa: BLE001 - one broken frame must not stop the rest
+            out.append((k, None, {}, f"{type(exc).__name__}: {exc}"))
+    return out
+
+
+def _simulate_world_frame(inputs: _WorldInputs, k: int, geometry: str, world_id: str,
+                          store: ArtifactStore, spec: DatasetSpec,
+                          fresh: bool) -> tuple[DatasetFrame, dict]:
     frame = inputs.frames()[k]
     radar_seed = frame_seed(spec.seed, frame.seed, k)
     scene = inputs.radar_scene()  # the world's meshes: the GT radar and the labels' visibility
     if geometry == "ground_truth":
         from sim2radar.factory.pipeline import ground_truth_frame
 
-        df, rkeys = ground_truth_frame(frame, world_id, scene, spec, radar_seed), {}
-    else:
-        df, rkeys = _reconstructed_frame(frame, world_id, scene, store, spec, radar_seed, fresh)
-    store.write("dataset_frames", key, dataset_frame_to_table(df),
-                stage_version=DATASET_STAGE_VERSION,
-                provenance=_provenance(spec, inputs.keys, df, geometry, rkeys))
-    return df, rkeys
+        return ground_truth_frame(frame, world_id, scene, spec, radar_seed), {}
+    return _reconstructed_frame(frame, world_id, scene, store, spec, radar_seed, fresh)
 
 
 def _provenance(spec, keys, df: DatasetFrame, geometry, rkeys) -> dict:

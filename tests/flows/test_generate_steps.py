@@ -19,7 +19,7 @@ def test_world_steps_are_tasks_and_a_rerun_is_cached(prefect_server, tmp_path):
     states = _task_runs("generate-dataset")
     assert states["world-3"] == "Completed"
     for step in ("render", "depth-f000", "segments-f000", "materials-f000", "scene-f000",
-                 "simulate-f000-ground_truth", "simulate-f000-reconstructed"):
+                 "simulate-ground_truth", "simulate-reconstructed"):
         assert states[f"world_000003-{step}"] == "Completed", step
 
     again = generate_dataset(**kw)
