@@ -325,6 +325,13 @@ class _WorldInputs:
             self._radar_scene = RadarScene(with_material(meshes, self.material_override))
         return self._radar_scene
 
+    def release(self) -> None:
+        """Drop the decoded frames and the Mitsuba scene now, in the thread that built them
+        (step tasks may hold these inputs as parameters after the world is done; the
+        scene's Dr.Jit objects are then not left for another thread to free)."""
+        self._frames = None
+        self._radar_scene = None
+
 
 def _fill_frame_outcome(fo: FrameOutcome, df: DatasetFrame) -> None:
     fo.n_points[df.geometry] = int(len(df.points))
@@ -445,6 +452,7 @@ def generate_world_dataset(
             frames_out[k].status = "ok"
             computed_any = True
             done(k, df, rkeys)
+    inputs.release()
     for k, fo in enumerate(frames_out):
         if errors[k]:
             fo.status, fo.error = "failed", "; ".join(errors[k])
