@@ -1,6 +1,8 @@
 """The factory's main job, per world: procedural world -> (reconstructed | ground-truth)
-geometry -> radar frames with door boxes -> the artifact store (plain functions + thin Prefect
-tasks). :mod:`flows.generate_dataset` composes them.
+geometry -> radar frames with door boxes -> the artifact store. Keys, caching, store I/O and
+outcome records only: the science is in :mod:`sim2radar.factory` (spec, per-frame pipeline),
+:mod:`tasks.steps` runs the reconstruction's steps, :mod:`flows.generate_dataset` makes every
+step a Prefect task (the plain loop calls the same functions).
 
 Per world seed, :func:`generate_world_dataset`:
 
