@@ -25,20 +25,19 @@ import os
 import time
 from typing import Any
 
-from prefect import flow, get_run_logger, task
+from prefect import flow, task
 from prefect.cache_policies import NO_CACHE
-from prefect.futures import as_completed
 from prefect.task_runners import ThreadPoolTaskRunner
 
 from flows import _progress
-from flows._steps import run_as_tasks
+from flows._steps import gather_scenes, run_as_tasks
 from sim2radar.factory.captures import CaptureScene, CaptureSpec, find_captures
 from storage import ArtifactStore
 from tasks import capture as steps
-from tasks.common import REMOTE_IO_RETRIES, REMOTE_IO_RETRY_DELAYS_S, retry_transient_io
 from tasks.dataset import (
     WorldDatasetOutcome,
     export_all,
+    failed_scene_outcome,
     record_world_dataset,
     summarize_dataset,
 )
@@ -60,14 +59,6 @@ def capture_scene_task(scene: CaptureScene, spec: CaptureSpec, store: str,
     """One scene, every step a Prefect task (:func:`tasks.capture.process_capture_scene`)."""
     return steps.process_capture_scene(scene, spec, store, force=force,
                                        run=run_as_tasks(scene.scene_id, _simulate_batch_name))
-
-
-@task(name="record-capture-manifest", cache_policy=NO_CACHE, retries=REMOTE_IO_RETRIES,
-      retry_delay_seconds=REMOTE_IO_RETRY_DELAYS_S, retry_condition_fn=retry_transient_io,
-      persist_result=False)
-def record_scene_task(store: str, dataset: str, outcome: WorldDatasetOutcome) -> list:
-    """Manifest rows of one scene and its frames (retried: storage I/O)."""
-    return record_world_dataset(store, dataset, outcome)
 
 
 def progress_callback(fn):
@@ -107,13 +98,8 @@ def capture_dataset_flow(
     -------
     dict — :func:`tasks.dataset.summarize_dataset` (+ ``export``, ``stage_table``)
     """
-    from prefect.artifacts import (
-        create_progress_artifact,
-        create_table_artifact,
-        update_progress_artifact,
-    )
+    from prefect.artifacts import create_progress_artifact, create_table_artifact
 
-    logger = get_run_logger()
     st = ArtifactStore(store)
     st.manifest(dataset)  # validates the name before any work
     progress_id = create_progress_artifact(
@@ -121,40 +107,23 @@ def capture_dataset_flow(
         description=f"capture dataset {dataset}: scenes finished of {len(scenes)}")
     futures = {capture_scene_task.with_options(task_run_name=f"scene-{s.scene_id}").submit(
         s, spec, store, force): i for i, s in enumerate(scenes)}
-    outcomes: dict[int, WorldDatasetOutcome] = {}
-    for fut in as_completed(list(futures)):
-        i = futures[fut]
-        result = fut.result(raise_on_failure=False)
-        if not isinstance(result, WorldDatasetOutcome):
-            error = result if isinstance(result, BaseException) else (
-                fut.state.message or repr(result))
-            text = f"{type(error).__name__}: {error}" if isinstance(error, BaseException) \
-                else str(error)
-            result = WorldDatasetOutcome(scenes[i].scene_id, -1, "failed", error=text,
-                                         source=scenes[i].folder)
-        record_scene_task(store, dataset, result)
-        outcomes[i] = result
-        if result.status == "failed":
-            logger.error("%s FAILED: %s", result.world_id, result.error)
-        else:
-            logger.info("%s: %s, %d frames", result.world_id, result.status, len(result.frames))
-        update_progress_artifact(progress_id, 100.0 * len(outcomes) / max(len(scenes), 1))
-        _progress.notify("capture_dataset", result)
-    ordered = [outcomes[i] for i in range(len(scenes))]
-    return _finish(st, dataset, spec, ordered, export_dir, publish=lambda rows, counts:
-                   create_table_artifact(
-                       table=rows, key=_progress.artifact_key("captures", dataset, "scenes"),
-                       description=f"capture dataset {dataset}: scenes {counts} (seconds per "
-                                   "step in this run; cached steps take milliseconds)"))
+    outcomes = gather_scenes(
+        futures, lambda i, error: failed_scene_outcome(scenes[i].scene_id, error,
+                                                       source=scenes[i].folder),
+        store=store, dataset=dataset, progress_id=progress_id, channel="capture_dataset")
+    summary = _finish(st, dataset, spec, [outcomes[i] for i in range(len(scenes))], export_dir)
+    create_table_artifact(
+        table=summary["stage_table"], key=_progress.artifact_key("captures", dataset, "scenes"),
+        description=f"capture dataset {dataset}: scenes {summary['counts']} (seconds per step "
+                    "in this run; cached steps take milliseconds)")
+    return summary
 
 
 def _finish(st, dataset: str, spec: CaptureSpec, outcomes: list[WorldDatasetOutcome],
-            export_dir: str | None, publish=None) -> dict[str, Any]:
+            export_dir: str | None) -> dict[str, Any]:
     summary = summarize_dataset(st, dataset, spec, outcomes)
     summary["unit"], summary["ground_truth"] = "scenes", False
     summary["stage_table"] = stage_table(outcomes)
-    if publish is not None:
-        publish(summary["stage_table"], summary["counts"])
     if export_dir is not None:
         summary["export"] = export_all(st, outcomes, export_dir, spec, domain=CAPTURE_DOMAIN)
     return summary

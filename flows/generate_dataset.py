@@ -32,20 +32,17 @@ from typing import Any
 
 from prefect import flow, get_run_logger, task
 from prefect.cache_policies import NO_CACHE
-from prefect.futures import as_completed
 from prefect.task_runners import ThreadPoolTaskRunner
 
 from flows import _progress
-from flows._steps import run_as_tasks
+from flows._steps import gather_scenes, run_as_tasks
 from sim2radar.factory.spec import resolve_spec
 from storage import ArtifactStore
-from tasks.common import REMOTE_IO_RETRIES, REMOTE_IO_RETRY_DELAYS_S, retry_transient_io
 from tasks.dataset import (
     WorldDatasetOutcome,
     export_all,
     failed_world_outcome,
     generate_world_dataset,
-    record_world_dataset,
     summarize_dataset,
 )
 from tasks.runners import task_runner
@@ -72,19 +69,6 @@ class DatasetFailures(RuntimeError):
 def progress_callback(fn: Callable[[WorldDatasetOutcome], None]):
     """Context manager: call ``fn(outcome)`` in this process after each world finishes."""
     return _progress.listen("generate_dataset", fn)
-
-
-def _notify_progress(outcome: WorldDatasetOutcome) -> None:
-    _progress.notify("generate_dataset", outcome)
-
-
-@task(name="record-dataset-manifest", cache_policy=NO_CACHE, retries=REMOTE_IO_RETRIES,
-      retry_delay_seconds=REMOTE_IO_RETRY_DELAYS_S, retry_condition_fn=retry_transient_io,
-      persist_result=False)
-def record_world_dataset_task(store: str, dataset: str, outcome: WorldDatasetOutcome) -> list:
-    """Manifest rows of one world and its frames (retried only on transient storage errors;
-    the radar and the reconstruction are deterministic and are never retried)."""
-    return record_world_dataset(store, dataset, outcome)
 
 
 def world_table(outcomes: list[WorldDatasetOutcome]) -> list[dict[str, Any]]:
@@ -162,11 +146,7 @@ def generate_dataset_flow(
     -------
     dict — :func:`tasks.dataset.summarize_dataset` (+ ``export``)
     """
-    from prefect.artifacts import (
-        create_progress_artifact,
-        create_table_artifact,
-        update_progress_artifact,
-    )
+    from prefect.artifacts import create_progress_artifact, create_table_artifact
 
     logger = get_run_logger()
     st = ArtifactStore(store)
@@ -180,25 +160,8 @@ def generate_dataset_flow(
             int(s), spec, store, force, frames_by_seed.get(int(s))): int(s)
         for s in seeds
     }
-    outcomes: dict[int, WorldDatasetOutcome] = {}
-    for fut in as_completed(list(futures)):
-        seed = futures[fut]
-        result = fut.result(raise_on_failure=False)
-        if isinstance(result, WorldDatasetOutcome):
-            outcome = result
-        else:
-            error = result if isinstance(result, BaseException) else (
-                fut.state.message or repr(result))
-            outcome = failed_world_outcome(seed, error)
-        record_world_dataset_task(store, dataset, outcome)
-        if outcome.status == "failed":
-            logger.error("%s FAILED: %s", outcome.world_id, outcome.error)
-        else:
-            logger.info("%s: %s, %d frames", outcome.world_id, outcome.status,
-                        len(outcome.frames))
-        outcomes[seed] = outcome
-        update_progress_artifact(progress_id, 100.0 * len(outcomes) / max(len(seeds), 1))
-        _notify_progress(outcome)
+    outcomes = gather_scenes(futures, failed_world_outcome, store=store, dataset=dataset,
+                             progress_id=progress_id, channel="generate_dataset")
     ordered = [outcomes[int(s)] for s in seeds]
     summary = summarize_dataset(st, dataset, spec, ordered)
     summary["stage_table"] = world_table(ordered)

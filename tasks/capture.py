@@ -188,8 +188,8 @@ def _cached_frames(scene: CaptureScene, spec: CaptureSpec, store: str,
     """Every frame of a finished scene read back, or None when one is missing."""
     st = open_store(store)
     yaml_digest = _radar_yaml_digest(scene)
-    n = spec.poses.frames if scene.radar is None or read_radar_yaml(scene.radar)["poses"] is None \
-        else len(read_radar_yaml(scene.radar)["poses"])
+    given = read_radar_yaml(scene.radar)["poses"]  # None without radar.yaml or its poses
+    n = spec.poses.frames if given is None else len(given)
     frame_keys = [capture_frame_key(keys, scene.scene_id, k, spec, yaml_digest)
                   for k in range(n)]
     if not all(st.exists("dataset_frames", key) for key in frame_keys):

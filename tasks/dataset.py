@@ -89,6 +89,7 @@ __all__ = [
     "frame_id_for",
     "generate_world_dataset",
     "failed_world_outcome",
+    "failed_scene_outcome",
     "outcomes_from_summary",
     "record_world_dataset",
     "read_dataset_frame",
@@ -236,12 +237,18 @@ def outcomes_from_summary(summary: dict[str, Any]) -> list[WorldDatasetOutcome]:
     return out
 
 
+def failed_scene_outcome(scene_id: str, error: BaseException | str, *, seed: int = -1,
+                         source: str = "") -> WorldDatasetOutcome:
+    """A ``failed`` outcome for a world or capture scene (``"Type: message"`` error text)."""
+    text = error if isinstance(error, str) else f"{type(error).__name__}: {error}"
+    return WorldDatasetOutcome(scene_id, int(seed), "failed", error=text, source=source)
+
+
 def failed_world_outcome(seed: int, error: BaseException | str) -> WorldDatasetOutcome:
     """A ``failed`` outcome for world ``seed``."""
     from storage.worlds import world_id_for
 
-    text = error if isinstance(error, str) else f"{type(error).__name__}: {error}"
-    return WorldDatasetOutcome(world_id_for(seed), int(seed), "failed", error=text)
+    return failed_scene_outcome(world_id_for(seed), error, seed=seed)
 
 
 # ---------------------------------------------------------------------------------------------

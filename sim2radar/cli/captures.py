@@ -43,10 +43,10 @@ def run_captures(captures: Path, *, store: str, dataset: str, settings: dict[str
 
         from contextlib import nullcontext
 
+        from flows._steps import STEP_NAMES
         from sim2radar.cli._app import quiet_recorded_failures
-        from tasks.capture import CAPTURE_STAGES
 
-        quiet = (quiet_recorded_failures(["capture-scene", *CAPTURE_STAGES], verbose)
+        quiet = (quiet_recorded_failures(["capture-scene", *STEP_NAMES], verbose)
                  if use_prefect else nullcontext())
         with quiet:
             summary = capture_dataset(captures, store, dataset, export_dir=export_dir,

@@ -6,8 +6,9 @@ path (no store, no Prefect; ``tasks/dataset.py`` adds caching and I/O).
   (:func:`ground_truth_labels`: at least ``labels.min_visibility`` of the doorway unoccluded,
   in FOV and range).
 * :func:`reconstructed_frame` — the paper's pipeline: meshes reconstructed from the frame's RGB
-  + LiDAR (:func:`reconstruct_world_frame`) moved into the rig's radar frame
-  (``inv(radar_to_world) @ camera_to_world``) and simulated; labels are the reconstructed door
+  + LiDAR (:func:`world_frame_input`; the reconstruction's steps run in ``tasks/steps.py``)
+  moved into the rig's radar frame (``inv(radar_to_world) @ camera_to_world``) and
+  simulated; labels are the reconstructed door
   boxes the radar sees on the reconstructed geometry (the same visibility rule), the paper's
   pre-training pseudo-labels. The ground-truth doors the radar sees are stored alongside.
 """
@@ -23,7 +24,7 @@ from sim2radar.factory.frames import DatasetFrame, points_near_boxes
 from sim2radar.factory.labels import radar_visibility, scene_ray_caster
 
 __all__ = ["frame_id_for", "with_material", "ground_truth_labels", "ground_truth_frame",
-           "world_frame_input", "reconstruct_world_frame", "reconstructed_frame",
+           "world_frame_input", "reconstructed_frame",
            "render_seconds", "world_radar_frames"]
 
 
@@ -89,15 +90,6 @@ def world_frame_input(frame):
 
     return FrameInput(frame.rgb, frame.intrinsics, frame.lidar_points,
                       name=frame_id_for(frame.seed, frame.frame_index), **frame.rig_calibration)
-
-
-def reconstruct_world_frame(frame, config):
-    """:func:`sim2radar.reconstruct.reconstruct` on :func:`world_frame_input` in one call;
-    ``oracle`` backends get the frame's ground truth. (The factory runs the same stages as
-    separate cached steps: ``tasks/steps.py``.)"""
-    from sim2radar.reconstruct import reconstruct
-
-    return reconstruct(world_frame_input(frame), config, ground_truth=frame)
 
 
 def reconstructed_frame(frame, world_id: str, world_scene, spec, radar_seed: int, *, meshes,
