@@ -254,7 +254,10 @@ def generate_world(seed: int, config: WorldConfig | None = None) -> World:
             if double:
                 return plan_door(side, s_center, a, b, leads_to, False)
             return False
-        s0 = q(rd.uniform(a + 0.1, b - 0.1 - ow)) if s_center is None else q(s_center - ow / 2)
+        # max(): b - a can fall short of ow + 0.2 by a rounding error (q() rounds ow); the
+        # draw then has an empty range (seed 1161 raised "high - low < 0")
+        s0 = (q(rd.uniform(a + 0.1, max(b - 0.1 - ow, a + 0.1))) if s_center is None
+              else q(s_center - ow / 2))
         s0 = min(max(s0, q(a + 0.1)), q(b - 0.1 - ow))
         if not side.free(s0 - 0.1, s0 + ow + 0.1, ("opening", "door")):
             return False

@@ -39,6 +39,16 @@ def test_bad_seed_and_config_are_refused():
         generate_world(0, {"corridor_width_m": (2, 3)})
 
 
+def test_a_door_span_a_rounding_error_short_of_its_opening_still_generates():
+    """Seed 1161 (default config) offered a blind-door span whose length fell short of the
+    opening by a rounding error: the door position was drawn from an empty range and the world
+    failed with "high - low < 0"."""
+    world = generate_world(1161)
+    assert world.doors and all(d.width_m > 0 and d.box_world[3] > d.width_m
+                               for d in world.doors)
+    assert generate_world(1161).describe() == world.describe()
+
+
 def test_objects_use_project_vocabularies(world3):
     assert len(world3.meshes) == len(world3.objects)
     for i, (mesh, obj) in enumerate(zip(world3.meshes, world3.objects, strict=True)):
