@@ -1,4 +1,5 @@
-"""The one place that picks hardware: the Mitsuba variant and the torch device.
+"""The one place that picks hardware: the Mitsuba variant and the torch device, and the one
+way NumPy data enters Dr.Jit (:func:`to_drjit`).
 
 Order of preference is CUDA -> LLVM (CPU, vectorised JIT) -> scalar (CPU, ~25x slower).
 ``SIM2RADAR_MITSUBA_VARIANT`` and ``SIM2RADAR_TORCH_DEVICE`` override the choice;
@@ -11,6 +12,8 @@ from __future__ import annotations
 import functools
 import logging
 import os
+
+import numpy as np
 
 log = logging.getLogger(__name__)
 
@@ -101,6 +104,49 @@ def _apply_drjit_threads() -> None:
 
     dr.set_thread_count(n)
     log.info("drjit: %d CPU threads", n)
+
+
+#: Slack after every NumPy buffer handed to Dr.Jit [bytes]: 4x the widest vector packet (64 B).
+DRJIT_SLACK_BYTES = 256
+
+
+def to_drjit(array_type, values, dtype=None):
+    """A Dr.Jit array of type ``array_type`` holding ``values``, safe for Dr.Jit kernels.
+
+    Dr.Jit's LLVM backend does not copy a contiguous NumPy array: the Dr.Jit array keeps the
+    NumPy buffer, and its kernels load it in whole vector packets (16 float32 with AVX-512),
+    so they read past the end of a buffer whose length is not a multiple of the packet. NumPy
+    allocates exactly: when the buffer ends where a mapping ends the kernel faults (reproduced:
+    161 float32 ending at a guard page -> SIGSEGV; 160 or 176 -> fine). The factory died that
+    way about once in 50 killed runs (the visibility query's ray origins; the heap layout after
+    a SIGTERM made it likelier). Here ``values`` are copied into a fresh buffer with
+    :data:`DRJIT_SLACK_BYTES` after its end, which the Dr.Jit array keeps (nothing else holds it,
+    so nothing else can change it either).
+
+    Parameters
+    ----------
+    array_type : a Dr.Jit array type, flat (``mi.Float``, ``mi.UInt32``) or with components
+        (``mi.Point3f``: ``values`` is then ``(components, N)``).
+    values : array-like
+    dtype : NumPy dtype of the copy (default: that of ``values``)
+
+    Returns
+    -------
+    ``array_type`` instance
+    """
+    import drjit as dr
+
+    a = np.asarray(values, dtype=dtype)
+    if dr.depth_v(array_type) > 1:
+        if a.ndim != 2 or a.shape[0] != dr.size_v(array_type):
+            raise ValueError(f"{array_type.__name__} needs ({dr.size_v(array_type)}, N) values, "
+                             f"got shape {a.shape}")
+        return array_type(*(to_drjit(dr.value_t(array_type), row) for row in a))
+    flat = a.reshape(-1)
+    slack = -(-DRJIT_SLACK_BYTES // flat.dtype.itemsize)
+    buf = np.zeros(flat.size + slack, dtype=flat.dtype)
+    buf[: flat.size] = flat
+    return array_type(buf[: flat.size])
 
 
 def torch_device(prefer: str | None = None):

@@ -28,3 +28,44 @@ def test_bad_overrides_name_the_variable():
     proc = _run("from sim2radar.hardware import mitsuba_variant; mitsuba_variant()",
                 SIM2RADAR_DRJIT_THREADS="zero")
     assert proc.returncode != 0 and "SIM2RADAR_DRJIT_THREADS" in proc.stderr
+
+
+# 161 float32 ending exactly where the readable memory ends (the next page has no access): how
+# NumPy's exact-size buffers sit at the top of a heap now and then
+_AT_A_GUARD_PAGE = """
+import ctypes, mmap, numpy as np, drjit as dr, mitsuba as mi
+from sim2radar.hardware import mitsuba_variant, to_drjit
+mitsuba_variant()
+page = mmap.PAGESIZE
+m = mmap.mmap(-1, 2 * page, prot=mmap.PROT_READ | mmap.PROT_WRITE)
+base = ctypes.addressof(ctypes.c_char.from_buffer(m))
+assert ctypes.CDLL(None).mprotect(ctypes.c_void_p(base + page), page, 0) == 0
+values = np.frombuffer(m, dtype=np.float32, count=page // 4)[-161:]
+values[:] = np.arange(161)
+x = {make}(mi.Float, values) if "{make}" == "to_drjit" else mi.Float(values)
+print(float(dr.sum(x * 2.0 + 1.0)[0]))
+"""
+
+
+def test_numpy_data_enters_drjit_with_slack_after_its_end():
+    """Dr.Jit's LLVM backend keeps a contiguous NumPy buffer instead of copying it, and its
+    kernels read whole vector packets past the end: a buffer that ends at unreadable memory
+    crashes the kernel (the factory's rare SIGSEGV in the visibility query). ``to_drjit`` copies
+    into a buffer with slack: the same data then sums correctly."""
+    safe = _run(_AT_A_GUARD_PAGE.replace("{make}", "to_drjit"))
+    assert safe.returncode == 0, safe.stderr[-2000:]
+    assert float(safe.stdout.split()[-1]) == 2 * sum(range(161)) + 161
+    raw = _run(_AT_A_GUARD_PAGE.replace("{make}", "raw"))
+    # the hazard itself (in Dr.Jit 1.5 / Mitsuba 3.9 on a CPU with 16-lane packets; a release
+    # that copies or pads would print the sum instead, and to_drjit would be belt and braces)
+    assert raw.returncode in (-11, 0), raw.stderr[-2000:]
+
+
+def test_to_drjit_copies_and_keeps_components_apart():
+    proc = _run("import numpy as np, mitsuba as mi; "
+                "from sim2radar.hardware import mitsuba_variant, to_drjit; mitsuba_variant(); "
+                "a = np.arange(6.0).reshape(3, 2); p = to_drjit(mi.Point3f, a, np.float32); "
+                "a[:] = -1; print(p.x, p.y, p.z, to_drjit(mi.UInt32, [4, 5], np.uint32)); "
+                "to_drjit(mi.Point3f, np.zeros((2, 4)))")
+    assert "[0, 1] [2, 3] [4, 5] [4, 5]" in proc.stdout, proc.stdout + proc.stderr
+    assert proc.returncode != 0 and "Point3f needs (3, N) values" in proc.stderr

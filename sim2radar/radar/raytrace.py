@@ -27,6 +27,7 @@ from collections.abc import Iterator, Sequence
 import numpy as np
 
 from sim2radar.em import get_material
+from sim2radar.hardware import to_drjit
 from sim2radar.mesh import MaterialMesh
 from sim2radar.radar.binning import Accumulator, array_geometry
 from sim2radar.radar.config import RadarConfig
@@ -240,12 +241,12 @@ class RadarScene:
             has_vertex_texcoords=False,
         )
         params = mi.traverse(mesh)
-        params["vertex_positions"] = mi.Float(vertices.ravel())
-        params["faces"] = mi.UInt32(faces.ravel())
+        params["vertex_positions"] = to_drjit(mi.Float, vertices.ravel(), np.float32)
+        params["faces"] = to_drjit(mi.UInt32, faces.ravel(), np.uint32)
         params.update()
         self._scene = mi.load_dict({"type": "scene", "mesh": mesh})
-        self._face_material = mi.UInt32(face_material)
-        self._face_object = mi.UInt32(face_object_ids(meshes))
+        self._face_material = to_drjit(mi.UInt32, face_material, np.uint32)
+        self._face_object = to_drjit(mi.UInt32, face_object_ids(meshes), np.uint32)
         self._prepared: dict[tuple[str, int | None], _Prepared] = {}
         self.build_seconds = time.perf_counter() - t0
 
@@ -271,8 +272,8 @@ class RadarScene:
         alpha = dir_lut = None
         if directive:
             alphas = [sc.lobe(m) for m in self.materials]
-            alpha = mi.Float(np.asarray(alphas, dtype=np.float32))
-            dir_lut = mi.Float(directive_lut(alphas).astype(np.float32).ravel())
+            alpha = to_drjit(mi.Float, alphas, np.float32)
+            dir_lut = to_drjit(mi.Float, directive_lut(alphas).ravel(), np.float32)
         transmits = any(sc.transmits(m) for m in self.materials)
         t_re = t_im = choice = None
         if transmits:
@@ -282,21 +283,19 @@ class RadarScene:
                 [d if sc.transmits(m) else None for m, d in zip(self.materials, thickness,
                                                                   strict=True)],
             ).astype(np.complex64)
-            t_re, t_im = mi.Float(tl.real.ravel()), mi.Float(tl.imag.ravel())
+            t_re, t_im = to_drjit(mi.Float, tl.real.ravel()), to_drjit(mi.Float, tl.imag.ravel())
             draws = continuation_uniforms(n, radar.max_bounces, seed)
-            choice = [mi.Float(row.astype(np.float32)) for row in draws]
+            choice = [to_drjit(mi.Float, row, np.float32) for row in draws]
         prep = _Prepared(
-            directions=mi.Vector3f(
-                *(mi.Float(directions[:, i].astype(np.float32)) for i in range(3))
-            ),
+            directions=to_drjit(mi.Vector3f, directions.T, np.float32),
             n_rays=n,
-            solid_angle=mi.Float(solid_angle.astype(np.float32)),
-            diffuse_u=mi.Float(diffuse_phase_seed(n, seed).astype(np.float32)),
+            solid_angle=to_drjit(mi.Float, solid_angle, np.float32),
+            diffuse_u=to_drjit(mi.Float, diffuse_phase_seed(n, seed), np.float32),
             spacing_rad=spacing,
-            lut_re=mi.Float(lut.real.ravel()),
-            lut_im=mi.Float(lut.imag.ravel()),
-            s_coef=mi.Float(s),
-            spec_coef=mi.Float(np.sqrt(1.0 - s**2).astype(np.float32)),
+            lut_re=to_drjit(mi.Float, lut.real.ravel()),
+            lut_im=to_drjit(mi.Float, lut.imag.ravel()),
+            s_coef=to_drjit(mi.Float, s),
+            spec_coef=to_drjit(mi.Float, np.sqrt(1.0 - s**2), np.float32),
             directive=directive,
             alpha=alpha,
             dir_lut=dir_lut,
@@ -803,11 +802,8 @@ class RadarScene:
         norm = np.linalg.norm(d, axis=1, keepdims=True)
         if not (np.isfinite(o).all() and np.isfinite(d).all()) or np.any(norm <= 0):
             raise ValueError("origins and directions must be finite, directions non-zero")
-        d = (d / norm).astype(np.float32)
-        ray = mi.Ray3f(
-            mi.Point3f(*(mi.Float(o[:, i].astype(np.float32)) for i in range(3))),
-            mi.Vector3f(*(mi.Float(d[:, i]) for i in range(3))),
-        )
+        ray = mi.Ray3f(to_drjit(mi.Point3f, o.T, np.float32),
+                       to_drjit(mi.Vector3f, (d / norm).T, np.float32))
         pi = self._scene.ray_intersect_preliminary(ray)
         t = dr.select(pi.is_valid(), pi.t, dr.inf)
         return np.asarray(t.numpy(), dtype=np.float64)

@@ -296,15 +296,15 @@ class LabeledScene:
         name from the mesh list)."""
         import mitsuba as mi
 
-        from sim2radar.hardware import mitsuba_variant
+        from sim2radar.hardware import mitsuba_variant, to_drjit
 
         mitsuba_variant()
         scene: dict[str, Any] = {"type": "scene"}
         for i, mesh in enumerate(self.meshes_in(camera_to_target)):
             m = mi.Mesh(mesh.name or f"mesh_{i}", len(mesh.vertices), len(mesh.faces))
             params = mi.traverse(m)
-            params["vertex_positions"] = mi.Float(mesh.vertices.ravel().astype(np.float32))
-            params["faces"] = mi.UInt32(mesh.faces.ravel().astype(np.uint32))
+            params["vertex_positions"] = to_drjit(mi.Float, mesh.vertices.ravel(), np.float32)
+            params["faces"] = to_drjit(mi.UInt32, mesh.faces.ravel(), np.uint32)
             params.update()
             scene[mesh.name or f"mesh_{i}"] = m
         return scene

@@ -23,7 +23,7 @@ import numpy as np
 
 from sim2radar.boxes import boxes_to_frame
 from sim2radar.camera import CameraIntrinsics
-from sim2radar.hardware import mitsuba_variant
+from sim2radar.hardware import mitsuba_variant, to_drjit
 from sim2radar.vocab import material_id, semantic_id
 from sim2radar.worlds.appearance import texture_image
 from sim2radar.worlds.config import RigConfig, radar_view
@@ -137,9 +137,9 @@ def _mi_mesh(mi, dr, name: str, vertices: np.ndarray, faces: np.ndarray, bsdf, s
     m = mi.Mesh(name, len(tri), len(faces), props=props, has_vertex_normals=False,
                 has_vertex_texcoords=True)
     p = mi.traverse(m)
-    p["vertex_positions"] = dr.ravel(mi.Point3f(tri.T.astype(np.float32)))
-    p["faces"] = dr.ravel(mi.Vector3u(np.arange(len(tri), dtype=np.uint32).reshape(-1, 3).T))
-    p["vertex_texcoords"] = dr.ravel(mi.Point2f(uv.T.astype(np.float32)))
+    p["vertex_positions"] = dr.ravel(to_drjit(mi.Point3f, tri.T, np.float32))
+    p["faces"] = dr.ravel(to_drjit(mi.Vector3u, np.arange(len(tri)).reshape(-1, 3).T, np.uint32))
+    p["vertex_texcoords"] = dr.ravel(to_drjit(mi.Point2f, uv.T, np.float32))
     p.update()
     return m
 
@@ -192,7 +192,7 @@ def cast_rays(world: World, origins: np.ndarray, directions: np.ndarray) -> dict
     scene, lut, _, _, _ = _SCENES.get(world)
     d = np.asarray(directions, dtype=np.float64)
     o = np.broadcast_to(np.asarray(origins, dtype=np.float64), d.shape)
-    ray = mi.Ray3f(mi.Point3f(o.T.astype(np.float32)), mi.Vector3f(d.T.astype(np.float32)))
+    ray = mi.Ray3f(to_drjit(mi.Point3f, o.T, np.float32), to_drjit(mi.Vector3f, d.T, np.float32))
     si = scene.ray_intersect(ray, ray_flags=mi.RayFlags.Minimal | mi.RayFlags.ShadingFrame,
                              coherent=True)
     valid = np.asarray(si.is_valid(), dtype=bool)
