@@ -27,7 +27,6 @@ from typing import Any
 
 from prefect import flow, task
 from prefect.cache_policies import NO_CACHE
-from prefect.task_runners import ThreadPoolTaskRunner
 
 from flows import _progress
 from flows._steps import gather_scenes, run_as_tasks
@@ -41,6 +40,7 @@ from tasks.dataset import (
     record_world_dataset,
     summarize_dataset,
 )
+from tasks.runners import ThreadRunner
 
 __all__ = ["capture_dataset_flow", "capture_dataset", "capture_dataset_job", "progress_callback",
            "CAPTURE_DOMAIN", "stage_table"]
@@ -82,7 +82,7 @@ def stage_table(outcomes: list[WorldDatasetOutcome]) -> list[dict[str, Any]]:
     return rows
 
 
-@flow(name="capture-dataset", task_runner=ThreadPoolTaskRunner(max_workers=1), log_prints=False)
+@flow(name="capture-dataset", task_runner=ThreadRunner(max_workers=1), log_prints=False)
 def capture_dataset_flow(
     scenes: list[CaptureScene],
     spec: CaptureSpec,

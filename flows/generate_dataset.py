@@ -32,7 +32,6 @@ from typing import Any
 
 from prefect import flow, get_run_logger, task
 from prefect.cache_policies import NO_CACHE
-from prefect.task_runners import ThreadPoolTaskRunner
 
 from flows import _progress
 from flows._steps import gather_scenes, run_as_tasks
@@ -45,7 +44,7 @@ from tasks.dataset import (
     generate_world_dataset,
     summarize_dataset,
 )
-from tasks.runners import task_runner
+from tasks.runners import ThreadRunner, task_runner
 
 __all__ = ["generate_dataset_flow", "generate_dataset", "generate_dataset_job", "DatasetFailures",
            "progress_callback"]
@@ -111,7 +110,7 @@ def generate_world_dataset_task(seed: int, spec: dict, store: str, force: bool =
                                   run=run_as_tasks(world_id_for(seed), _step_name))
 
 
-@flow(name="generate-dataset", task_runner=ThreadPoolTaskRunner(max_workers=1), log_prints=False)
+@flow(name="generate-dataset", task_runner=ThreadRunner(max_workers=1), log_prints=False)
 def generate_dataset_flow(
     seeds: list[int],
     spec: dict,

@@ -18,7 +18,6 @@ from typing import Any
 
 from prefect import flow, get_run_logger
 from prefect.futures import as_completed
-from prefect.task_runners import ThreadPoolTaskRunner
 
 from storage import ArtifactStore
 from tasks.reconstruct import (
@@ -29,11 +28,12 @@ from tasks.reconstruct import (
     record_recon_outcome_task,
     summarize_recon,
 )
+from tasks.runners import ThreadRunner
 
 __all__ = ["reconstruct_flow", "run_reconstruction"]
 
 
-@flow(name="reconstruct-frames", task_runner=ThreadPoolTaskRunner(max_workers=1), log_prints=False)
+@flow(name="reconstruct-frames", task_runner=ThreadRunner(max_workers=1), log_prints=False)
 def reconstruct_flow(
     jobs: list[ImageJob],
     store: str = "out/store",
@@ -92,7 +92,7 @@ def run_reconstruction(
     jobs = [ImageJob(os.fspath(img), os.fspath(intrinsics), os.fspath(lidar[i]) if lidar else None)
             for i, img in enumerate(images)]
     cfg = config.to_dict() if hasattr(config, "to_dict") else (config or None)
-    runner = ThreadPoolTaskRunner(max_workers=max(1, int(workers)))
+    runner = ThreadRunner(max_workers=max(1, int(workers)))
     return reconstruct_flow.with_options(task_runner=runner)(
         jobs=jobs, store=os.fspath(store), dataset=dataset, config=cfg,
         out_dir=os.fspath(out_dir) if out_dir else None, force=force)

@@ -31,7 +31,6 @@ from typing import Any
 
 from prefect import flow, get_run_logger
 from prefect.futures import as_completed
-from prefect.task_runners import ThreadPoolTaskRunner
 
 from flows import _progress
 from storage import ArtifactStore
@@ -43,7 +42,7 @@ from tasks.radar import (
     simulate_scene_task,
     summarize,
 )
-from tasks.runners import task_runner
+from tasks.runners import ThreadRunner, task_runner
 
 __all__ = [
     "simulate_flow",
@@ -88,7 +87,7 @@ def _check_unique_ids(scenes: Sequence[str]) -> None:
         seen[sid] = s
 
 
-@flow(name="simulate-radar", task_runner=ThreadPoolTaskRunner(max_workers=1), log_prints=False)
+@flow(name="simulate-radar", task_runner=ThreadRunner(max_workers=1), log_prints=False)
 def simulate_flow(
     scenes: list[str],
     radar: str = "ti-mmwcas",

@@ -16,9 +16,9 @@ from typing import Any
 
 from prefect import flow, get_run_logger
 from prefect.futures import as_completed
-from prefect.task_runners import ThreadPoolTaskRunner
 
 from storage import ArtifactStore
+from tasks.runners import ThreadRunner
 from tasks.worlds import (
     WorldOutcome,
     failed_world,
@@ -30,7 +30,7 @@ from tasks.worlds import (
 __all__ = ["worlds_flow", "run_worlds"]
 
 
-@flow(name="generate-worlds", task_runner=ThreadPoolTaskRunner(max_workers=1), log_prints=False)
+@flow(name="generate-worlds", task_runner=ThreadRunner(max_workers=1), log_prints=False)
 def worlds_flow(
     seeds: list[int],
     n_frames: int = 4,
@@ -94,7 +94,7 @@ def run_worlds(
     def dump(cfg):
         return cfg.model_dump(mode="json") if hasattr(cfg, "model_dump") else (cfg or {})
 
-    runner = ThreadPoolTaskRunner(max_workers=max(1, int(workers)))
+    runner = ThreadRunner(max_workers=max(1, int(workers)))
     return worlds_flow.with_options(task_runner=runner)(
         seeds=[int(s) for s in seeds], n_frames=int(n_frames), store=os.fspath(store),
         dataset=dataset, world_cfg=dump(world_cfg), rig=dump(rig),
