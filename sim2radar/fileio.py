@@ -9,10 +9,13 @@ from __future__ import annotations
 
 import json
 import os
+import re
 from pathlib import Path
 from typing import Any
 
-__all__ = ["atomic_write", "write_json"]
+__all__ = ["atomic_write", "write_json", "abandoned_temp_files"]
+
+_TEMP = re.compile(r"^\..+\.tmp(\d+)$")
 
 
 def atomic_write(path: str | os.PathLike, data: bytes) -> Path:
@@ -22,6 +25,23 @@ def atomic_write(path: str | os.PathLike, data: bytes) -> Path:
     tmp.write_bytes(data)
     os.replace(tmp, path)
     return path
+
+
+def abandoned_temp_files(folder: str | os.PathLike) -> list[Path]:
+    """Temporary files of :func:`atomic_write` in ``folder`` whose writing process is gone (a
+    killed run's leftovers, ``.<name>.tmp<pid>``); a live process's file is not listed."""
+    out = []
+    for p in sorted(Path(folder).glob(".*.tmp*")):
+        m = _TEMP.match(p.name)
+        if m is None or int(m.group(1)) == os.getpid():
+            continue
+        try:
+            os.kill(int(m.group(1)), 0)
+        except ProcessLookupError:
+            out.append(p)
+        except PermissionError:  # another user's live process
+            continue
+    return out
 
 
 def write_json(path: str | os.PathLike, doc: Any, *, sort_keys: bool = False) -> Path:

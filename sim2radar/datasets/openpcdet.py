@@ -21,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
-from sim2radar.fileio import atomic_write, write_json
+from sim2radar.fileio import abandoned_temp_files, atomic_write, write_json
 
 __all__ = [
     "DatasetError",
@@ -226,8 +226,8 @@ def write_dataset(
 
     The folder then holds exactly this dataset: ``points/*.npy`` and ``labels/*.txt`` of frames
     not written now (left by an earlier, larger export into the same folder) and split files
-    not given are removed (logged), so no stale frame lies next to the splits. Other files in
-    the folder are left alone.
+    not given are removed (logged), so no stale frame lies next to the splits; so are the
+    temporary files of an export killed mid-write. Other files in the folder are left alone.
     """
     root = Path(root)
     written = set()
@@ -242,6 +242,8 @@ def write_dataset(
     stale = [p for sub, suffix in (("points", ".npy"), ("labels", ".txt"))
              for p in sorted((root / sub).glob(f"*{suffix}")) if p.stem not in written]
     stale += [p for p in sorted((root / "ImageSets").glob("*.txt")) if p.stem not in splits]
+    stale += [p for sub in ("points", "labels", "ImageSets", ".")
+              for p in abandoned_temp_files(root / sub)]  # an export killed mid-write
     for p in stale:
         p.unlink()
     if stale:
