@@ -103,24 +103,38 @@ def test_five_concurrent_first_starts_all_finish_on_one_server(five_at_once):
     assert state.api_url.startswith("http://127.0.0.1:")
 
 
+def _latest_flow_run_state(api_url: str) -> str:
+    import httpx
+
+    runs = httpx.post(f"{api_url}/flow_runs/filter", timeout=10,
+                      json={"sort": "EXPECTED_START_TIME_DESC", "limit": 1}).json()
+    return runs[0]["state"]["type"]
+
+
 @pytest.mark.parametrize("sig", [signal.SIGKILL, signal.SIGTERM], ids=["SIGKILL", "SIGTERM"])
 def test_a_killed_generate_leaves_no_process_but_the_managed_server(five_at_once, tmp_path, sig):
     home, _ = five_at_once
     server, _ = srv.ensure_server(home)
     store, opd = tmp_path / "store", tmp_path / "openpcdet"
-    proc = subprocess.Popen([*CLI, "generate", *TINY, "--frames", "8", "--out", str(store),
-                             "--export-openpcdet", str(opd)], cwd=REPO, env=_env(home),
-                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+    frames = 24
+    proc = subprocess.Popen([*CLI, "generate", *TINY, "--frames", str(frames), "--out",
+                             str(store), "--export-openpcdet", str(opd)], cwd=REPO,
+                            env=_env(home), stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
                             start_new_session=True)
-    try:  # kill it inside the flow: after its world, before its eight frames are done
+    try:  # kill it inside the flow: after its world, before its frames are done
         deadline = time.monotonic() + 120
         while not list(store.glob("world_specs/*.parquet")) and proc.poll() is None \
                 and time.monotonic() < deadline:
             time.sleep(0.05)
     finally:
         os.kill(proc.pid, sig)  # the run's process only, as a scheduler or `kill PID` does
-        proc.wait(timeout=60)
-    assert proc.returncode == -sig, "the run ended before it was killed"
+        _, err = proc.communicate(timeout=60)
+    assert proc.returncode == -sig, f"the run ended before it was killed: {err[-3000:]}"
+    # it stopped there: a SIGTERM'd run reports Crashed and goes without finishing its world
+    # (Prefect's own thread pool waited for all 24 frames)
+    assert len(list(store.glob("dataset_frames/*.parquet"))) < frames
+    if sig == signal.SIGTERM:
+        assert _latest_flow_run_state(server.api_url) == "CRASHED"
     left = _settled(home, {server.pid})
     assert left.keys() == {server.pid}, left
     assert srv.server_status(home) == (server, True)  # the next run reuses it
