@@ -28,6 +28,7 @@ def test_bad_whole_numbers_name_file_and_field(tmp_path, line, field):
     lines = res.output.strip().splitlines()
     assert len(lines) == 1 and "Traceback" not in res.output, res.output
     assert f"gen.yaml: {field}:" in lines[0], lines[0]
+    assert f"write e.g. '{field}: " in lines[0] or "must be >= 1" in lines[0], lines[0]  # the fix
     assert not (tmp_path / "store").exists()  # nothing ran
 
 

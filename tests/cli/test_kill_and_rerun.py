@@ -108,8 +108,14 @@ def _assert_same_dataset(store: Path, export: Path, ref_store: Path, ref_export:
 def reference(tmp_path_factory):
     """One uninterrupted run."""
     root = tmp_path_factory.mktemp("reference")
-    _finish(_generate(root / "store", root / "export"))
+    proc = _generate(root / "store", root / "export")
+    out, err = proc.communicate(timeout=300)
+    assert proc.returncode == 0, out[-2000:] + err[-3000:]
     assert len(_frames(root / "store")) == 6
+    # two worlds cannot fill train, val and test (split by world): said, not silent
+    meta = json.loads((root / "export" / "dataset.json").read_text())
+    assert [k for k, n in meta["splits"].items() if n == 0] and "are empty" in meta["warnings"][0]
+    assert "are empty" in out + err
     return root / "store", root / "export"
 
 

@@ -317,6 +317,15 @@ def test_a_checkpoint_carrying_code_is_refused_without_running_it(tmp_path):
         with pytest.raises(ValueError, match="refused to load"):
             load()
     assert not marker.exists()
+    # --resume reads out_dir/last.pt
+    root, run = tmp_path / "data", tmp_path / "run"
+    write_synthetic_dataset(root, n_train=2, n_val=1, n_test=1, seed=5, points_per_frame=300)
+    run.mkdir()
+    (run / "last.pt").write_bytes(bad.read_bytes())
+    cfg = small_config(data=dict(root=root), optimization=dict(batch_size=2, epochs=1))
+    with pytest.raises(ValueError, match="refused to load"):
+        train(cfg, out_dir=run, resume=True)
+    assert not marker.exists()
 
 
 def test_a_failed_run_leaves_no_empty_run_folder(tmp_path):

@@ -8,7 +8,9 @@ import errno
 import pytest
 
 from storage.manifest import Manifest
+from flows._steps import record_scene_task
 from tasks.common import REMOTE_IO_RETRIES
+from tasks.dataset import WorldDatasetOutcome
 from tasks.radar import SceneOutcome, record_outcome_task
 from tasks.reconstruct import ReconOutcome, record_recon_outcome_task
 from tasks.worlds import WorldOutcome, record_world_outcome_task
@@ -18,6 +20,7 @@ RECORD_TASKS = [
     (record_outcome_task, SceneOutcome(scene_id="s", source="s.yaml", status="ok")),
     (record_recon_outcome_task, ReconOutcome("f", "f.png", "ok")),
     (record_world_outcome_task, WorldOutcome(world_id="world_000001", seed=1, status="ok")),
+    (record_scene_task, WorldDatasetOutcome("world_000002", 2, "ok")),  # generate, captures
 ]
 
 
