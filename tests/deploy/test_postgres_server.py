@@ -4,11 +4,13 @@ A throw-away PostgreSQL cluster (Debian's ``postgresql``: ``initdb`` + ``pg_ctl`
 on a free port, socket in a temporary folder) holds the database of a ``prefect server``
 started with ``PREFECT_API_DATABASE_CONNECTION_URL=postgresql+asyncpg://…``. Against it, as
 an operator would: ``prefect work-pool create``, ``prefect deploy`` of ``radar-on-demand``
-from ``deploy/prefect.yaml``, a process worker, and ``prefect deployment run … --watch`` on
-the built-in demo corridor with the store in a temporary folder. The run must finish
-Completed, its flow and task runs must be rows of the Postgres database (and no SQLite file
+and ``generate-on-demand`` from ``deploy/prefect.yaml``, a process worker, and ``prefect
+deployment run … --watch`` of each: the built-in demo corridor, and one small procedural world
+(the factory's main job), with the store in a temporary folder. The runs must finish
+Completed, their flow and task runs must be rows of the Postgres database (and no SQLite file
 may appear), and the store must hold the corridor's radar frames under the content key an
-in-process run would use, with the metal end door detected where it stands.
+in-process run would use, with the metal end door detected where it stands, and the world's
+dataset frames with their OpenPCDet export.
 
 Every process (postgres, the Prefect server, the worker and its flow-run children) is
 stopped at teardown, also on failure. ``make setup`` installs ``postgresql`` with apt; the
@@ -41,6 +43,7 @@ REPO = Path(__file__).resolve().parents[2]
 PREFECT_FILE = REPO / "deploy" / "prefect.yaml"
 POOL = "sim2radar-cpu"  # the work pool deploy/prefect.yaml names
 FLOW, DEPLOYMENT = "simulate-dataset", "radar-on-demand"
+GEN_FLOW, GEN_DEPLOYMENT = "generate-dataset-job", "generate-on-demand"
 DEMO_SCENE = "sim2radar/data/demo"  # relative to SIM2RADAR_HOME, where the worker runs
 DB_USER, DB_NAME = "sim2radar", "prefect"
 SERVER_START_S = 180.0  # Prefect server start incl. its migrations on an empty database [s]
@@ -274,25 +277,33 @@ def test_deployment_run_on_a_postgres_backed_server_completes_and_stores_the_fra
                        PREFECT_WORKER_QUERY_SECONDS="2")  # pick the run up quickly
     prefect = [sys.executable, "-m", "prefect"]
     _run([*prefect, "work-pool", "create", POOL, "--type", "process"], env)
-    _run([*prefect, "--no-prompt", "deploy", "--name", DEPLOYMENT,
-          "--prefect-file", str(PREFECT_FILE)], env)
+    for name in (DEPLOYMENT, GEN_DEPLOYMENT):
+        _run([*prefect, "--no-prompt", "deploy", "--name", name,
+              "--prefect-file", str(PREFECT_FILE)], env)
 
     worker_log = tmp_path / "worker.log"
     worker = _start([*prefect, "worker", "start", "--pool", POOL], worker_log, env)
     store, png = tmp_path / "store", tmp_path / "bev"
     run_name = f"postgres-{uuid.uuid4().hex[:8]}"
+    watch = ["--watch", "--watch-interval", "2", "--watch-timeout", str(RUN_TIMEOUT_S)]
     try:
         out = _run([*prefect, "deployment", "run", f"{FLOW}/{DEPLOYMENT}",
                     "-p", f'scenes=["{DEMO_SCENE}"]', "-p", f'store="{store}"',
                     "-p", 'dataset="postgres"', "-p", f'png_dir="{png}"',
-                    "--flow-run-name", run_name, "--watch", "--watch-interval", "2",
-                    "--watch-timeout", str(RUN_TIMEOUT_S)],
-                   env, timeout_s=RUN_TIMEOUT_S + 60)
+                    "--flow-run-name", run_name, *watch], env, timeout_s=RUN_TIMEOUT_S + 60)
+        gen_out = _run([*prefect, "deployment", "run", f"{GEN_FLOW}/{GEN_DEPLOYMENT}",
+                        "-p", "n_worlds=1", "-p", "frames_per_world=2", "-p", f'store="{store}"',
+                        "-p", 'dataset="postgres-worlds"', "-p", 'geometry="ground_truth"',
+                        "-p", 'rig={"width": 80, "height": 60}',
+                        "-p", f'export_dir="{tmp_path / "openpcdet"}"',
+                        "--flow-run-name", f"{run_name}-gen", *watch],
+                       env, timeout_s=RUN_TIMEOUT_S + 60)
     except AssertionError as e:
         raise AssertionError(f"{e}\n{_tail(worker_log)}\n{_tail(prefect_server.log)}") from None
     finally:
         _stop(worker)
     assert "Completed" in out, out
+    assert "Completed" in gen_out, gen_out
 
     # the run, its subflow and its scene task are rows of the Postgres database ...
     rows = postgres.psql(
@@ -301,7 +312,14 @@ def test_deployment_run_on_a_postgres_backed_server_completes_and_stores_the_fra
     assert rows == [["COMPLETED", DEPLOYMENT]]
     flows = postgres.psql("SELECT fl.name, f.state_type FROM flow_run f JOIN flow fl"
                           " ON fl.id = f.flow_id ORDER BY fl.name")
-    assert flows == [[FLOW, "COMPLETED"], ["simulate-radar", "COMPLETED"]]
+    assert flows == [["generate-dataset", "COMPLETED"], [GEN_FLOW, "COMPLETED"],
+                     [FLOW, "COMPLETED"], ["simulate-radar", "COMPLETED"]]
+    # the factory's steps as task runs: the world, its render and its simulate step
+    steps = postgres.psql("SELECT name, state_type FROM task_run WHERE name LIKE 'world%'"
+                          " ORDER BY name")
+    assert [name for name, _ in steps] == ["world-0", "world_000000-render",
+                                           "world_000000-simulate-ground_truth"], steps
+    assert {state for _, state in steps} == {"COMPLETED"}
     tasks = postgres.psql("SELECT state_type FROM task_run WHERE name = 'simulate-corridor'")
     assert tasks == [["COMPLETED"]]
     # ... and no SQLite database was made on the side
@@ -321,3 +339,7 @@ def test_deployment_run_on_a_postgres_backed_server_completes_and_stores_the_fra
     x, y = np.asarray(frames[0]["x_m"]), np.asarray(frames[0]["y_m"])
     on_door = np.abs(y) <= END_DOOR_HALF_WIDTH_M
     assert np.min(np.abs(x[on_door] - END_DOOR_X_M)) < END_DOOR_TOL_M
+    # the procedural world's dataset: its rows, its frames and their export
+    counts = st.manifest("postgres-worlds").counts()
+    assert counts["ok"] == 3 and counts["failed"] == 0, counts  # the world and its 2 frames
+    assert len(list((tmp_path / "openpcdet" / "points").glob("*.npy"))) == 2
