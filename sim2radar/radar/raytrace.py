@@ -62,9 +62,10 @@ PRUNE_BELOW_NOISE_DB = 40.0
 #: gives 0.45). Float32 returns above 2^-16 convert exactly.
 AMPLITUDE_STEP = 2.0**-40
 #: Power and power x range step 2^-54 ~ 5.6e-17 [sim. |a|^2, |a|^2 m]: 44 dB under N0 (~1.4e-12);
-#: sums up to 2^9 = 512 (the metal wall at 5 cm gives 0.032).
+#: sums up to 2^9 = 512 (the metal wall at 5 cm gives 0.032; power grows as 1/r^2, so only a
+#: radar within ~0.5 mm of a metal surface could overflow).
 POWER_STEP = 2.0**-54
-#: A sum this close to the 64-bit limit means the steps above no longer fit the scene.
+#: The largest sum the 64-bit steps hold is 2^63 steps; tests check the headroom against this.
 _SUM_LIMIT = 2**61
 
 
@@ -630,19 +631,15 @@ class RadarScene:
             p = pair64(int64(dr.round(pw)), int64(dr.round(pw * rng_m)))
             dr.scatter_reduce(dr.ReduceOp.Add, cells, p, cell, cell_ok)
 
+        # back to float on the device (float32 grid, as the float sums were; float64 cells)
+        grid = mi.Float(grid) * AMPLITUDE_STEP
+        cells = dr.float64_array_t(mi.Float)(cells) * POWER_STEP
         dr.eval(grid, cells, hits)
         dr.sync_thread()
         t2 = time.perf_counter()
-        g_int, c_int = grid.numpy(), cells.numpy()
-        if max(np.abs(g_int).max(initial=0), np.abs(c_int).max(initial=0)) >= _SUM_LIMIT:
-            raise RuntimeError(
-                "radar trace: a fixed-point sum reached 2^61 (AMPLITUDE_STEP / POWER_STEP in "
-                "sim2radar/radar/raytrace.py are too fine for this scene: is the radar inside "
-                "or touching a surface?)")
-        iq = g_int.reshape(n_z, n_r, m_fine, 2) * AMPLITUDE_STEP
-        sums = c_int.reshape(-1, 2) * POWER_STEP
+        sums = cells.numpy().reshape(-1, 2)
         accumulator = Accumulator(
-            grid=(iq[..., 0] + 1j * iq[..., 1]).astype(np.complex64),
+            grid=np.ascontiguousarray(grid.numpy()).view(np.complex64).reshape(n_z, n_r, m_fine),
             power=sums[:, 0].copy(),
             range_w=sums[:, 1].copy(),
         )
