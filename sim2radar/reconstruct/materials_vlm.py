@@ -500,7 +500,6 @@ class VlmMaterials:
         self.client = ChatClient(self.config)
         self.cache = AnswerCache(self.config.cache_path) if self.config.cache_path else None
         self.stats = {"cache_hits": 0, "fallbacks": 0}
-        self.last_info: dict = {}
         self._stats_lock = threading.Lock()
         self._abort = threading.Event()
 
@@ -595,5 +594,4 @@ class VlmMaterials:
                         fut.cancel()
                     raise
         self.stats.update(self.client.stats)
-        self.last_info = dict(self.stats)
         return [r for r in results if r is not None]

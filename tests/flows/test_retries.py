@@ -7,8 +7,8 @@ import errno
 
 import pytest
 
-from storage.manifest import Manifest
 from flows._steps import record_scene_task
+from storage.manifest import Manifest
 from tasks.common import REMOTE_IO_RETRIES
 from tasks.dataset import WorldDatasetOutcome
 from tasks.radar import SceneOutcome, record_outcome_task
