@@ -65,7 +65,7 @@ AMPLITUDE_STEP = 2.0**-40
 #: sums up to 2^9 = 512 (the metal wall at 5 cm gives 0.032; power grows as 1/r^2, so only a
 #: radar within ~0.5 mm of a metal surface could overflow).
 POWER_STEP = 2.0**-54
-#: The largest sum the 64-bit steps hold is 2^63 steps; tests check the headroom against this.
+#: A margin under the 2^63 steps a 64-bit sum holds; the tests check the headroom against it.
 _SUM_LIMIT = 2**61
 
 
