@@ -9,8 +9,9 @@
 Choice of runner
 ----------------
 * ``dask_address=None`` -> :class:`ThreadRunner` (Prefect's thread pool that does not wait for
-  running tasks when the flow is interrupted by SIGTERM or Ctrl-C) with ``workers`` threads. Mitsuba/Dr.Jit already spreads one frame over every core, so ``workers=1`` is the
-  default on one machine.
+  running tasks when the flow is interrupted by SIGTERM or Ctrl-C) with ``workers`` threads.
+  Mitsuba/Dr.Jit already spreads one frame over every core, so ``workers=1`` is the default on
+  one machine.
 * ``dask_address="local"`` -> ``prefect_dask.DaskTaskRunner`` on a temporary
   ``distributed.LocalCluster`` with ``workers`` worker *processes* of one thread each, bound to
   127.0.0.1 (no dashboard). Each process imports Mitsuba and picks its variant itself
@@ -67,6 +68,9 @@ class ThreadRunner(ThreadPoolTaskRunner):
     process goes within about a second. Nothing is lost by not waiting: every artifact is
     published atomically and a rerun recomputes only what is missing. A flow that ends
     normally, or on an ordinary exception, still waits for its tasks.
+
+    It reaches into the pool's ``_executor`` and ``_cancel_events`` (Prefect 3.8.8, pinned in
+    pyproject.toml); ``tests/cli/test_server.py`` fails if a Prefect upgrade changes them.
     """
 
     def __exit__(self, exc_type, exc_value, traceback) -> None:
