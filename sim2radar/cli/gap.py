@@ -5,8 +5,10 @@
 
 Writes ``gap.json`` (points per frame and their ratio, azimuth/range coverage, effective
 azimuth FOV, intensity histograms before/after log-space matching, Chamfer distance of frames
-with a shared id) and ``overlay.png``, ``azimuth.png``, ``range.png``, ``intensity.png``,
-``points.png`` (see :func:`sim2radar.evaluate.gap.write_gap_report`).
+with a shared id, and per dataset its domain and artefact figures: sidelobe share vs control,
+Doppler, range beyond 8 m, points below the floor) and ``overlay.png``, ``azimuth.png``,
+``range.png``, ``intensity.png``, ``points.png``, ``artefacts.png`` (see
+:func:`sim2radar.evaluate.gap.write_gap_report`).
 """
 
 from __future__ import annotations
@@ -19,11 +21,48 @@ import typer
 
 from sim2radar.cli._app import app
 
-__all__ = ["gap", "print_gap_summary"]
+__all__ = ["artefact_lines", "gap", "print_gap_summary"]
 
 
 def _num(v: Any, spec: str) -> str:
     return format(v, spec) if isinstance(v, int | float) and math.isfinite(v) else "n/a"
+
+
+def _share(v: Any) -> str:
+    return f"{_num(100 * v, '.1f')} %" if isinstance(v, int | float) else "n/a"
+
+
+def artefact_lines(doc: dict[str, Any]) -> list[str]:
+    """One line per domain (sim, real) with its artefact figures from ``gap.json``
+    (:func:`sim2radar.evaluate.gap.artefacts_dict`); none for a report without them."""
+    art = doc.get("artefacts")
+    if not isinstance(art, dict):
+        return []
+    st = art.get("settings") or {}
+    far, margin = st.get("far_range_m"), st.get("below_floor_margin_m")
+    lines = []
+    for role in ("sim", "real"):
+        a = art.get(role) or {}
+        diff = a.get("sidelobe_difference")
+        dop = a.get("doppler")
+        if isinstance(dop, dict):
+            doppler = (f"Doppler moving {_share(dop.get('moving_share'))} "
+                       f"(median |v| {_num(dop.get('abs_median_mps'), '.2f')} m/s)")
+        else:
+            doppler = a.get("doppler_note") or "no Doppler"
+        below = a.get("below_floor_share")
+        floor = (f"{_share(below)} > {_num(margin, 'g')} m below the floor "
+                 f"(radar {_num(a.get('radar_height_m'), '.2f')} m up)" if below is not None
+                 else "below floor: unknown (no radar_height_m in dataset.json)")
+        lines.append(
+            f"{role:4s} artefacts [domain: {doc.get(role, {}).get('domain', 'undeclared')}]: "
+            f"sidelobe bins {_share(a.get('sidelobe_share'))} vs control "
+            f"{_share(a.get('sidelobe_control_share'))} "
+            f"({'+' if isinstance(diff, int | float) and diff >= 0 else ''}"
+            f"{_num(100 * diff if isinstance(diff, int | float) else None, '.1f')} points); "
+            f"{doppler}; range > {_num(far, 'g')} m {_share(a.get('beyond_range_share'))}; "
+            f"{floor}")
+    return lines
 
 
 def print_gap_summary(doc: dict[str, Any], out: Path, fov_coverage: float = 0.95) -> None:
@@ -46,6 +85,8 @@ def print_gap_summary(doc: dict[str, Any], out: Path, fov_coverage: float = 0.95
     else:
         typer.echo(f"Chamfer ({ch['pairs']} shared frames): mean {_num(ch['mean_m'], '.3f')} m")
     typer.echo(f"intensity match fitted on {doc['intensity']['fitted_on']}")
+    for line in artefact_lines(doc):
+        typer.echo(line)
     files = ", ".join(["gap.json", *doc["figures"].values()])
     typer.echo(f"wrote {out}/: {files}")
 
@@ -64,7 +105,7 @@ def gap(
         help="Frame id to overlay (default: the shared frame with the median Chamfer distance).")
     ] = None,
 ) -> None:
-    """Sim–real gap report: density, coverage, FOV, intensities, Chamfer, overlay picture."""
+    """Sim–real gap report: density, coverage, FOV, intensities, Chamfer, artefacts, overlay."""
     from sim2radar.evaluate.gap import GapSettings, write_gap_report
 
     settings = GapSettings()

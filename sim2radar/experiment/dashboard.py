@@ -653,6 +653,48 @@ def _generation(data: SweepData) -> dict[str, Any]:
     return _clean({"datasets": datasets, "generation": gen})
 
 
+def _share_cell(v: Any) -> str:
+    f = _num(v)
+    return "—" if f is None else f"{100 * f:.1f} %"
+
+
+def _gap_artefact_rows(art: Any) -> list[list[str]]:
+    """Rows [label, sim, real] of ``gap.json["artefacts"]`` (sim2radar.evaluate.gap
+    .artefacts_dict); "—" cells for a report without them (written before they existed)."""
+    art = art if isinstance(art, Mapping) else {}
+    st = art.get("settings") if isinstance(art.get("settings"), Mapping) else {}
+    sides = [a if isinstance(a, Mapping) else {} for a in (art.get("sim"), art.get("real"))]
+    far, margin = _num(st.get("far_range_m")), _num(st.get("below_floor_margin_m"))
+
+    def sidelobe(a: Mapping) -> str:
+        share, ctl = _num(a.get("sidelobe_share")), _num(a.get("sidelobe_control_share"))
+        if share is None and ctl is None:
+            return "—"
+        return f"{_share_cell(share)} / {_share_cell(ctl)}"
+
+    def doppler(a: Mapping) -> str:
+        d = a.get("doppler")
+        if isinstance(d, Mapping):
+            med = _num(d.get("abs_median_mps"))
+            return (f"{_share_cell(d.get('moving_share'))} (median |v| "
+                    f"{'—' if med is None else f'{med:.2f}'} m/s)")
+        return str(a.get("doppler_note") or "—")
+
+    def below(a: Mapping) -> str:
+        if a.get("below_floor_share") is None:
+            return str(a.get("below_floor_note") or "—")
+        return _share_cell(a.get("below_floor_share"))
+
+    return [
+        ["sidelobe-bin share / control", *(sidelobe(a) for a in sides)],
+        ["Doppler: moving share", *(doppler(a) for a in sides)],
+        [f"range > {'8' if far is None else f'{far:g}'} m",
+         *(_share_cell(a.get("beyond_range_share")) for a in sides)],
+        [f"> {'0.1' if margin is None else f'{margin:g}'} m below the floor",
+         *(below(a) for a in sides)],
+    ]
+
+
 def _gap(data: SweepData) -> dict[str, Any] | None:
     gap = data.gap
     if gap is None:
@@ -665,6 +707,9 @@ def _gap(data: SweepData) -> dict[str, Any] | None:
             ["points per frame (median)", _fmt(sim.get("points_per_frame_median")),
              _fmt(real.get("points_per_frame_median"))],
             ["effective azimuth FOV [°]", _fmt(fov.get("sim")), _fmt(fov.get("real"))],
+            ["domain (dataset.json)", str(sim.get("domain") or "—"),
+             str(real.get("domain") or "—")],
+            *_gap_artefact_rows(gap.get("artefacts")),
             ["dataset folder", str(sim.get("root", "—")), str(real.get("root", "—"))]]
     ratio = _num(gap.get("points_ratio"))
     ch = gap.get("chamfer")
@@ -678,6 +723,13 @@ def _gap(data: SweepData) -> dict[str, Any] | None:
     definition = (gap.get("azimuth") or {}).get("definition")
     if definition:
         facts.append(["effective FOV", str(definition)])
+    art = gap.get("artefacts")
+    defs = (art.get("definitions") if isinstance(art, Mapping) else None) or {}
+    if isinstance(defs, Mapping):
+        for key, label in (("sidelobe", "sidelobe share"), ("doppler", "Doppler"),
+                           ("beyond_range", "range coverage"), ("below_floor", "below floor")):
+            if defs.get(key):
+                facts.append([label, str(defs[key])])
     figures = [{"name": name, "uri": uri} for name, uri in data.gap_images.items()]
     return _clean({"rows": rows, "facts": facts, "figures": figures})
 

@@ -294,6 +294,64 @@ def test_gap_pngs_are_embedded_and_bad_figure_entries_are_warned(sweep_dir):
     assert "'../sweep.json' is not a file name" in text        # no path escapes the gap folder
 
 
+def _gap_report_into(sweep: Path) -> dict:
+    """A real ``sim2radar gap`` report in ``sweep/gap``: SIM, undeclared, 4 points per frame
+    of which 3 sit on a 40 dB point's range 20 dB weaker at 20°-40° (angle-sidelobe arcs), no
+    Doppler; REAL, declared measured, its radar 1 m above the floor, 1 of its 4 points below
+    it, 2 beyond 8 m, Doppler 0, 0, 0.5, -1 m/s."""
+    from sim2radar.datasets import Frame, write_dataset, write_metadata
+    from sim2radar.evaluate.gap import write_gap_report
+
+    def at(r, az_deg, db, z=0.0, *extra):
+        a = np.radians(az_deg)
+        h = np.sqrt(r * r - z * z)
+        return [h * np.cos(a), h * np.sin(a), z, db, *extra]
+
+    sim = np.array([at(4.0, 0, 40), at(4.0, 20, 20), at(4.0, -30, 20), at(4.0, 40, 20)],
+                   np.float32)
+    real = np.array([at(3.0, 0, 30, -1.5, 0.0), at(5.0, 10, 30, 0.0, 0.0),
+                     at(9.0, -10, 30, 0.0, 0.5), at(9.5, 20, 30, 0.0, -1.0)], np.float32)
+    data = sweep / "data"
+    for name, pts in (("sim", sim), ("real", real)):
+        write_dataset(data / name, [Frame("f0", pts, np.zeros((0, 7)), ())], {"train": ["f0"]})
+    write_metadata(data / "real", {"domain": "measured", "radar_height_m": 1.0})
+    return write_gap_report(data / "sim", data / "real", sweep / "gap")
+
+
+def test_gap_section_shows_the_artefact_figures_and_artefacts_png(tmp_path):
+    sweep = make_sweep(tmp_path / "a")
+    doc = _gap_report_into(sweep)
+    data = load_sweep(sweep)
+    assert "artefacts" in data.gap_images and not data.warnings
+    gap = dashboard_data(data)
+    rows = {r[0]: r[1:] for r in gap["gap"]["rows"]}
+    assert rows["domain (dataset.json)"] == ["undeclared", "measured"]
+    assert rows["sidelobe-bin share / control"] == ["75.0 % / 0.0 %", "0.0 % / 0.0 %"]
+    sim_doppler, real_doppler = rows["Doppler: moving share"]
+    assert "no Doppler" in sim_doppler and sim_doppler == doc["artefacts"]["sim"]["doppler_note"]
+    assert real_doppler == "50.0 % (median |v| 0.25 m/s)"
+    assert rows["range > 8 m"] == ["0.0 %", "50.0 %"]
+    below_sim, below_real = rows["> 0.1 m below the floor"]
+    assert "floor height unknown" in below_sim and below_real == "25.0 %"
+    facts = dict(gap["gap"]["facts"])
+    assert "13 dB stronger" in facts["sidelobe share"]
+    assert [f["name"] for f in gap["gap"]["figures"]].count("artefacts") == 1
+    page = render_html(gap)
+    assert _embedded(page)["gap"]["rows"] == gap["gap"]["rows"]
+    json.dumps(gap, allow_nan=False)
+
+
+def test_gap_section_of_an_older_report_without_artefacts_shows_dashes(sweep_dir):
+    gap = dashboard_data(load_sweep(sweep_dir))["gap"]
+    rows = {r[0]: r[1:] for r in gap["rows"]}
+    for label in ("domain (dataset.json)", "sidelobe-bin share / control",
+                  "Doppler: moving share", "range > 8 m", "> 0.1 m below the floor"):
+        assert rows[label] == ["—", "—"], label
+    assert ["points per frame (mean)", "300.5", "1,200.0"] in gap["rows"]   # the rest as before
+    assert "sidelobe share" not in dict(gap["facts"])
+    render_html(dashboard_data(load_sweep(sweep_dir)))
+
+
 def test_measured_and_unknown_domains(tmp_path):
     measured = dashboard_data(load_sweep(make_sweep(tmp_path / "m", proxy=False)))
     assert measured["banner"]["kind"] == "measured"
