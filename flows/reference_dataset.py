@@ -28,16 +28,22 @@ __all__ = ["REFERENCE_RADAR", "reference_dataset", "reference_dataset_job", "ref
 
 #: The reference radar's preset.
 REFERENCE_RADAR = "ti-mmwcas-reference"
+#: The reference rig's walking speed range [m/s] (min, max; drawn per frame): a person
+#: carrying the rig through a corridor.
+REFERENCE_SPEED_MPS = (0.5, 1.5)
 
 
 def reference_spec(frames_per_world: int = 10, radar: Any = REFERENCE_RADAR, world: Any = None,
-                   rig: Any = None, seed: int = 0, labels: Any = None):
+                   rig: Any = None, seed: int = 0, labels: Any = None,
+                   speed_mps: tuple[float, float] = REFERENCE_SPEED_MPS):
     """The :class:`tasks.dataset.DatasetSpec` of a reference dataset: ground-truth geometry,
-    the reference radar, no RGB / LiDAR rendering."""
+    the reference radar on a rig walking at ``speed_mps`` (min, max) [m/s] along its heading
+    (a speed drawn per frame), no RGB / LiDAR rendering."""
     from sim2radar.factory.spec import resolve_spec
 
     return resolve_spec(frames_per_world, "ground_truth", radar, None, world, rig, seed,
-                        labels=labels, render_rgb=False)
+                        labels=labels, render_rgb=False,
+                        motion={"speed_mps": list(speed_mps)})
 
 
 def reference_run(first_seed: int = REFERENCE_FIRST_SEED, worlds: int | None = None,
@@ -67,6 +73,7 @@ def reference_dataset(
     rig: Any = None,
     seed: int = 0,
     labels: Any = None,
+    speed_mps: tuple[float, float] = REFERENCE_SPEED_MPS,
     force: bool = False,
     strict: bool = False,
     workers: int = 1,
@@ -80,6 +87,7 @@ def reference_dataset(
     worlds : number of worlds of ``frames_per_world`` frames (None: sized like the paper's
         371 / 92 / 155 split, :func:`~sim2radar.factory.reference.plan_reference`).
     first_seed : seed of the first world (keep it disjoint from the simulated domain's worlds).
+    speed_mps : the rig's walking speed range [m/s] (min, max; drawn per frame).
     Other parameters as :func:`flows.generate_dataset.generate_dataset`.
     """
     from flows.generate_dataset import generate_dataset_flow
@@ -87,7 +95,7 @@ def reference_dataset(
 
     args = reference_run(first_seed, worlds, frames_per_world, seed)
     plan = args.pop("plan")
-    spec = reference_spec(frames_per_world, radar, world, rig, seed, labels)
+    spec = reference_spec(frames_per_world, radar, world, rig, seed, labels, speed_mps)
     runner = task_runner(workers, dask_address)
     summary = generate_dataset_flow.with_options(task_runner=runner, name="reference-dataset")(
         spec=spec.to_dict(), store=os.fspath(store), dataset=dataset,
@@ -108,6 +116,7 @@ def reference_dataset_job(
     frames_per_world: int = 10,
     radar: str | dict = REFERENCE_RADAR,
     seed: int = 0,
+    speed_mps: tuple[float, float] = REFERENCE_SPEED_MPS,
     force: bool = False,
     strict: bool = False,
     workers: int = 1,
@@ -118,5 +127,6 @@ def reference_dataset_job(
     package = importlib.import_module("flows.reference_dataset")
     return package.reference_dataset(
         store=store, dataset=dataset, export_dir=export_dir, first_seed=first_seed,
-        worlds=worlds, frames_per_world=frames_per_world, radar=radar, seed=seed, force=force,
+        worlds=worlds, frames_per_world=frames_per_world, radar=radar, seed=seed,
+        speed_mps=tuple(speed_mps), force=force,
         strict=strict, workers=workers, dask_address=dask_address)

@@ -109,10 +109,11 @@ log = logging.getLogger(__name__)
 
 #: Bump when a ``dataset_frames`` artifact of the same inputs changes (labels, filtering,
 #: table logic): every dataset frame is recomputed, world renders and reconstructions are not.
-DATASET_STAGE_VERSION = 2
+DATASET_STAGE_VERSION = 3
 #: (2: door labels need the radar to see >= LabelConfig.min_visibility of the doorway instead
 #: of only the box centre in FOV and range; label visibility and Doppler stored; derived
-#: receiver noise in the ray tracer)
+#: receiver noise in the ray tracer. 3: the reference radar runs TI's cascade detection chain
+#: on a moving rig's full chirp cube, the IF filter rolls off instead of deleting paths)
 #: Short tags used in frame ids and artifact maps.
 _TAG = {"ground_truth": "gt", "reconstructed": "rec"}
 
@@ -133,6 +134,8 @@ def frame_key(world_keys: dict[str, str], frame_index: int, geometry: str,
     }
     if spec.material_override is not None:
         config["material_override"] = spec.material_override
+    if spec.moving:
+        config["motion"] = spec.motion.model_dump(mode="json")
     if geometry == "reconstructed":
         config["reconstruction"] = spec.reconstruction.to_dict()
     return content_key(

@@ -50,7 +50,7 @@ def _reference_dataset(store: str, dataset: str, export_dir: Path, png_dir: Path
                        verbose: bool, **plan: Any) -> dict[str, Any]:
     """The reference radar's dataset of a plan (:func:`flows.reference_dataset.reference_run`
     arguments) through the generate flow, exported to ``export_dir``."""
-    from flows.reference_dataset import REFERENCE_RADAR, reference_run
+    from flows.reference_dataset import REFERENCE_RADAR, REFERENCE_SPEED_MPS, reference_run
     from sim2radar.cli.generate import run_generate
 
     args = reference_run(**plan)
@@ -58,7 +58,8 @@ def _reference_dataset(store: str, dataset: str, export_dir: Path, png_dir: Path
     return run_generate(args.pop("seeds"), frames=plan["frames_per_world"], store=store,
                         dataset=dataset, geometry="ground_truth", radar=REFERENCE_RADAR,
                         export_dir=str(export_dir), png_dir=png_dir, verbose=verbose,
-                        render_rgb=False, flow_name="reference-dataset", **args)
+                        render_rgb=False, flow_name="reference-dataset",
+                        motion={"speed_mps": list(REFERENCE_SPEED_MPS)}, **args)
 
 
 def run_demo(

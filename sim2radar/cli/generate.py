@@ -63,6 +63,7 @@ def run_generate(
     domain: str | None = None,
     flow_name: str = "generate-dataset",
     export_whole_dataset: bool = False,
+    motion: Any = None,
 ) -> dict[str, Any]:
     """Run the generate-dataset flow (or its plain loop) with a progress bar; write BEV PNGs.
 
@@ -70,8 +71,9 @@ def run_generate(
     ``tcp://127.0.0.1:8786``, or ``"local"`` for a LocalCluster of ``workers`` processes) runs
     them on Dask instead (needs ``prefect-dask``; not with ``use_prefect=False``).
 
-    ``render_rgb``, ``frames_by_seed``, ``splits``, ``export_doppler``, ``domain`` and
-    ``flow_name`` serve the reference dataset (:mod:`flows.reference_dataset`).
+    ``render_rgb``, ``frames_by_seed``, ``splits``, ``export_doppler``, ``domain``,
+    ``flow_name`` and ``motion`` (the rig's speed range) serve the reference dataset
+    (:mod:`flows.reference_dataset`).
     ``export_whole_dataset`` (``--retry-failed``): the export holds every frame the dataset's
     manifest lists, not only this run's worlds.
 
@@ -91,7 +93,7 @@ def run_generate(
 
     spec = resolve_spec(frames, geometry, radar, reconstruction, world, rig, seed, class_name,
                         labels, material_override, _label_range(export_label_range_m),
-                        render_rgb)
+                        render_rgb, motion)
     extras = {"frames_by_seed": frames_by_seed, "splits": splits,
               "export_doppler": export_doppler, "domain": domain}
     whole_export, export_dir = (export_dir, None) if export_whole_dataset else (None, export_dir)

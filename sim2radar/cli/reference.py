@@ -36,6 +36,9 @@ def reference(
                               help="Reference radar preset or YAML (fidelity: signal)."),
     dataset: str = typer.Option("reference", help="Manifest (dataset) name."),
     seed: int = typer.Option(0, help="Run seed: trajectories, radar noise, world splits."),
+    speed: tuple[float, float] = typer.Option(
+        (0.5, 1.5), "--speed", help="The rig's walking speed range [m/s], drawn per frame "
+        "(MIN MAX; 0 0 stands still): the Doppler of the points."),
     png_dir: Path | None = typer.Option(None, "--png-dir", help="BEV PNGs [default OUT/../bev]."),
     no_png: bool = typer.Option(False, "--no-png", help="Do not write BEV PNGs."),
     force: bool = typer.Option(False, help="Recompute frames even when cached."),
@@ -59,7 +62,7 @@ def reference(
 
         args = reference_run(first_seed, worlds, frames, seed)
         plan = args.pop("plan")
-        reference_spec(frames, radar, seed=seed)  # validates the radar preset / YAML
+        reference_spec(frames, radar, seed=seed, speed_mps=speed)  # validates radar and speed
         if workers < 1:
             raise ValueError(f"--workers must be >= 1, got {workers}")
     except (ValueError, FileNotFoundError, ImportError) as exc:
@@ -74,7 +77,8 @@ def reference(
         radar=radar, seed=seed, export_dir=None if export_openpcdet is None
         else str(export_openpcdet), png_dir=None if no_png else png_dir, force=force,
         strict=strict, workers=workers, dask_address=dask, use_prefect=not no_prefect,
-        verbose=verbose, render_rgb=False, flow_name="reference-dataset", **args,
+        verbose=verbose, render_rgb=False, flow_name="reference-dataset",
+        motion={"speed_mps": list(speed)}, **args,
     )
     summary["plan"] = plan.split_frames()
     finish_generate(summary, json_out, strict)

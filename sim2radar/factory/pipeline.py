@@ -2,7 +2,8 @@
 path (no store, no Prefect; ``tasks/dataset.py`` adds caching and I/O).
 
 * :func:`ground_truth_frame` — the radar on the world's own meshes at the frame's
-  ``radar_to_world``; labels are the ground-truth doors the radar sees
+  ``radar_to_world``, moving along its heading at the spec's ``motion`` (a speed drawn per
+  frame, :func:`~sim2radar.factory.seeds.frame_speed`); labels are the ground-truth doors the radar sees
   (:func:`ground_truth_labels`: at least ``labels.min_visibility`` of the doorway unoccluded,
   in FOV and range).
 * :func:`reconstructed_frame` — the paper's pipeline: meshes reconstructed from the frame's RGB
@@ -64,10 +65,16 @@ def ground_truth_labels(frame, world_scene, spec):
 def ground_truth_frame(frame, world_id: str, world_scene, spec, radar_seed: int) -> DatasetFrame:
     """The radar on the world's meshes (``world_scene``, a RadarScene in the world frame) at the
     frame's radar pose, labelled with the ground-truth doors it sees."""
+    from sim2radar.factory.seeds import frame_speed
     from sim2radar.radar import simulate_scene_frame
+    from sim2radar.worlds import rig_velocity
 
+    speed = (frame_speed(spec.motion.speed_mps, spec.seed, frame.seed, frame.frame_index)
+             if spec.moving else 0.0)
+    velocity = rig_velocity(frame.radar_to_world, speed) if speed > 0 else None
     t0 = time.perf_counter()
-    rf = simulate_scene_frame(world_scene, spec.radar, frame.radar_to_world, seed=radar_seed)
+    rf = simulate_scene_frame(world_scene, spec.radar, frame.radar_to_world, seed=radar_seed,
+                              velocity_mps=velocity)
     sim_s = time.perf_counter() - t0
     gt, idx, vis = ground_truth_labels(frame, world_scene, spec)
     return DatasetFrame(
@@ -78,7 +85,7 @@ def ground_truth_frame(frame, world_id: str, world_scene, spec, radar_seed: int)
         gt_boxes=gt, gt_door_index=idx, gt_points_near=points_near_boxes(rf.points, gt),
         gt_visibility=vis, n_triangles=world_scene.n_triangles,
         timings_s={"render": render_seconds(frame), "simulate": sim_s},
-        stats={"radar": rf.stats, "radar_seed": radar_seed},
+        stats={"radar": rf.stats, "radar_seed": radar_seed, "rig_speed_mps": speed},
     )
 
 

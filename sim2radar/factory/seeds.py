@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["frame_seed", "pose_seed", "scene_seed", "scene_file_frame_seed"]
+__all__ = ["frame_seed", "frame_speed", "pose_seed", "scene_seed", "scene_file_frame_seed"]
 
 
 def frame_seed(run_seed: int, world_seed: int, frame_index: int) -> int:
@@ -15,6 +15,17 @@ def frame_seed(run_seed: int, world_seed: int, frame_index: int) -> int:
     """
     ss = np.random.SeedSequence([int(run_seed), int(world_seed), int(frame_index), 0x5EED])
     return int(ss.generate_state(1)[0])
+
+
+def frame_speed(speed_mps: tuple[float, float], run_seed: int, world_seed: int,
+                frame_index: int) -> float:
+    """The rig's speed [m/s] while one world frame is taken: uniform in ``speed_mps`` (min,
+    max), from (run seed, world seed, frame index) with its own stream (not the radar seed's)."""
+    lo, hi = float(speed_mps[0]), float(speed_mps[1])
+    if hi <= 0.0:
+        return 0.0
+    rng = np.random.default_rng([int(run_seed), int(world_seed), int(frame_index), 0x5BEED])
+    return float(rng.uniform(lo, hi)) if hi > lo else lo
 
 
 def scene_seed(digest: str) -> int:

@@ -49,6 +49,9 @@ class DatasetSpec:
         in this point-cloud range [m] (the detector's; None keeps every label).
     render_rgb : bool — path trace RGB and cast LiDAR for the world frames (needed by
         ``reconstructed``; a ground-truth-only run such as the reference radar can skip it).
+    motion : RigMotion — the rig's speed range while frames are taken (the signal-level
+        radar's Doppler; :func:`sim2radar.worlds.trajectory.rig_velocity`); standing still by
+        default.
     """
 
     frames_per_world: int
@@ -63,6 +66,7 @@ class DatasetSpec:
     material_override: str | None = None
     export_label_range_m: tuple[float, ...] | None = DEFAULT_POINT_CLOUD_RANGE_M
     render_rgb: bool = True
+    motion: Any = None
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-able form (what the Prefect flow passes to its tasks)."""
@@ -80,7 +84,13 @@ class DatasetSpec:
             "export_label_range_m": (None if self.export_label_range_m is None
                                      else list(self.export_label_range_m)),
             "render_rgb": self.render_rgb,
+            "motion": None if self.motion is None else self.motion.model_dump(mode="json"),
         }
+
+    @property
+    def moving(self) -> bool:
+        """The rig moves while frames are taken (``motion`` with a speed above 0)."""
+        return self.motion is not None and self.motion.moving
 
 
 def _geometries(geometry: str | Sequence[str]) -> tuple[str, ...]:
@@ -149,6 +159,7 @@ def resolve_spec(
     material_override: str | None = None,
     export_label_range_m: Any = DEFAULT_POINT_CLOUD_RANGE_M,
     render_rgb: bool = True,
+    motion: Any = None,
 ) -> DatasetSpec:
     """Validate and resolve a run's configuration.
 
@@ -167,6 +178,7 @@ def resolve_spec(
     material_override : a material name for every mesh (one-material ablation) or None
     export_label_range_m : (6,) point-cloud range of the exported labels, or None
     render_rgb : bool — False only for ground-truth-only runs (no RGB, no LiDAR rendered)
+    motion : RigMotion, its dict (``{"speed_mps": [min, max]}``) or None (standing still)
 
     Raises
     ------
@@ -194,6 +206,13 @@ def resolve_spec(
     if export_label_range_m is not None:
         boxes_in_point_cloud_range(np.zeros((0, 7)), export_label_range_m)  # validates
         export_label_range_m = tuple(float(v) for v in export_label_range_m)
+    from sim2radar.worlds.config import RigMotion
+
+    if motion is not None and not isinstance(motion, RigMotion):
+        try:
+            motion = RigMotion.model_validate(motion)
+        except Exception as exc:  # pydantic's ValidationError names the field
+            raise ValueError(f"motion: {exc}") from None
     return DatasetSpec(
         frames_per_world=int(frames_per_world),
         geometries=_geometries(geometry),
@@ -207,6 +226,7 @@ def resolve_spec(
         material_override=material_override,
         export_label_range_m=export_label_range_m,
         render_rgb=bool(render_rgb),
+        motion=motion if motion is not None and motion.moving else None,
     )
 
 
@@ -221,7 +241,7 @@ def as_spec(spec: DatasetSpec | dict) -> DatasetSpec:
                         spec.get("class_name", "door"), spec.get("labels"),
                         spec.get("material_override"),
                         spec.get("export_label_range_m", DEFAULT_POINT_CLOUD_RANGE_M),
-                        spec.get("render_rgb", True))
+                        spec.get("render_rgb", True), spec.get("motion"))
 
 
 def dataset_metadata(spec: DatasetSpec, geometry: str, domain: str | None = None) -> dict:
@@ -240,6 +260,10 @@ def dataset_metadata(spec: DatasetSpec, geometry: str, domain: str | None = None
                        + (" on the reconstructed geometry" if geometry == "reconstructed"
                           else "")),
         "class_name": spec.class_name, "run_seed": spec.seed,
+        "range_resolution_m": radar.range_resolution_m,
+        "radar_height_m": float(spec.rig.radar_position_m[2]),
+        "rig_motion": ({"speed_mps": list(spec.motion.speed_mps),
+                        "direction": "the rig's heading"} if spec.moving else "static"),
     }
 
 

@@ -288,7 +288,26 @@ class HardwareConfig(_Frozen):
         "AWR2243 HPF1 options: 175, 235, 350, 700 kHz")
     if_bandwidth_fraction: float = Field(
         0.9, gt=0.0, le=1.0, description="usable IF band as a fraction of the complex sampling "
-        "rate; beat frequencies beyond it are removed by the decimation filter")
+        "rate: the decimation filter's pass band (flat); beyond it, if_rolloff_db")
+    if_rolloff_db: tuple[tuple[float, float], ...] = Field(
+        ((1.0, -40.0), (1.1, -60.0)), description="the IF (anti-alias / decimation) filter's "
+        "attenuation beyond the pass band: (|beat frequency| / f_adc, gain [dB]) points, gain "
+        "linear in dB between them from 0 dB at if_bandwidth_fraction, the last value beyond; "
+        "returns past the unambiguous range alias (complex sampling) at that attenuation")
+    polarization: Literal["unpolarized", "vertical", "horizontal"] = Field(
+        "unpolarized", description="TX and RX element polarisation: 'vertical' / 'horizontal' "
+        "(linear, the field along theta-hat / phi-hat of the radar frame, Sionna RT's 'V' / 'H') "
+        "track it through every bounce; 'unpolarized' uses the mean TE/TM power per bounce")
+
+    @field_validator("if_rolloff_db")
+    @classmethod
+    def _check_rolloff(cls, value: tuple[tuple[float, float], ...]) -> tuple:
+        f = [float(p[0]) for p in value]
+        if any(b <= a for a, b in zip(f, f[1:], strict=False)) or any(
+                float(p[1]) > 0.0 for p in value):
+            raise ValueError("if_rolloff_db needs increasing frequency fractions and gains <= 0 "
+                             f"dB, got {list(value)}")
+        return value
 
 
 class SignalChainConfig(_Frozen):
@@ -302,11 +321,13 @@ class SignalChainConfig(_Frozen):
     """
 
     # -- synthesis (sim2radar.radar.fmcw) ------------------------------------------------
-    synthesis: Literal["time", "frequency"] = Field(
+    synthesis: Literal["time", "frequency", "narrowband"] = Field(
         "frequency", description="'time': every IF sample of every path evaluated directly "
-        "(the reference); 'frequency': each path's tone gridded onto an oversampled spectrum "
-        "and inverse-FFT'd (NUFFT; P x C x 7 instead of P x C x N_adc operations), equal within "
-        "0.1 dB on a point target")
+        "(the reference); 'frequency': each path's tone gridded per channel onto an "
+        "oversampled spectrum and inverse-FFT'd (NUFFT; P x C x 7 instead of P x C x N_adc "
+        "operations), equal within 0.1 dB on a point target; 'narrowband': one tone per path "
+        "with exact per-channel phases, Doppler by a slow-time NUFFT (no range walk across the "
+        "aperture or the frame; sim2radar.radar.fmcw says how large that is)")
     doppler: Literal["integrated", "full"] = Field(
         "integrated", description="'integrated': no per-chirp synthesis, the Doppler-windowed "
         "coherent sum over chirps (the zero-Doppler bin; static scenes); 'full': every chirp, "
@@ -329,27 +350,62 @@ class SignalChainConfig(_Frozen):
     impairment_seed: int = Field(0, description="seed of the fixed per-channel errors (a board's "
                                  "calibration residue, the same every frame)")
     # -- processing (sim2radar.radar.processing) ------------------------------------------
-    range_window: Literal["none", "hann", "hamming", "blackman"] = "hann"
-    doppler_window: Literal["none", "hann", "hamming", "blackman"] = "hann"
-    azimuth_window: Literal["none", "hann", "hamming", "blackman"] = "none"
+    range_window: Literal["none", "hann", "hanning", "hamming", "blackman"] = Field(
+        "hann", description="range FFT window ('hanning': MATLAB's symmetric hanning(N) without "
+        "zero end points, TI's cascade chain; 'hann': the DFT-even one)")
+    range_dc_removal: bool = Field(
+        False, description="subtract each chirp's mean over its samples, per channel, before "
+        "the range window (TI's rangeProcCascade, always on there)")
+    doppler_window: Literal["none", "hann", "hanning", "hamming", "blackman"] = "hann"
+    azimuth_window: Literal["none", "hann", "hanning", "hamming", "blackman"] = "none"
     azimuth_fft_size: int = Field(256, ge=16, le=4096,
                                   description="zero-padded azimuth FFT length [bins]")
-    elevation_step_deg: float = Field(0.5, gt=0.0, le=10.0,
-                                      description="elevation beamforming scan step [deg]")
-    cfar_kind: Literal["ca", "os"] = Field("ca", description="'ca' (cell averaging) or 'os' "
-                                           "(ordered statistic)")
+    elevation_fft_size: int = Field(256, ge=8, le=4096,
+                                    description="zero-padded elevation FFT length [bins]")
+    virtual_duplicates: Literal["first", "average"] = Field(
+        "average", description="virtual channels sharing an array position: keep the first in "
+        "TX firing order (TI's DOA_beamformingFFT_2D, MATLAB unique) or average them")
+    cfar_kind: Literal["ca", "caso", "os"] = Field(
+        "ca", description="'ca' (cell averaging), 'caso' (smallest of the two sides' means, TI's "
+        "CFAR_CASO; range-doppler only) or 'os' (ordered statistic)")
     cfar_domain: Literal["range-azimuth", "range-doppler"] = Field(
-        "range-azimuth", description="2-D CFAR plane: 'range-azimuth' (per Doppler bin) or "
-        "'range-doppler' (power summed over virtual channels, then azimuth peaks per detection)")
+        "range-azimuth", description="'range-doppler': TI's cascade point path (one CFAR pass "
+        "along range on every Doppler column of the map summed over virtual channels, one along "
+        "Doppler on the range hits, both needed; angles only at the detections); "
+        "'range-azimuth': a 2-D CFAR on each Doppler bin's range-azimuth map (TI's display "
+        "heatmap, not its point path)")
     cfar_guard_cells: tuple[int, int] = Field((2, 2), description="guard cells each side [bins]")
     cfar_training_cells: tuple[int, int] = Field((8, 4),
                                                  description="training cells each side [bins]")
-    cfar_pfa: float = Field(1e-4, gt=0.0, lt=0.5, description="design false-alarm rate per cell")
+    cfar_threshold: tuple[float, float] | None = Field(
+        None, description="linear threshold factors (range pass, other axis) - TI's K0; null: "
+        "designed from cfar_pfa")
+    cfar_pfa: float = Field(1e-4, gt=0.0, lt=0.5, description="design false-alarm rate per cell "
+                            "(when cfar_threshold is null)")
+    cfar_discard_range_bins: tuple[int, int] = Field(
+        (0, 0), description="range-doppler: first / last range bins never tested (TI's "
+        "discardCellLeft / discardCellRight); the range pass pads its ends as TI does")
     cfar_os_rank: float = Field(0.75, gt=0.0, le=1.0,
                                 description="OS-CFAR rank as a fraction of the training cells")
     angle_sidelobe_db: float = Field(
-        10.0, gt=0.0, le=60.0, description="range-doppler domain: azimuth peaks within this many "
-        "dB of a detection's strongest are points too [dB]")
+        1.0, ge=0.0, le=60.0, description="range-doppler: azimuth peaks of a detection whose "
+        "magnitude is >= max * 10^(-x/10) are points (TI's sidelobeLevel_dB_azim, applied to "
+        "magnitudes as TI does)")
+    elevation_sidelobe_db: float = Field(
+        0.0, ge=0.0, le=60.0, description="the same rule for elevation peaks per azimuth peak "
+        "(TI's sidelobeLevel_dB_elev: 0 = the maximum only)")
+    angle_peak_hysteresis_db: float = Field(
+        0.2, gt=0.0, le=10.0, description="hysteresis of the angle peak search [dB] (TI's "
+        "gamma = 10^(0.2/10))")
+    azimuth_gate_deg: float | None = Field(
+        None, gt=0.0, le=90.0, description="points at |azimuth| beyond this are dropped [deg] "
+        "(TI: 80); null: half the azimuth FOV")
+    elevation_gate_deg: float | None = Field(
+        None, gt=0.0, le=90.0, description="points at |elevation| beyond this are dropped [deg] "
+        "(TI: 20); null: half the elevation FOV")
+    interpolate: bool = Field(
+        True, description="refine range, Doppler and angles between bins (parabola through log "
+        "powers); false: bin positions, as TI's chain reports them")
     doppler_sidelobe_db: float = Field(
         20.0, gt=0.0, le=80.0, description="full Doppler, range-azimuth: a point's Doppler bin "
         "must be within this many dB of the strongest of its range-azimuth cell (the Hann "
@@ -358,8 +414,20 @@ class SignalChainConfig(_Frozen):
         0.0, ge=0.0, description="no detections nearer than this [m] (TX->RX leakage and the "
         "IF high-pass region; TI's chains skip the first range bins likewise)")
     peak_grouping: bool = Field(True, description="keep only local maxima (3x3, or 3x3x3 with "
-                                "Doppler)")
+                                "Doppler; range-doppler: 3x3 on the range-Doppler map)")
     max_points: int | None = Field(None, ge=1, description="keep the strongest N points")
+
+    @model_validator(mode="after")
+    def _check_chain(self) -> SignalChainConfig:
+        if self.cfar_kind == "caso" and self.cfar_domain != "range-doppler":
+            raise ValueError("cfar_kind 'caso' is TI's 1-D pass of the range-doppler domain; "
+                             "use 'ca' or 'os' with cfar_domain 'range-azimuth'")
+        if self.cfar_threshold is not None and min(self.cfar_threshold) <= 0:
+            raise ValueError(f"cfar_threshold factors must be > 0, got {self.cfar_threshold}")
+        if min(self.cfar_discard_range_bins) < 0:
+            raise ValueError("cfar_discard_range_bins must be >= 0, got "
+                             f"{self.cfar_discard_range_bins}")
+        return self
 
     @field_validator("cfar_guard_cells")
     @classmethod

@@ -1,4 +1,6 @@
-"""Peak detection: CA-CFAR along range, local maxima, angles from the array response.
+"""Peak detection of the ray tracer: CA-CFAR along range, local maxima, angles from the array
+response (the detectors themselves are :mod:`sim2radar.radar.cfar`, shared with the reference
+radar).
 
 Following TI's cascade chain (``DOA_beamformingFFT_2D``, see :mod:`sim2radar.radar.binning`),
 peaks are found in the range-azimuth map ``A`` of the complete azimuth row and each peak's
@@ -41,8 +43,8 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from scipy import ndimage
 
+from sim2radar.radar import cfar
 from sim2radar.radar.binning import (
     Accumulator,
     array_geometry,
@@ -78,8 +80,8 @@ def cell_noise_power(radar: RadarConfig) -> float:
 def ca_cfar_mask(
     power: np.ndarray, cfg: DetectionConfig, noise_power: float | None = None
 ) -> np.ndarray:
-    """Boolean detection mask of a (n_range, ...) power map or cube (CA-CFAR along axis 0,
-    sidelobe rule per range bin, local maxima).
+    """Boolean detection mask of a (n_range, ...) power map or cube: the ray tracer's detector
+    (:func:`sim2radar.radar.cfar.ca_cfar_mask` with ``cfg``'s settings).
 
     Parameters
     ----------
@@ -93,52 +95,10 @@ def ca_cfar_mask(
             raise ValueError("noise_power is required when detection.noise_floor_db is derived "
                              "(pass cell_noise_power(radar))")
         noise_power = 10.0 ** (cfg.noise_floor_db / 10.0)
-    p = np.asarray(power, dtype=np.float64)
-    g, t = cfg.cfar_guard_cells, cfg.cfar_training_cells
-    # training cells = (full window of 2(g+t)+1 cells) - (guard window of 2g+1 cells),
-    # both as O(n) running sums along range (zero-padded beyond the ends)
-    n_full, n_guard = 2 * (g + t) + 1, 2 * g + 1
-
-    def window_sum(a: np.ndarray, size: int, axis: int = 0) -> np.ndarray:
-        return size * ndimage.uniform_filter1d(a, size, axis=axis, mode="constant", cval=0.0)
-
-    train_sum = window_sum(p, n_full) - window_sum(p, n_guard)
-    ones = np.ones(p.shape[0])
-    count = window_sum(ones, n_full) - window_sum(ones, n_guard)  # fewer near the ends
-    shape = (-1,) + (1,) * (p.ndim - 1)
-    mean_train = train_sum / np.maximum(count, 1.0).reshape(shape)
-    alpha = 10.0 ** (cfg.cfar_threshold_db / 10.0)
-    mask = (p > alpha * (mean_train + noise_power)) & (
-        p > noise_power * 10.0 ** (cfg.min_snr_db / 10.0)
-    )
-    if cfg.sidelobe_level_db is not None and p.ndim > 1:
-        strongest = p.reshape(p.shape[0], -1).max(axis=1).reshape(shape)
-        mask &= p >= strongest * 10.0 ** (-cfg.sidelobe_level_db / 10.0)
-    if cfg.peak_grouping:
-        mask &= _is_local_max(p, mask)
-    return mask
-
-
-def _is_local_max(p: np.ndarray, candidates: np.ndarray) -> np.ndarray:
-    """True where a candidate cell is >= all its 3^ndim - 1 neighbours (zero outside).
-
-    Only the (few) candidate cells are tested, which is much cheaper than a full
-    maximum filter over the cube.
-    """
-    idx = np.nonzero(candidates)
-    out = np.zeros_like(candidates)
-    if len(idx[0]) == 0:
-        return out
-    padded = np.pad(p, 1, mode="constant", constant_values=0.0)
-    centre = p[idx]
-    keep = np.ones(len(centre), dtype=bool)
-    for offset in np.ndindex(*(3,) * p.ndim):
-        if all(o == 1 for o in offset):
-            continue
-        neighbour = padded[tuple(i + o for i, o in zip(idx, offset, strict=True))]
-        keep &= centre >= neighbour
-    out[tuple(i[keep] for i in idx)] = True
-    return out
+    return cfar.ca_cfar_mask(
+        power, guard=cfg.cfar_guard_cells, train=cfg.cfar_training_cells,
+        threshold_db=cfg.cfar_threshold_db, noise_power=noise_power, min_snr_db=cfg.min_snr_db,
+        sidelobe_level_db=cfg.sidelobe_level_db, peak_grouping=cfg.peak_grouping)
 
 
 def spherical_to_cartesian(
@@ -165,13 +125,6 @@ def direction_to_cartesian(range_m: np.ndarray, u_az: np.ndarray, u_el: np.ndarr
     return np.stack([r * x, r * ua, r * ue], axis=1)
 
 
-def _parabola_offset(y_m: np.ndarray, y_0: np.ndarray, y_p: np.ndarray) -> np.ndarray:
-    """Vertex offset (in steps, clipped to +-1) of the parabola through (-1, 0, 1) samples."""
-    den = y_m - 2.0 * y_0 + y_p
-    off = np.where(den < 0, 0.5 * (y_m - y_p) / np.where(den < 0, den, -1.0), 0.0)
-    return np.clip(off, -1.0, 1.0)
-
-
 def _refine_peak(centre: np.ndarray, values: np.ndarray, step: float) -> np.ndarray:
     """Refined argmax of |values| (K, P) sampled at ``centre[k] + (p - P // 2) step``."""
     logp = np.log(np.maximum(np.abs(values) ** 2, 1e-300))
@@ -180,7 +133,8 @@ def _refine_peak(centre: np.ndarray, values: np.ndarray, step: float) -> np.ndar
     p = logp.argmax(axis=1)
     pc = np.clip(p, 1, max(n - 2, 1))
     if n >= 3:
-        off = _parabola_offset(logp[k, pc - 1], logp[k, pc], logp[k, pc + 1])
+        off, _ = cfar.parabolic_peak(logp[k, pc - 1], logp[k, pc], logp[k, pc + 1],
+                                     max_offset=1.0)
         off = np.where(p == pc, off, 0.0)
     else:
         off = np.zeros(len(values))

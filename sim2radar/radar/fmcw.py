@@ -56,8 +56,9 @@ Amplitudes
 ``K_echo`` = :func:`~sim2radar.radar.link_budget.echo_power_scale_w` (radar equation),
 ``g`` the one-way element power patterns (:func:`~sim2radar.radar.link_budget.
 element_power_pattern`) at the departure / arrival direction seen from the array's phase
-centre, and ``H_IF`` the IF filter: a first-order high-pass at ``if_highpass_hz`` and the
-decimation filter's band edge at ``if_bandwidth_fraction * f_adc`` (paths beyond are removed).
+centre, and ``H_IF`` the IF filter (:func:`if_filter_response`): a first-order high-pass at
+``if_highpass_hz`` and the anti-alias filter's pass band up to ``if_bandwidth_fraction * f_adc``
+with the roll-off ``if_rolloff_db`` beyond (a return past the unambiguous range aliases).
 The ``1/r`` difference between elements (< 5 % at 2 m for the 0.17 m array) is neglected; the
 phase difference is not.
 
@@ -80,6 +81,7 @@ import functools
 import logging
 import math
 import time
+import warnings
 from typing import Any
 
 import numpy as np
@@ -115,6 +117,13 @@ NUFFT_BETA_PER_WIDTH = 2.30
 #: (path, TX/RX pair) combinations synthesised per chunk: bounds the working memory (~100
 #: bytes of float64/complex temporaries each, ~100 MB at this size).
 CHUNK_PATH_CHANNELS = 1 << 20
+#: Oversampling of the narrowband synthesis' slow-time (Doppler) NUFFT grid [-].
+DOPPLER_OVERSAMPLING = 2
+#: Kernel width of the slow-time NUFFT [grid points] (error ~1e-6 at oversampling 2).
+DOPPLER_WIDTH = 6
+#: Sub-arrays of the narrowband synthesis: runs of virtual azimuth positions that share one
+#: tone per path (the range walk across a sub-array is dropped; module doc).
+NARROWBAND_SUBARRAYS = 8
 
 
 # -- geometry and timing ------------------------------------------------------------------
@@ -175,9 +184,13 @@ def slot_times_s(radar: RadarConfig) -> np.ndarray:
 
 def window_weights(name: str, n: int) -> np.ndarray:
     """(n,) float64 — a DFT-even (periodic) window (Harris, Proc. IEEE 66(1), 1978);
-    ``"none"`` is rectangular."""
+    ``"none"`` is rectangular; ``"hanning"`` is MATLAB's symmetric ``hanning(n)``,
+    ``0.5 - 0.5 cos(2 pi k / (n + 1))`` for ``k = 1..n`` (no zero end points; the range window
+    of TI's cascade chain, ``module_param.m``)."""
     if name == "none":
         return np.ones(n)
+    if name == "hanning":
+        return 0.5 - 0.5 * np.cos(2.0 * np.pi * np.arange(1, n + 1) / (n + 1))
     return scipy.signal.get_window(name, n, fftbins=True).astype(np.float64)
 
 
@@ -185,13 +198,19 @@ def if_filter_response(radar: RadarConfig, beat_hz: np.ndarray) -> np.ndarray:
     """Complex IF-chain response at beat frequency ``beat_hz`` [Hz] [-].
 
     First-order high-pass ``H = j f/f_c / (1 + j f/f_c)`` at ``hardware.if_highpass_hz``
-    (AWR2243 HPF1; TI SWRS223), times the decimation filter's pass band: 1 below
-    ``if_bandwidth_fraction * f_adc`` (and at or above 0), 0 outside.
+    (AWR2243 HPF1; TI SWRS223), times the anti-alias / decimation filter: 1 for ``|f| <=
+    if_bandwidth_fraction * f_adc``, beyond that the gain of ``hardware.if_rolloff_db``
+    (linear in dB between its points, the last value beyond them). Nothing is removed: a return
+    beyond the unambiguous range keeps its beat frequency, which complex sampling aliases by
+    ``f_adc`` (the synthesis' grid is periodic), at the filter's attenuation.
     """
     f = np.asarray(beat_hz, dtype=np.float64)
     hw = radar.hardware
-    h = ((f >= -0.5 * radar.adc_sample_rate_hz / radar.adc_samples)
-         & (f < hw.if_bandwidth_fraction * radar.adc_sample_rate_hz)).astype(np.complex128)
+    frac = np.abs(f) / radar.adc_sample_rate_hz
+    xs = [hw.if_bandwidth_fraction] + [float(p[0]) for p in hw.if_rolloff_db]
+    ys = [0.0] + [float(p[1]) for p in hw.if_rolloff_db]
+    gain_db = np.interp(frac, xs, ys, left=0.0, right=ys[-1])
+    h = (10.0 ** (gain_db / 20.0)).astype(np.complex128)
     if hw.if_highpass_hz is not None:
         jf = 1j * f / hw.if_highpass_hz
         h = h * jf / (1.0 + jf)
@@ -301,17 +320,21 @@ def _es_kernel_inplace(torch, x, width: int):
     return x.sub_(1.0).mul_(beta).exp_()
 
 
-@functools.lru_cache(maxsize=16)
-def _deapodisation(n_samples: int, width: int, oversampling: int) -> np.ndarray:
-    """(n_samples,) float64 — ``1 / Phi((n - N/2) / M)``: the kernel's Fourier transform
-    ``Phi(xi) = int phi(x) cos(2 pi x xi) dx`` by 64-node Gauss-Legendre quadrature."""
-    m = oversampling * n_samples
+def _kernel_ft(xi: np.ndarray, width: int) -> np.ndarray:
+    """The kernel's Fourier transform ``Phi(xi) = int phi(x) cos(2 pi x xi) dx`` [grid units]
+    at ``xi`` [cycles per grid unit], by 64-node Gauss-Legendre quadrature."""
     nodes, weights = np.polynomial.legendre.leggauss(64)
     x = 0.5 * width * nodes
     phi = _es_kernel(x, width) * 0.5 * width * weights
-    xi = (np.arange(n_samples) - n_samples // 2) / m
-    ft = (phi[None, :] * np.cos(2.0 * np.pi * xi[:, None] * x[None, :])).sum(axis=1)
-    return 1.0 / ft
+    xi = np.asarray(xi, dtype=np.float64)
+    return (phi * np.cos(2.0 * np.pi * xi[..., None] * x)).sum(axis=-1)
+
+
+@functools.lru_cache(maxsize=16)
+def _deapodisation(n_samples: int, width: int, oversampling: int) -> np.ndarray:
+    """(n_samples,) float64 — ``1 / Phi((n - N/2) / M)`` (:func:`_kernel_ft`)."""
+    m = oversampling * n_samples
+    return 1.0 / _kernel_ft((np.arange(n_samples) - n_samples // 2) / m, width)
 
 
 def _torch():
@@ -345,7 +368,8 @@ def _path_terms(paths: PathSet, radar: RadarConfig) -> tuple[_PathTerms, dict[st
     amp = (np.asarray(paths.amplitude, np.complex128)
            * np.sqrt(link_budget.echo_power_scale_w(radar) * g) * h)
     keep = amp != 0
-    counts = {"n_paths": len(paths), "n_paths_outside_if_band": int(np.count_nonzero(h == 0)),
+    beyond = np.abs(beat_hz) > radar.hardware.if_bandwidth_fraction * radar.adc_sample_rate_hz
+    counts = {"n_paths": len(paths), "n_paths_beyond_if_band": int(np.count_nonzero(beyond)),
               "n_paths_behind_elements": int(np.count_nonzero(g == 0))}
     dep, arr = dep[keep], arr[keep]
     terms = _PathTerms(
@@ -458,6 +482,146 @@ def _synth_time(torch, radar: RadarConfig, terms: _PathTerms, slow_gain: np.ndar
     return out.to(torch.complex64)
 
 
+def _grid_rows(v, key: np.ndarray, taps: np.ndarray, doppler_taps: np.ndarray, row_len: int,
+               n_rows: int):
+    """``Y[key_p + i row_len + j] += doppler_taps[p, i] taps[p, j] v[p]`` for every path ``p``,
+    Doppler tap ``i`` and fast-time tap ``j``: one sparse (CSR) x dense product, the sparse
+    matrix built by counting (no sort; ``key`` sorted ascending).
+
+    v : (P, C2) float32 torch; key : (P,) int64 sorted; taps : (P, w) float32;
+    doppler_taps : (P, w_d) float32; returns (n_rows, C2) float32 torch.
+    """
+    import torch
+
+    n_paths, w = taps.shape
+    w_d = doppler_taps.shape[1]
+    # entry (p, i, j) lands in row key_p + i row_len + j; rows are unique per (p, i, j) pair
+    # (j < row_len), so within a row the entries are the paths of consecutive keys: count them
+    cnt = np.bincount(key, minlength=n_rows)                                  # paths per key
+    first = np.cumsum(cnt) - cnt                                              # first sorted index
+    rank = np.arange(n_paths) - first[key]                                    # rank within key
+    per_row = np.zeros(n_rows + 1, np.int64)                                  # entries per row
+    # row r holds, for tap (i, j), the paths with key r - i row_len - j
+    shift = (np.arange(w_d)[:, None] * row_len + np.arange(w)[None, :]).ravel()  # (w_d w,)
+    for d in shift:
+        per_row[d:n_rows] += cnt[:n_rows - d]
+    crow = np.zeros(n_rows + 1, np.int64)
+    np.cumsum(per_row[:n_rows], out=crow[1:])
+    # position of (p, i, j) = crow[row] + (entries of row from taps before it) + rank
+    before = np.zeros((len(shift), n_rows), np.int64)
+    for k in range(1, len(shift)):
+        before[k, shift[k]:] = before[k - 1, shift[k]:]
+        d = shift[k - 1]
+        before[k, d:] += cnt[:n_rows - d]
+        before[k, :shift[k]] = 0
+    rows = key[None, :] + shift[:, None]                                      # (w_d w, P)
+    pos = crow[rows] + np.take_along_axis(before, rows, axis=1) + rank[None, :]
+    nnz = int(crow[-1])
+    col = np.empty(nnz, np.int64)
+    val = np.empty(nnz, np.float32)
+    col[pos.ravel()] = np.broadcast_to(np.arange(n_paths), rows.shape).ravel()
+    val[pos.ravel()] = (doppler_taps[:, :, None] * taps[:, None, :]).reshape(n_paths, -1).T.ravel()
+    with warnings.catch_warnings():  # "CSR support is in beta": the product is what we use
+        warnings.simplefilter("ignore", UserWarning)
+        sp = torch.sparse_csr_tensor(torch.as_tensor(crow), torch.as_tensor(col),
+                                     torch.as_tensor(val), (n_rows, n_paths), device=v.device,
+                                     check_invariants=False)
+    return sp @ v
+
+
+def _subarrays(radar: RadarConfig, n_groups: int) -> list[np.ndarray]:
+    """Virtual channels (flat ``t * N_rx + r``) in ``n_groups`` contiguous runs of virtual
+    azimuth position (the delay differences within one run stay small)."""
+    v = np.asarray(radar.virtual_array_half_wl)
+    order = np.lexsort((v[:, 1], v[:, 0]))
+    return [g for g in np.array_split(order, min(n_groups, len(order))) if len(g)]
+
+
+def _synth_narrowband(torch, radar: RadarConfig, terms: _PathTerms, w_d: np.ndarray,
+                      integrated: bool, device):
+    """IF samples (n_slow, T, R, N) by the sub-array separable synthesis (module doc)."""
+    c = SPEED_OF_LIGHT_M_S
+    n = radar.adc_samples
+    m_grid = NUFFT_OVERSAMPLING * n
+    w = NUFFT_WIDTH
+    nt, nr = radar.n_tx, radar.n_rx
+    f_s, slope, f_adc = radar.start_frequency_hz, radar.slope_hz_per_s, radar.adc_sample_rate_hz
+    t_win = radar.sampling_time_s
+    n_loops = radar.n_chirps
+    t_loop = nt * radar.chirp_period_s
+    n_paths = len(terms.amp)
+    dtau = 2.0 * terms.rate / c                                             # (P,) [-]
+    # slow-time NUFFT taps over the Doppler grid (cycles per loop x sigma_D M), not periodic:
+    # the Doppler at mid-window, the same for every channel
+    mu = dtau * (f_s + 0.5 * slope * t_win) * t_loop                        # [cycles / loop]
+    scale = DOPPLER_OVERSAMPLING * n_loops
+    x_d = mu * scale
+    g0 = np.ceil(x_d - 0.5 * DOPPLER_WIDTH).astype(np.int64)
+    dtaps = _es_kernel(g0[:, None] + np.arange(DOPPLER_WIDTH)[None, :] - x_d[:, None],
+                       DOPPLER_WIDTH).astype(np.float32)
+    g_min = int(g0.min())
+    n_groups = int(g0.max()) - g_min + DOPPLER_WIDTH
+    row_len = m_grid + w
+    # exact per-channel delays (eq. (2) at the frame centre) about the path's mean delay: the
+    # TX and RX parts [s], each small (array size / c), float64 before the subtraction
+    dt_mean, dr_mean = terms.d_tx.mean(axis=1), terms.d_rx.mean(axis=1)
+    tau0 = (dt_mean + terms.inner + dr_mean) / c                            # (P,) [s]
+    del_t = torch.as_tensor((terms.d_tx - dt_mean[:, None]) / c, device=device)  # (P, T)
+    del_r = torch.as_tensor((terms.d_rx - dr_mean[:, None]) / c, device=device)  # (P, R)
+    amp_abs = torch.as_tensor(np.abs(terms.amp), device=device, dtype=torch.float32)
+    amp_arg = np.angle(terms.amp) / (2.0 * np.pi)                           # [cycles]
+    grid = torch.zeros((n_groups * row_len, nt * nr, 2), dtype=torch.float32, device=device)
+    for chans in _subarrays(radar, NARROWBAND_SUBARRAYS):
+        # one tone per path and sub-array at the sub-array's mean delay (eq. (1); frequency and
+        # phase as in _synth_frequency), each channel's phase exact at mid-window
+        ch = torch.as_tensor(chans, device=device)
+        rel = del_t[:, ch // nr] + del_r[:, ch % nr]                        # (P, c) [s]
+        rel_mean = rel.mean(dim=1)
+        rel = rel - rel_mean[:, None]
+        tau = tau0 + rel_mean.cpu().numpy()                                 # (P,) [s]
+        beat_bins = (slope * tau + dtau * (f_s + slope * (t_win - tau))) * (n / f_adc)
+        cycles = (f_s * tau - 0.5 * slope * tau * tau - slope * dtau * t_win**2 / 6.0
+                  + 0.5 * beat_bins + amp_arg)
+        f_eff = torch.as_tensor(f_s + slope * (0.5 * t_win - tau), device=device)  # [Hz]
+        ph = torch.remainder(torch.as_tensor(cycles, device=device)[:, None]
+                             + f_eff[:, None] * rel, 1.0)
+        u = beat_bins * NUFFT_OVERSAMPLING
+        l0 = np.ceil(u - 0.5 * w)
+        taps = _es_kernel(l0[:, None] + np.arange(w)[None, :] - u[:, None], w).astype(np.float32)
+        key = (g0 - g_min) * row_len + np.remainder(l0.astype(np.int64), m_grid)
+        order = np.argsort(key, kind="stable")
+        order_t = torch.as_tensor(order, device=device)
+        wts = torch.polar(amp_abs[order_t, None].expand(-1, len(chans)),
+                          (2.0 * math.pi) * ph[order_t].to(torch.float32))
+        v = torch.view_as_real(wts).reshape(n_paths, -1)
+        part = _grid_rows(v, key[order], taps[order], dtaps[order], row_len,
+                          n_groups * row_len)
+        grid[:, ch] = part.reshape(-1, len(chans), 2)
+    grid = torch.view_as_complex(grid).reshape(n_groups, row_len, nt, nr)
+    folded = grid[:, :m_grid].clone()
+    folded[:, :w] += grid[:, m_grid:]
+    # slow time: e^{j 2 pi mu s} = sum_g phi(g - x) e^{j 2 pi g s / (sigma M)} / Phi(s / sigma M)
+    # at every chirp's start s = T / T_loop [loops from the frame centre], per TX slot
+    s_mt = slot_times_s(radar) / t_loop                                     # (M, T)
+    xi = s_mt / scale
+    g_abs = np.arange(g_min, g_min + n_groups)
+    e = (np.exp(2j * np.pi * np.remainder(xi[:, :, None] * g_abs[None, None, :], 1.0))
+         / _kernel_ft(xi, DOPPLER_WIDTH)[:, :, None])                       # (M, T, G)
+    if integrated:
+        e = np.einsum("m,mtg->tg", w_d, e)[:, None, :]                      # (T, 1, G)
+    else:
+        e = np.transpose(e, (1, 0, 2))                                      # (T, M, G)
+    e_t = torch.as_tensor(e.astype(np.complex64), device=device)
+    y = folded.permute(2, 0, 3, 1).reshape(nt, n_groups, nr * m_grid)      # (T, G, R L)
+    xs = torch.bmm(e_t, y).reshape(nt, e.shape[1], nr, m_grid)              # (T, S, R, L)
+    g_t = torch.fft.ifft(xs, dim=-1) * m_grid
+    idx = torch.as_tensor(np.remainder(np.arange(n) - n // 2, m_grid), device=device)
+    deapod = torch.as_tensor(_deapodisation(n, w, NUFFT_OVERSAMPLING), device=device,
+                             dtype=torch.float32)
+    out = g_t[..., idx] * deapod                                            # (T, S, R, N)
+    return out.permute(1, 0, 2, 3).contiguous()                            # (S, T, R, N)
+
+
 def _leakage(radar: RadarConfig) -> np.ndarray:
     """(T, R, N) complex128 — TX->RX leakage tones [sqrt(W)] (one chirp)."""
     tx_m, rx_m = element_positions_m(radar)
@@ -522,11 +686,19 @@ def synthesize_if(paths: PathSet, radar: RadarConfig, *, seed: int | None = None
     stats.update(moving_paths=int(np.count_nonzero(terms.rate)), synthesis=sig.synthesis,
                  doppler=sig.doppler, device=str(device))
 
-    if sig.doppler == "integrated":
-        if moving:
-            log.warning("doppler: integrated keeps only the zero-Doppler bin; %d moving paths "
-                        "are attenuated as they would be there (use doppler: full for a moving "
-                        "rig)", stats["moving_paths"])
+    integrated = sig.doppler == "integrated"
+    if integrated and moving:
+        log.warning("doppler: integrated keeps only the zero-Doppler bin; %d moving paths "
+                    "are attenuated as they would be there (use doppler: full for a moving "
+                    "rig)", stats["moving_paths"])
+    if sig.synthesis == "narrowband":
+        x = (_synth_narrowband(torch, radar, terms, w_d, integrated, device) if len(terms.amp)
+             else torch.zeros((1 if integrated else radar.n_chirps, nt, nr, n),
+                              dtype=torch.complex64, device=device))
+        n_slow = 1 if integrated else radar.n_chirps
+        doppler_gain = float(w_d.sum()) if integrated else 1.0
+        noise_scale = float(np.sum(w_d**2)) if integrated else 1.0
+    elif integrated:
         dc = _doppler_dc_gain(radar, terms.rate, w_d) if moving else None
         x = synth(torch, radar, terms, dc, None, device)
         if dc is None:

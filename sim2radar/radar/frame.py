@@ -82,10 +82,12 @@ def simulate_scene_frame(
     *,
     return_cube: bool = False,
     seed: int | None = None,
+    velocity_mps: np.ndarray | None = None,
 ) -> RadarFrame:
     """Simulate one frame of a pre-built :class:`RadarScene` (see :func:`simulate_frame`)."""
     if radar.fidelity == "signal":
-        return _simulate_signal_scene_frame(scene, radar, pose, seed=seed)
+        return _simulate_signal_scene_frame(scene, radar, pose, seed=seed,
+                                            velocity_mps=velocity_mps)
     t0 = time.perf_counter()
     result = scene.trace(radar, pose, seed=seed)
     t1 = time.perf_counter()
@@ -131,13 +133,14 @@ def simulate_scene_frame(
 
 
 def _simulate_signal_scene_frame(
-    scene: RadarScene, radar: RadarConfig, pose: np.ndarray | None, *, seed: int | None
+    scene: RadarScene, radar: RadarConfig, pose: np.ndarray | None, *, seed: int | None,
+    velocity_mps: np.ndarray | None = None,
 ) -> RadarFrame:
     """``fidelity: signal``: trace propagation paths, synthesise IF samples, run the chain."""
     from sim2radar.radar.signal import simulate_signal_frame
 
     t0 = time.perf_counter()
-    paths = scene.trace_paths(radar, pose, seed=seed)
+    paths = scene.trace_paths(radar, pose, seed=seed, velocity_mps=velocity_mps)
     t1 = time.perf_counter()
     sf = simulate_signal_frame(paths, radar, seed=seed)
     t2 = time.perf_counter()
@@ -172,6 +175,7 @@ def simulate_frame(
     *,
     return_cube: bool = False,
     seed: int | None = None,
+    velocity_mps: np.ndarray | None = None,
 ) -> RadarFrame:
     """Simulate one radar frame of a material-labelled scene.
 
@@ -194,6 +198,11 @@ def simulate_frame(
         adds complex Gaussian receiver noise to every virtual channel at the level of
         :func:`sim2radar.radar.detection.cell_noise_power` (the hardware link budget unless
         ``detection.noise_floor_db`` overrides it) — reproducibly.
+    velocity_mps : (3,), optional
+        The radar's velocity in its own frame [m/s] over a static scene (None: standing
+        still). The signal-level radar (``fidelity: signal``) turns it into each path's range
+        rate and so into Doppler; the ray tracer's binned cube has no Doppler axis and
+        ignores it.
 
     Returns
     -------
@@ -201,4 +210,5 @@ def simulate_frame(
     """
     radar = radar if isinstance(radar, RadarConfig) else load_radar_config(radar)
     scene = meshes if isinstance(meshes, RadarScene) else RadarScene(meshes)
-    return simulate_scene_frame(scene, radar, pose, return_cube=return_cube, seed=seed)
+    return simulate_scene_frame(scene, radar, pose, return_cube=return_cube, seed=seed,
+                                velocity_mps=velocity_mps)

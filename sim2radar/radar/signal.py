@@ -3,7 +3,8 @@
 The project's *reference radar* (the labelled proxy for measured data, never called real):
 :func:`simulate_signal_frame` synthesises the IF samples of every TX/RX pair from a
 :class:`~sim2radar.radar.paths.PathSet` (:mod:`sim2radar.radar.fmcw`) and runs TI's cascade
-processing chain on them (:mod:`sim2radar.radar.processing`)::
+processing chain on them (:mod:`sim2radar.radar.processing`: TI's 4-chip cascade MIMO
+example's detection chain)::
 
     from sim2radar.radar import load_radar_config
     from sim2radar.radar.paths import PathSet
@@ -47,17 +48,20 @@ class SignalFrame:
         :mod:`sim2radar.radar.processing`), radial velocity [m/s] (positive = receding);
         strongest first.
     stats : dict — seconds per stage (``seconds_synthesis``, ``seconds_if_total``,
-        ``seconds_range_fft``, ``seconds_doppler_fft``, ``seconds_azimuth_fft``,
-        ``seconds_cfar``, ``seconds_points``, ``seconds_processing``, ``seconds_total``),
-        counts (``n_paths``, ``n_paths_synthesised``, ``n_paths_outside_if_band``,
-        ``moving_paths``, ``n_detections``), noise (``noise_power_w`` per IF sample,
-        ``noise_floor_db`` per range-azimuth cell on the intensity scale), the CFAR design
-        (``cfar_alpha_db``, ``cfar_n_train``, ``cfar_n_eff``, ``cfar_looks``), ``seed``,
-        ``device``.
+        ``seconds_range_doppler_fft``, ``seconds_azimuth_fft``, ``seconds_cfar_and_angles``,
+        ``seconds_points``, ``seconds_processing``, ``seconds_total``), counts (``n_paths``,
+        ``n_paths_synthesised``, ``n_paths_beyond_if_band``, ``moving_paths``,
+        ``n_detections``), noise (``noise_power_w`` per IF sample, ``noise_floor_db`` per
+        range-Doppler-azimuth cell on the intensity scale), the CFAR design (range-doppler:
+        ``cfar_alpha_range_db``, ``cfar_design_pfa_range``, ``cfar_n_eff_range`` and the
+        ``_doppler`` ones, ``cfar_looks``; range-azimuth: ``cfar_alpha_db``,
+        ``cfar_design_pfa``, ``cfar_n_train``, ``cfar_n_eff``), ``seed``, ``device``.
     range_m : (n_range,) float32 — range-bin centres [m].
     azimuth_sin : (n_az,) float32 — ``sin(az) cos(el)`` of the azimuth bins in the FOV [-].
     range_azimuth_db : (n_range, n_az) float32 — range-azimuth map (max over Doppler),
         intensity scale [dB].
+    range_doppler_db : (n_range, n_doppler) float32 — the map summed over virtual channels that
+        TI's CFAR runs on [dB re 1 W per sample^2].
     if_samples : (n_slow, N_tx, N_rx, N_adc) complex64 or None — IF samples [sqrt(W)]
         (``return_cubes=True``; ``n_slow`` = 1 for ``doppler: integrated``).
     range_doppler_cube : (n_doppler, N_tx, N_rx, n_range) complex64 or None — after range and
@@ -69,6 +73,7 @@ class SignalFrame:
     range_m: np.ndarray
     azimuth_sin: np.ndarray
     range_azimuth_db: np.ndarray
+    range_doppler_db: np.ndarray | None = None
     if_samples: np.ndarray | None = None
     range_doppler_cube: np.ndarray | None = None
 
@@ -118,6 +123,7 @@ def simulate_signal_frame(
         range_m=result.range_m,
         azimuth_sin=result.azimuth_sin,
         range_azimuth_db=result.range_azimuth_db,
+        range_doppler_db=result.range_doppler_db,
         if_samples=if_samples,
         range_doppler_cube=rd_cube,
     )

@@ -10,6 +10,7 @@ See :mod:`sim2radar.worlds.frame` for the data types and frame conventions.
 
 from sim2radar.worlds.config import (
     RigConfig,
+    RigMotion,
     WorldConfig,
     WorldConfigError,
     load_worlds_config,
@@ -29,7 +30,7 @@ from sim2radar.worlds.frame import (
 )
 from sim2radar.worlds.generate import STAGE_VERSION, generate_world
 from sim2radar.worlds.render import RENDER_VERSION, cast_rays, render_frame, rig_extrinsics
-from sim2radar.worlds.trajectory import rig_pose, trajectory
+from sim2radar.worlds.trajectory import rig_pose, rig_velocity, trajectory
 
 __all__ = [
     "NO_INSTANCE",
@@ -38,6 +39,8 @@ __all__ = [
     "Appearance",
     "DoorSpec",
     "RigConfig",
+    "RigMotion",
+    "rig_velocity",
     "RigPose",
     "Space",
     "World",

@@ -252,6 +252,31 @@ class WorldConfig(BaseModel):
         return self
 
 
+class RigMotion(BaseModel):
+    """How the rig moves while each frame is taken: along its heading (the radar's forward
+    axis, levelled) at a speed drawn per frame uniformly from ``speed_mps`` [m/s]
+    (:func:`sim2radar.worlds.trajectory.rig_velocity`); ``(0, 0)`` stands still. A person
+    carrying the rig walks at ~0.5-1.5 m/s. The signal-level radar turns the motion into
+    Doppler; the ray tracer has no Doppler axis and ignores it.
+    """
+
+    model_config = ConfigDict(frozen=True, extra="forbid")
+
+    speed_mps: tuple[float, float] = (0.0, 0.0)
+
+    @field_validator("speed_mps")
+    @classmethod
+    def _speed(cls, v: tuple[float, float]) -> tuple[float, float]:
+        lo, hi = float(v[0]), float(v[1])
+        if not (math.isfinite(lo) and math.isfinite(hi) and 0.0 <= lo <= hi <= 10.0):
+            raise ValueError(f"speed_mps: need 0 <= min <= max <= 10 [m/s], got {list(v)}")
+        return lo, hi
+
+    @property
+    def moving(self) -> bool:
+        return self.speed_mps[1] > 0.0
+
+
 class RigConfig(BaseModel):
     """The sensor rig: pinhole camera, radar and sparse LiDAR, with their extrinsics.
 

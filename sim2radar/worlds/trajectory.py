@@ -13,7 +13,7 @@ import numpy as np
 
 from sim2radar.worlds.frame import RigPose, World
 
-__all__ = ["trajectory", "rig_pose"]
+__all__ = ["trajectory", "rig_pose", "rig_velocity"]
 
 
 def rig_pose(x_m: float, y_m: float, yaw_rad: float, index: int = 0) -> RigPose:
@@ -82,3 +82,26 @@ def trajectory(
                 yaw += float(np.clip(delta, -math.radians(45), math.radians(45))) * 0.7
         poses.append(rig_pose(float(p[0]), float(p[1]), yaw, i))
     return poses
+
+
+def rig_velocity(radar_to_world: np.ndarray, speed_mps: float) -> np.ndarray:
+    """The radar's velocity in its own frame [m/s] for a rig moving at ``speed_mps`` along its
+    heading: the radar's forward (x) axis projected onto the floor plane, in world coordinates,
+    rotated into the radar frame (``R^T v``).
+
+    Parameters
+    ----------
+    radar_to_world : (4, 4) — the frame's radar pose (rigid).
+    speed_mps : float [m/s] >= 0.
+
+    Returns
+    -------
+    (3,) float64 [m/s] — x forward, y left, z up (a level radar: ``(speed, 0, 0)``).
+    """
+    m = np.asarray(radar_to_world, dtype=np.float64)
+    heading = np.array([m[0, 0], m[1, 0], 0.0])
+    norm = float(np.linalg.norm(heading))
+    if not norm > 1e-9:
+        raise ValueError("the radar looks straight up or down: its heading is undefined")
+    v_world = float(speed_mps) * heading / norm
+    return m[:3, :3].T @ v_world
