@@ -261,9 +261,12 @@ def dataset_metadata(spec: DatasetSpec, geometry: str, domain: str | None = None
                           else "")),
         "class_name": spec.class_name, "run_seed": spec.seed,
         "range_resolution_m": radar.range_resolution_m,
-        "radar_height_m": float(spec.rig.radar_position_m[2]),
+        # the procedural rig's radar height above the floor (a capture run knows none)
+        "radar_height_m": (float(spec.rig.radar_position_m[2]) if hasattr(spec, "rig")
+                           else None),
         "rig_motion": ({"speed_mps": list(spec.motion.speed_mps),
-                        "direction": "the rig's heading"} if spec.moving else "static"),
+                        "direction": "the rig's heading"}
+                       if getattr(spec, "moving", False) else "static"),
     }
 
 

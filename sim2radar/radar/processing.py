@@ -316,7 +316,8 @@ def process_if(cube: IFCube, radar: RadarConfig, *, noise_free: bool = False,
     xc = X.reshape(n_dop, nt * nr, n)
     row_mat = torch.as_tensor(row_w * w_a[None, :], device=device, dtype=torch.complex64)
     y_row = torch.einsum("dcn,ca->dna", xc, row_mat)                       # (D, N, A_pos)
-    power = _spectrum_bins(y_row, n_az).abs().square().cpu().numpy().astype(np.float64)
+    power_t = _spectrum_bins(y_row, n_az).abs().square()                  # (D, N, A) float32
+    ra = power_t[:, :, torch.as_tensor(fov, device=device)].amax(dim=0).cpu().numpy()
     timings["seconds_azimuth_fft"] = time.perf_counter() - t
 
     # range-Doppler map summed over the virtual channels (TI's detection matrix)
@@ -334,6 +335,7 @@ def process_if(cube: IFCube, radar: RadarConfig, *, noise_free: bool = False,
         ri, di = np.nonzero(det)
         di, ri, ai, ei = _angles_at(X, grid, w_a, di, ri, radar)
     else:
+        power = power_t.cpu().numpy().astype(np.float64)
         di, ri, ai, design = _detect_range_azimuth(
             power + (noise_az if noise_free else 0.0), radar, corr_r, fov, near, front.w_d,
             grid, w_a)
@@ -342,24 +344,28 @@ def process_if(cube: IFCube, radar: RadarConfig, *, noise_free: bool = False,
 
     # points
     t = time.perf_counter()
-    logp = np.log(np.maximum(power, 1e-300))
+
+    def logp_at(d, r, a):  # log power of the azimuth map at (Doppler, range, azimuth) bins
+        cells = power_t[torch.as_tensor(d % n_dop, device=device),
+                        torch.as_tensor(r % n, device=device),
+                        torch.as_tensor(a % n_az, device=device)]
+        return np.log(np.maximum(cells.cpu().numpy().astype(np.float64), 1e-300))
+
     n_el_fft = sig.elevation_fft_size
     sin_el = (ei - n_el_fft // 2) * 2.0 / n_el_fft
-    peak_w = power[di, ri, ai]
+    lp0 = logp_at(di, ri, ai)
+    peak_w = np.exp(lp0)
     u_det = u[ai]
     rng = ri * radar.range_resolution_m
     rdot = ((di - n_dop // 2) / (n_dop * front.t_loop_s) * 0.5 * radar.wavelength_m
             if n_dop > 1 else np.zeros(len(di)))
     if sig.interpolate and len(di):
-        dr, inc_r = cfar.parabolic_peak(logp[di, (ri - 1) % n, ai], logp[di, ri, ai],
-                                        logp[di, (ri + 1) % n, ai])
-        da, inc_a = cfar.parabolic_peak(logp[di, ri, (ai - 1) % n_az], logp[di, ri, ai],
-                                        logp[di, ri, (ai + 1) % n_az])
-        peak_w = np.exp(logp[di, ri, ai] + inc_r + inc_a)
+        dr, inc_r = cfar.parabolic_peak(logp_at(di, ri - 1, ai), lp0, logp_at(di, ri + 1, ai))
+        da, inc_a = cfar.parabolic_peak(logp_at(di, ri, ai - 1), lp0, logp_at(di, ri, ai + 1))
+        peak_w = np.exp(lp0 + inc_r + inc_a)
         u_det = np.clip(u_det + da * 2.0 / n_az, -1.0, 1.0)
         if n_dop > 1:
-            dd, _ = cfar.parabolic_peak(logp[(di - 1) % n_dop, ri, ai], logp[di, ri, ai],
-                                        logp[(di + 1) % n_dop, ri, ai])
+            dd, _ = cfar.parabolic_peak(logp_at(di - 1, ri, ai), lp0, logp_at(di + 1, ri, ai))
             rdot = rdot + dd / (n_dop * front.t_loop_s) * 0.5 * radar.wavelength_m
         sin_el = _refine_elevation(X, grid, di, ri, u_det, ei, radar)
         # range: bin spacing c f_adc / (2 S N) = c / 2B; minus the range-Doppler coupling
@@ -378,8 +384,8 @@ def process_if(cube: IFCube, radar: RadarConfig, *, noise_free: bool = False,
         points = points[: sig.max_points]
     timings["seconds_points"] = time.perf_counter() - t
 
-    ra = power[:, :, fov].max(axis=0)
-    ra_db = (10.0 * np.log10(4.0 * math.pi * np.maximum(ra, 1e-300) * to_a2)).astype(np.float32)
+    ra_db = (10.0 * np.log10(4.0 * math.pi * np.maximum(ra.astype(np.float64), 1e-300) * to_a2)
+             ).astype(np.float32)
     stats = {
         **timings,
         **design,
@@ -471,14 +477,16 @@ def _detect_range_azimuth(power: np.ndarray, radar: RadarConfig, corr_r: np.ndar
 
 
 # -- angles -------------------------------------------------------------------------------
-def _grid_values(X, grid: VirtualGrid, di: np.ndarray, ri: np.ndarray) -> np.ndarray:
-    """(K, n_az, n_el) complex128 — the virtual grid of each detection's channels."""
+def _grid_values(X, grid: VirtualGrid, di: np.ndarray, ri: np.ndarray):
+    """(K, n_az, n_el) complex64 torch — the virtual grid of each detection's channels."""
     import torch
 
     nt, nr = X.shape[1], X.shape[2]
     data = X[torch.as_tensor(di, device=X.device), :, :, torch.as_tensor(ri, device=X.device)]
-    data = data.reshape(len(di), nt * nr).cpu().numpy().astype(np.complex128)
-    return np.einsum("kc,cae->kae", data, grid.weights)
+    w = torch.as_tensor(grid.weights.reshape(nt * nr, -1), device=X.device,
+                        dtype=torch.complex64)
+    return (data.reshape(len(di), nt * nr) @ w).reshape(len(di), grid.n_azimuth,
+                                                         grid.n_elevation)
 
 
 def _angles_at(X, grid: VirtualGrid, w_a: np.ndarray, di: np.ndarray, ri: np.ndarray,
@@ -493,14 +501,15 @@ def _angles_at(X, grid: VirtualGrid, w_a: np.ndarray, di: np.ndarray, ri: np.nda
     if len(di) == 0:
         return e, e, e, e
     gamma = 10.0 ** (sig.angle_peak_hysteresis_db / 10.0)
-    vals = _grid_values(X, grid, di, ri) * w_a[None, :, None]             # (K, A_pos, E_pos)
-    az = _spectrum_bins(torch.as_tensor(np.moveaxis(vals, 1, 2)), sig.azimuth_fft_size)
-    az = az.numpy()                                                        # (K, E_pos, A)
-    mag = np.abs(az[:, grid.row, :])
+    w_t = torch.as_tensor(w_a, device=X.device, dtype=torch.float32)[None, :, None]
+    vals = _grid_values(X, grid, di, ri) * w_t                             # (K, A_pos, E_pos)
+    az = _spectrum_bins(vals.transpose(1, 2), sig.azimuth_fft_size)        # (K, E_pos, A)
+    mag = az[:, grid.row, :].abs().cpu().numpy()
     k_idx, a_idx = np.nonzero(cfar.hysteresis_peaks(mag, gamma=gamma,
                                                     sidelobe_db=sig.angle_sidelobe_db))
-    col = az[k_idx, :, a_idx]                                              # (P, E_pos)
-    el = np.abs(_spectrum_bins(torch.as_tensor(col), sig.elevation_fft_size).numpy())
+    col = az[torch.as_tensor(k_idx, device=X.device), :,
+             torch.as_tensor(a_idx, device=X.device)]                      # (P, E_pos)
+    el = _spectrum_bins(col, sig.elevation_fft_size).abs().cpu().numpy()
     p_idx, e_idx = np.nonzero(cfar.hysteresis_peaks(el, gamma=gamma,
                                                     sidelobe_db=sig.elevation_sidelobe_db))
     k_idx, a_idx = k_idx[p_idx], a_idx[p_idx]
@@ -516,11 +525,10 @@ def _elevation_bins(X, grid: VirtualGrid, di: np.ndarray, ri: np.ndarray, ai: np
     if len(di) == 0:
         return np.zeros(0, np.int64)
     sig = radar.signal
-    vals = _grid_values(X, grid, di, ri)
-    az = _spectrum_bins(torch.as_tensor(np.moveaxis(vals, 1, 2)), sig.azimuth_fft_size).numpy()
-    col = az[np.arange(len(di)), :, ai]
-    el = np.abs(_spectrum_bins(torch.as_tensor(col), sig.elevation_fft_size).numpy())
-    return np.argmax(el, axis=1)
+    az = _spectrum_bins(_grid_values(X, grid, di, ri).transpose(1, 2), sig.azimuth_fft_size)
+    col = az[torch.arange(len(di), device=X.device), :, torch.as_tensor(ai, device=X.device)]
+    el = _spectrum_bins(col, sig.elevation_fft_size).abs()
+    return el.argmax(dim=1).cpu().numpy()
 
 
 def _refine_elevation(X, grid: VirtualGrid, di: np.ndarray, ri: np.ndarray, u: np.ndarray,
@@ -534,9 +542,10 @@ def _refine_elevation(X, grid: VirtualGrid, di: np.ndarray, ri: np.ndarray, u: n
     if len(di) == 0:
         return np.zeros(0)
     vals = _grid_values(X, grid, di, ri)                                   # (K, A_pos, E_pos)
-    steer = np.exp(1j * math.pi * np.arange(grid.n_azimuth)[None, :] * u[:, None])
-    col = np.einsum("kae,ka->ke", vals, steer)
-    el = np.abs(_spectrum_bins(torch.as_tensor(col), n_el).numpy()) ** 2
+    steer = torch.as_tensor(np.exp(1j * math.pi * np.arange(grid.n_azimuth)[None, :]
+                                   * u[:, None]), device=X.device, dtype=torch.complex64)
+    col = torch.einsum("kae,ka->ke", vals, steer)
+    el = _spectrum_bins(col, n_el).abs().square().cpu().numpy().astype(np.float64)
     lp = np.log(np.maximum(el, 1e-300))
     k = np.arange(len(di))
     delta, _ = cfar.parabolic_peak(lp[k, (ei - 1) % n_el], lp[k, ei], lp[k, (ei + 1) % n_el])

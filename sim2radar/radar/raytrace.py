@@ -42,6 +42,7 @@ from sim2radar.radar.returns import (
     diffuse_phase_seed,
     directive_lut,
     fresnel_lut,
+    polarized_luts,
     ray_grid,
     transmission_lut,
     transmit_probability,
@@ -175,6 +176,10 @@ class _Prepared:
     t_re: object | None  # transmission table (n_mat * FRESNEL_LUT_SIZE,)
     t_im: object | None
     choice_u: list | None  # per bounce: mi.Float (N,) reflect-or-transmit draws
+    polarized: bool = False
+    slant: tuple[float, float] = (1.0, 0.0)  # (cos, sin) of the antennas' slant from vertical
+    pol_r: tuple | None = None  # (te_re, te_im, tm_re, tm_im) reflection tables
+    pol_t: tuple | None = None  # (te_re, te_im, tm_re, tm_im) transmission tables
 
 
 @dataclasses.dataclass
@@ -287,6 +292,19 @@ class RadarScene:
             t_re, t_im = to_drjit(mi.Float, tl.real.ravel()), to_drjit(mi.Float, tl.imag.ravel())
             draws = continuation_uniforms(n, radar.max_bounces, seed)
             choice = [to_drjit(mi.Float, row, np.float32) for row in draws]
+        pol_r = pol_t = None
+        polarized = radar.hardware.polarization != "unpolarized"
+        if polarized:
+            refl, trans = polarized_luts(self.materials, radar.center_frequency_hz, thickness,
+                                         [sc.transmits(m) for m in self.materials])
+
+            def tables(lut: np.ndarray) -> tuple:
+                lut = lut.astype(np.complex64)
+                return tuple(to_drjit(mi.Float, part(lut[:, :, k]).ravel())
+                             for k in (0, 1) for part in (np.real, np.imag))
+
+            pol_r, pol_t = tables(refl), tables(trans)
+        slant = math.radians(90.0 if radar.hardware.polarization == "horizontal" else 0.0)
         prep = _Prepared(
             directions=to_drjit(mi.Vector3f, directions.T, np.float32),
             n_rays=n,
@@ -304,6 +322,10 @@ class RadarScene:
             t_re=t_re,
             t_im=t_im,
             choice_u=choice,
+            polarized=polarized,
+            slant=(math.cos(slant), math.sin(slant)),
+            pol_r=pol_r,
+            pol_t=pol_t,
         )
         if len(self._prepared) > 8:
             self._prepared.pop(next(iter(self._prepared)))
@@ -348,12 +370,14 @@ class RadarScene:
         si2 = self._scene.ray_intersect(si.spawn_ray(ray.d), again)
         return dr.select(again, si2, si)
 
-    def _return_leg(self, si, candidate, radar_pos, prep: _Prepared):
+    def _return_leg(self, si, candidate, radar_pos, prep: _Prepared, fields=None):
         """Gain of the way back from ``si`` to the radar through slab materials.
 
-        Returns ``(tau_re, tau_im, visible, arrival, n_slabs)``: each transmissive object on
-        the line multiplies ``tau`` by its ``T`` (both faces of one object count once), any
-        other surface (or more than :data:`MAX_RETURN_SLABS` slabs) blocks.
+        Returns ``(tau_re, tau_im, visible, arrival, n_slabs, fields)``: each transmissive
+        object on the line multiplies ``tau`` by its ``T`` (both faces of one object count
+        once), any other surface (or more than :data:`MAX_RETURN_SLABS` slabs) blocks. With
+        ``prep.polarized``, ``fields`` (a list of complex field vectors ``(re, im)``) pass each
+        slab through its TE/TM transmission instead and ``tau`` stays 1.
         """
         mi, dr = self._mi, self._dr
         tau_re = dr.full(mi.Float, 1.0, dr.width(candidate))
@@ -371,14 +395,27 @@ class RadarScene:
                 break
             mat = dr.gather(mi.UInt32, self._face_material, sb.prim_index, blocked)
             obj = dr.gather(mi.UInt32, self._face_object, sb.prim_index, blocked)
-            cos_b = dr.abs(dr.dot(dr.normalize(ray.d), sb.n))
-            t_re, t_im = self._table(prep.t_re, prep.t_im, mat, cos_b, blocked, FRESNEL_LUT_SIZE)
-            through = blocked & ((t_re * t_re + t_im * t_im) > 0.0)
+            u = dr.normalize(ray.d)
+            cos_b = dr.abs(dr.dot(u, sb.n))
+            if prep.polarized:
+                te = self._table(prep.pol_t[0], prep.pol_t[1], mat, cos_b, blocked,
+                                 FRESNEL_LUT_SIZE)
+                tm = self._table(prep.pol_t[2], prep.pol_t[3], mat, cos_b, blocked,
+                                 FRESNEL_LUT_SIZE)
+                through = blocked & ((te[0] * te[0] + te[1] * te[1]
+                                      + tm[0] * tm[0] + tm[1] * tm[1]) > 0.0)
+                s_b = self._te_basis(u, sb.n)
+                fields = [tuple(dr.select(through, new, old) for new, old in zip(
+                    self._jones(f, s_b, u, u, te, tm), f, strict=True)) for f in fields]
+            else:
+                t_re, t_im = self._table(prep.t_re, prep.t_im, mat, cos_b, blocked,
+                                         FRESNEL_LUT_SIZE)
+                through = blocked & ((t_re * t_re + t_im * t_im) > 0.0)
+                new_re = tau_re * t_re - tau_im * t_im
+                new_im = tau_re * t_im + tau_im * t_re
+                tau_re = dr.select(through, new_re, tau_re)
+                tau_im = dr.select(through, new_im, tau_im)
             visible &= ~(blocked & ~through)
-            new_re = tau_re * t_re - tau_im * t_im
-            new_im = tau_re * t_im + tau_im * t_re
-            tau_re = dr.select(through, new_re, tau_re)
-            tau_im = dr.select(through, new_im, tau_im)
             n_slabs += dr.select(through, mi.UInt32(1), mi.UInt32(0))
             # leave the object: skip its other face on the way to the radar
             ray2 = sb.spawn_ray_to(radar_pos)
@@ -389,7 +426,63 @@ class RadarScene:
             arrival = dr.select(through, dr.select(same, sb2.p, sb.p), arrival)
             ray = dr.select(same, sb2.spawn_ray_to(radar_pos), ray2)
             pending = through
-        return tau_re, tau_im, visible, arrival, n_slabs
+        return tau_re, tau_im, visible, arrival, n_slabs, fields
+
+    # -- polarisation (prep.polarized) ---------------------------------------------------
+    def _te_basis(self, k, n):
+        """Unit TE vector ``s = k x n / |k x n|`` of a wave along ``k`` meeting a surface of
+        normal ``n`` (Sionna RT's Jones basis; any vector normal to ``k`` at normal
+        incidence)."""
+        mi, dr = self._mi, self._dr
+        s = dr.cross(k, n)
+        n2 = dr.squared_norm(s)
+        alt = dr.cross(k, dr.select(dr.abs(k.z) < 0.9, mi.Vector3f(0.0, 0.0, 1.0),
+                                    mi.Vector3f(1.0, 0.0, 0.0)))
+        s = dr.select(n2 > 1e-12, s, alt)
+        return s * dr.rsqrt(dr.maximum(dr.squared_norm(s), 1e-30))
+
+    def _jones(self, field, s, k_in, k_out, te, tm):
+        """A complex field vector ``field = (re, im)`` through one interaction: ``r_te (E.s) s +
+        r_tm (E.p_in) p_out`` with ``p = k x s`` for the incoming and outgoing directions
+        (reflection: ``k_out`` the reflected or returning direction; transmission through a
+        slab: ``k_out = k_in``); ``te``, ``tm`` = (re, im) coefficients (ITU-R P.2040-3
+        eq. (31) / (43); Sionna RT's sign convention, ``r_tm = -r_te`` at normal incidence).
+        """
+        dr = self._dr
+        e_re, e_im = field
+        p_in, p_out = dr.cross(k_in, s), dr.cross(k_out, s)
+        es_re, es_im = dr.dot(e_re, s), dr.dot(e_im, s)
+        ep_re, ep_im = dr.dot(e_re, p_in), dr.dot(e_im, p_in)
+        a_re = te[0] * es_re - te[1] * es_im
+        a_im = te[0] * es_im + te[1] * es_re
+        b_re = tm[0] * ep_re - tm[1] * ep_im
+        b_im = tm[0] * ep_im + tm[1] * ep_re
+        return a_re * s + b_re * p_out, a_im * s + b_im * p_out
+
+    def _apply(self, carry, op):
+        """``carry`` through one interaction ``op``: ``("scalar", (re, im), None)`` multiplies a
+        complex scalar carry; ``("jones", (s, k_in, k_out, te, tm), scale)`` sends a field
+        vector through :meth:`_jones` and multiplies it by the real ``scale`` (if any)."""
+        kind, args, scale = op
+        if kind == "scalar":
+            return (carry[0] * args[0] - carry[1] * args[1],
+                    carry[0] * args[1] + carry[1] * args[0])
+        out = self._jones(carry, *args)
+        return out if scale is None else (out[0] * scale, out[1] * scale)
+
+    def _antenna(self, d, up, prep: _Prepared):
+        """The antennas' unit polarisation vector for the direction ``d`` [world] (a wave
+        leaving the TX along ``d``, or reaching the RX from ``d``): ``cos(slant) v + sin(slant)
+        h`` with ``v`` the radar's up axis ``up`` made normal to ``d`` (theta-hat up to sign,
+        Sionna RT's "V") and ``h = up x d`` normalised (phi-hat, "H")."""
+        dr = self._dr
+        c, s = prep.slant
+        v = up - dr.dot(up, d) * d
+        e = v * (c * dr.rsqrt(dr.maximum(dr.squared_norm(v), 1e-30)))
+        if s != 0.0:
+            h = dr.cross(up, d)
+            e = e + h * (s * dr.rsqrt(dr.maximum(dr.squared_norm(h), 1e-30)))
+        return e
 
     def _interactions(
         self, radar: RadarConfig, pose: np.ndarray, prep: _Prepared, hits
@@ -408,10 +501,17 @@ class RadarScene:
 
         # C: product of earlier specular factors. With transmission two copies: ``carry`` is
         # amplitude-unbiased (E[C] exact; it weights the coherent PO samples) and ``carry_d``
-        # power-unbiased (E|C|^2 exact; it weights the diffuse samples) -- returns.py, item 3
-        carry_re = dr.full(mi.Float, 1.0, n)
-        carry_im = dr.zeros(mi.Float, n)
-        carry_d_re, carry_d_im = carry_re, carry_im
+        # power-unbiased (E|C|^2 exact; it weights the diffuse samples) -- returns.py, item 3.
+        # Polarised (prep.polarized), C is the complex field vector (re, im) of the ray instead,
+        # starting as the TX antenna's polarisation along the ray.
+        up = None
+        if prep.polarized:
+            up = mi.Vector3f(*(dr.opaque(mi.Float, float(pose[i, 2])) for i in range(3)))
+            e0 = self._antenna(ray.d, up, prep)
+            carry = (e0, dr.zeros(mi.Vector3f, n))
+        else:
+            carry = (dr.full(mi.Float, 1.0, n), dr.zeros(mi.Float, n))
+        carry_d = carry
         path_in = dr.zeros(mi.Float, n)
         active = dr.full(mi.Bool, True, n)
         d_omega = prep.solid_angle
@@ -419,11 +519,17 @@ class RadarScene:
         departure = mi.Point3f(radar_pos)
         skip_obj = dr.full(mi.UInt32, NO_OBJECT, n) if prep.transmits else None
 
+        def cmul(a, b):
+            return a[0] * b[0] - a[1] * b[1], a[0] * b[1] + a[1] * b[0]
+
+        def power(c):
+            return dr.squared_norm(c[0]) + dr.squared_norm(c[1])
+
         for bounce in range(radar.max_bounces):
             if bounce > 0:
-                state = [ray, prev_hit, departure, carry_re, carry_im, path_in, active, hits]
+                state = [ray, prev_hit, departure, *carry, path_in, active, hits]
                 if prep.transmits:
-                    state += [skip_obj, carry_d_re, carry_d_im]
+                    state += [skip_obj, *carry_d]
                 dr.eval(*state)
             si = self._intersect(ray, active, skip_obj if bounce > 0 else None)
             valid = active & si.is_valid()
@@ -444,33 +550,51 @@ class RadarScene:
             cos_out = dr.dot(u_out, normal)
             visible = valid & (cos_out > 0)
             arrival = mi.Point3f(hit)
-            tau_re = tau_im = None
+            mat = dr.gather(mi.UInt32, self._face_material, si.prim_index, valid)
+            s_coef = dr.gather(mi.Float, prep.s_coef, mat, valid)
+            spec = dr.gather(mi.Float, prep.spec_coef, mat, valid)
+            reflected = ray.d + 2.0 * cos_in * normal
+            if prep.polarized:
+                # the field sent back toward the radar, TE/TM on this surface (returns.py)
+                r_te = self._table(prep.pol_r[0], prep.pol_r[1], mat, cos_in, valid,
+                                   FRESNEL_LUT_SIZE)
+                r_tm = self._table(prep.pol_r[2], prep.pol_r[3], mat, cos_in, valid,
+                                   FRESNEL_LUT_SIZE)
+                s_vec = self._te_basis(ray.d, normal)
+                fields = [self._jones(carry, s_vec, ray.d, u_out, r_te, r_tm)]
+                if prep.transmits:
+                    fields.append(self._jones(carry_d, s_vec, ray.d, u_out, r_te, r_tm))
             n_ret = mi.UInt32(0)
+            tau = None
             if bounce > 0:
                 if prep.transmits:
-                    tau_re, tau_im, visible, arrival, n_ret = self._return_leg(
-                        si, visible, radar_pos, prep
-                    )
+                    tau_re, tau_im, visible, arrival, n_ret, fields_out = self._return_leg(
+                        si, visible, radar_pos, prep, fields if prep.polarized else None)
+                    if prep.polarized:
+                        fields = fields_out
+                    else:
+                        tau = (tau_re, tau_im)
                 else:
                     visible &= ~self._scene.ray_test(si.spawn_ray_to(radar_pos), visible)
 
-            mat = dr.gather(mi.UInt32, self._face_material, si.prim_index, valid)
-            g_re, g_im = self._table(prep.lut_re, prep.lut_im, mat, cos_in, valid,
-                                     FRESNEL_LUT_SIZE)
-            s_coef = dr.gather(mi.Float, prep.s_coef, mat, valid)
-            spec = dr.gather(mi.Float, prep.spec_coef, mat, valid)
-            cg_re = carry_re * g_re - carry_im * g_im  # C * Gamma
-            cg_im = carry_re * g_im + carry_im * g_re
-            if tau_re is not None:  # C * Gamma * tau
-                cg_re, cg_im = cg_re * tau_re - cg_im * tau_im, cg_re * tau_im + cg_im * tau_re
-            if prep.transmits:  # the diffuse sample's C * Gamma * tau
-                cd_re = carry_d_re * g_re - carry_d_im * g_im
-                cd_im = carry_d_re * g_im + carry_d_im * g_re
-                if tau_re is not None:
-                    cd_re, cd_im = (cd_re * tau_re - cd_im * tau_im,
-                                    cd_re * tau_im + cd_im * tau_re)
+            if prep.polarized:  # received: the RX antenna's polarisation . field
+                e_rx = self._antenna(-u_out, up, prep)
+                cg = (dr.dot(e_rx, fields[0][0]), dr.dot(e_rx, fields[0][1]))
+                cd = (dr.dot(e_rx, fields[-1][0]), dr.dot(e_rx, fields[-1][1])) \
+                    if prep.transmits else cg
             else:
-                cd_re, cd_im = cg_re, cg_im
+                gamma = self._table(prep.lut_re, prep.lut_im, mat, cos_in, valid,
+                                    FRESNEL_LUT_SIZE)
+                cg = cmul(carry, gamma)                                     # C * Gamma
+                if tau is not None:
+                    cg = cmul(cg, tau)                                      # C * Gamma * tau
+                cd = cg
+                if prep.transmits:  # the diffuse sample's C * Gamma * tau
+                    cd = cmul(carry_d, gamma)
+                    if tau is not None:
+                        cd = cmul(cd, tau)
+            cg_re, cg_im = cg
+            cd_re, cd_im = cd
 
             # physical-optics (specular) sample with the Nyquist window
             ci = dr.maximum(cos_in, MIN_COS)
@@ -484,7 +608,6 @@ class RadarScene:
             ) * window
             amp_c = dr.select(visible, amp_c, 0.0)
             # diffuse sample: S sqrt(dOmega f_s) / r_o with a per-ray speckle phase
-            reflected = ray.d + 2.0 * cos_in * normal
             if prep.directive:
                 alpha = dr.gather(mi.Float, prep.alpha, mat, valid)
                 f_norm = self._table(prep.dir_lut, None, mat, cos_in, valid, DIRECTIVE_LUT_SIZE)
@@ -514,34 +637,47 @@ class RadarScene:
 
             if bounce + 1 < radar.max_bounces:
                 # continuation: specular reflection, or (slabs) a seeded reflect-or-transmit
-                f_re, f_im = g_re * spec, g_im * spec
                 direction = reflected
+                if prep.polarized:
+                    r_op = ("jones", (s_vec, ray.d, reflected, r_te, r_tm), spec)
+                else:
+                    r_op = ("scalar", (gamma[0] * spec, gamma[1] * spec), None)
                 if prep.transmits:
-                    t_re, t_im = self._table(prep.t_re, prep.t_im, mat, cos_in, valid,
-                                             FRESNEL_LUT_SIZE)
-                    q = transmit_probability(f_re * f_re + f_im * f_im, t_re * t_re + t_im * t_im)
+                    if prep.polarized:
+                        t_te = self._table(prep.pol_t[0], prep.pol_t[1], mat, cos_in, valid,
+                                           FRESNEL_LUT_SIZE)
+                        t_tm = self._table(prep.pol_t[2], prep.pol_t[3], mat, cos_in, valid,
+                                           FRESNEL_LUT_SIZE)
+                        t_op = ("jones", (s_vec, ray.d, ray.d, t_te, t_tm), None)
+                        e2 = dr.maximum(power(carry), 1e-30)
+                        q = transmit_probability(power(self._apply(carry, r_op)) / e2,
+                                                 power(self._apply(carry, t_op)) / e2)
+                    else:
+                        t_c = self._table(prep.t_re, prep.t_im, mat, cos_in, valid,
+                                          FRESNEL_LUT_SIZE)
+                        t_op = ("scalar", t_c, None)
+                        q = transmit_probability(
+                            (gamma[0] * gamma[0] + gamma[1] * gamma[1]) * spec * spec,
+                            t_c[0] * t_c[0] + t_c[1] * t_c[1])
                     reflect = prep.choice_u[bounce] >= q
                     w = dr.select(reflect, 1.0 - q, q)  # probability of the chosen branch
-                    b_re = dr.select(reflect, f_re, t_re)
-                    b_im = dr.select(reflect, f_im, t_im)
                     k_c = dr.rcp(dr.maximum(w, 1e-30))  # amplitude-unbiased weight
                     k_d = dr.rsqrt(dr.maximum(w, 1e-30))  # power-unbiased weight
-                    carry_d_re, carry_d_im = (
-                        (carry_d_re * b_re - carry_d_im * b_im) * k_d,
-                        (carry_d_re * b_im + carry_d_im * b_re) * k_d,
-                    )
-                    f_re, f_im = b_re * k_c, b_im * k_c
+                    carry = tuple(dr.select(reflect, a, b) * k_c for a, b in zip(
+                        self._apply(carry, r_op), self._apply(carry, t_op), strict=True))
+                    carry_d = tuple(dr.select(reflect, a, b) * k_d for a, b in zip(
+                        self._apply(carry_d, r_op), self._apply(carry_d, t_op), strict=True))
                     direction = dr.select(reflect, reflected, ray.d)
                     obj = dr.gather(mi.UInt32, self._face_object, si.prim_index, valid)
                     skip_obj = dr.select(reflect, mi.UInt32(NO_OBJECT), obj)
-                carry_re, carry_im = (carry_re * f_re - carry_im * f_im,
-                                      carry_re * f_im + carry_im * f_re)
+                else:
+                    carry = self._apply(carry, r_op)
+                    carry_d = carry
                 ray = si.spawn_ray(direction)
                 prev_hit = hit
-                strength = carry_re * carry_re + carry_im * carry_im
+                strength = power(carry)
                 if prep.transmits:
-                    strength = dr.maximum(strength,
-                                          carry_d_re * carry_d_re + carry_d_im * carry_d_im)
+                    strength = dr.maximum(strength, power(carry_d))
                 active = valid & (strength > 1e-10)
             yield record
 

@@ -101,6 +101,7 @@ __all__ = [
     "directive_normalisation",
     "fresnel_lut",
     "nyquist_window",
+    "polarized_luts",
     "ray_grid",
     "transmission_lut",
     "transmit_probability",
@@ -147,6 +148,43 @@ def fresnel_lut(
             for m, d in zip(materials, thickness, strict=True)
         ]
     )
+
+
+def polarized_luts(
+    materials: list[str],
+    frequency_hz: float,
+    thickness_m: list[float | None],
+    transmits: list[bool],
+    size: int = FRESNEL_LUT_SIZE,
+) -> tuple[np.ndarray, np.ndarray]:
+    """TE and TM reflection and transmission tables for the polarised tracer, sampled like
+    :func:`fresnel_lut` (half-space ITU-R P.2040-3 eq. (31) or the slab of eqs. (43a)/(43b)).
+
+    Parameters
+    ----------
+    materials : list of str
+    frequency_hz : float [Hz]
+    thickness_m : list of (float or None) — slab thickness [m] per material, or ``None``.
+    transmits : list of bool — materials rays may pass through (zeros otherwise).
+    size : int — samples over cos(theta) in [0, 1].
+
+    Returns
+    -------
+    reflection : (len(materials), size, 2) complex128 — ``r_te``, ``r_tm``.
+    transmission : (len(materials), size, 2) complex128 — ``t_te``, ``t_tm``.
+    """
+    from sim2radar.em import reflection_coefficients, transmission_coefficients
+
+    cos_t = np.linspace(0.0, 1.0, size)
+    theta = np.arccos(np.clip(cos_t, 0.0, 1.0))
+    refl, trans = [], []
+    for m, d, t in zip(materials, thickness_m, transmits, strict=True):
+        refl.append(np.stack(reflection_coefficients(m, frequency_hz, theta, d), axis=-1))
+        if t and d is not None:
+            trans.append(np.stack(transmission_coefficients(m, frequency_hz, theta, d), axis=-1))
+        else:
+            trans.append(np.zeros((size, 2), dtype=np.complex128))
+    return np.stack(refl), np.stack(trans)
 
 
 def transmission_lut(
