@@ -117,12 +117,11 @@ NUFFT_BETA_PER_WIDTH = 2.30
 #: (path, TX/RX pair) combinations synthesised per chunk: bounds the working memory (~100
 #: bytes of float64/complex temporaries each, ~100 MB at this size).
 CHUNK_PATH_CHANNELS = 1 << 20
-#: Oversampling of the narrowband synthesis' slow-time (Doppler) NUFFT grid [-].
-DOPPLER_OVERSAMPLING = 2
-#: Kernel width of the slow-time NUFFT [grid points]: at oversampling 2 its error sits ~112 dB
-#: under a static return's zero-Doppler peak (4 taps: -95 dB, which TI's Doppler CFAR detects
-#: beside a metal plate whose range-Doppler peak stands ~100 dB over the noise).
-DOPPLER_WIDTH = 6
+#: Doppler groups per Doppler bin of the narrowband synthesis: a path's Doppler is rounded to
+#: the nearest 1/4 bin (<= 1/8 bin = 0.006 m/s off, <= 0.22 dB weaker at the bin centre; a
+#: tone at a slightly other frequency, no leakage — a slow-time NUFFT with 4 taps leaked
+#: Doppler sidelobes 95 dB down, which TI's CFAR detects beside a metal plate).
+DOPPLER_SUBBINS = 4
 #: Sub-arrays of the narrowband synthesis: runs of virtual azimuth positions that share one
 #: tone per path (the range walk across a sub-array is dropped; module doc).
 NARROWBAND_SUBARRAYS = 8
@@ -553,75 +552,83 @@ def _synth_narrowband(torch, radar: RadarConfig, terms: _PathTerms, w_d: np.ndar
     t_loop = nt * radar.chirp_period_s
     n_paths = len(terms.amp)
     dtau = 2.0 * terms.rate / c                                             # (P,) [-]
-    # slow-time NUFFT taps over the Doppler grid (cycles per loop x sigma_D M), not periodic:
-    # the Doppler at mid-window, the same for every channel
+    # Doppler groups: each path's slow-time frequency (the Doppler at mid-window, the same for
+    # every channel) rounded to 1 / DOPPLER_SUBBINS of a Doppler bin, not periodic
     mu = dtau * (f_s + 0.5 * slope * t_win) * t_loop                        # [cycles / loop]
-    scale = DOPPLER_OVERSAMPLING * n_loops
-    x_d = mu * scale
-    g0 = np.ceil(x_d - 0.5 * DOPPLER_WIDTH).astype(np.int64)
-    dtaps = _es_kernel(g0[:, None] + np.arange(DOPPLER_WIDTH)[None, :] - x_d[:, None],
-                       DOPPLER_WIDTH).astype(np.float32)
+    scale = DOPPLER_SUBBINS * n_loops
+    g0 = np.rint(mu * scale).astype(np.int64)
+    dtaps = np.ones((n_paths, 1), dtype=np.float32)
     g_min = int(g0.min())
-    n_groups = int(g0.max()) - g_min + DOPPLER_WIDTH
+    n_groups = int(g0.max()) - g_min + 1
     row_len = m_grid + w
     # exact per-channel delays (eq. (2) at the frame centre) about the path's mean delay: the
-    # TX and RX parts [s], each small (array size / c), float64 before the subtraction
+    # TX and RX parts [s], each small (array size / c), float64 before the subtraction; the
+    # channels in sub-array order (each sub-array a contiguous run of columns)
+    subs = _subarrays(radar, NARROWBAND_SUBARRAYS)
+    perm = np.concatenate(subs)
     dt_mean, dr_mean = terms.d_tx.mean(axis=1), terms.d_rx.mean(axis=1)
     tau0 = (dt_mean + terms.inner + dr_mean) / c                            # (P,) [s]
-    del_t = torch.as_tensor((terms.d_tx - dt_mean[:, None]) / c, device=device)  # (P, T)
-    del_r = torch.as_tensor((terms.d_rx - dr_mean[:, None]) / c, device=device)  # (P, R)
-    amp_abs = torch.as_tensor(np.abs(terms.amp), device=device, dtype=torch.float32)
+    del_t = (terms.d_tx - dt_mean[:, None]) / c                             # (P, T) [s]
+    del_r = (terms.d_rx - dr_mean[:, None]) / c                             # (P, R) [s]
+    # each channel's phase at mid-window about the path's mean delay, e^{j 2 pi f_eff (delta_t
+    # + delta_r)} = a TX factor times an RX factor (f_eff of the path's mean delay for every
+    # sub-array: the difference is < 1e-4 cycle)
+    f_eff0 = f_s + slope * (0.5 * t_win - tau0)                             # (P,) [Hz]
+
+    def factor(delta: np.ndarray):
+        return torch.polar(torch.ones(delta.shape, device=device), torch.as_tensor(
+            (2.0 * np.pi) * np.remainder(f_eff0[:, None] * delta, 1.0), device=device,
+            dtype=torch.float32))
+
+    a_t, b_r = factor(del_t), factor(del_r)                                # (P, T), (P, R)
     amp_arg = np.angle(terms.amp) / (2.0 * np.pi)                           # [cycles]
-    grid = torch.zeros((n_groups * row_len, nt * nr, 2), dtype=torch.float32, device=device)
-    for chans in _subarrays(radar, NARROWBAND_SUBARRAYS):
+    parts = []
+    for chans in subs:
         # one tone per path and sub-array at the sub-array's mean delay (eq. (1); frequency and
         # phase as in _synth_frequency), each channel's phase exact at mid-window
-        ch = torch.as_tensor(chans, device=device)
-        rel = del_t[:, ch // nr] + del_r[:, ch % nr]                        # (P, c) [s]
-        rel_mean = rel.mean(dim=1)
-        rel = rel - rel_mean[:, None]
-        tau = tau0 + rel_mean.cpu().numpy()                                 # (P,) [s]
+        rel_mean = (del_t @ np.bincount(chans // nr, minlength=nt)
+                    + del_r @ np.bincount(chans % nr, minlength=nr)) / len(chans)  # [s]
+        tau = tau0 + rel_mean
         beat_bins = (slope * tau + dtau * (f_s + slope * (t_win - tau))) * (n / f_adc)
         cycles = (f_s * tau - 0.5 * slope * tau * tau - slope * dtau * t_win**2 / 6.0
-                  + 0.5 * beat_bins + amp_arg)
-        f_eff = torch.as_tensor(f_s + slope * (0.5 * t_win - tau), device=device)  # [Hz]
-        ph = torch.remainder(torch.as_tensor(cycles, device=device)[:, None]
-                             + f_eff[:, None] * rel, 1.0)
+                  + 0.5 * beat_bins + amp_arg - f_eff0 * rel_mean)
         u = beat_bins * NUFFT_OVERSAMPLING
         l0 = np.ceil(u - 0.5 * w)
         taps = _es_kernel(l0[:, None] + np.arange(w)[None, :] - u[:, None], w).astype(np.float32)
         key = (g0 - g_min) * row_len + np.remainder(l0.astype(np.int64), m_grid)
         order = np.argsort(key, kind="stable")
+        turn = torch.polar(torch.as_tensor(np.abs(terms.amp[order]), device=device,
+                                           dtype=torch.float32), torch.as_tensor(
+            (2.0 * np.pi) * np.remainder(cycles[order], 1.0), device=device,
+            dtype=torch.float32))
         order_t = torch.as_tensor(order, device=device)
-        wts = torch.polar(amp_abs[order_t, None].expand(-1, len(chans)),
-                          (2.0 * math.pi) * ph[order_t].to(torch.float32))
+        wts = (a_t[order_t][:, torch.as_tensor(chans // nr, device=device)]
+               * b_r[order_t][:, torch.as_tensor(chans % nr, device=device)] * turn[:, None])
         v = torch.view_as_real(wts).reshape(n_paths, -1)
-        part = _grid_rows(v, key[order], taps[order], dtaps[order], row_len,
-                          n_groups * row_len)
-        grid[:, ch] = part.reshape(-1, len(chans), 2)
-    grid = torch.view_as_complex(grid).reshape(n_groups, row_len, nt, nr)
+        parts.append(_grid_rows(v, key[order], taps[order], dtaps[order], row_len,
+                                n_groups * row_len).reshape(-1, len(chans), 2))
+    grid = torch.view_as_complex(torch.cat(parts, dim=1)).reshape(n_groups, row_len, nt * nr)
     folded = grid[:, :m_grid].clone()
     folded[:, :w] += grid[:, m_grid:]
-    # slow time: e^{j 2 pi mu s} = sum_g phi(g - x) e^{j 2 pi g s / (sigma M)} / Phi(s / sigma M)
-    # at every chirp's start s = T / T_loop [loops from the frame centre], per TX slot
+    # slow time: each group's tone e^{j 2 pi mu_g s} at every chirp's start s = T / T_loop
+    # [loops from the frame centre], per TX slot (the TDM offsets)
     s_mt = slot_times_s(radar) / t_loop                                     # (M, T)
-    xi = s_mt / scale
     g_abs = np.arange(g_min, g_min + n_groups)
-    e = (np.exp(2j * np.pi * np.remainder(xi[:, :, None] * g_abs[None, None, :], 1.0))
-         / _kernel_ft(xi, DOPPLER_WIDTH)[:, :, None])                       # (M, T, G)
+    e = np.exp(2j * np.pi * np.remainder(s_mt[:, :, None] * g_abs[None, None, :] / scale,
+                                         1.0))                              # (M, T, G)
     if integrated:
         e = np.einsum("m,mtg->tg", w_d, e)[:, None, :]                      # (T, 1, G)
     else:
         e = np.transpose(e, (1, 0, 2))                                      # (T, M, G)
-    e_t = torch.as_tensor(e.astype(np.complex64), device=device)
-    y = folded.permute(2, 0, 3, 1).reshape(nt, n_groups, nr * m_grid)      # (T, G, R L)
-    xs = torch.bmm(e_t, y).reshape(nt, e.shape[1], nr, m_grid)              # (T, S, R, L)
-    g_t = torch.fft.ifft(xs, dim=-1) * m_grid
+    e_c = torch.as_tensor(e[perm // nr].astype(np.complex64), device=device)   # (C, S, G)
+    y = folded.permute(2, 0, 1)                                             # (C, G, L)
+    g_t = torch.fft.ifft(torch.bmm(e_c, y), dim=-1) * m_grid                # (C, S, L)
     idx = torch.as_tensor(np.remainder(np.arange(n) - n // 2, m_grid), device=device)
     deapod = torch.as_tensor(_deapodisation(n, w, NUFFT_OVERSAMPLING), device=device,
                              dtype=torch.float32)
-    out = g_t[..., idx] * deapod                                            # (T, S, R, N)
-    return out.permute(1, 0, 2, 3).contiguous()                            # (S, T, R, N)
+    out = g_t[..., idx] * deapod                                            # (C, S, N)
+    out = out[torch.as_tensor(np.argsort(perm), device=device)]            # channel order
+    return out.reshape(nt, nr, -1, n).permute(2, 0, 1, 3).contiguous()    # (S, T, R, N)
 
 
 def _leakage(radar: RadarConfig) -> np.ndarray:
