@@ -43,7 +43,7 @@ from sim2radar.radar.returns import (
     directive_lut,
     fresnel_lut,
     polarized_luts,
-    ray_grid,
+    ray_angles,
     transmission_lut,
     transmit_probability,
 )
@@ -254,22 +254,57 @@ class RadarScene:
         self._face_material = to_drjit(mi.UInt32, face_material, np.uint32)
         self._face_object = to_drjit(mi.UInt32, face_object_ids(meshes), np.uint32)
         self._prepared: dict[tuple[str, int | None], _Prepared] = {}
+        self._tables: dict[str, dict] = {}
         self.build_seconds = time.perf_counter() - t0
 
     # ------------------------------------------------------------------------------------
     def _prepare(self, radar: RadarConfig, seed: int | None) -> _Prepared:
-        key = (radar.content_hash(), seed)
+        """The device arrays of one (config, seed): the seed's ray grid, speckle phases and
+        reflect-or-transmit draws over the config's material tables (built once per config)."""
+        h = radar.content_hash()
+        key = (h, seed)
         if key in self._prepared:
             return self._prepared[key]
         mi = self._mi
-        sc = radar.scattering
-        directions, solid_angle, spacing = ray_grid(
-            radar.azimuth_fov_rad,
-            radar.elevation_fov_rad,
-            math.radians(radar.ray_spacing_deg),
-            seed=seed,
+        if h not in self._tables:
+            if len(self._tables) > 4:
+                self._tables.pop(next(iter(self._tables)))
+            self._tables[h] = self._material_tables(radar)
+        tables = self._tables[h]
+        # ray_grid's rays, their directions and solid angles made on the device
+        az, el, d_az, d_el = ray_angles(radar.azimuth_fov_rad, radar.elevation_fov_rad,
+                                        math.radians(radar.ray_spacing_deg), seed=seed)
+        n = len(az)
+        az_d, el_d = to_drjit(mi.Float, az, np.float32), to_drjit(mi.Float, el, np.float32)
+        dr = self._dr
+        sin_az, cos_az = dr.sincos(az_d)
+        sin_el, cos_el = dr.sincos(el_d)
+        directions = mi.Vector3f(cos_el * cos_az, cos_el * sin_az, sin_el)
+        solid_angle = cos_el * (d_az * d_el)
+        dr.eval(directions, solid_angle)
+        choice = None
+        if tables["transmits"]:
+            draws = continuation_uniforms(n, radar.max_bounces, seed)
+            choice = [to_drjit(mi.Float, row, np.float32) for row in draws]
+        prep = _Prepared(
+            directions=directions,
+            n_rays=n,
+            solid_angle=solid_angle,
+            diffuse_u=to_drjit(mi.Float, diffuse_phase_seed(n, seed), np.float32),
+            spacing_rad=math.sqrt(d_az * d_el),
+            choice_u=choice,
+            **tables,
         )
-        n = len(directions)
+        if len(self._prepared) > 8:
+            self._prepared.pop(next(iter(self._prepared)))
+        self._prepared[key] = prep
+        return prep
+
+    def _material_tables(self, radar: RadarConfig) -> dict:
+        """Per-material device tables of a config (Fresnel, roughness, lobes, transmission,
+        polarised TE/TM): the :class:`_Prepared` fields that no seed changes."""
+        mi = self._mi
+        sc = radar.scattering
         thickness = [sc.thickness_m(m) for m in self.materials]
         lut = fresnel_lut(self.materials, radar.center_frequency_hz, thickness_m=thickness)
         lut = lut.astype(np.complex64)
@@ -281,7 +316,7 @@ class RadarScene:
             alpha = to_drjit(mi.Float, alphas, np.float32)
             dir_lut = to_drjit(mi.Float, directive_lut(alphas).ravel(), np.float32)
         transmits = any(sc.transmits(m) for m in self.materials)
-        t_re = t_im = choice = None
+        t_re = t_im = None
         if transmits:
             tl = transmission_lut(
                 self.materials,
@@ -290,47 +325,35 @@ class RadarScene:
                                                                   strict=True)],
             ).astype(np.complex64)
             t_re, t_im = to_drjit(mi.Float, tl.real.ravel()), to_drjit(mi.Float, tl.imag.ravel())
-            draws = continuation_uniforms(n, radar.max_bounces, seed)
-            choice = [to_drjit(mi.Float, row, np.float32) for row in draws]
         pol_r = pol_t = None
         polarized = radar.hardware.polarization != "unpolarized"
         if polarized:
             refl, trans = polarized_luts(self.materials, radar.center_frequency_hz, thickness,
                                          [sc.transmits(m) for m in self.materials])
 
-            def tables(lut: np.ndarray) -> tuple:
-                lut = lut.astype(np.complex64)
-                return tuple(to_drjit(mi.Float, part(lut[:, :, k]).ravel())
+            def tables(table: np.ndarray) -> tuple:
+                table = table.astype(np.complex64)
+                return tuple(to_drjit(mi.Float, part(table[:, :, k]).ravel())
                              for k in (0, 1) for part in (np.real, np.imag))
 
             pol_r, pol_t = tables(refl), tables(trans)
         slant = math.radians(90.0 if radar.hardware.polarization == "horizontal" else 0.0)
-        prep = _Prepared(
-            directions=to_drjit(mi.Vector3f, directions.T, np.float32),
-            n_rays=n,
-            solid_angle=to_drjit(mi.Float, solid_angle, np.float32),
-            diffuse_u=to_drjit(mi.Float, diffuse_phase_seed(n, seed), np.float32),
-            spacing_rad=spacing,
-            lut_re=to_drjit(mi.Float, lut.real.ravel()),
-            lut_im=to_drjit(mi.Float, lut.imag.ravel()),
-            s_coef=to_drjit(mi.Float, s),
-            spec_coef=to_drjit(mi.Float, np.sqrt(1.0 - s**2), np.float32),
-            directive=directive,
-            alpha=alpha,
-            dir_lut=dir_lut,
-            transmits=transmits,
-            t_re=t_re,
-            t_im=t_im,
-            choice_u=choice,
-            polarized=polarized,
-            slant=(math.cos(slant), math.sin(slant)),
-            pol_r=pol_r,
-            pol_t=pol_t,
-        )
-        if len(self._prepared) > 8:
-            self._prepared.pop(next(iter(self._prepared)))
-        self._prepared[key] = prep
-        return prep
+        return {
+            "lut_re": to_drjit(mi.Float, lut.real.ravel()),
+            "lut_im": to_drjit(mi.Float, lut.imag.ravel()),
+            "s_coef": to_drjit(mi.Float, s),
+            "spec_coef": to_drjit(mi.Float, np.sqrt(1.0 - s**2), np.float32),
+            "directive": directive,
+            "alpha": alpha,
+            "dir_lut": dir_lut,
+            "transmits": transmits,
+            "t_re": t_re,
+            "t_im": t_im,
+            "polarized": polarized,
+            "slant": (math.cos(slant), math.sin(slant)),
+            "pol_r": pol_r,
+            "pol_t": pol_t,
+        }
 
     def _primary_rays(self, prep: _Prepared, pose: np.ndarray):
         """Rotate the cached radar-frame grid by the pose (opaque scalars: no recompilation)."""

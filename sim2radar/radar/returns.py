@@ -102,6 +102,7 @@ __all__ = [
     "fresnel_lut",
     "nyquist_window",
     "polarized_luts",
+    "ray_angles",
     "ray_grid",
     "transmission_lut",
     "transmit_probability",
@@ -334,6 +335,35 @@ def nyquist_window(dphi: np.ndarray) -> np.ndarray:
     return np.where(x < 1.0, np.cos(0.5 * math.pi * x) ** 2, 0.0)  # exactly 0 beyond pi
 
 
+def ray_angles(
+    azimuth_fov_rad: float,
+    elevation_fov_rad: float,
+    spacing_rad: float,
+    *,
+    seed: int | None = None,
+) -> tuple[np.ndarray, np.ndarray, float, float]:
+    """Azimuth and elevation of every ray of :func:`ray_grid` (same grid, same jitter).
+
+    Returns
+    -------
+    azimuth_rad, elevation_rad : (N,) float64 [rad].
+    d_az, d_el : float — the grid's cell size [rad].
+    """
+    n_az = max(1, math.ceil(azimuth_fov_rad / spacing_rad - 1e-9))
+    n_el = max(1, math.ceil(elevation_fov_rad / spacing_rad - 1e-9))
+    d_az = azimuth_fov_rad / n_az
+    d_el = elevation_fov_rad / n_el
+    az = -0.5 * azimuth_fov_rad + (np.arange(n_az) + 0.5) * d_az
+    el = -0.5 * elevation_fov_rad + (np.arange(n_el) + 0.5) * d_el
+    az_g = np.repeat(az, n_el)
+    el_g = np.tile(el, n_az)
+    if seed is not None:
+        rng = np.random.default_rng(seed)
+        az_g = az_g + (rng.random(az_g.shape) - 0.5) * d_az
+        el_g = el_g + (rng.random(el_g.shape) - 0.5) * d_el
+    return az_g, el_g, d_az, d_el
+
+
 def ray_grid(
     azimuth_fov_rad: float,
     elevation_fov_rad: float,
@@ -358,19 +388,8 @@ def ray_grid(
     solid_angle_sr : (N,) float64 — ``cos(el) d_az d_el`` per ray [sr].
     spacing_rad : float — the geometric-mean grid spacing actually used [rad].
     """
-    n_az = max(1, math.ceil(azimuth_fov_rad / spacing_rad - 1e-9))
-    n_el = max(1, math.ceil(elevation_fov_rad / spacing_rad - 1e-9))
-    d_az = azimuth_fov_rad / n_az
-    d_el = elevation_fov_rad / n_el
-    az = -0.5 * azimuth_fov_rad + (np.arange(n_az) + 0.5) * d_az
-    el = -0.5 * elevation_fov_rad + (np.arange(n_el) + 0.5) * d_el
-    az_g, el_g = np.meshgrid(az, el, indexing="ij")
-    az_g = az_g.ravel()
-    el_g = el_g.ravel()
-    if seed is not None:
-        rng = np.random.default_rng(seed)
-        az_g = az_g + (rng.random(az_g.shape) - 0.5) * d_az
-        el_g = el_g + (rng.random(el_g.shape) - 0.5) * d_el
+    az_g, el_g, d_az, d_el = ray_angles(azimuth_fov_rad, elevation_fov_rad, spacing_rad,
+                                        seed=seed)
     cos_el = np.cos(el_g)
     directions = np.stack([cos_el * np.cos(az_g), cos_el * np.sin(az_g), np.sin(el_g)], axis=1)
     solid_angle = cos_el * d_az * d_el
