@@ -90,7 +90,6 @@ from sim2radar.radar.fmcw import IFCube, tx_slots, window_weights
 __all__ = [
     "ProcessingResult",
     "VirtualGrid",
-    "azimuth_row",
     "process_if",
     "virtual_grid",
 ]
@@ -164,12 +163,6 @@ def virtual_grid(radar: RadarConfig) -> VirtualGrid:
     noise_gain = (weights**2).sum(axis=0)
     row = int(np.argmax(filled.sum(axis=0)))
     return VirtualGrid(weights=weights, filled=filled, noise_gain=noise_gain, row=row)
-
-
-def azimuth_row(radar: RadarConfig) -> VirtualGrid:
-    """:func:`virtual_grid` (the azimuth FFT runs over its ``row``); kept for callers that
-    name the azimuth row."""
-    return virtual_grid(radar)
 
 
 # -- result -------------------------------------------------------------------------------
