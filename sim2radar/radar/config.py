@@ -357,6 +357,10 @@ class SignalChainConfig(_Frozen):
         False, description="subtract each chirp's mean over its samples, per channel, before "
         "the range window (TI's rangeProcCascade, always on there)")
     doppler_window: Literal["none", "hann", "hanning", "hamming", "blackman"] = "hann"
+    doppler_clutter_removal: bool = Field(
+        False, description="subtract each range bin's mean over the chirps, per channel, after "
+        "the Doppler window (TI's DopplerProcClutterRemove, off by default there): removes what "
+        "does not move relative to the radar")
     azimuth_window: Literal["none", "hann", "hanning", "hamming", "blackman"] = "none"
     azimuth_fft_size: int = Field(256, ge=16, le=4096,
                                   description="zero-padded azimuth FFT length [bins]")

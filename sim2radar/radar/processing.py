@@ -11,7 +11,9 @@ defaults of ``module_param.m`` (the preset ``ti-mmwcas-reference`` cites each va
    (``signal.range_dc_removal``; TI: always), ``signal.range_window`` (TI: MATLAB's symmetric
    ``hanning(N)``), FFT; bin ``k`` <-> beat frequency ``k f_adc / N``, range ``k c / (2 B)``
    (TI SWRA553, range-resolution section).
-2. **Doppler FFT** across chirps with ``signal.doppler_window`` (TI: none), ``fftshift``:
+2. **Doppler FFT** across chirps with ``signal.doppler_window`` (TI: none) and, with
+   ``signal.doppler_clutter_removal`` (TI: off), each range bin's mean over the chirps
+   subtracted first; ``fftshift``:
    bin ``d`` <-> ``f_D = (d - D/2) / (N_chirps T_loop)``, radial velocity ``f_D lambda / 2``
    (positive = receding; ``T_loop = N_tx T_c``). ``doppler: integrated`` has one
    (zero-Doppler) bin.
@@ -224,9 +226,10 @@ def _front_end(cube: IFCube, radar: RadarConfig) -> _Front:
     if cube.doppler_integrated:
         return _Front(big, w_r, w_d, cube.noise_power_w, 1.0, t_loop)
     n_dop = x.shape[0]
-    big = torch.fft.fftshift(torch.fft.fft(
-        big * torch.as_tensor(w_d, device=device, dtype=torch.float32)[:, None, None, None],
-        dim=0), dim=0)
+    big = big * torch.as_tensor(w_d, device=device, dtype=torch.float32)[:, None, None, None]
+    if sig.doppler_clutter_removal:
+        big = big - big.mean(dim=0, keepdim=True)
+    big = torch.fft.fftshift(torch.fft.fft(big, dim=0), dim=0)
     f_d = (np.arange(n_dop) - n_dop // 2) / (n_dop * t_loop)              # [Hz]
     slot_s = tx_slots(radar) * radar.chirp_period_s                       # [s]
     comp = np.exp(-2j * np.pi * f_d[:, None] * slot_s[None, :])           # (D, T)

@@ -285,3 +285,16 @@ def test_gpu_frame_equals_cpu_frame(reference):
     assert len(cpu.points) == len(gpu.points)
     assert np.abs(cpu.points[:, :3] - gpu.points[:, :3]).max() < 1e-3
     assert np.abs(cpu.points[:, 3] - gpu.points[:, 3]).max() < 0.01
+
+
+def test_clutter_removal_drops_what_does_not_move_relative_to_the_radar(clean):
+    """TI's optional clutter removal (mean over chirps subtracted): a static target vanishes,
+    a moving one stays (full chirp cube)."""
+    paths = PathSet.point_targets([point(3.0, 10.0), point(4.5, -20.0)], [1.0, 1.0],
+                                  range_rate_mps=[0.0, -0.8])
+    radar = clean.with_updates(signal={"doppler_clutter_removal": True})
+    frame = simulate_signal_frame(paths, radar, seed=5)
+    assert len(near(frame.points, 4.5, -20.0, 3 * radar.range_resolution_m, 2.0))
+    assert not len(near(frame.points, 3.0, 10.0, 3 * radar.range_resolution_m, 2.0))
+    kept = simulate_signal_frame(paths, clean, seed=5)
+    assert len(near(kept.points, 3.0, 10.0, 3 * radar.range_resolution_m, 2.0))
