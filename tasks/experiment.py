@@ -76,7 +76,8 @@ class SweepContext:
     store : str — artifact store root (path or URI).
     datasets : dict — role -> {"root", "key"} (roles :data:`ROLES`).
     pretrain_config, finetune_config : dict — resolved :class:`DetectConfig` dumps.
-    intensity_match : dict — sim role -> :meth:`IntensityMatch.to_dict` applied to its frames
+    intensity_match : dict — pre-training id -> :meth:`IntensityMatch.to_dict` applied to its
+        sim frames (fitted on that pre-training's real subset)
         before pre-training (empty without intensity matching).
     eval_split, val_split : str — the real splits for the test and the learning curves.
     val_every : int — epochs between validation APs (0: none).
@@ -185,7 +186,6 @@ def prepare_sweep(
     ------
     ValueError, FileNotFoundError, DatasetError — naming the dataset, profile or field at fault.
     """
-    import numpy as np
 
     from sim2radar.experiment import (
         ABLATIONS,
@@ -195,10 +195,9 @@ def prepare_sweep(
         pretrain_key_inputs,
         run_key_inputs,
     )
-    from sim2radar.experiment.data import check_disjoint_worlds
+    from sim2radar.experiment.data import check_disjoint_worlds, fit_subset_intensity_match
     from sim2radar.experiment.profiles import ExperimentProfile
     from sim2radar.experiment.stats import DEFAULT_METRIC
-    from sim2radar.radar.intensity import fit_intensity_match
 
     if not name or not all(c.isalnum() or c in "-_." for c in name):
         raise ValueError(f"sweep name {name!r}: use letters, digits, '-', '_' or '.'")
@@ -240,27 +239,24 @@ def prepare_sweep(
         pre_cfg = pre_cfg.with_updates(runtime={"device": device})
         ft_cfg = ft_cfg.with_updates(runtime={"device": device})
     nfeat, classes = ft_cfg.model.num_point_features, ft_cfg.model.class_names
+    pretrain_dump, ft_dump = pre_cfg.model_dump(mode="json"), ft_cfg.model_dump(mode="json")
+    pretrains, runs = plan_sweep(prof, real_ds.splits[prof.train_split], conditions)
+    # intensity matching: each pre-training's sim frames mapped onto the intensities of its
+    # runs' own real fine-tuning subset (plan.PretrainSpec.real_ids)
     matches: dict[str, dict] = {}
     if prof.intensity_matching and nfeat > 3:
         real_train = real_ds.frames(real_ds.splits[prof.train_split], nfeat, classes)
-        target = np.concatenate([f.points[:, 3] for f in real_train])
-        for role, ds in domains.items():
-            if role == "real":
-                continue
-            source = np.concatenate([f.points[:, 3] for f in ds.frames(ds.ids(), nfeat,
-                                                                        classes)])
-            matches[role] = fit_intensity_match(source, target).to_dict()
-            matches[role]["fitted_on"] = (f"{len(real_train)} frames of the real "
-                                          f"{prof.train_split!r} split")
-
-    pretrain_dump, ft_dump = pre_cfg.model_dump(mode="json"), ft_cfg.model_dump(mode="json")
-    pretrains, runs = plan_sweep(prof, real_ds.splits[prof.train_split], conditions)
+        sims = {role: ds.frames(ds.ids(), nfeat, classes) for role, ds in domains.items()
+                if role != "real" and any(p.sim_role == role for p in pretrains)}
+        for p in pretrains:
+            matches[p.name] = fit_subset_intensity_match(sims[p.sim_role], real_train,
+                                                         p.real_ids).to_dict()
     pre_out, pre_key = [], {}
     for p in pretrains:
         key = content_key(
             stage="experiment_pretrain", stage_version=EXPERIMENT_STAGE_VERSION,
             inputs={"sim": domains[p.sim_role].key},
-            config={**pretrain_key_inputs(p, pretrain_dump, matches.get(p.sim_role)),
+            config={**pretrain_key_inputs(p, pretrain_dump, matches.get(p.name)),
                     "code": _code_version()})
         pre_key[p.name] = key
         pre_out.append({**p.to_dict(), "id": p.name, "key": key})
@@ -315,8 +311,8 @@ def run_pretraining(ctx: SweepContext | dict, spec: dict[str, Any]) -> dict[str,
     cfg = DetectConfig.model_validate(ctx.pretrain_config)
     sim = open_domain(ctx.datasets[role]["root"], role)
     frames = _load(ctx, role, sim.ids(), cfg)
-    if role in ctx.intensity_match:
-        frames = with_intensity(frames, IntensityMatch.from_dict(ctx.intensity_match[role]))
+    if spec["id"] in ctx.intensity_match:
+        frames = with_intensity(frames, IntensityMatch.from_dict(ctx.intensity_match[spec["id"]]))
     out = Path(ctx.sweep_dir) / "pretrain" / spec["key"]
     ckpt = pretrain_encoder(cfg, frames, out, seed=int(spec["seed"]), epochs=int(spec["epochs"]),
                             device=ctx.device)

@@ -15,9 +15,13 @@ from pathlib import Path
 import numpy as np
 
 from sim2radar.boxes import points_in_boxes
-from sim2radar.datasets.openpcdet import Frame, OpenPCDetDataset, write_dataset
+from sim2radar.datasets.openpcdet import Frame, OpenPCDetDataset, write_dataset, write_metadata
 
-__all__ = ["make_door_frames", "write_synthetic_dataset"]
+__all__ = ["SYNTHETIC_DOMAIN", "make_door_frames", "write_synthetic_dataset"]
+
+#: ``domain`` that ``sim2radar detect-demo-data`` declares in its ``dataset.json``: these
+#: frames are neither measured nor simulated radar, and a sweep must not call them either
+SYNTHETIC_DOMAIN = "synthetic (detect-demo-data)"
 
 
 def _door_points(rng, box: np.ndarray, n: int) -> np.ndarray:
@@ -123,12 +127,25 @@ def write_synthetic_dataset(
     seed: int = 0,
     points_per_frame: int = 2000,
     num_point_features: int = 4,
+    domain: str = SYNTHETIC_DOMAIN,
 ) -> OpenPCDetDataset:
-    """Write a synthetic door dataset in OpenPCDet's layout with train/val/test splits."""
+    """Write a synthetic door dataset in OpenPCDet's layout with train/val/test splits, and a
+    ``dataset.json`` that declares its ``domain`` (default :data:`SYNTHETIC_DOMAIN`), the
+    generator and its settings (so a sweep or gap report reads the frames as what they are,
+    not as measured radar)."""
     n = n_train + n_val + n_test
     frames = make_door_frames(n, seed=seed, points_per_frame=points_per_frame,
                               num_point_features=num_point_features)
     ids = [f.frame_id for f in frames]
     splits = {"train": ids[:n_train], "val": ids[n_train:n_train + n_val],
               "test": ids[n_train + n_val:]}
-    return write_dataset(root, frames, splits)
+    ds = write_dataset(root, frames, splits)
+    write_metadata(root, {
+        "domain": domain,
+        "generator": "sim2radar.datasets.synthetic.make_door_frames (corridor walls + doors; "
+                     "not a radar simulation)",
+        "seed": int(seed), "points_per_frame": int(points_per_frame),
+        "num_point_features": int(num_point_features),
+        "splits": {name: len(v) for name, v in splits.items()},
+    })
+    return ds

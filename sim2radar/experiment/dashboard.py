@@ -24,6 +24,13 @@ What the sweep folder holds (written by ``flows/run_experiment.py`` and ``sim2ra
 Plot traces carry ``meta = {"role": ..., "condition": ...}``; the count rule the browser test
 checks: the AP figure has exactly one ``"mean"`` trace and one ``"trials"`` trace per condition
 of :func:`dashboard_data`'s ``conditions`` (empty where a condition has no finished run yet).
+The difference figure adds, per non-baseline condition, an ``"mde"`` trace (the minimum
+detectable effect per fraction) and one ``"paper-delta"`` trace (the paper's Table 1 Δ).
+
+Every number leads back to its run: the runs table has each run's folder relative to the sweep
+(``run_folder``), the trial points' hover names it, and the page filters and groups the runs
+by condition, fraction and trial and downloads the rows it shows as CSV or JSON (built in the
+page: no request).
 """
 
 from __future__ import annotations
@@ -35,6 +42,7 @@ import ipaddress
 import json
 import math
 import os
+import posixpath
 import threading
 from collections.abc import Mapping, Sequence
 from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
@@ -42,12 +50,19 @@ from pathlib import Path
 from typing import Any
 
 from sim2radar.experiment.profiles import BASELINE, CONDITIONS
-from sim2radar.experiment.report import condition_label, results_table_rows
-from sim2radar.experiment.stats import AP_METRICS, DEFAULT_METRIC, sweep_stats
+from sim2radar.experiment.report import (
+    UNDECLARED,
+    condition_label,
+    detectability_sentences,
+    domain_kind,
+    results_table_rows,
+)
+from sim2radar.experiment.stats import AP_METRICS, DEFAULT_METRIC, paper_delta, sweep_stats
 
 __all__ = [
     "FILES",
     "POLL_S",
+    "run_folder",
     "DashboardServer",
     "SweepData",
     "SweepFolderError",
@@ -354,9 +369,11 @@ def _dodge(i: int, k: int) -> float:
     return 1.0 + _DODGE * (i - (k - 1) / 2)
 
 
-def _ap_figure(stats: Mapping[str, Any], conds: Sequence[str], metric: str) -> dict[str, Any]:
+def _ap_figure(stats: Mapping[str, Any], conds: Sequence[str], metric: str,
+               folders: Mapping[tuple[str, float, int], str] | None = None) -> dict[str, Any]:
     """AP vs real-data fraction (paper Figure 4): per condition a ``mean`` trace (mean ± std
-    error bars) and a ``trials`` trace (every trial's value)."""
+    error bars) and a ``trials`` trace (every trial's value; its hover names the run folder,
+    ``folders``: (condition, fraction, trial) -> folder relative to the sweep)."""
     import plotly.graph_objects as go
 
     cells = {(c["condition"], float(c["fraction"])): c for c in stats.get("cells", [])}
@@ -373,7 +390,7 @@ def _ap_figure(stats: Mapping[str, Any], conds: Sequence[str], metric: str) -> d
             for t, v in zip(cell.get("trials", []), cell.get("values", []), strict=False):
                 tx.append(100 * f * dx)
                 ty.append(v)
-                tinfo.append([_pct(f), t])
+                tinfo.append([_pct(f), t, (folders or {}).get((cond, f, int(t)), "—")])
             if cell.get("mean") is None:
                 continue
             xs.append(100 * f * dx)
@@ -392,7 +409,8 @@ def _ap_figure(stats: Mapping[str, Any], conds: Sequence[str], metric: str) -> d
                            "%{customdata[2]} trial(s), %{customdata[3]} failed<br>"
                            "%{customdata[4]} real frames<extra></extra>")))
         fig.add_trace(_trial_markers(tx, ty, tinfo, cond, label, color, name=f"{label}: trials",
-                                     role="trials", value="%{y:.2f}"))
+                                     role="trials", value="%{y:.2f}<br>run folder "
+                                                          "%{customdata[2]}"))
     fig.update_layout(
         template=_PLOTLY_TEMPLATE, height=440, margin={"l": 60, "r": 20, "t": 50, "b": 55},
         title={"text": f"{_metric_label(metric)} vs real data (mean ± std, every trial)"},
@@ -407,10 +425,13 @@ def _ap_figure(stats: Mapping[str, Any], conds: Sequence[str], metric: str) -> d
 def _delta_figure(stats: Mapping[str, Any], conds: Sequence[str], metric: str,
                   ) -> dict[str, Any]:
     """Paired difference to the baseline per fraction: per non-baseline condition a ``delta``
-    trace (mean difference with its Student-t interval) and a ``delta-trials`` trace."""
+    trace (mean difference with its Student-t interval), a ``delta-trials`` trace and an
+    ``mde`` trace (the minimum detectable effect at 80 % power: a true Δ below it is more
+    likely than not to be missed); one ``paper-delta`` trace (the paper's Table 1 Δ)."""
     import plotly.graph_objects as go
 
     level = f"{100 * (1 - float(stats.get('alpha', 0.05))):g} %"
+    power = float((stats.get("power") or {}).get("power", 0.8))
     fractions = [float(f) for f in stats.get("fractions", [])]
     others = [c for c in conds if c != BASELINE]
     fig = go.Figure()
@@ -420,12 +441,18 @@ def _delta_figure(stats: Mapping[str, Any], conds: Sequence[str], metric: str,
         comps = [c for c in stats.get("comparisons", []) if c["condition"] == cond]
         xs, ys, up, down, info = [], [], [], [], []
         tx, ty, tinfo = [], [], []
+        mx, my, minfo = [], [], []
         for comp in comps:
             f = float(comp["fraction"])
             for t, d in zip(comp.get("trials", []), comp.get("differences", []), strict=False):
                 tx.append(100 * f * dx)
                 ty.append(d)
                 tinfo.append([_pct(f), t])
+            mde = _num(comp.get("mde"))
+            if mde is not None:
+                mx.append(100 * f)
+                my.append(mde)
+                minfo.append([_pct(f), comp.get("n_pairs"), comp.get("mde_alpha")])
             m = comp.get("mean_diff")
             if m is None:
                 continue
@@ -438,9 +465,14 @@ def _delta_figure(stats: Mapping[str, Any], conds: Sequence[str], metric: str,
             ci = "n/a" if lo is None else f"[{lo:+.2f}, {hi:+.2f}]"
             boot = "n/a" if b_lo is None else f"[{b_lo:+.2f}, {b_hi:+.2f}]"
             p = comp.get("p_holm")
+            share = comp.get("p_improved")
+            s_lo, s_hi = (comp.get("p_improved_ci") or [None, None])[:2]
             info.append([_pct(f), ci, boot, "n/a" if p is None else f"{p:.3g}",
                          f"{comp.get('k_improved', 0)}/{comp.get('n_pairs', 0)}",
-                         comp.get("verdict", "")])
+                         comp.get("verdict", ""),
+                         "n/a" if mde is None else f"{mde:.2f}",
+                         "n/a" if share is None else
+                         f"{100 * share:.0f} % [{100 * s_lo:.0f}, {100 * s_hi:.0f}]"])
         fig.add_trace(go.Scatter(
             x=xs, y=ys, mode="lines+markers", name=f"{label} − {condition_label(BASELINE)}",
             legendgroup=cond, line={"color": color, "width": 2.5},
@@ -450,16 +482,36 @@ def _delta_figure(stats: Mapping[str, Any], conds: Sequence[str], metric: str,
             customdata=info, meta={"role": "delta", "condition": cond},
             hovertemplate=(f"<b>{html.escape(label)}</b> %{{customdata[0]}}<br>"
                            f"Δ %{{y:+.2f}}, {level} t-interval %{{customdata[1]}}<br>"
+                           f"MDE ({100 * power:g} % power) %{{customdata[6]}}<br>"
                            "bootstrap (reference) %{customdata[2]}<br>"
-                           "p (Holm) %{customdata[3]}, improved in %{customdata[4]}<br>"
+                           "p (Holm) %{customdata[3]}, improved in %{customdata[4]} "
+                           "(P %{customdata[7]})<br>"
                            "%{customdata[5]}<extra></extra>")))
         fig.add_trace(_trial_markers(tx, ty, tinfo, cond, label, color,
                                      name=f"{label}: per-trial Δ", role="delta-trials",
                                      value="Δ %{y:+.2f}"))
+        fig.add_trace(go.Scatter(
+            x=mx, y=my, mode="lines+markers", name=f"{label}: MDE ({100 * power:g} % power)",
+            legendgroup=cond, line={"color": color, "width": 1.2, "dash": "dash"},
+            marker={"color": color, "size": 6, "symbol": "triangle-up-open"},
+            customdata=minfo, meta={"role": "mde", "condition": cond},
+            hovertemplate=(f"{html.escape(label)} %{{customdata[0]}}: smallest Δ detectable "
+                           f"with {100 * power:g} % power %{{y:.2f}}<br>(%{{customdata[1]}} "
+                           "pairs, level %{customdata[2]:.3g})<extra></extra>")))
+    if others:
+        px = [100 * f for f in fractions if paper_delta(f) is not None]
+        py = [paper_delta(f) for f in fractions if paper_delta(f) is not None]
+        fig.add_trace(go.Scatter(
+            x=px, y=py, mode="markers", name="paper Table 1 Δ (Sim Pretrain)",
+            marker={"color": "#222", "size": 10, "symbol": "x-thin-open",
+                    "line": {"width": 2, "color": "#222"}},
+            meta={"role": "paper-delta", "condition": None},
+            hovertemplate="paper Table 1: Δ %{y:+.1f} at %{x:g} %<extra></extra>"))
     fig.update_layout(
-        template=_PLOTLY_TEMPLATE, height=400, margin={"l": 60, "r": 20, "t": 50, "b": 55},
+        template=_PLOTLY_TEMPLATE, height=420, margin={"l": 60, "r": 20, "t": 50, "b": 55},
         title={"text": f"Δ {_metric_label(metric)} vs baseline, paired by trial "
-                       f"(mean with its {level} t-interval)"},
+                       f"(mean with its {level} t-interval; dashed: MDE at "
+                       f"{100 * power:g} % power)"},
         xaxis=_fraction_axis(fractions), yaxis={"title": {"text": "Δ AP [points]"}},
         legend={"orientation": "h", "y": -0.2}, uirevision="keep")
     if not others:
@@ -538,8 +590,9 @@ def _curves_figure(runs: Sequence[Mapping[str, Any]], conds: Sequence[str]) -> d
 
 
 #: columns of the per-run table: (key, heading, type); the page formats and sorts by type
+#: (``condition``: the registered name, shown by its label; ``run_folder`` is computed)
 _RUN_COLUMNS: tuple[tuple[str, str, str], ...] = (
-    ("condition", "condition", "text"),
+    ("condition", "condition", "condition"),
     ("fraction", "real data", "pct"),
     ("trial", "trial", "int"),
     ("seed", "seed", "int"),
@@ -554,20 +607,59 @@ _RUN_COLUMNS: tuple[tuple[str, str, str], ...] = (
     ("status", "status", "text"),
     ("error", "error", "text"),
     ("finished_at", "finished (UTC)", "text"),
+    ("run_folder", "run folder", "text"),
     ("run_key", "run key", "key"),
     ("checkpoint", "checkpoint", "text"),
 )
 
 
-def _runs_table(runs: Sequence[Mapping[str, Any]], metric: str) -> dict[str, Any]:
+def run_folder(run: Mapping[str, Any], sweep_name: str) -> str | None:
+    """The folder of a run relative to its sweep folder (POSIX separators), e.g.
+    ``runs/<run_key>``.
+
+    From the row's ``checkpoint`` (written relative to the sweep's parent folder,
+    ``<sweep>/runs/<key>/last.pt``; a run found finished in the store keeps the checkpoint of
+    the sweep that trained it, e.g. ``../other/runs/<key>``), else ``runs/<run_key>`` (where
+    the sweep flow trains every run, a failed one included); None without either.
+    """
+    ckpt = str(run.get("checkpoint") or "").replace("\\", "/")
+    if ckpt:
+        parent = posixpath.dirname(ckpt)
+        if posixpath.isabs(parent):
+            return parent  # absolute: cannot be made relative without the sweep's own path
+        return posixpath.relpath(parent, sweep_name or ".")
+    key = run.get("run_key")
+    return f"runs/{key}" if key else None
+
+
+def _run_folders(runs: Sequence[Mapping[str, Any]], sweep_name: str,
+                 ) -> dict[tuple[str, float, int], str]:
+    """(condition, fraction, trial) -> run folder of the run whose value the statistics use (a
+    finished one over a failed attempt of the same cell)."""
+    out: dict[tuple[str, float, int], str] = {}
+    for r in runs:
+        if r.get("condition") is None or r.get("fraction") is None or r.get("trial") is None:
+            continue
+        key = (str(r["condition"]), float(r["fraction"]), int(r["trial"]))
+        folder = run_folder(r, sweep_name)
+        if folder and (key not in out or r.get("status") != "failed"):
+            out[key] = folder
+    return out
+
+
+def _runs_table(runs: Sequence[Mapping[str, Any]], metric: str,
+                sweep_name: str) -> dict[str, Any]:
     cols = list(_RUN_COLUMNS)
     ap_start = next(i for i, c in enumerate(cols) if c[2] == "ap")
     head = next(i for i, c in enumerate(cols) if c[0] == metric)
     cols.insert(ap_start, cols.pop(head))  # the sweep's metric first among the APs
-    rows = [[_clean(r.get(k)) if k != "condition" else condition_label(str(r.get(k)))
+    rows = [[run_folder(r, sweep_name) if k == "run_folder" else _clean(r.get(k))
              for k, _, _ in cols] for r in runs]
+    keys = [c[0] for c in cols]
     return {"columns": [{"key": k, "label": label, "type": t} for k, label, t in cols],
-            "rows": rows, "status_column": [c[0] for c in cols].index("status")}
+            "rows": rows, "status_column": keys.index("status"),
+            "metric_column": keys.index(metric),
+            "group_columns": [keys.index(k) for k in ("condition", "fraction", "trial")]}
 
 
 def _banner(sweep: Mapping[str, Any] | None) -> dict[str, str]:
@@ -576,14 +668,21 @@ def _banner(sweep: Mapping[str, Any] | None) -> dict[str, str]:
                 "page cannot say whether the 'real' data is measured radar or a proxy. Treat "
                 "the results as unverified."}
     real = (sweep.get("datasets") or {}).get("real") or {}
-    domain = str(sweep.get("real_domain") or real.get("domain") or "measured")
-    proxy = sweep.get("real_is_proxy")
-    if proxy is None:
-        proxy = domain.strip().lower().startswith("proxy")
-    if proxy:
+    domain = str(sweep.get("real_domain") or real.get("domain") or UNDECLARED)
+    kind = domain_kind(domain, sweep.get("real_is_proxy"))
+    if kind == "proxy":
         return {"kind": "proxy", "text": f"PROXY real domain — {domain}. The 'real' radar of "
                 "this sweep is a stand-in for measured radar (the reference radar simulation). "
                 "Its results are not claims about measured radar."}
+    if kind == "undeclared":
+        return {"kind": "undeclared", "text": "Real domain undeclared: the real dataset's "
+                "dataset.json declares no domain, so this page cannot say whether it is "
+                "measured radar. Its results are not claims about measured radar until it is "
+                "declared."}
+    if kind == "declared":
+        return {"kind": "declared", "text": f"Real domain: {domain} (as its dataset.json "
+                "declares) — not measured radar. Its results are not claims about measured "
+                "radar."}
     return {"kind": "measured", "text": f"Real domain: {domain} (measured radar)."}
 
 
@@ -608,14 +707,24 @@ def _progress(data: SweepData, conds: Sequence[str]) -> dict[str, Any]:
             "updated_at": prog.get("updated_at"), "state": state}
 
 
+#: summary columns shown left-aligned (text); every other column is a number
+_TEXT_SUMMARY_COLUMNS = ("condition", "real data", "verdict")
+
+
 def _summary_table(stats: Mapping[str, Any]) -> dict[str, Any]:
-    """Table 1 (paper) as strings: one row per (non-baseline condition, fraction)."""
+    """Table 1 (paper) as strings: one row per (non-baseline condition, fraction), with the
+    MDE beside Δ, P(improved) beside k/n (:func:`~.report.results_table_rows`); ``numeric``
+    flags the right-aligned columns; ``sentences`` says what the sweep could and could not
+    have detected (:func:`~.report.detectability_sentences`)."""
     rows = results_table_rows(stats)
+    sentences = detectability_sentences(stats)
     if not rows:
-        return {"columns": [], "rows": []}
+        return {"columns": [], "rows": [], "numeric": [], "sentences": sentences}
     cols = list(rows[0])
     return {"columns": cols, "rows": [[condition_label(r[c]) if c == "condition" else r[c]
-                                       for c in cols] for r in rows]}
+                                       for c in cols] for r in rows],
+            "numeric": [c not in _TEXT_SUMMARY_COLUMNS for c in cols],
+            "sentences": sentences}
 
 
 def _fmt(v: Any, spec: str = ",.1f") -> str:
@@ -763,13 +872,17 @@ def dashboard_data(sweep: SweepData) -> dict[str, Any]:
     Returns
     -------
     dict with keys ``name``, ``folder``, ``metric``, ``metric_label``, ``created_at``,
-    ``profile``, ``banner`` (``{"kind": "proxy" | "measured" | "unknown", "text"}``),
+    ``profile``, ``banner`` (``{"kind": "proxy" | "measured" | "undeclared" | "declared" |
+    "unknown", "text"}``),
     ``progress`` (``finished``, ``total``, ``ok``, ``skipped``, ``failed``, ``running``,
     ``updated_at``, ``state``), ``conditions`` (``[{"name", "label", "color"}]``),
     ``fractions``, ``figures`` (Plotly ``{"data", "layout"}`` of ``ap``, ``delta``, ``curves``;
     trace ``meta.role`` ``mean``/``trials``, ``delta``/``delta-trials``, ``loss``/``val_ap``),
-    ``summary`` (Table 1: ``columns``, ``rows`` of strings), ``notes``, ``stats_source``,
-    ``runs`` (``columns`` ``[{"key", "label", "type"}]``, ``rows``: one list per run),
+    ``summary`` (Table 1: ``columns``, ``rows`` of strings with the MDE and P(improved) per
+    cell, ``numeric``, ``sentences``: what the sweep could and could not detect), ``notes``,
+    ``stats_source``, ``runs`` (``columns`` ``[{"key", "label", "type"}]``, ``rows``: one
+    list per run with its ``run_folder`` relative to the sweep; ``status_column``,
+    ``metric_column``, ``group_columns``: indices of condition, fraction, trial),
     ``datasets``, ``generation``, ``gap`` (None without ``gap/gap.json``), ``provenance``
     (None without ``sweep.json``), ``warnings``, ``error`` (None; set by the live server when
     the folder cannot be read).
@@ -785,8 +898,10 @@ def dashboard_data(sweep: SweepData) -> dict[str, Any]:
     metric = str(stats.get("metric") or sweep_doc.get("metric") or DEFAULT_METRIC)
     profile = sweep_doc.get("profile") or {}
     gen = _generation(sweep)
+    name = str(sweep_doc.get("name") or sweep.folder.name)
+    folders = _run_folders(sweep.runs, sweep.folder.name)
     data = {
-        "name": str(sweep_doc.get("name") or sweep.folder.name),
+        "name": name,
         "folder": str(sweep.folder),
         "metric": metric,
         "metric_label": _metric_label(metric),
@@ -797,13 +912,13 @@ def dashboard_data(sweep: SweepData) -> dict[str, Any]:
         "conditions": [{"name": c, "label": condition_label(c), "color": _color(c, conds)}
                        for c in conds],
         "fractions": [float(f) for f in stats.get("fractions", [])],
-        "figures": {"ap": _ap_figure(stats, conds, metric),
+        "figures": {"ap": _ap_figure(stats, conds, metric, folders),
                     "delta": _delta_figure(stats, conds, metric),
                     "curves": _curves_figure(sweep.runs, conds)},
         "summary": _summary_table(stats),
         "notes": [str(n) for n in stats.get("notes", [])],
         "stats_source": sweep.stats_source,
-        "runs": _runs_table(sweep.runs, metric),
+        "runs": _runs_table(sweep.runs, metric, sweep.folder.name),
         "datasets": gen["datasets"],
         "generation": gen["generation"],
         "gap": _gap(sweep),
@@ -840,7 +955,8 @@ h1{font-size:22px;margin:4px 0}h2{font-size:17px;margin:26px 0 8px;border-bottom
 .sub{color:#555}.muted{color:#777}
 #banner{margin:12px 0;padding:12px 16px;border-radius:6px;font-weight:600}
 #banner.proxy{background:#fff3cd;border:2px solid #e0a800;color:#5c4400;font-size:15px}
-#banner.unknown{background:#fde2e1;border:2px solid #d9534f;color:#6b1a17}
+#banner.unknown,#banner.undeclared{background:#fde2e1;border:2px solid #d9534f;color:#6b1a17}
+#banner.declared{background:#fff3cd;border:2px solid #e0a800;color:#5c4400}
 #banner.measured{background:#e7f4e8;border:1px solid #7bbf7f;color:#1e4620;font-weight:500}
 #error{display:none;margin:8px 0;padding:10px 14px;background:#fde2e1;border:1px solid #d9534f;
  border-radius:6px;color:#6b1a17}
@@ -867,6 +983,11 @@ progress{width:320px;height:14px;vertical-align:middle}
 pre{max-height:360px;overflow:auto;background:#f6f8fa;padding:8px;font-size:12px}
 details{margin:6px 0}
 ul.notes li{margin:3px 0}
+#power-summary{margin:8px 0;padding:8px 14px;background:#eef4fb;border-left:4px solid #1f77b4}
+#power-summary p{margin:4px 0}
+#runs-controls{display:flex;flex-wrap:wrap;gap:12px;align-items:center;margin:6px 0}
+#runs-controls label{font-size:13px}
+tr.group td{background:#eef1f4;font-weight:600;white-space:normal}
 """
 
 # The page's script: render(data) fills every section from the JSON document; the live page
@@ -875,7 +996,8 @@ _JS = r"""
 (function () {
 "use strict";
 const CONFIG = {responsive: true, displaylogo: false};
-const state = {data: null, text: null, sortCol: null, sortDir: 1, renders: 0};
+const state = {data: null, text: null, sortCol: null, sortDir: 1, renders: 0,
+  filter: {}, groupBy: "", shown: []};
 window.dashboard = state;
 const $ = (id) => document.getElementById(id);
 function esc(v) {
@@ -892,10 +1014,15 @@ function fmt(v, type) {
     case "seconds": return v >= 3600 ? (v / 3600).toFixed(2) + " h" :
       v >= 60 ? (v / 60).toFixed(1) + " min" : Number(v).toFixed(1) + " s";
     case "key": return String(v).slice(0, 12);
+    case "condition": return label(v);
     default: return String(v);
   }
 }
-function table(columns, rows, numeric) {
+function label(name) {
+  const c = (state.data.conditions || []).find((x) => x.name === name);
+  return c ? c.label : String(name);
+}
+function table(columns, rows, numeric) {  // numeric: (column index) -> right-align
   const head = "<tr>" + columns.map((c) => "<th>" + esc(c) + "</th>").join("") + "</tr>";
   const body = rows.map((r) => "<tr>" + r.map((v, i) =>
     "<td" + (numeric && numeric(i) ? " class=num" : "") + ">" + esc(v === null ||
@@ -910,31 +1037,109 @@ function compare(a, b, type) {
   const na = a === null || a === undefined || a === "", nb = b === null || b === undefined ||
     b === "";
   if (na || nb) return na && nb ? 0 : na ? 1 : -1;   // empty cells last, either direction
-  if (type === "text" || type === "key") return state.sortDir * String(a).localeCompare(String(b));
+  if (type === "text" || type === "key" || type === "condition")
+    return state.sortDir * String(a).localeCompare(String(b));
   return state.sortDir * (a - b);
+}
+// the rows the filters let through, sorted, in group order when grouped
+function visibleRuns() {
+  const runs = state.data.runs, cols = runs.columns;
+  let rows = runs.rows.filter((r) => runs.group_columns.every((i) => {
+    const want = state.filter[cols[i].key];
+    return want === undefined || want === "" || String(r[i]) === want;
+  }));
+  if (state.sortCol !== null && state.sortCol < cols.length) {
+    const i = state.sortCol, t = cols[i].type;
+    rows = rows.slice().sort((a, b) => compare(a[i], b[i], t));
+  }
+  const g = cols.findIndex((c) => c.key === state.groupBy);
+  if (g >= 0) {  // stable: keeps the sort order within each group
+    const keys = [...new Set(rows.map((r) => String(r[g])))].sort((a, b) =>
+      cols[g].type === "condition" || cols[g].type === "text" ? a.localeCompare(b) : a - b);
+    rows = keys.flatMap((k) => rows.filter((r) => String(r[g]) === k));
+  }
+  return {rows: rows, group: g};
+}
+function renderControls() {
+  const runs = state.data.runs, cols = runs.columns;
+  let out = "";
+  for (const i of runs.group_columns) {
+    const c = cols[i], cur = state.filter[c.key] || "";
+    const values = [...new Set(runs.rows.map((r) => r[i]).filter((v) => v !== null))]
+      .sort((a, b) => (typeof a === "number" ? a - b : String(a).localeCompare(String(b))));
+    out += "<label>" + esc(c.label) + " <select id='filter-" + esc(c.key) + "' data-key='" +
+      esc(c.key) + "'><option value=''>all</option>" + values.map((v) => "<option value='" +
+      esc(v) + "'" + (String(v) === cur ? " selected" : "") + ">" + esc(fmt(v, c.type)) +
+      "</option>").join("") + "</select></label>";
+  }
+  out += "<label>group by <select id='group-by'><option value=''>none</option>" +
+    runs.group_columns.map((i) => "<option value='" + esc(cols[i].key) + "'" +
+    (cols[i].key === state.groupBy ? " selected" : "") + ">" + esc(cols[i].label) +
+    "</option>").join("") + "</select></label>" +
+    "<button type=button id='download-csv'>download CSV</button>" +
+    "<button type=button id='download-json'>download JSON</button>" +
+    "<span class=muted id='runs-shown'></span>";
+  $("runs-controls").innerHTML = out;
 }
 function renderRuns() {
   const runs = state.data.runs, cols = runs.columns;
   const head = cols.map((c, i) => "<th data-col=" + i + " title='sort by " + esc(c.label) +
     "' aria-sort=" + (state.sortCol === i ? (state.sortDir > 0 ? "ascending" : "descending") :
     "none") + ">" + esc(c.label) + "</th>").join("");
-  let rows = runs.rows.slice();
-  if (state.sortCol !== null && state.sortCol < cols.length) {
-    const i = state.sortCol, t = cols[i].type;
-    rows.sort((a, b) => compare(a[i], b[i], t));
+  const vis = visibleRuns(), rows = vis.rows;
+  state.shown = rows;
+  const statusCol = runs.status_column, metricCol = runs.metric_column;
+  let body = "", last = null;
+  for (const r of rows) {
+    if (vis.group >= 0 && String(r[vis.group]) !== last) {
+      last = String(r[vis.group]);
+      const members = rows.filter((x) => String(x[vis.group]) === last);
+      const vals = members.map((x) => x[metricCol]).filter((v) => v !== null);
+      const mean = vals.length ? vals.reduce((a, b) => a + b, 0) / vals.length : null;
+      body += "<tr class=group><td colspan=" + cols.length + ">" +
+        esc(cols[vis.group].label) + " " + esc(fmt(r[vis.group], cols[vis.group].type)) +
+        " · " + members.length + " run(s) · mean " + esc(cols[metricCol].label) + " " +
+        (mean === null ? "—" : mean.toFixed(2)) + "</td></tr>";
+    }
+    body += "<tr class='run" + (r[statusCol] === "failed" ? " failed" : "") + "'>" +
+      r.map((v, i) => {
+        const t = cols[i].type, title = t === "key" && v ? " title='" + esc(v) + "'" : "";
+        const cls = cols[i].key === "error" ? " class=err" : (t !== "text" && t !== "key" &&
+          t !== "condition" ? " class=num" : "");
+        return "<td" + cls + title + ">" + esc(fmt(v, t)) + "</td>";
+      }).join("") + "</tr>";
   }
-  const statusCol = runs.status_column;
-  const body = rows.map((r) => "<tr class='run" + (r[statusCol] === "failed" ? " failed" : "") +
-    "'>" + r.map((v, i) => {
-      const t = cols[i].type, title = t === "key" && v ? " title='" + esc(v) + "'" : "";
-      const cls = cols[i].key === "error" ? " class=err" : (t !== "text" && t !== "key" ?
-        " class=num" : "");
-      return "<td" + cls + title + ">" + esc(fmt(v, t)) + "</td>";
-    }).join("") + "</tr>").join("");
   $("runs-table").innerHTML = "<thead><tr>" + head + "</tr></thead><tbody>" + body +
     "</tbody>";
   $("runs-empty").style.display = rows.length ? "none" : "block";
+  const shown = $("runs-shown");
+  if (shown) shown.textContent = rows.length + " of " + runs.rows.length + " runs shown";
 }
+// downloads of the rows shown (raw values, every column), built here: the page fetches nothing
+function csvCell(v, type) {
+  if (v === null || v === undefined) return "";
+  let s = typeof v === "object" ? JSON.stringify(v) : String(v);
+  if (type === "text" && /^[=+\-@\t\r]/.test(s)) s = "'" + s;  // no formulas in spreadsheets
+  return /[",\r\n]/.test(s) ? '"' + s.replace(/"/g, '""') + '"' : s;
+}
+function runsCsv(rows) {
+  const cols = state.data.runs.columns;
+  return [cols.map((c) => csvCell(c.key, "key")).join(",")].concat(rows.map((r) =>
+    r.map((v, i) => csvCell(v, cols[i].type)).join(","))).join("\r\n") + "\r\n";
+}
+function runsJson(rows) {
+  const cols = state.data.runs.columns;
+  return JSON.stringify(rows.map((r) => Object.fromEntries(cols.map((c, i) => [c.key, r[i]]))),
+    null, 1);
+}
+function download(text, type, ext) {
+  const url = URL.createObjectURL(new Blob([text], {type: type}));
+  const a = document.createElement("a");
+  a.href = url; a.download = "sweep-" + state.data.name + "-runs." + ext;
+  document.body.appendChild(a); a.click(); a.remove();
+  setTimeout(() => URL.revokeObjectURL(url), 1000);
+}
+window.dashboardExport = {csv: () => runsCsv(state.shown), json: () => runsJson(state.shown)};
 function renderProgress(p) {
   $("run-count").textContent = p.finished;
   $("run-total").textContent = p.total;
@@ -1017,10 +1222,13 @@ function render(d) {
   plot("plot-delta", d.figures.delta);
   plot("plot-curves", d.figures.curves);
   $("summary").innerHTML = d.summary.rows.length ? table(d.summary.columns, d.summary.rows,
-    (i) => i > 1 && i !== d.summary.columns.length - 2) :
-    "<p class=muted>No comparison yet.</p>";
+    (i) => (d.summary.numeric || [])[i]) : "<p class=muted>No comparison yet.</p>";
+  const sentences = d.summary.sentences || [];
+  $("power-summary").innerHTML = sentences.map((x) => "<p>" + esc(x) + "</p>").join("");
+  $("power-summary").style.display = sentences.length ? "block" : "none";
   $("notes").innerHTML = d.notes.map((n) => "<li>" + esc(n) + "</li>").join("");
   $("stats-source").textContent = "statistics: " + d.stats_source;
+  renderControls();
   renderRuns();
   renderDatasets(d);
   renderGap(d.gap);
@@ -1029,6 +1237,17 @@ function render(d) {
   $("warnings-section").style.display = d.warnings.length ? "block" : "none";
   state.renders += 1;
 }
+$("runs-controls").addEventListener("change", (e) => {
+  const el = e.target;
+  if (el.id === "group-by") state.groupBy = el.value;
+  else if (el.dataset && el.dataset.key) state.filter[el.dataset.key] = el.value;
+  renderRuns();
+});
+$("runs-controls").addEventListener("click", (e) => {
+  if (e.target.id === "download-csv") download(runsCsv(state.shown), "text/csv", "csv");
+  if (e.target.id === "download-json") download(runsJson(state.shown), "application/json",
+    "json");
+});
 $("runs-table").addEventListener("click", (e) => {
   const th = e.target.closest("th[data-col]");
   if (!th) return;
@@ -1084,12 +1303,16 @@ _BODY = """<header>
 <section><h2>AP vs real-data fraction</h2>
 <div class="card"><div id="plot-ap" class="plot"></div></div></section>
 <section><h2>Difference to the baseline</h2>
+<div id="power-summary" role="note"></div>
 <div class="card"><div id="plot-delta" class="plot"></div></div>
 <div class="scroll" id="summary"></div>
 <p class="muted" id="stats-source"></p><ul class="notes" id="notes"></ul></section>
 <section><h2>Learning curves</h2>
 <div class="card"><div id="plot-curves" class="plot"></div></div></section>
-<section><h2>Runs</h2><p class="muted">Click a column heading to sort.</p>
+<section><h2>Runs</h2><p class="muted">Click a column heading to sort; filter and group by
+condition, fraction and trial; the downloads hold the runs shown. Each run's folder is relative
+to the sweep folder.</p>
+<div id="runs-controls"></div>
 <div class="scroll"><table id="runs-table"></table></div>
 <p class="muted" id="runs-empty">No run has finished yet.</p></section>
 <section><h2>Datasets</h2><div id="datasets"></div></section>

@@ -5,7 +5,13 @@ A sweep works on any datasets in OpenPCDet's custom layout: a simulated one (pre
 identified by a digest of its content (:func:`dataset_digest`), which enters every training
 run's content key, so rerunning a sweep on changed data recomputes what the change touches.
 Its ``dataset.json`` (:func:`sim2radar.datasets.read_metadata`) says which domain it is; a
-folder without one is a measured dataset.
+folder without one, or whose file declares no ``domain``, is ``"undeclared"``
+(:func:`sim2radar.evaluate.artefacts.read_dataset_info`, the one reader that never guesses
+"measured"): the report calls a real domain measured radar only where it is declared so.
+
+Intensity matching (paper §6.1) is fitted per fine-tuning run, on that run's real subset only
+(:func:`fit_subset_intensity_match`): a sim-pretrain arm at 5 % must not see the intensity
+distribution of more real frames than it trains on.
 
 A proxy "real" domain (the reference radar) must not share worlds with the simulated domain —
 the transfer experiment would then test on scenes the encoder was pre-trained on
@@ -23,13 +29,19 @@ from pathlib import Path
 import numpy as np
 
 from sim2radar.datasets import DatasetError, Frame, OpenPCDetDataset, read_metadata
+from sim2radar.evaluate.artefacts import UNDECLARED, read_dataset_info
+from sim2radar.experiment.plan import ids_digest
+from sim2radar.radar.intensity import IntensityMatch, fit_intensity_match
 
 __all__ = [
+    "UNDECLARED",
     "DomainDataset",
+    "SubsetIntensityMatch",
     "open_domain",
     "dataset_digest",
     "world_of_frame",
     "check_disjoint_worlds",
+    "fit_subset_intensity_match",
     "with_intensity",
 ]
 
@@ -58,7 +70,8 @@ class DomainDataset:
     role : str — ``sim``, ``real``, ``sim-gt`` or ``sim-one-material``.
     root : Path — the folder (OpenPCDet custom layout).
     key : str — :func:`dataset_digest` of the folder.
-    metadata : dict — its ``dataset.json`` (``{"domain": "measured"}`` without one).
+    metadata : dict — its ``dataset.json`` (``{}`` without one; no ``domain`` key where the
+        file declares none).
     splits : dict[str, list[str]] — frame ids per split file.
     """
 
@@ -70,7 +83,9 @@ class DomainDataset:
 
     @property
     def domain(self) -> str:
-        return str(self.metadata.get("domain", "measured"))
+        """The declared ``domain`` of its ``dataset.json``, else :data:`UNDECLARED`."""
+        d = self.metadata.get("domain")
+        return d if isinstance(d, str) and d.strip() else UNDECLARED
 
     @property
     def is_proxy(self) -> bool:
@@ -108,7 +123,10 @@ def open_domain(root: str | Path, role: str) -> DomainDataset:
     splits = {name: ds.split_ids(name) for name in ds.splits()}
     if not any(splits.values()):
         raise DatasetError(f"{root}/ImageSets: no split lists any frame")
-    return DomainDataset(role, root.resolve(), dataset_digest(root), read_metadata(root), splits)
+    metadata = read_metadata(root)  # validates the file
+    if read_dataset_info(root).domain == UNDECLARED:
+        metadata.pop("domain", None)  # read_metadata fills in "measured"; nothing declared it
+    return DomainDataset(role, root.resolve(), dataset_digest(root), metadata, splits)
 
 
 def world_of_frame(frame_id: str) -> str | None:
@@ -119,7 +137,8 @@ def world_of_frame(frame_id: str) -> str | None:
 
 def check_disjoint_worlds(sim: DomainDataset, real: DomainDataset) -> None:
     """Refuse a proxy real domain that shares procedural worlds with a simulated one (the
-    sweep would test on scenes it pre-trained on). Measured datasets are not checked."""
+    sweep would test on scenes it pre-trained on). Only a proxy real domain is checked
+    (measured, undeclared and other declared domains are not)."""
     if not real.is_proxy:
         return
     shared = ({world_of_frame(i) for i in sim.ids()} & {world_of_frame(i) for i in real.ids()})
@@ -129,6 +148,76 @@ def check_disjoint_worlds(sim: DomainDataset, real: DomainDataset) -> None:
             f"{real.root} ({real.domain}) and {sim.root} share {len(shared)} world(s), e.g. "
             f"{sorted(shared)[:3]}: build the reference dataset from other world seeds "
             "(`sim2radar reference --first-seed ...`)")
+
+
+@dataclasses.dataclass(frozen=True)
+class SubsetIntensityMatch:
+    """An intensity match fitted on one run's real fine-tuning subset.
+
+    Attributes
+    ----------
+    match : IntensityMatch — sim -> real quantile map of intensities [dB].
+    subset_ids : tuple of str — the real frames whose intensities it was fitted on.
+    n_sim_frames : int — simulated frames it was fitted on.
+    """
+
+    match: IntensityMatch
+    subset_ids: tuple[str, ...]
+    n_sim_frames: int
+
+    def to_dict(self) -> dict:
+        """:meth:`IntensityMatch.to_dict` plus what it was fitted on (for provenance and the
+        pre-training's content key): ``fitted_on`` (one line), ``subset_ids_digest``
+        (:func:`~sim2radar.experiment.plan.ids_digest` of the subset, in order),
+        ``n_real_frames``, ``n_sim_frames``."""
+        return {**self.match.to_dict(),
+                "fitted_on": f"{len(self.subset_ids)} frames of the run's real fine-tuning "
+                             "subset",
+                "subset_ids_digest": ids_digest(self.subset_ids),
+                "n_real_frames": len(self.subset_ids), "n_sim_frames": int(self.n_sim_frames)}
+
+
+def _intensities(frames: Sequence[Frame], what: str) -> np.ndarray:
+    cols = [np.asarray(f.points)[:, 3] for f in frames
+            if np.asarray(f.points).ndim == 2 and np.asarray(f.points).shape[1] > 3]
+    if not cols:
+        raise ValueError(f"intensity matching: the {what} frames have no intensity column")
+    return np.concatenate(cols)
+
+
+def fit_subset_intensity_match(sim_frames: Sequence[Frame], real_frames: Sequence[Frame],
+                               subset_ids: Sequence[str], *,
+                               n_quantiles: int = 256) -> SubsetIntensityMatch:
+    """Log-space histogram matching (:func:`sim2radar.radar.intensity.fit_intensity_match`,
+    paper §6.1) of ``sim_frames`` onto the intensities of the real frames in ``subset_ids``
+    only: the real fine-tuning subset of one (trial, fraction) run.
+
+    Parameters
+    ----------
+    sim_frames : simulated frames (column 3: intensity [dB]) — all that pre-training uses.
+    real_frames : real frames containing at least the subset (e.g. the whole train split);
+        frames outside ``subset_ids`` are ignored.
+    subset_ids : the run's real train ids (:attr:`~sim2radar.experiment.plan.RunSpec
+        .train_ids`).
+    n_quantiles : quantiles of the map.
+
+    Raises
+    ------
+    ValueError — an empty subset, a subset id not among ``real_frames`` (named), frames
+    without an intensity column.
+    """
+    ids = tuple(str(i) for i in subset_ids)
+    if not ids:
+        raise ValueError("intensity matching: the real subset is empty")
+    by_id = {f.frame_id: f for f in real_frames}
+    missing = [i for i in ids if i not in by_id]
+    if missing:
+        raise ValueError(f"intensity matching: {len(missing)} subset frame(s) not among the "
+                         f"real frames given, e.g. {missing[:3]}")
+    subset = [by_id[i] for i in dict.fromkeys(ids)]
+    match = fit_intensity_match(_intensities(sim_frames, "sim"),
+                                _intensities(subset, "real subset"), n_quantiles)
+    return SubsetIntensityMatch(match, ids, len(sim_frames))
 
 
 def with_intensity(frames: Sequence[Frame], mapping) -> list[Frame]:

@@ -46,6 +46,10 @@ class PretrainSpec:
     seed : int — its seed (initial weights, data order); the trial's seed when per trial.
     sim_role : str — dataset role it trains on (``sim``, ``sim-gt``, ``sim-one-material``).
     epochs : int — training epochs on the simulated frames.
+    fraction : float or None — with intensity matching, the real-data fraction whose runs load
+        it: the sim intensities are matched to that run's own real fine-tuning subset
+        (``real_ids``), so each (trial, fraction) has its own pre-training; None otherwise.
+    real_ids : tuple of str — that subset's real frame ids (empty without matching).
     """
 
     condition: str
@@ -53,16 +57,22 @@ class PretrainSpec:
     seed: int
     sim_role: str
     epochs: int
+    fraction: float | None = None
+    real_ids: tuple[str, ...] = ()
 
     @property
     def name(self) -> str:
-        """Readable id, e.g. ``pretrain-sim-t2`` or ``pretrain-sim-shared``."""
-        return f"pretrain-{self.sim_role}-" + ("shared" if self.trial is None
+        """Readable id, e.g. ``pretrain-sim-t2``, ``pretrain-sim-t2-f0.05`` or
+        ``pretrain-sim-shared``."""
+        name = f"pretrain-{self.sim_role}-" + ("shared" if self.trial is None
                                                else f"t{self.trial}")
+        return name if self.fraction is None else f"{name}-f{self.fraction:g}"
 
     def to_dict(self) -> dict[str, Any]:
         """Plain JSON-able fields (e.g. for a Prefect task parameter)."""
-        return dataclasses.asdict(self)
+        d = dataclasses.asdict(self)
+        d["real_ids"] = list(self.real_ids)
+        return d
 
 
 @dataclasses.dataclass(frozen=True)
@@ -149,18 +159,27 @@ def plan_sweep(
         raise ValueError(f"duplicate condition in {list(conds)}")
     conds = (BASELINE, *(c for c in conds if c != BASELINE))
 
-    pretrains: dict[tuple[str, int | None], PretrainSpec] = {}
+    pretrains: dict[tuple[str, int | None, float | None], PretrainSpec] = {}
+    # intensity matching fits the sim intensities to each run's own real subset (the 5 % arm
+    # must not see the intensities of real frames it does not train on): one pre-training per
+    # (trial, fraction); without it, one per trial (or one shared)
+    per_subset = bool(profile.intensity_matching)
 
-    def pretrain_for(condition: str, trial: int) -> PretrainSpec | None:
+    def pretrain_for(condition: str, trial: int, fraction: float,
+                     ids: tuple[str, ...]) -> PretrainSpec | None:
         role = CONDITIONS[condition].sim_role
         if role is None:
             return None
-        key_trial = trial if profile.pretrain_per_trial else None
-        seed = trial_seed(profile.sweep_seed, trial if profile.pretrain_per_trial else 0)
-        if (role, key_trial) not in pretrains:
-            pretrains[(role, key_trial)] = PretrainSpec(condition, key_trial, seed, role,
-                                                       profile.pretrain_epochs)
-        return pretrains[(role, key_trial)]
+        per_trial = profile.pretrain_per_trial or per_subset
+        key_trial = trial if per_trial else None
+        key_fraction = float(fraction) if per_subset else None
+        seed = trial_seed(profile.sweep_seed, trial if per_trial else 0)
+        key = (role, key_trial, key_fraction)
+        if key not in pretrains:
+            pretrains[key] = PretrainSpec(condition, key_trial, seed, role,
+                                          profile.pretrain_epochs, key_fraction,
+                                          ids if per_subset else ())
+        return pretrains[key]
 
     runs: list[RunSpec] = []
     for trial in range(profile.trials):
@@ -171,7 +190,7 @@ def plan_sweep(
                                 profile.min_steps)
             for condition in conds:
                 runs.append(RunSpec(condition, float(fraction), trial, seed, len(ids),
-                                    pretrain_for(condition, trial), epochs, ids))
+                                    pretrain_for(condition, trial, fraction, ids), epochs, ids))
     return tuple(pretrains.values()), tuple(runs)
 
 

@@ -1,17 +1,24 @@
 """The sweep's results as text: a Markdown report laid out like the paper's Table 1, and the same
-table as rows for a Prefect table artifact. Pure functions of :func:`~.stats.sweep_stats`'s
-dict (and the run rows, for failures and cost).
+table as rows for a Prefect table artifact; the sentence that says what the sweep could and
+could not have detected; the line that says what its "real" data is. Pure functions of
+:func:`~.stats.sweep_stats`'s dict (and the run rows, for failures and cost).
 """
 
 from __future__ import annotations
 
+import re
 from collections.abc import Iterable, Mapping
 from typing import Any
 
 from sim2radar.experiment.profiles import BASELINE
-from sim2radar.experiment.stats import as_rows
+from sim2radar.experiment.stats import DEGENERATE, as_rows
 
-__all__ = ["condition_label", "results_markdown", "results_table_rows"]
+__all__ = ["UNDECLARED", "condition_label", "detectability_sentences", "domain_kind",
+           "domain_line", "results_markdown", "results_table_rows"]
+
+#: domain of a dataset whose ``dataset.json`` declares none (as in
+#: :data:`sim2radar.evaluate.artefacts.UNDECLARED`; never guessed as "measured")
+UNDECLARED = "undeclared"
 
 _LABELS = {
     BASELINE: "Baseline",
@@ -50,6 +57,43 @@ def _pct(fraction: float) -> str:
     return f"{100 * fraction:g} %"
 
 
+def _share(comp: Mapping[str, Any]) -> str:
+    """``P(improved)`` with its interval: ``67 % [9, 99]``."""
+    share = comp.get("p_improved")
+    if share is None:
+        return _DASH
+    lo, hi = (comp.get("p_improved_ci") or [None, None])[:2]
+    ci = "" if lo is None else f" [{100 * lo:.0f}, {100 * hi:.0f}]"
+    return f"{100 * share:.0f} %{ci}"
+
+
+def _mde(comp: Mapping[str, Any]) -> str:
+    """The MDE [AP points], or a dash with the short reason there is none."""
+    if comp.get("mde") is not None:
+        return f"{comp['mde']:.1f}"
+    if "mde" not in comp:  # a stats.json written before the MDE existed
+        return _DASH
+    if comp.get("n_pairs", 0) < 2:
+        return f"{_DASH} (< 2 pairs)"
+    if comp.get("verdict") == DEGENERATE:
+        return f"{_DASH} (sd 0)"
+    return _DASH
+
+
+def _paper_trials(comp: Mapping[str, Any]) -> str:
+    """The paper's Δ and the trials that would detect it: ``+3.3 (14)``."""
+    delta = comp.get("paper_delta")
+    if delta is None:
+        return _DASH
+    n = comp.get("n_for_paper_delta")
+    if n is not None:
+        return f"{delta:+.1f} ({n:,})"
+    note = str(comp.get("n_for_paper_delta_note") or "")
+    if note.startswith("more than "):  # "more than 100,000 trials"
+        return f"{delta:+.1f} (> {note.split()[2]})"
+    return f"{delta:+.1f} ({_DASH})"
+
+
 def _mean_std(cell: Mapping[str, Any] | None) -> str:
     if cell is None or cell["mean"] is None:
         return _DASH
@@ -67,9 +111,13 @@ def results_table_rows(stats: Mapping[str, Any]) -> list[dict[str, str]]:
     table artifact (``create_table_artifact(table=rows)``).
 
     Keys: ``condition``, ``real data``, ``N``, ``Sim:Real``, ``baseline``, ``condition AP``,
-    ``Δ``, ``95 % CI`` (Student t), ``p (Holm)``, ``d_z``, ``k/n``, ``verdict``,
-    ``bootstrap CI`` (reference only: anti-conservative at 5 pairs). APs as ``mean ± std``
-    (sample std over trials), Δ = condition minus baseline.
+    ``Δ``, ``95 % CI`` (Student t), ``MDE`` (minimum detectable effect at 80 % power [AP
+    points]; a dash with the reason where there is none), ``p (Holm)``, ``d_z``, ``k/n``,
+    ``P(improved)`` (k/n as a percentage with its Clopper–Pearson interval), ``verdict``,
+    ``paper Δ (trials)`` (the paper's Δ at the fraction and the trials that would detect it at
+    the observed spread), ``bootstrap CI`` (reference only: anti-conservative at few pairs).
+    APs as ``mean ± std`` (sample std over trials), Δ = condition minus baseline. Reads a
+    ``stats.json`` written before the MDE existed (dashes).
     """
     cells = _cells(stats)
     level = f"{100 * (1 - float(stats['alpha'])):g} % CI"
@@ -91,14 +139,131 @@ def results_table_rows(stats: Mapping[str, Any]) -> list[dict[str, str]]:
             "condition AP": _mean_std(cond),
             "Δ": _f(comp["mean_diff"], signed=True),
             level: _DASH if lo is None else f"[{_f(lo, signed=True)}, {_f(hi, signed=True)}]",
+            "MDE": _mde(comp),
             "p (Holm)": _p(comp["p_holm"]),
             "d_z": _f(comp["d_z"], 2),
             "k/n": f"{comp['k_improved']}/{comp['n_pairs']}",
+            "P(improved)": _share(comp),
             "verdict": comp["verdict"],
+            "paper Δ (trials)": _paper_trials(comp),
             "bootstrap CI": _DASH if b_lo is None
-            else f"[{_f(b_lo, signed=True)}, {_f(b_hi, signed=True)}]",
+            else f"[{_f(b_lo, signed=True)}, {_f(b_hi, signed=True)}]"
+            + (f" ({100 * comp['bootstrap_coverage']:.0f} % cov.)"
+               if comp.get("bootstrap_coverage") is not None else ""),
         })
     return rows
+
+
+def _range(values: list[float], fmt: str = ".1f", signed: bool = False) -> str:
+    """``4.1`` or ``4.1 to 27.0`` (``+0.9 to +3.7`` signed)."""
+    spec = ("+" if signed else "") + fmt
+    lo, hi = min(values), max(values)
+    return format(lo, spec) if format(lo, spec) == format(hi, spec) else \
+        f"{format(lo, spec)} to {format(hi, spec)}"
+
+
+def _fractions(fracs: list[float]) -> str:
+    return ", ".join(_pct(f) for f in fracs)
+
+
+def detectability_sentences(stats: Mapping[str, Any]) -> list[str]:
+    """One sentence per non-baseline condition: what the sweep could and could not have
+    detected, computed from the comparisons' MDEs and the paper's Δ (:func:`~.stats
+    .sweep_stats`'s ``mde``, ``paper_delta``, ``n_for_paper_delta``).
+
+    E.g. "Sim Pretrain vs Baseline: with 3 trials per fraction this sweep could detect gains
+    of ≥ 4.1 AP points (at 100 %) to ≥ 27.0 (at 5 %) at 80 % power; the paper's effects (+0.9
+    to +3.7) are below that at every fraction; detecting them at the observed spread would
+    take 12 to 240 trials per fraction." Empty for a ``stats.json`` written before the MDE
+    existed.
+    """
+    comps = list(stats.get("comparisons", []))
+    if not comps or not all("mde" in c for c in comps):
+        return []
+    power = float((stats.get("power") or {}).get("power", 0.8))
+    out = []
+    for cond in dict.fromkeys(c["condition"] for c in comps):
+        block = [c for c in comps if c["condition"] == cond]
+        head = f"{condition_label(cond)} vs {condition_label(BASELINE)}: "
+        with_mde = [c for c in block if c.get("mde") is not None]
+        if not with_mde:
+            flat = [c for c in block if c.get("verdict") == DEGENERATE]
+            why = ("every fraction's paired differences are identical (sd 0)" if flat and
+                   len(flat) == len(block) else "no fraction has 2 complete pairs whose "
+                   "differences vary")
+            out.append(head + f"this sweep cannot say what it could have detected: {why}.")
+            continue
+        ns = sorted({c["n_pairs"] for c in with_mde})
+        trials = (f"{ns[0]} trials" if len(ns) == 1 else f"{ns[0]} to {ns[-1]} trials")
+        lo = min(with_mde, key=lambda c: c["mde"])
+        hi = max(with_mde, key=lambda c: c["mde"])
+        if f"{lo['mde']:.1f}" == f"{hi['mde']:.1f}":
+            gains = f"≥ {lo['mde']:.1f} AP points"
+        else:
+            gains = (f"≥ {lo['mde']:.1f} AP points (at {_pct(lo['fraction'])}) to "
+                     f"≥ {hi['mde']:.1f} (at {_pct(hi['fraction'])})")
+        text = (head + f"with {trials} per fraction this sweep could detect gains of {gains} "
+                f"at {100 * power:g} % power")
+        papered = [c for c in with_mde if c.get("paper_delta") is not None]
+        if papered:
+            deltas = [c["paper_delta"] for c in papered]
+            below = [c for c in papered if abs(c["paper_delta"]) < c["mde"]]
+            above = [c["fraction"] for c in papered if abs(c["paper_delta"]) >= c["mde"]]
+            many = len(papered) > 1
+            effects = f"the paper's effect{'s' if many else ''} ({_range(deltas, signed=True)})"
+            if not above:
+                text += (f"; {effects} {'are' if many else 'is'} below that"
+                         + (" at every fraction" if many else ""))
+            elif not below:
+                text += (f"; {effects} {'are' if many else 'is'} at or above it"
+                         + (" at every fraction" if many else ""))
+            else:
+                text += (f"; {effects} are below it at "
+                         f"{_fractions([c['fraction'] for c in below])} and at or above it at "
+                         f"{_fractions(above)}")
+            needed = [float(c["n_for_paper_delta"]) for c in below
+                      if c.get("n_for_paper_delta") is not None]
+            if needed:
+                text += (f"; detecting {'them' if len(below) > 1 else 'it'} at the observed "
+                         f"spread would take {_range(needed, ',.0f')} trials per fraction")
+        skipped = [c["fraction"] for c in block if c.get("mde") is None]
+        if skipped:
+            text += f" (no MDE at {_fractions(skipped)}: fewer than 2 pairs or no spread)"
+        out.append(text + ".")
+    return out
+
+
+def domain_kind(label: str, proxy: bool | None = None) -> str:
+    """What a dataset's declared ``domain`` says it is: ``"proxy"`` (a labelled stand-in for
+    measured radar: ``proxy`` is True, or the label starts with "proxy"), ``"undeclared"``
+    (empty, or :data:`UNDECLARED`), ``"measured"`` (the word "measured" in the label, e.g.
+    "measured", "IFR (measured)"), else ``"declared"`` (another declared domain, e.g.
+    "synthetic (detect-demo-data)": not measured radar)."""
+    text = (label or "").strip().lower()
+    if proxy or (proxy is None and text.startswith("proxy")):
+        return "proxy"
+    if not text or text == UNDECLARED:
+        return "undeclared"
+    if re.search(r"\bmeasured\b", text):
+        return "measured"
+    return "declared"
+
+
+def domain_line(label: str, proxy: bool | None = None) -> str:
+    """The report's line on the real domain (:func:`domain_kind`)."""
+    kind = domain_kind(label, proxy)
+    if kind == "proxy":
+        return (f"**real = {label}**: a stand-in for measured radar. These results are not "
+                "claims about measured radar.")
+    if kind == "undeclared":
+        return ("**real = undeclared**: the real dataset's `dataset.json` declares no domain, so "
+                "this report cannot say whether it is measured radar. Declare it (e.g. "
+                '`{"domain": "measured"}`) before reading these results as claims about '
+                "measured radar.")
+    if kind == "measured":
+        return f"real = {label} (measured radar)."
+    return (f"**real = {label}** (as its `dataset.json` declares): not measured radar. These "
+            "results are not claims about measured radar.")
 
 
 def _table(header: list[str], rows: list[list[str]], align: list[str]) -> list[str]:
@@ -124,30 +289,35 @@ def results_markdown(
     runs : the ``experiment_runs`` rows (list of dicts or a pyarrow Table), for the failed runs'
         errors and the sweep's cost; may be empty.
     title : the report's heading.
-    real_domain_label : what the "real" data is, e.g. ``"proxy-real (reference radar
-        simulation)"`` or ``"IFR (measured)"``.
+    real_domain_label : what the "real" data is, as its ``dataset.json`` declares, e.g.
+        ``"proxy-real (reference radar simulation)"``, ``"IFR (measured)"``, ``"synthetic
+        (detect-demo-data)"``, or ``"undeclared"``.
     proxy : whether the real domain is a stand-in for measured radar (default: the label
-        starts with ``proxy``). A proxy report says so at the top and at the end.
+        starts with ``proxy``). A proxy, undeclared or other non-measured domain says so at the
+        top and at the end (:func:`domain_line`); only a domain declared "measured" is called
+        measured radar.
 
     Returns
     -------
-    str — Table 1 (one block per non-baseline condition), every trial's value per cell, failed
-    runs, notes, and the real domain's status.
+    str — what the sweep could detect (:func:`detectability_sentences`), Table 1 (one block
+    per non-baseline condition) with the MDE beside every Δ and verdict, every trial's value
+    per cell, failed runs, notes, and the real domain's status.
     """
-    if proxy is None:
-        proxy = real_domain_label.strip().lower().startswith("proxy")
-    domain_line = (
-        f"**real = {real_domain_label}**: a stand-in for measured radar. These results are not "
-        "claims about measured radar." if proxy else
-        f"real = {real_domain_label} (measured radar)."
-    )
+    line = domain_line(real_domain_label, proxy)
     cells = _cells(stats)
     alpha = float(stats["alpha"])
     level = f"{100 * (1 - alpha):g} % CI"
-    out = [f"# {title}", "", domain_line, "",
+    power = float((stats.get("power") or {}).get("power", 0.8))
+    out = [f"# {title}", "", line, "",
            f"Metric: `{stats['metric']}` (AP in %), mean ± std over trials; Δ = condition "
-           f"minus baseline, paired by trial, with its {level} (Student t); p Holm-adjusted "
-           f"across fractions; verdict at alpha = {alpha:g}.", ""]
+           f"minus baseline, paired by trial, with its {level} (Student t); MDE = the "
+           f"smallest true Δ detected with {100 * power:g} % power at the Holm family's level "
+           f"(AP points); p Holm-adjusted across fractions; verdict at alpha = {alpha:g}; "
+           "P(improved) = k/n with its Clopper–Pearson interval; paper Δ (trials) = the "
+           "paper's Table 1 Δ and the trials that would detect it at the observed spread.", ""]
+    out += [f"- {s}" for s in detectability_sentences(stats)]
+    if out[-1] != "":
+        out.append("")
 
     rows_by_cond: dict[str, list[dict[str, str]]] = {}
     for row in results_table_rows(stats):
@@ -156,11 +326,14 @@ def results_markdown(
         label = condition_label(cond)
         out += [f"## {label} vs {condition_label(BASELINE)}", ""]
         header = ["Real Data", "N", "Sim:Real", condition_label(BASELINE), label,
-                  f"Δ [{level}]", "p (Holm)", "d_z", "k/n", "Verdict", "Bootstrap CI (ref.)"]
+                  f"Δ [{level}]", "MDE", "p (Holm)", "d_z", "k/n", "P(improved)", "Verdict",
+                  "Paper Δ (trials)", "Bootstrap CI (ref.)"]
         body = [[r["real data"], r["N"], r["Sim:Real"], r["baseline"], r["condition AP"],
-                 f"{r['Δ']} {r[level]}" if r[level] != _DASH else r["Δ"], r["p (Holm)"],
-                 r["d_z"], r["k/n"], r["verdict"], r["bootstrap CI"]] for r in rows]
-        out += _table(header, body, ["r", "r", "r", "r", "r", "l", "r", "r", "r", "l", "l"])
+                 f"{r['Δ']} {r[level]}" if r[level] != _DASH else r["Δ"], r["MDE"],
+                 r["p (Holm)"], r["d_z"], r["k/n"], r["P(improved)"], r["verdict"],
+                 r["paper Δ (trials)"], r["bootstrap CI"]] for r in rows]
+        out += _table(header, body, ["r", "r", "r", "r", "r", "l", "r", "r", "r", "r", "r",
+                                     "l", "r", "l"])
         out.append("")
 
     trials = sorted({t for c in stats["cells"] for t in c["trials"]})
@@ -200,5 +373,5 @@ def results_markdown(
                        f"trial {r.get('trial')}: {err}")
         out.append("")
 
-    out += ["## Notes", ""] + [f"- {n}" for n in stats["notes"]] + ["", domain_line, ""]
+    out += ["## Notes", ""] + [f"- {n}" for n in stats["notes"]] + ["", line, ""]
     return "\n".join(out)

@@ -58,3 +58,22 @@ def test_train_on_a_malformed_label_is_one_line_and_leaves_no_run(tmp_path):
     assert len(lines) == 1 and "Traceback" not in r.output, r.output
     assert f"error: {label}:" in lines[0] and "expected 8 fields" in lines[0], lines[0]
     assert not (tmp_path / "run").exists()
+
+
+def test_detect_demo_data_declares_its_own_domain(tmp_path):
+    """Its frames are synthetic: a sweep must not read them as measured radar (a folder
+    without a declared domain reads as "undeclared", never "measured")."""
+    from sim2radar.datasets import read_metadata
+    from sim2radar.experiment.data import open_domain
+    from sim2radar.experiment.report import domain_kind
+
+    data = tmp_path / "data"
+    r = CliRunner().invoke(app, ["detect-demo-data", str(data), "--n-train", "2", "--n-val",
+                                 "1", "--n-test", "1", "--seed", "4"])
+    assert r.exit_code == 0, r.output
+    meta = read_metadata(data)
+    assert meta["domain"] == "synthetic (detect-demo-data)" and meta["seed"] == 4
+    assert meta["splits"] == {"train": 2, "val": 1, "test": 1}
+    ds = open_domain(data, "real")
+    assert ds.domain == "synthetic (detect-demo-data)" and not ds.is_proxy
+    assert domain_kind(ds.domain, ds.is_proxy) == "declared"     # reported as not measured

@@ -1,7 +1,8 @@
 """The sweep dashboard without a browser: what the page shows for a constructed sweep (cell
-means, paired differences with their t-interval, trial points, runs, progress, banner, gap
-figures), that the page is self-contained, that partial and broken sweep folders behave, the
-CLI, and the live server's endpoints.
+means, paired differences with their t-interval, the MDE and P(improved) per cell and the
+sentence on what the sweep could detect, trial points, runs with their folders, progress,
+banner per real domain, gap figures), that the page is self-contained, that partial and broken
+sweep folders behave, the CLI, and the live server's endpoints.
 
 ``make_sweep`` / ``append_run`` are shared with test_dashboard_browser.py.
 """
@@ -33,9 +34,11 @@ from sim2radar.experiment.dashboard import (
     dashboard_data,
     load_sweep,
     render_html,
+    run_folder,
     serve_dashboard,
     write_dashboard,
 )
+from sim2radar.experiment.report import detectability_sentences
 from storage import get_schema
 
 REPO = Path(__file__).resolve().parents[2]
@@ -115,10 +118,11 @@ def png_bytes(width: int = 64, height: int = 48) -> bytes:
 def make_sweep(folder: Path, *, conditions=("baseline", "sim-pretrain"),
                fractions=FRACTIONS, trials=TRIALS, failed=(("sim-pretrain", 0.5, 2),),
                ran=None, proxy: bool = True, sweep_json: bool = True,
-               extras: bool = True) -> Path:
+               extras: bool = True, domain: str | None = None) -> Path:
     """A sweep folder like the sweep flow writes: runs.parquet (every run of ``ran``
-    conditions, ``failed`` ones failed), sweep.json and, with ``extras``, progress.json,
-    generation.json and gap/ with gap.json and two PNGs. No stats.json."""
+    conditions, ``failed`` ones failed), sweep.json (real domain ``domain``, default the
+    proxy's or "measured" by ``proxy``) and, with ``extras``, progress.json, generation.json
+    and gap/ with gap.json and two PNGs. No stats.json."""
     folder.mkdir(parents=True, exist_ok=True)
     ran = conditions if ran is None else ran
     rows = [run_row(c, f, t, status="failed" if (c, f, t) in failed else "ok",
@@ -128,7 +132,7 @@ def make_sweep(folder: Path, *, conditions=("baseline", "sim-pretrain"),
     write_runs(folder, rows)
     n_runs = len(conditions) * len(fractions) * trials
     if sweep_json:
-        domain = PROXY if proxy else "measured"
+        domain = domain or (PROXY if proxy else "measured")
         sweep = {
             "name": folder.name, "profile": {"name": "smoke", "trials": trials},
             "conditions": list(conditions), "fractions": list(fractions), "trials": trials,
@@ -358,6 +362,106 @@ def test_measured_and_unknown_domains(tmp_path):
     assert "PROXY" not in measured["banner"]["text"]
     unknown = dashboard_data(load_sweep(make_sweep(tmp_path / "u", sweep_json=False)))
     assert unknown["banner"]["kind"] == "unknown" and unknown["provenance"] is None
+
+
+def test_undeclared_and_other_declared_domains_are_not_called_measured(tmp_path):
+    """The audit's case: a real dataset without a declared domain (and detect-demo-data's
+    synthetic frames) showed "Real domain: measured (measured radar)"."""
+    und = dashboard_data(load_sweep(make_sweep(tmp_path / "u", proxy=False,
+                                               domain="undeclared")))
+    assert und["banner"]["kind"] == "undeclared" and "(measured radar)" not in \
+        und["banner"]["text"] and "declares no domain" in und["banner"]["text"]
+    syn = dashboard_data(load_sweep(make_sweep(tmp_path / "s", proxy=False,
+                                               domain="synthetic (detect-demo-data)")))
+    assert syn["banner"]["kind"] == "declared"
+    assert "synthetic (detect-demo-data)" in syn["banner"]["text"]
+    assert "not measured radar" in syn["banner"]["text"]
+    # a sweep.json without any domain field: undeclared, not measured
+    folder = make_sweep(tmp_path / "n", proxy=False)
+    doc = json.loads((folder / "sweep.json").read_text())
+    for key in ("real_domain", "real_is_proxy"):
+        doc.pop(key)
+    doc["datasets"]["real"].pop("domain")
+    (folder / "sweep.json").write_text(json.dumps(doc))
+    assert dashboard_data(load_sweep(folder))["banner"]["kind"] == "undeclared"
+    assert 'id="banner" class="undeclared"' in render_html(dashboard_data(load_sweep(folder)))
+
+
+def test_summary_has_the_mde_and_p_improved_per_cell_and_says_what_was_detectable(sweep_dir):
+    data = dashboard_data(load_sweep(sweep_dir))
+    stats = load_sweep(sweep_dir).stats
+    cols, rows = data["summary"]["columns"], data["summary"]["rows"]
+    i_delta, i_mde = cols.index("Δ"), cols.index("MDE")
+    i_kn, i_share = cols.index("k/n"), cols.index("P(improved)")
+    assert i_mde == cols.index("95 % CI") + 1 and i_share == i_kn + 1   # beside Δ and k/n
+    assert cols.index("verdict") > i_mde
+    for row, comp in zip(rows, stats["comparisons"], strict=True):
+        assert row[i_mde] == f"{comp['mde']:.1f}" and row[i_delta].startswith("+")
+        assert row[i_share].startswith(f"{100 * comp['p_improved']:.0f} % [")
+    # with 2 or 3 pairs of spread 0.5 the MDE at alpha / 3 is several AP points
+    assert all(c["mde"] > 2.0 and c["mde_alpha"] == pytest.approx(0.05 / 3)
+               for c in stats["comparisons"])
+    assert data["summary"]["numeric"][cols.index("verdict")] is False
+    assert data["summary"]["numeric"][i_mde] is True
+    (sentence,) = data["summary"]["sentences"]
+    assert data["summary"]["sentences"] == detectability_sentences(stats)
+    assert sentence.startswith("Sim Pretrain vs Baseline: with 2 to 3 trials per fraction this "
+                               "sweep could detect gains of ≥ ")
+    # the paper's +0.9 (10 %) and +1.2 (50 %) are below this sweep's MDE there, +3.7 is not
+    assert "below it at 10 %, 50 % and at or above it at 100 %" in sentence
+    page = render_html(data)
+    assert _embedded(page)["summary"]["sentences"] == [sentence]
+
+
+def test_delta_plot_shows_the_mde_and_the_papers_delta(sweep_dir):
+    data = dashboard_data(load_sweep(sweep_dir))
+    stats = load_sweep(sweep_dir).stats
+    (mde,) = _traces(data["figures"]["delta"], "mde")
+    assert mde["meta"]["condition"] == "sim-pretrain"
+    np.testing.assert_allclose(mde["y"], [c["mde"] for c in stats["comparisons"]])
+    np.testing.assert_allclose(mde["x"], [100 * f for f in FRACTIONS])
+    (paper,) = _traces(data["figures"]["delta"], "paper-delta")
+    assert paper["y"] == [0.9, 1.2, 3.7] and paper["x"] == [10.0, 50.0, 100.0]
+    (delta,) = _traces(data["figures"]["delta"], "delta")
+    assert [c[6] for c in delta["customdata"]] == [f"{c['mde']:.2f}"
+                                                   for c in stats["comparisons"]]
+    assert delta["customdata"][0][7] == "100 % [29, 100]"           # P(improved), 3/3
+
+
+def test_every_run_and_trial_point_names_its_run_folder(sweep_dir):
+    data = dashboard_data(load_sweep(sweep_dir))
+    runs = data["runs"]
+    keys = [c["key"] for c in runs["columns"]]
+    folder = keys.index("run_folder")
+    for row in runs["rows"]:
+        if row[runs["status_column"]] == "failed":
+            continue
+        cond, f, t = row[keys.index("condition")], row[keys.index("fraction")], row[
+            keys.index("trial")]
+        assert row[folder] == f"runs/{cond}-{f:g}-{t}"      # checkpoint t/runs/.../last.pt
+        # the sweep folder joined with it holds the run's checkpoint
+        assert (sweep_dir / row[folder] / "last.pt").relative_to(sweep_dir.parent).as_posix() \
+            == row[keys.index("checkpoint")]
+    failed = next(r for r in runs["rows"] if r[runs["status_column"]] == "failed")
+    assert failed[folder] == "runs/" + failed[keys.index("run_key")]   # no checkpoint
+    # condition names (shown by label), and the group and metric columns the page uses
+    assert {r[keys.index("condition")] for r in runs["rows"]} == {"baseline", "sim-pretrain"}
+    assert [keys[i] for i in runs["group_columns"]] == ["condition", "fraction", "trial"]
+    assert keys[runs["metric_column"]] == "ap_3d_r40_iou03"
+    # the AP plot's trial points name the folder of the run behind each value
+    base_pts, _ = _traces(data["figures"]["ap"], "trials")
+    assert base_pts["customdata"][0] == ["10 %", 0, "runs/baseline-0.1-0"]
+    assert "run folder" in base_pts["hovertemplate"]
+
+
+def test_run_folder_is_relative_to_the_sweep():
+    assert run_folder({"checkpoint": "s/runs/k1/last.pt", "run_key": "k1"}, "s") == "runs/k1"
+    # found finished in the store: trained by another sweep
+    assert run_folder({"checkpoint": "old/runs/k2/last.pt", "run_key": "k2"}, "s") == \
+        "../old/runs/k2"
+    assert run_folder({"checkpoint": "", "run_key": "k3"}, "s") == "runs/k3"    # failed
+    assert run_folder({"checkpoint": "/abs/x/runs/k4/last.pt"}, "s") == "/abs/x/runs/k4"
+    assert run_folder({}, "s") is None
 
 
 def test_stats_json_is_used_while_it_counts_the_runs_and_recomputed_when_stale(sweep_dir):

@@ -131,3 +131,76 @@ def test_served_page_shows_a_new_run_without_reload(tmp_path, page):
         assert page.errors == []
         origin = server.url.rstrip("/")
         assert {u.split("?")[0] for u in page.requests} <= {server.url, origin + "/data.json"}
+
+
+def test_runs_filter_group_and_download_offline(tmp_path, page):
+    """Filter the runs by condition and fraction, group them by trial, and download the rows
+    shown as CSV and JSON: the files hold exactly those runs with their folders, and the page
+    still requests nothing but itself. The summary states what the sweep could detect."""
+    import csv
+    import io
+    import json
+
+    sweep = make_sweep(tmp_path / "t")
+    html = write_dashboard(sweep, tmp_path / "dash.html")
+    page.goto(html.as_uri())
+    page.wait_for_selector("#plot-delta .main-svg")
+    summary = page.locator("#power-summary").inner_text()
+    assert "could detect gains of ≥" in summary and "paper's effects" in summary
+    assert page.locator("#summary th", has_text="MDE").count() == 1
+    assert page.locator("#summary th", has_text="P(improved)").count() == 1
+
+    rows = page.locator("#runs-table tbody tr.run")
+    assert rows.count() == 18
+    page.select_option("#filter-condition", "sim-pretrain")
+    assert rows.count() == 9
+    page.select_option("#filter-fraction", "0.5")
+    assert rows.count() == 3 and page.locator("#runs-table tbody tr.failed").count() == 1
+    assert page.locator("#runs-shown").inner_text() == "3 of 18 runs shown"
+    # condition shown by its label, each run with its folder
+    texts = page.evaluate("""() => Array.from(document.querySelectorAll(
+        '#runs-table tbody tr.run')).map(r => r.textContent)""")
+    assert all("Sim Pretrain" in t for t in texts)
+    assert any("runs/sim-pretrain-0.5-0" in t for t in texts)
+
+    with page.expect_download() as info:
+        page.click("#download-csv")
+    dl = info.value
+    assert dl.suggested_filename == "sweep-t-runs.csv"
+    table = list(csv.DictReader(io.StringIO(open(dl.path(), encoding="utf-8").read())))
+    assert len(table) == 3
+    assert {r["condition"] for r in table} == {"sim-pretrain"}
+    assert {r["fraction"] for r in table} == {"0.5"}
+    assert sorted(r["run_folder"] for r in table if r["status"] == "ok") == [
+        "runs/sim-pretrain-0.5-0", "runs/sim-pretrain-0.5-1"]
+    ok = next(r for r in table if r["trial"] == "1")
+    assert float(ok["ap_3d_r40_iou03"]) == pytest.approx(20 + 40 * 0.5 + 1 + 3.5)
+    failed = next(r for r in table if r["status"] == "failed")
+    assert failed["ap_3d_r40_iou03"] == "" and "</script>" in failed["error"]
+
+    page.select_option("#filter-fraction", "")          # all fractions again
+    page.select_option("#group-by", "trial")
+    groups = page.locator("#runs-table tbody tr.group")
+    assert groups.count() == 3 and rows.count() == 9
+    assert groups.first.inner_text().startswith("trial 0 · 3 run(s) · mean 3D AP R40 @0.3")
+    trials = page.evaluate("""() => Array.from(document.querySelectorAll(
+        '#runs-table tbody tr.run')).map(r => r.children[2].textContent)""")
+    assert trials == sorted(trials)                     # grouped rows are contiguous
+    with page.expect_download() as info:
+        page.click("#download-json")
+    doc = json.loads(open(info.value.path(), encoding="utf-8").read())
+    assert len(doc) == 9 and {r["condition"] for r in doc} == {"sim-pretrain"}
+    assert [r["trial"] for r in doc] == sorted(r["trial"] for r in doc)
+    assert all(r["run_folder"].startswith("runs/sim-pretrain-") for r in doc)
+
+    # sorting still works inside the filtered view
+    heading = page.locator("#runs-table th", has_text="3D AP R40 @0.3")
+    page.select_option("#group-by", "")
+    heading.click()
+    col = int(heading.get_attribute("data-col"))
+    vals = page.evaluate(f"""() => Array.from(document.querySelectorAll(
+        '#runs-table tbody tr.run')).map(r => r.children[{col}].textContent)""")
+    nums = [float(v) for v in vals if v != "—"]
+    assert nums == sorted(nums) and len(vals) == 9
+    assert page.errors == []
+    assert page.requests == [html.as_uri()]             # downloads built in the page

@@ -43,15 +43,25 @@ def test_paper_grid_pairs_conditions_by_trial():
         assert base.pretrain is None and sim.pretrain.trial == trial
         assert sim.pretrain.seed == base.seed
     assert sorted({r.n_real for r in runs}) == [18, 37, 92, 185, 371]
-    # one pre-training per trial seed, shared by that trial's fractions
-    assert [(p.sim_role, p.trial, p.epochs) for p in pretrains] == [
-        ("sim", t, 20) for t in range(5)]
+    # intensity matching on (the paper's §6.1): one pre-training per trial and fraction, its
+    # sim intensities matched to exactly the real subset its runs fine-tune on
+    assert [(p.sim_role, p.trial, p.fraction, p.epochs) for p in pretrains] == [
+        ("sim", t, f, 20) for t in range(5) for f in profile.fractions]
+    assert len({id(r.pretrain) for r in runs if r.pretrain}) == 25
+    for r in runs:
+        if r.pretrain:
+            assert r.pretrain.real_ids == r.train_ids and r.pretrain.fraction == r.fraction
+    # without matching: one pre-training per trial seed, shared by that trial's fractions
+    plain = profile.model_copy(update={"intensity_matching": False})
+    pre, runs = plan_sweep(plain, IDS)
+    assert [(p.sim_role, p.trial, p.fraction) for p in pre] == [("sim", t, None)
+                                                                 for t in range(5)]
     assert len({id(r.pretrain) for r in runs if r.pretrain}) == 5
 
 
 def test_shared_pretraining_and_ablations():
     profile = ExperimentProfile(detector=Path("x.yaml"), trials=3, fractions=(0.5, 1.0),
-                                pretrain_per_trial=False,
+                                pretrain_per_trial=False, intensity_matching=False,
                                 ablations=("sim-gt-pretrain", "sim-one-material-pretrain"))
     pretrains, runs = plan_sweep(profile, IDS[:40])
     assert len(runs) == 4 * 2 * 3

@@ -1,5 +1,7 @@
 """Paired statistics: the t-interval and p against scipy.stats.t directly, Holm on a textbook
-example, verdicts on constructed sweeps, interval coverage by simulation, failed runs."""
+example, verdicts on constructed sweeps, interval coverage by simulation, failed runs; the
+minimum detectable effect and the trials a given effect needs against simulated paired
+experiments, P(improvement)'s exact interval, the degenerate (zero-spread) case."""
 
 from __future__ import annotations
 
@@ -12,11 +14,18 @@ import pytest
 from scipy import stats as sps
 
 from sim2radar.experiment.stats import (
-    COVERAGE_NOTE,
     DEFAULT_METRIC,
+    DEGENERATE,
+    PAPER_DELTA_AP,
     holm_adjust,
+    interval_coverage,
+    minimum_detectable_dz,
+    minimum_detectable_effect,
     paired_comparison,
+    paired_t_power,
+    proportion_improved,
     sweep_stats,
+    trials_to_detect,
 )
 
 FRACTIONS = (0.05, 0.10, 0.25, 0.50, 1.00)
@@ -96,26 +105,47 @@ def test_verdicts_on_constructed_sweeps():
     comps = mixed["comparisons"]
     assert all(c["p_holm"] >= c["p"] for c in comps)
     assert comps[0]["p_holm"] == pytest.approx(5 * comps[0]["p"])
-    # identical runs: no difference at all
+    # identical runs: differences all 0, no spread: no test (t = 0/0), not "no difference"
     same = _sweep(0.0, diff_sd=0.0)
     res = sweep_stats(same)
-    assert all(c["verdict"] == "no detectable difference" and c["p"] == 1.0 and c["d_z"] is None
-               and c["t_ci"] == [0.0, 0.0] for c in res["comparisons"])
+    assert all(c["verdict"] == DEGENERATE and c["p"] is None and c["p_holm"] is None
+               and c["d_z"] is None and c["t_ci"] == [None, None] and c["mde"] is None
+               for c in res["comparisons"])
 
 
 def test_interval_coverage_simulation():
-    """2,000 synthetic 5-pair sweeps: the 95 % t-interval covers the true mean difference in
-    93-97 % of them; the bootstrap interval clearly less often (~84 %, COVERAGE_NOTE)."""
+    """2,000 synthetic 5-pair sweeps (another seed, another mean and sd, 9,999 resamples):
+    the 95 % t-interval covers the true mean difference in 93-97 % of them; the bootstrap
+    interval clearly less often, as often as interval_coverage (the figure the notes quote)
+    says."""
     rng = np.random.default_rng(12345)
-    n_sweeps, true = COVERAGE_NOTE["sweeps"], 1.5
-    base = rng.normal(40.0, 6.0, (n_sweeps, COVERAGE_NOTE["n_pairs"]))
+    n_sweeps, n_pairs, true = 2000, 5, 1.5
+    base = rng.normal(40.0, 6.0, (n_sweeps, n_pairs))
     treated = base + rng.normal(true, 3.0, base.shape)
     s = paired_comparison(treated, base, n_resamples=9999, seed=1)
     cov_t = np.mean((s["t_lo"] <= true) & (true <= s["t_hi"]))
     cov_b = np.mean((s["boot_lo"] <= true) & (true <= s["boot_hi"]))
     assert 0.93 <= cov_t <= 0.97, cov_t
     assert cov_b < 0.90 and cov_b < cov_t - 0.05, (cov_b, cov_t)
-    assert abs(cov_b - COVERAGE_NOTE["bootstrap"]) < 0.03, cov_b  # the figure the notes quote
+    quoted = interval_coverage(n_pairs)
+    assert quoted.n_pairs == 5 and 0.93 <= quoted.t <= 0.97
+    assert abs(cov_b - quoted.bootstrap) < 0.03, (cov_b, quoted)
+
+
+def test_bootstrap_coverage_note_is_for_the_sweeps_own_n():
+    """The audit's case: a 3-pair sweep must not quote the 5-pair coverage. With 3 pairs the
+    BCa interval covers far less (~73 %) than with 5 (~85 %) or 10 (~90 %)."""
+    cov = {n: interval_coverage(n) for n in (3, 5, 10)}
+    assert cov[3].bootstrap < cov[5].bootstrap < cov[10].bootstrap < 0.95
+    assert 0.65 < cov[3].bootstrap < 0.80 and all(0.93 <= c.t <= 0.97 for c in cov.values())
+    assert interval_coverage(3) is cov[3]                      # cached: simulated once per n
+    res = sweep_stats(_sweep(2.0, trials=3, seed=4))
+    (note,) = [n for n in res["notes"] if "bootstrap" in n]
+    assert f"{100 * cov[3].bootstrap:.0f} % with 3 pairs" in note and "anti-conservative" in note
+    assert "5 pairs" not in note
+    assert all(c["bootstrap_coverage"] == cov[3].bootstrap for c in res["comparisons"])
+    with pytest.raises(ValueError, match="n_pairs >= 2"):
+        interval_coverage(1)
 
 
 def test_failed_runs_are_counted_and_excluded():
@@ -151,22 +181,27 @@ def test_output_structure_metric_choice_and_table_input():
     rows = _sweep(2.0, seed=4)
     res = sweep_stats(rows)
     assert list(res) == ["metric", "alpha", "conditions", "fractions", "cells", "comparisons",
-                         "notes"]
+                         "power", "notes"]
+    assert res["power"]["power"] == 0.8 and res["power"]["source"].startswith("paper Table 1")
     assert res["metric"] == DEFAULT_METRIC == "ap_3d_r40_iou03" and res["alpha"] == 0.05
     assert res["conditions"] == ["baseline", "sim-pretrain"]
     assert res["fractions"] == list(FRACTIONS)
     assert set(res["cells"][0]) == {"condition", "fraction", "n_real_frames", "sim_real_ratio",
                                     "n", "n_failed", "mean", "std", "values", "trials"}
     assert set(res["comparisons"][0]) == {
-        "condition", "fraction", "n_pairs", "mean_diff", "t_ci", "bootstrap_ci", "p", "p_holm",
-        "d_z", "k_improved", "verdict", "differences", "trials"}
+        "condition", "fraction", "n_pairs", "mean_diff", "sd_diff", "t_ci", "bootstrap_ci",
+        "bootstrap_coverage", "p", "p_holm", "d_z", "k_improved", "p_improved",
+        "p_improved_ci", "verdict", "mde", "mde_dz", "mde_alpha", "mde_note", "paper_delta",
+        "n_for_paper_delta", "n_for_paper_delta_note", "differences", "trials"}
     json.dumps(res, allow_nan=False)  # strict JSON
     cell = res["cells"][5]  # sim-pretrain at 5 %
     assert cell["sim_real_ratio"] == pytest.approx(15.0) and cell["n_real_frames"] == 18
     assert cell["std"] == pytest.approx(np.std(cell["values"], ddof=1))
     assert res["cells"][0]["sim_real_ratio"] is None
     assert any("0.0625" in n for n in res["notes"])
-    assert any("anti-conservative" in n and "84 %" in n for n in res["notes"])
+    cov5 = interval_coverage(5)
+    assert any("anti-conservative" in n and f"{100 * cov5.bootstrap:.0f} % with 5 pairs" in n
+               for n in res["notes"])
     # a pyarrow Table gives the same result
     assert sweep_stats(pa.Table.from_pylist(rows)) == res
     # R11 instead of R40: every value moves by +1 in this construction, differences do not
@@ -179,3 +214,139 @@ def test_output_structure_metric_choice_and_table_input():
     clash = dict(rows[0], ap_3d_r40_iou03=rows[0]["ap_3d_r40_iou03"] + 1)
     with pytest.raises(ValueError, match="two different results"):
         sweep_stats([*rows, clash])
+
+
+# ------------------------------------------------------------------------------ power
+def _rejection_rate(effect, sd, n, alpha, experiments=20_000, seed=0):
+    """Share of simulated paired experiments (n normal differences, mean ``effect``, sd
+    ``sd``) in which the two-sided paired t-test rejects at ``alpha``."""
+    rng = np.random.default_rng(seed)
+    base = rng.normal(30.0, 5.0, (experiments, n))
+    treated = base + rng.normal(effect, sd, (experiments, n))
+    return float(np.mean(sps.ttest_rel(treated, base, axis=-1).pvalue < alpha))
+
+
+@pytest.mark.parametrize("n,alpha,sd", [(3, 0.05 / 5, 2.0), (5, 0.05, 3.0), (5, 0.05 / 5, 1.0),
+                                        (10, 0.05 / 3, 4.0)])
+def test_mde_is_detected_with_80_percent_power_in_simulated_experiments(n, alpha, sd):
+    """20,000 simulated paired experiments with the true mean difference at the MDE: the
+    t-test rejects in 80 % +- 2 % of them (binomial SE 0.3 %); at half the MDE clearly less
+    often, and the power function agrees with the simulation at both."""
+    mde = minimum_detectable_effect(n, sd, alpha)
+    assert mde.note is None and mde.mde == pytest.approx(mde.mde_dz * sd)
+    rate = _rejection_rate(mde.mde, sd, n, alpha, seed=n)
+    assert abs(rate - 0.80) <= 0.02, rate
+    half = _rejection_rate(mde.mde / 2, sd, n, alpha, seed=n + 100)
+    assert half < 0.6 and abs(half - paired_t_power(mde.mde_dz / 2, n, alpha)) < 0.02
+    # a negative effect of the same size is detected as often (two-sided)
+    assert abs(_rejection_rate(-mde.mde, sd, n, alpha, seed=n + 200) - 0.80) <= 0.02
+
+
+def test_mde_known_values_and_limits():
+    # G*Power / Cohen's tables, paired two-sided t at alpha 0.05, power 0.8: d_z = 1.68 at
+    # n = 5, 1.00 at n = 10; the power at no effect is alpha
+    assert minimum_detectable_dz(5, 0.05) == pytest.approx(1.682, abs=2e-3)
+    assert minimum_detectable_dz(10, 0.05) == pytest.approx(0.996, abs=2e-3)
+    assert paired_t_power(0.0, 5, 0.05) == pytest.approx(0.05)
+    # more pairs or a looser level: a smaller MDE
+    assert minimum_detectable_dz(3, 0.01) > minimum_detectable_dz(5, 0.01) > \
+        minimum_detectable_dz(5, 0.05)
+    # n = 2 at alpha / 5: a single degree of freedom needs a huge effect, and scipy's far
+    # lower tail (NaN from nct.cdf) does not break the root search
+    assert 50 < minimum_detectable_dz(2, 0.01) < 70
+
+
+def test_no_mde_below_two_pairs_or_without_spread():
+    one = minimum_detectable_effect(1, None, 0.05)
+    assert one.mde is None and "at least 2" in one.note
+    flat = minimum_detectable_effect(5, 0.0, 0.05)
+    assert flat.mde is None and "identical (sd 0)" in flat.note
+    assert minimum_detectable_effect(5, float("nan"), 0.05).mde is None
+    with pytest.raises(ValueError, match="n >= 2"):
+        minimum_detectable_dz(1, 0.05)
+    with pytest.raises(ValueError, match="power"):
+        minimum_detectable_effect(5, 1.0, 0.05, power=0.01)
+    assert trials_to_detect(3.0, 0.0, 0.05).n is None
+    assert trials_to_detect(0.0, 1.0, 0.05).n is None
+    assert "unknown" in trials_to_detect(3.0, None, 0.05).note
+    assert "more than 100" in trials_to_detect(0.01, 10.0, 0.01, max_n=100).note
+
+
+@pytest.mark.parametrize("effect,sd,alpha", [(3.3, 3.0, 0.01), (0.9, 3.0, 0.01),
+                                             (3.7, 1.0, 0.05)])
+def test_trials_to_detect_is_the_smallest_n_with_80_percent_power(effect, sd, alpha):
+    need = trials_to_detect(effect, sd, alpha)
+    n = need.n
+    assert paired_t_power(effect / sd, n, alpha) >= 0.8 > paired_t_power(effect / sd, n - 1,
+                                                                          alpha)
+    assert need.achieved_power == pytest.approx(paired_t_power(effect / sd, n, alpha))
+    # consistent with the MDE: at n pairs the MDE is at most the effect, at n - 1 above it
+    assert minimum_detectable_effect(n, sd, alpha).mde <= effect
+    if n > 2:
+        assert minimum_detectable_effect(n - 1, sd, alpha).mde > effect
+    if n <= 40:  # and the simulation agrees
+        assert _rejection_rate(effect, sd, n, alpha, experiments=20_000, seed=n) >= 0.78
+
+
+def test_sweep_reports_mde_at_the_holm_family_level_and_trials_for_the_papers_delta():
+    rows = _sweep([3.0, 1.0, 3.0, 1.0, 4.0], diff_sd=2.0, trials=3, seed=11)
+    res = sweep_stats(rows)
+    assert PAPER_DELTA_AP == {0.05: 3.3, 0.10: 0.9, 0.25: 3.2, 0.50: 1.2, 1.00: 3.7}
+    for comp in res["comparisons"]:
+        sd = np.std(comp["differences"], ddof=1)
+        assert comp["sd_diff"] == pytest.approx(sd)
+        assert comp["mde_alpha"] == pytest.approx(0.05 / 5)          # 5 fractions in the family
+        assert comp["mde"] == pytest.approx(minimum_detectable_dz(3, 0.01) * sd)
+        assert comp["paper_delta"] == PAPER_DELTA_AP[comp["fraction"]]
+        assert comp["n_for_paper_delta"] == trials_to_detect(comp["paper_delta"], sd, 0.01).n
+    # one fraction's differences all equal (+2.0): its own verdict, no p, out of the family
+    for r in rows:
+        if r["fraction"] == 0.25 and r["condition"] == "sim-pretrain":
+            base = next(b for b in rows if b["condition"] == "baseline"
+                        and b["fraction"] == 0.25 and b["trial"] == r["trial"])
+            r["ap_3d_r40_iou03"] = base["ap_3d_r40_iou03"] + 2.0
+    res = sweep_stats(rows)
+    flat = res["comparisons"][2]
+    assert flat["verdict"] == DEGENERATE and flat["p"] is None and flat["p_holm"] is None
+    assert flat["mean_diff"] == pytest.approx(2.0) and flat["t_ci"] == [None, None]
+    assert flat["mde"] is None and "identical" in flat["mde_note"]
+    assert flat["k_improved"] == 3 and flat["p_improved"] == 1.0
+    others = [c for i, c in enumerate(res["comparisons"]) if i != 2]
+    assert all(c["mde_alpha"] == pytest.approx(0.05 / 4) for c in others)   # family of 4
+    assert max(c["p_holm"] for c in others) <= 1.0
+    assert any(DEGENERATE in n for n in res["notes"])
+    # a fraction the paper has no Δ for
+    odd = [dict(r, fraction=0.2) for r in rows if r["fraction"] == 0.05]
+    comp = sweep_stats(odd)["comparisons"][0]
+    assert comp["paper_delta"] is None and comp["n_for_paper_delta"] is None
+    assert "no Δ" in comp["n_for_paper_delta_note"]
+    json.dumps(res, allow_nan=False)
+
+
+def test_identical_nonzero_differences_are_not_a_gain():
+    """The audit's case: every trial +1.5 AP gave p = 0 and a 'gain'. Also where float
+    rounding leaves a spread of ~1e-15 (AP + 1.5 - AP is not exactly 1.5)."""
+    base = np.array([31.7, 28.3, 44.1, 0.1, 12.345])
+    assert 0 < np.std((base + 1.5) - base, ddof=1) < 1e-14     # rounding: not exactly 0
+    s = paired_comparison(base + 1.5, base, n_resamples=0)
+    assert bool(s["flat"]) and np.isnan(s["p"]) and np.isnan(s["t_lo"])
+    rows = [{"condition": c, "fraction": 0.5, "trial": t, "ap_3d_r40_iou03": v, "status": "ok"}
+            for t, b in enumerate(base) for c, v in (("baseline", b), ("sim-pretrain", b + 1.5))]
+    (comp,) = sweep_stats(rows)["comparisons"]
+    assert comp["verdict"] == DEGENERATE == "identical differences: no test possible"
+    assert comp["p"] is None and comp["mde"] is None and comp["k_improved"] == 5
+
+
+def test_p_improved_has_a_clopper_pearson_interval():
+    share, (lo, hi) = proportion_improved(3, 3)
+    # Clopper-Pearson with k = n: lower bound (alpha / 2)^(1 / n), upper bound 1
+    assert share == 1.0 and lo == pytest.approx(0.025 ** (1 / 3)) and hi == 1.0
+    share, (lo, hi) = proportion_improved(2, 5)
+    assert share == 0.4
+    assert lo == pytest.approx(sps.beta.ppf(0.025, 2, 4)) and hi == pytest.approx(
+        sps.beta.ppf(0.975, 3, 3))
+    assert proportion_improved(0, 0) == (None, [None, None])
+    res = sweep_stats(_sweep(5.0, diff_sd=0.5))
+    comp = res["comparisons"][0]
+    assert comp["k_improved"] == 5 and comp["p_improved"] == 1.0
+    assert comp["p_improved_ci"] == pytest.approx([0.025 ** (1 / 5), 1.0])

@@ -71,13 +71,18 @@ def test_every_cell_runs_once_and_the_outputs_are_written(first):
         assert r["n_real_frames"] == {0.5: 4, 1.0: 8}[r["fraction"]]
         assert (r["pretrain_key"] is None) == (r["condition"] == "baseline")
         assert r["history_val_epoch"] == [1, 2] and len(r["history_loss"]) == 2
-    assert len({r["pretrain_key"] for r in rows if r["pretrain_key"]}) == 2   # one per trial
-    assert len(list((d / "pretrain").iterdir())) == 2
+    # one pre-training per trial and fraction: its sim intensities matched to that subset
+    assert len({r["pretrain_key"] for r in rows if r["pretrain_key"]}) == 4
+    assert len(list((d / "pretrain").iterdir())) == 4
     stats = json.loads((d / "stats.json").read_text())
     assert {c["n"] for c in stats["cells"]} == {2}
     sweep = json.loads((d / "sweep.json").read_text())
     assert sweep["real_is_proxy"] and sweep["datasets"]["real"]["domain"] == PROXY
-    assert "sim" in sweep["intensity_match"]               # fitted on the real train split
+    matches = sweep["intensity_match"]                     # one per pre-training ...
+    assert sorted(matches) == ["pretrain-sim-t0-f0.5", "pretrain-sim-t0-f1", "pretrain-sim-t1-f0.5",
+                               "pretrain-sim-t1-f1"]
+    for pid, m in matches.items():                         # ... fitted on its runs' subset
+        assert m["n_real_frames"] == (4 if pid.endswith("f0.5") else 8)
     md = (d / "results.md").read_text()
     assert "proxy" in md and "not claims about measured radar" in md
     html = (d / "dashboard.html").read_text()
