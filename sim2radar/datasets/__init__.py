@@ -2,6 +2,7 @@
 
 from sim2radar.datasets.openpcdet import (
     METADATA_FILE,
+    UNDECLARED,
     DatasetError,
     Frame,
     OpenPCDetDataset,
@@ -18,6 +19,7 @@ from sim2radar.datasets.synthetic import make_door_frames, write_synthetic_datas
 
 __all__ = [
     "METADATA_FILE",
+    "UNDECLARED",
     "DatasetError",
     "Frame",
     "OpenPCDetDataset",

@@ -34,6 +34,7 @@ __all__ = [
     "write_split",
     "METADATA_FILE",
     "read_metadata",
+    "UNDECLARED",
     "write_metadata",
 ]
 
@@ -41,8 +42,11 @@ log = logging.getLogger(__name__)
 
 #: Optional description of a dataset folder (JSON): its ``domain`` ("measured", "proxy-real
 #: (reference radar simulation)", "simulated (...)"), the radar, how labels were chosen, worlds
-#: and splits. Measured datasets need not have it (their domain reads as "measured").
+#: and splits. A folder without one (or without a ``domain`` in it) has the domain
+#: :data:`UNDECLARED`: nothing guesses that it is measured radar.
 METADATA_FILE = "dataset.json"
+#: The ``domain`` of a dataset whose ``dataset.json`` declares none.
+UNDECLARED = "undeclared"
 
 
 class DatasetError(ValueError):
@@ -258,18 +262,20 @@ def write_metadata(root: str | Path, metadata: Mapping) -> Path:
 
 
 def read_metadata(root: str | Path) -> dict:
-    """``ROOT/dataset.json`` as a dict; ``{"domain": "measured"}`` when the folder has none (a
-    measured dataset such as IFR). A malformed file raises :class:`DatasetError`."""
+    """``ROOT/dataset.json`` as a dict, its ``domain`` :data:`UNDECLARED` when the file (or the
+    key) is missing — a measured dataset such as IFR declares ``{"domain": "measured"}`` to be
+    called so. A malformed file raises :class:`DatasetError` naming it."""
     import json
 
     path = Path(root) / METADATA_FILE
     if not path.is_file():
-        return {"domain": "measured"}
+        return {"domain": UNDECLARED}
     try:
         doc = json.loads(path.read_text())
     except (ValueError, OSError) as exc:
         raise DatasetError(f"{path}: not valid JSON ({exc}); fix or delete the file") from exc
     if not isinstance(doc, dict):
         raise DatasetError(f"{path}: expected a JSON object")
-    doc.setdefault("domain", "measured")
+    if doc.get("domain") in (None, ""):
+        doc["domain"] = UNDECLARED
     return doc

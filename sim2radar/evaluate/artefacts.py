@@ -34,7 +34,6 @@ defined here, so that this module needs nothing from :mod:`sim2radar.evaluate.ga
 
 from __future__ import annotations
 
-import json
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
@@ -42,7 +41,7 @@ from pathlib import Path
 
 import numpy as np
 
-from sim2radar.datasets.openpcdet import METADATA_FILE, DatasetError
+from sim2radar.datasets.openpcdet import METADATA_FILE, UNDECLARED, DatasetError, read_metadata
 
 __all__ = [
     "DEFAULT_RESOLUTION_FROM",
@@ -66,9 +65,6 @@ __all__ = [
     "sidelobe_share",
     "stack_points",
 ]
-
-#: ``domain`` of a dataset whose ``dataset.json`` (if any) declares none.
-UNDECLARED = "undeclared"
 
 #: ``range_resolution_from`` when ``dataset.json`` gives no range resolution and
 #: :attr:`ArtefactSettings.range_resolution_m` is used (``GapSettings.artefacts`` holds it).
@@ -561,8 +557,8 @@ def read_dataset_info(root: str | Path) -> DatasetInfo:
     """What ``ROOT/dataset.json`` says about the dataset's domain, range resolution and the
     radar's height above the floor (:class:`DatasetInfo`).
 
-    No file, or no ``domain`` string in it, gives the domain ``"undeclared"``: unlike
-    :func:`sim2radar.datasets.read_metadata`, this never guesses "measured". Absent (or null)
+    No file, or no ``domain`` string in it, gives the domain ``"undeclared"``
+    (:func:`sim2radar.datasets.read_metadata`: nothing is guessed "measured"). Absent (or null)
     ``range_resolution_m`` / ``radar_height_m`` give None.
 
     Raises
@@ -571,14 +567,7 @@ def read_dataset_info(root: str | Path) -> DatasetInfo:
     (``range_resolution_m`` > 0, ``radar_height_m`` >= 0); the file and key are named.
     """
     path = Path(root) / METADATA_FILE
-    if not path.is_file():
-        return DatasetInfo()
-    try:
-        doc = json.loads(path.read_text())
-    except (ValueError, OSError) as exc:
-        raise DatasetError(f"{path}: not valid JSON ({exc}); fix or delete the file") from exc
-    if not isinstance(doc, dict):
-        raise DatasetError(f"{path}: expected a JSON object")
+    doc = read_metadata(root)
     domain = doc.get("domain")
     values: dict[str, float | None] = {}
     for key, low, strict in (("range_resolution_m", 0.0, True), ("radar_height_m", 0.0, False)):

@@ -5,9 +5,8 @@ A sweep works on any datasets in OpenPCDet's custom layout: a simulated one (pre
 identified by a digest of its content (:func:`dataset_digest`), which enters every training
 run's content key, so rerunning a sweep on changed data recomputes what the change touches.
 Its ``dataset.json`` (:func:`sim2radar.datasets.read_metadata`) says which domain it is; a
-folder without one, or whose file declares no ``domain``, is ``"undeclared"``
-(:func:`sim2radar.evaluate.artefacts.read_dataset_info`, the one reader that never guesses
-"measured"): the report calls a real domain measured radar only where it is declared so.
+folder without one, or whose file declares no ``domain``, is ``"undeclared"`` — never guessed
+"measured": the report calls a real domain measured radar only where it is declared so.
 
 Intensity matching (paper §6.1) is fitted per fine-tuning run, on that run's real subset only
 (:func:`fit_subset_intensity_match`): a sim-pretrain arm at 5 % must not see the intensity
@@ -28,8 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
-from sim2radar.datasets import DatasetError, Frame, OpenPCDetDataset, read_metadata
-from sim2radar.evaluate.artefacts import UNDECLARED, read_dataset_info
+from sim2radar.datasets import UNDECLARED, DatasetError, Frame, OpenPCDetDataset, read_metadata
 from sim2radar.experiment.plan import ids_digest
 from sim2radar.radar.intensity import IntensityMatch, fit_intensity_match
 
@@ -123,9 +121,7 @@ def open_domain(root: str | Path, role: str) -> DomainDataset:
     splits = {name: ds.split_ids(name) for name in ds.splits()}
     if not any(splits.values()):
         raise DatasetError(f"{root}/ImageSets: no split lists any frame")
-    metadata = read_metadata(root)  # validates the file
-    if read_dataset_info(root).domain == UNDECLARED:
-        metadata.pop("domain", None)  # read_metadata fills in "measured"; nothing declared it
+    metadata = read_metadata(root)  # validates the file; "undeclared" unless it declares one
     return DomainDataset(role, root.resolve(), dataset_digest(root), metadata, splits)
 
 

@@ -10,15 +10,13 @@ import re
 from collections.abc import Iterable, Mapping
 from typing import Any
 
+from sim2radar.datasets import UNDECLARED
 from sim2radar.experiment.profiles import BASELINE
 from sim2radar.experiment.stats import DEGENERATE, as_rows
 
 __all__ = ["UNDECLARED", "condition_label", "detectability_sentences", "domain_kind",
            "domain_line", "results_markdown", "results_table_rows"]
 
-#: domain of a dataset whose ``dataset.json`` declares none (as in
-#: :data:`sim2radar.evaluate.artefacts.UNDECLARED`; never guessed as "measured")
-UNDECLARED = "undeclared"
 
 _LABELS = {
     BASELINE: "Baseline",

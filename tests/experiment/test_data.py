@@ -50,7 +50,7 @@ def test_digest_follows_content_not_export_time(tmp_path):
 def test_domain_label_and_splits(tmp_path):
     real = open_domain(_dataset(tmp_path / "r", [1, 2, 3]), "real")
     assert real.domain == "undeclared" and not real.is_proxy      # no dataset.json: not guessed
-    assert "domain" not in real.metadata and real.describe()["domain"] == "undeclared"
+    assert real.metadata["domain"] == real.describe()["domain"] == "undeclared"
     write_metadata(real.root, {"radar": "some radar"})             # a file, but no domain
     assert open_domain(real.root, "real").domain == "undeclared"
     write_metadata(real.root, {"domain": "measured"})              # declared measured
@@ -70,7 +70,7 @@ def test_proxy_real_must_not_share_worlds_with_the_sim(tmp_path):
     disjoint = _dataset(tmp_path / "d", [7, 8, 9])
     write_metadata(disjoint, {"domain": "proxy-real (reference radar simulation)"})
     check_disjoint_worlds(sim, open_domain(disjoint, "real"))     # fine
-    (real_root / "dataset.json").unlink()                          # measured: not checked
+    (real_root / "dataset.json").unlink()                          # undeclared: not checked
     check_disjoint_worlds(sim, open_domain(real_root, "real"))
     assert world_of_frame("world_000003_f012") == "world_000003"
     assert world_of_frame("ifr_scene_7") is None
