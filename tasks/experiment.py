@@ -13,14 +13,21 @@ key up front. A finished fine-tuning run is one
 (``<sweep>/runs/<key>/``, ``<sweep>/pretrain/<key>/``). Failed runs are not stored (a rerun
 retries them); they are recorded in the sweep's ``runs.parquet`` with their error.
 
+Claims. Before training, a run (or pre-training) is claimed in ``<sweep>/claims/``
+(:mod:`sim2radar.experiment.claims`): a second sweep process or Dask worker that reaches the
+same run waits for its result instead of training it again, and a claim whose process died (a
+killed Dask worker) is taken over and the run resumed from its last checkpoint.
+
 Retries: none. Training is deterministic given its inputs, so a failure would only fail again;
 the store writes are local or retried by the store itself.
 """
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import functools
+import json
 import logging
 import os
 from datetime import UTC, datetime
@@ -38,6 +45,7 @@ from tasks.common import open_store
 __all__ = [
     "EXPERIMENT_STAGE_VERSION",
     "SweepContext",
+    "SweepSettingsChanged",
     "prepare_sweep",
     "run_pretraining",
     "run_finetuning",
@@ -196,6 +204,7 @@ def prepare_sweep(
         run_key_inputs,
     )
     from sim2radar.experiment.data import check_disjoint_worlds, fit_subset_intensity_match
+    from sim2radar.experiment.plan import protocol_digest, protocol_settings
     from sim2radar.experiment.profiles import ExperimentProfile
     from sim2radar.experiment.stats import DEFAULT_METRIC
 
@@ -208,6 +217,9 @@ def prepare_sweep(
         except Exception as exc:  # pydantic's message names the field
             raise ValueError(f"profile {prof.name!r} overrides: {exc}") from None
     sweep_dir = Path(out) / name
+    settings = protocol_settings(prof, prof.detector_config("pretrain").model_dump(mode="json"),
+                                 prof.detector_config("finetune").model_dump(mode="json"))
+    fixed_at = _check_settings_unchanged(sweep_dir, name, settings)
     sweep_dir.mkdir(parents=True, exist_ok=True)
     st = open_store(store)
 
@@ -288,11 +300,52 @@ def prepare_sweep(
         "n_pretrains": len(pre_out), "n_runs": len(run_out),
         "provenance": {"versions": package_versions(), "code": _code_version(),
                        "configs": {"pretrain": pretrain_dump, "finetune": ft_dump}},
+        "settings": settings, "settings_digest": protocol_digest(settings),
+        "settings_fixed_at": fixed_at,
         "created_at": datetime.now(UTC).isoformat(timespec="seconds"),
     }
     write_json(sweep_dir / "sweep.json", sweep)
     return {"name": name, "context": ctx.to_dict(), "pretrains": pre_out, "runs": run_out,
             "concurrent_runs": prof.concurrent_runs, "metric": DEFAULT_METRIC, "sweep": sweep}
+
+
+class SweepSettingsChanged(ValueError):
+    """A sweep folder's settings were fixed by its first preparation and now differ."""
+
+
+def _check_settings_unchanged(sweep_dir: Path, name: str, settings: dict[str, Any]) -> str:
+    """Refuse to rerun a sweep whose protocol settings changed since it was created; returns
+    when they were fixed (now, for a new sweep; the first preparation's time otherwise).
+
+    A sweep's results must come from one set of settings, fixed before its first run: a
+    profile edited after some runs finished would mix two protocols in one table (and invites
+    tuning the protocol toward the answer). A folder written before settings were recorded
+    adopts the current ones.
+    """
+    from sim2radar.experiment.plan import protocol_digest, settings_changes
+
+    now = datetime.now(UTC).isoformat(timespec="seconds")
+    path = sweep_dir / "sweep.json"
+    if not path.is_file():
+        return now
+    try:
+        old = json.loads(path.read_text())
+    except (OSError, ValueError) as exc:
+        raise ValueError(f"{path}: unreadable ({exc}); delete it (and the sweep folder's runs "
+                         "if they are not wanted) or choose a new sweep name") from None
+    if "settings" not in old:
+        return str(old.get("created_at") or now)
+    if protocol_digest(old["settings"]) == protocol_digest(settings):
+        return str(old.get("settings_fixed_at") or old.get("created_at") or now)
+    changes = settings_changes(old["settings"], settings)
+    shown = "\n  ".join(changes[:12]) + (f"\n  ... and {len(changes) - 12} more"
+                                          if len(changes) > 12 else "")
+    raise SweepSettingsChanged(
+        f"sweep {name!r} ({sweep_dir}) was created with other settings (fixed at "
+        f"{old.get('settings_fixed_at') or old.get('created_at')}, digest "
+        f"{protocol_digest(old['settings'])}); what changed:\n  {shown}\n"
+        "One sweep's runs all use the settings fixed before its first run: start a new sweep "
+        "name (--name) for the new settings, or delete the folder to discard the old sweep.")
 
 
 # ---------------------------------------------------------------------------------------------
@@ -314,9 +367,26 @@ def run_pretraining(ctx: SweepContext | dict, spec: dict[str, Any]) -> dict[str,
     if spec["id"] in ctx.intensity_match:
         frames = with_intensity(frames, IntensityMatch.from_dict(ctx.intensity_match[spec["id"]]))
     out = Path(ctx.sweep_dir) / "pretrain" / spec["key"]
-    ckpt = pretrain_encoder(cfg, frames, out, seed=int(spec["seed"]), epochs=int(spec["epochs"]),
-                            device=ctx.device)
+    claim = _claim(ctx, spec["key"], lambda: (out / "done.json").is_file(), out,
+                   f"pre-training {spec['id']}")
+    with claim or contextlib.nullcontext():     # None: finished, pretrain_encoder reads it
+        ckpt = pretrain_encoder(cfg, frames, out, seed=int(spec["seed"]),
+                                epochs=int(spec["epochs"]), device=ctx.device)
     return {"key": spec["key"], "checkpoint": str(ckpt), "n_frames": len(frames)}
+
+
+def _claim(ctx: SweepContext, key: str, done, out: Path, what: str):
+    """Claim a run for this process (:mod:`sim2radar.experiment.claims`), waiting while another
+    live process trains it; None once it is finished (by anyone)."""
+    from sim2radar.experiment.claims import wait_and_claim
+
+    def waiting(holder: dict) -> None:
+        log.info("%s is being trained by pid %s on %s; waiting for it", what,
+                 holder.get("pid"), holder.get("host"))
+
+    return wait_and_claim(Path(ctx.sweep_dir) / "claims", key, done,
+                          note=lambda: {"resume": (out / "last.pt").is_file()},
+                          on_wait=waiting)
 
 
 def _base_row(ctx: SweepContext, spec: dict[str, Any],
@@ -336,21 +406,30 @@ def run_finetuning(ctx: SweepContext | dict, spec: dict[str, Any],
                    pretrain: dict[str, Any] | None) -> dict[str, Any]:
     """Fine-tune and test one cell's run (or read it back); returns its experiment_runs row
     with ``status`` ``ok`` (computed now) or ``skipped`` (found in the store)."""
-    from sim2radar.detect.config import DetectConfig
-    from sim2radar.experiment.runner import finetune_and_test
 
     ctx = _ctx(ctx)
     st = open_store(ctx.store)
     key = spec["key"]
-    if st.exists("experiment_runs", key):
+    out = Path(ctx.sweep_dir) / "runs" / key
+    claim = _claim(ctx, key, lambda: st.exists("experiment_runs", key), out, f"run {spec['id']}")
+    if claim is None:
         row = st.read("experiment_runs", key).to_pylist()[0]
         return {**row, "sweep": ctx.name, "status": "skipped"}
+    with claim:
+        return _finetune(ctx, st, spec, pretrain, out)
+
+
+def _finetune(ctx: SweepContext, st, spec: dict[str, Any], pretrain: dict[str, Any] | None,
+              out: Path) -> dict[str, Any]:
+    from sim2radar.detect.config import DetectConfig
+    from sim2radar.experiment.runner import finetune_and_test
+
+    key = spec["key"]
     cfg = DetectConfig.model_validate(ctx.finetune_config)
     train = _load(ctx, "real", spec["train_ids"], cfg)
     test = _load(ctx, "real", _split_ids(ctx, "real", ctx.eval_split), cfg)
     val = (_load(ctx, "real", _split_ids(ctx, "real", ctx.val_split), cfg)
            if ctx.val_every else [])
-    out = Path(ctx.sweep_dir) / "runs" / key
     fields = finetune_and_test(
         cfg, train, test, out, seed=int(spec["seed"]), epochs=int(spec["epochs"]),
         encoder_checkpoint=pretrain["checkpoint"] if pretrain else None, val_frames=val,
@@ -401,7 +480,10 @@ def finish_sweep(plan: dict[str, Any], rows: list[dict[str, Any]]) -> dict[str, 
     stats = sweep_stats(rows, plan["metric"], conditions=sweep["conditions"])
     md = results_markdown(stats, rows, title=f"Sweep {plan['name']}",
                           real_domain_label=sweep["real_domain"],
-                          proxy=sweep["real_is_proxy"])
+                          proxy=sweep["real_is_proxy"],
+                          settings={"profile": sweep["profile"].get("name"),
+                                    "digest": sweep.get("settings_digest"),
+                                    "fixed_at": sweep.get("settings_fixed_at")})
     write_json(sweep_dir / "stats.json", stats)
     (sweep_dir / "results.md").write_text(md)
     dashboard = write_dashboard(sweep_dir, sweep_dir / "dashboard.html")

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import dataclasses
 import hashlib
+import json
 import math
 from collections.abc import Mapping, Sequence
 from typing import Any
@@ -31,8 +32,14 @@ __all__ = [
     "ids_digest",
     "plan_sweep",
     "pretrain_key_inputs",
+    "protocol_digest",
+    "protocol_settings",
     "run_key_inputs",
+    "settings_changes",
 ]
+
+#: profile fields that only say how a sweep is executed or described, not what it measures
+EXECUTION_FIELDS = ("name", "description", "detector", "threads_per_run", "concurrent_runs")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -259,3 +266,44 @@ def run_key_inputs(spec: RunSpec, profile: ExperimentProfile, detector: Mapping[
                        "val_every": int(profile.val_every),
                        "max_val_points": int(profile.max_val_points), "ap_thresholds": "devkit"},
     }
+
+
+def protocol_settings(profile: ExperimentProfile, pretrain_detector: Mapping[str, Any],
+                      finetune_detector: Mapping[str, Any]) -> dict[str, Any]:
+    """Everything that fixes what a sweep measures, as JSON: the profile's fields without the
+    execution-only ones (:data:`EXECUTION_FIELDS`: name, description, the detector file's path,
+    threads and concurrency) and both stages' resolved detector identities (model,
+    augmentation, optimisation, mixed precision) in place of the detector file's path, so that
+    editing the detector YAML a profile points at counts as a change too.
+
+    Parameters
+    ----------
+    profile : the sweep's profile (after overrides).
+    pretrain_detector, finetune_detector : resolved DetectConfig dumps of the two stages.
+    """
+    fields = {k: v for k, v in profile.model_dump(mode="json").items()
+              if k not in EXECUTION_FIELDS}
+    return {"profile": fields,
+            "detector": {"pretrain": _detector_identity(pretrain_detector),
+                         "finetune": _detector_identity(finetune_detector)}}
+
+
+def protocol_digest(settings: Mapping[str, Any]) -> str:
+    """SHA-256 (hex, 20 characters) of :func:`protocol_settings` (canonical JSON)."""
+    text = json.dumps(settings, sort_keys=True, separators=(",", ":"), default=str)
+    return hashlib.sha256(text.encode()).hexdigest()[:20]
+
+
+def settings_changes(old: Mapping[str, Any], new: Mapping[str, Any],
+                     prefix: str = "") -> list[str]:
+    """The dotted paths whose values differ between two :func:`protocol_settings` documents,
+    as ``"path: old -> new"`` lines (for the message that refuses a changed sweep)."""
+    out: list[str] = []
+    for key in sorted(set(old) | set(new), key=str):
+        a, b = old.get(key), new.get(key)
+        path = f"{prefix}{key}"
+        if isinstance(a, Mapping) and isinstance(b, Mapping):
+            out += settings_changes(a, b, path + ".")
+        elif a != b:
+            out.append(f"{path}: {json.dumps(a, default=str)} -> {json.dumps(b, default=str)}")
+    return out

@@ -278,6 +278,7 @@ def results_markdown(
     title: str,
     real_domain_label: str,
     proxy: bool | None = None,
+    settings: Mapping[str, Any] | None = None,
 ) -> str:
     """A Markdown report of a sweep.
 
@@ -294,6 +295,8 @@ def results_markdown(
         starts with ``proxy``). A proxy, undeclared or other non-measured domain says so at the
         top and at the end (:func:`domain_line`); only a domain declared "measured" is called
         measured radar.
+    settings : ``{"profile", "digest", "fixed_at"}`` from sweep.json: the line saying when the
+        sweep's settings were fixed (before its first run; a changed profile is refused).
 
     Returns
     -------
@@ -313,6 +316,10 @@ def results_markdown(
            f"(AP points); p Holm-adjusted across fractions; verdict at alpha = {alpha:g}; "
            "P(improved) = k/n with its Clopper–Pearson interval; paper Δ (trials) = the "
            "paper's Table 1 Δ and the trials that would detect it at the observed spread.", ""]
+    if settings:
+        out += [f"Settings: profile `{settings.get('profile', '?')}` (digest "
+                f"`{settings.get('digest', '?')}`), fixed at {settings.get('fixed_at', '?')}, "
+                "before any run of this sweep; a rerun with changed settings is refused.", ""]
     out += [f"- {s}" for s in detectability_sentences(stats)]
     if out[-1] != "":
         out.append("")

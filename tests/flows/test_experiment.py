@@ -122,6 +122,23 @@ def test_a_rerun_trains_nothing(first, data, monkeypatch):
     assert again["stats"]["cells"] == first["summary"]["stats"]["cells"]
 
 
+def test_a_sweep_refuses_changed_settings_but_not_changed_execution(first, data):
+    """The settings are fixed when the sweep is created: a rerun with a changed protocol (lr)
+    is refused with the field named, one with changed execution (concurrency) runs."""
+    from tasks.experiment import SweepSettingsChanged, prepare_sweep
+
+    sweep = json.loads((first["dir"] / "sweep.json").read_text())
+    md = (first["dir"] / "results.md").read_text()
+    assert f"digest `{sweep['settings_digest']}`" in md and sweep["settings_fixed_at"] in md
+    with pytest.raises(SweepSettingsChanged, match=r"(?s)profile\.lr: .*new sweep name"):
+        prepare_sweep(data["sim"], data["real"], profile="smoke", name="t", out=first["out"],
+                      store=first["store"], overrides={"lr": 0.5})
+    plan = prepare_sweep(data["sim"], data["real"], profile="smoke", name="t", out=first["out"],
+                         store=first["store"], overrides={"concurrent_runs": 3})
+    assert plan["sweep"]["settings_fixed_at"] == sweep["settings_fixed_at"]
+    assert plan["sweep"]["settings_digest"] == sweep["settings_digest"]
+
+
 def test_a_broken_frame_fails_only_the_runs_that_read_it(data, prefect_server, tmp_path):
     from flows.run_experiment import run_experiment
 
@@ -215,3 +232,57 @@ def test_a_sweep_on_a_dask_cluster_gives_the_thread_runners_results(first, data,
         first["dir"] / "runs.parquet")
     assert on_dask.keys() == on_threads.keys()
     assert on_dask == pytest.approx(on_threads, abs=1e-6)
+
+
+def test_a_dask_worker_killed_mid_run_loses_nothing(data, prefect_server, tmp_path):
+    """SIGKILL the Dask worker that is fine-tuning a run once the run has a checkpoint: Dask
+    gives the task to a live worker, which takes over the dead worker's claim and resumes
+    from ``last.pt``. Every run finishes once, no row is duplicated."""
+    pytest.importorskip("prefect_dask")
+    distributed = pytest.importorskip("distributed")
+    import threading
+
+    from flows.run_experiment import run_experiment
+    from sim2radar.experiment.claims import read_events
+    from tasks.runners import local_cluster_kwargs
+
+    sweep = tmp_path / "sweeps" / "kill"
+    killed: dict = {}
+    stop = threading.Event()
+
+    def killer():
+        while not stop.is_set() and not killed:
+            for path in (sweep / "claims").glob("*.json"):
+                try:
+                    holder = json.loads(path.read_text())
+                except (OSError, ValueError):
+                    continue
+                run = sweep / "runs" / holder.get("key", "?")
+                if (run / "last.pt").is_file() and holder.get("pid") != os.getpid():
+                    os.kill(holder["pid"], signal.SIGKILL)
+                    killed.update(holder)
+                    return
+            time.sleep(0.02)
+
+    watcher = threading.Thread(target=killer, daemon=True)
+    with distributed.LocalCluster(**local_cluster_kwargs(2)) as lc:
+        watcher.start()
+        try:
+            summary = run_experiment(data["sim"], data["real"], profile="smoke", name="kill",
+                                     out=tmp_path / "sweeps", store=tmp_path / "store",
+                                     dask_address=lc.scheduler_address,
+                                     overrides={"finetune_epochs": 30, "val_every": 0})
+        finally:
+            stop.set()
+            watcher.join(5)
+    assert killed, "no run was caught mid-training"
+    assert summary["counts"] == {"ok": 8, "skipped": 0, "failed": 0}
+    rows = pq.read_table(sweep / "runs.parquet").to_pylist()
+    assert len(rows) == len({r["run_key"] for r in rows}) == 8
+    assert len(ArtifactStore(tmp_path / "store").keys("experiment_runs")) == 8
+    events = read_events(sweep / "claims")
+    victim = [e for e in events if e["key"] == killed["key"]]
+    assert [e["event"] for e in victim] == ["claimed", "takeover", "claimed", "released"]
+    assert victim[2]["resume"] is True and victim[2]["pid"] != killed["pid"]
+    for key in {e["key"] for e in events}:                  # finished once each
+        assert sum(e["event"] == "released" for e in events if e["key"] == key) == 1
