@@ -4,6 +4,13 @@ time, and (on a GPU) the paper's full grid.
     python -m benchmarks sweep                          # step times (~1 min on 2 cores)
     SIM2RADAR_BENCH_DEMO=1 python -m benchmarks sweep   # + `sim2radar demo` from scratch (~15 min)
     SIM2RADAR_BENCH_PAPER_GRID=1 python -m benchmarks sweep   # + the paper grid (GPU: ~1 h goal)
+    SIM2RADAR_BENCH_PAPER_SLICE=1 python -m benchmarks sweep  # + one paper cell (~25 min, CPU)
+
+The paper grid's plan (always): ``sim2radar sweep --plan``'s estimate on synthetic datasets of
+the paper's size (270 sim; 371 / 92 / 155 real), seconds per step measured here in the
+profile's resolved precision, wall time on 1 and 8 workers. The slice: one fraction (5 %) x
+one trial of the paper profile, both conditions (one pre-training, two fine-tuning runs, no
+validation), run one after another and timed, next to the plan's prediction for it.
 
 Step times: each profile's resolved fine-tuning detector config, batch size and threads, on
 synthetic corridors at IFR's density (2,000 points per frame), median seconds per optimiser
@@ -71,7 +78,6 @@ def _demo_wall_time() -> dict:
 
 
 def _paper_grid() -> dict:
-    from sim2radar.datasets import make_door_frames, write_dataset, write_metadata
     from sim2radar.hardware import torch_device
 
     device = torch_device()
@@ -79,24 +85,55 @@ def _paper_grid() -> dict:
         return {"skipped": "no CUDA device: the paper grid is for a GPU or a cluster"}
     root = Path(tempfile.mkdtemp(prefix="sim2radar-bench-grid-"))
     try:
-        sim = make_door_frames(270, seed=1, points_per_frame=POINTS_PER_FRAME)
-        write_dataset(root / "sim", sim, {"train": [f.frame_id for f in sim]})
-        real = make_door_frames(618, seed=2, points_per_frame=POINTS_PER_FRAME, first_id=1000)
-        ids = [f.frame_id for f in real]
-        write_dataset(root / "real", real, {"train": ids[:371], "val": ids[371:463],
-                                            "test": ids[463:]})
-        write_metadata(root / "real", {"domain": "synthetic benchmark frames"})
+        sim, real = _paper_data(root)
         from flows.run_experiment import run_experiment
 
         concurrent = int(os.environ.get("SIM2RADAR_BENCH_CONCURRENT", "4"))
         t0 = time.perf_counter()
-        summary = run_experiment(root / "sim", root / "real", profile="paper", name="grid",
+        summary = run_experiment(sim, real, profile="paper", name="grid",
                                  out=root / "sweeps", store=root / "store", workers=concurrent,
                                  overrides={"concurrent_runs": concurrent, "val_every": 0})
         return {"paper_grid_s": time.perf_counter() - t0, "concurrent_runs": concurrent,
                 "counts": summary["counts"], "device": str(device)}
     finally:
         shutil.rmtree(root, ignore_errors=True)
+
+
+def _paper_data(root: Path) -> tuple[Path, Path]:
+    """Synthetic datasets of the paper's size: 270 sim frames, 371 / 92 / 155 real."""
+    from sim2radar.datasets import make_door_frames, write_dataset, write_metadata
+
+    sim = make_door_frames(270, seed=1, points_per_frame=POINTS_PER_FRAME)
+    write_dataset(root / "sim", sim, {"train": [f.frame_id for f in sim]})
+    real = make_door_frames(618, seed=2, points_per_frame=POINTS_PER_FRAME, first_id=1000)
+    ids = [f.frame_id for f in real]
+    write_dataset(root / "real", real, {"train": ids[:371], "val": ids[371:463],
+                                        "test": ids[463:]})
+    write_metadata(root / "real", {"domain": "synthetic benchmark frames"})
+    return root / "sim", root / "real"
+
+
+def _paper_plan(root: Path) -> dict:
+    from tasks.experiment import plan_cost
+
+    sim, real = _paper_data(root)
+    return plan_cost(sim, real, profile="paper", store=root / "store", workers=(1, 8))
+
+
+def _paper_slice(root: Path) -> dict:
+    from flows.run_experiment import run_experiment
+    from tasks.experiment import plan_cost
+
+    sim, real = (root / "sim", root / "real") if (root / "real").is_dir() else _paper_data(root)
+    overrides = {"fractions": [0.05], "trials": 1, "val_every": 0, "concurrent_runs": 1}
+    predicted = plan_cost(sim, real, profile="paper", store=root / "store",
+                          overrides=overrides, workers=(1,))
+    t0 = time.perf_counter()
+    summary = run_experiment(sim, real, profile="paper", name="slice", out=root / "sweeps",
+                             store=root / "store", overrides=overrides, workers=1)
+    return {"measured_s": time.perf_counter() - t0, "predicted_s": 3600 *
+            predicted["wall_hours"][1], "counts": summary["counts"],
+            "precision": predicted["precision"], "step_seconds": predicted["step_seconds"]}
 
 
 def main() -> dict:
@@ -107,6 +144,21 @@ def main() -> dict:
         out["step_times"].append(r)
         print(f"{name:6s} batch {r['batch_size']} threads {r['threads']}: "
               f"{r['s_per_step_median']:.3f} s/step (median of {r['steps_timed']} steps)")
+    with tempfile.TemporaryDirectory(prefix="sim2radar-bench-plan-") as tmp:
+        plan = out["paper_plan"] = _paper_plan(Path(tmp))
+        print(f"paper grid plan ({plan['precision']['finetune']} mixed precision): "
+              f"{plan['jobs']['pretrain']['jobs']} pre-trainings x "
+              f"{plan['jobs']['pretrain']['steps'] // max(1, plan['jobs']['pretrain']['jobs'])}"
+              f" steps, {plan['jobs']['finetune']['jobs']} runs, "
+              f"{plan['jobs']['finetune']['steps']:,} fine-tuning steps; "
+              f"{plan['step_seconds']['finetune']:.3f} s/step here; compute "
+              f"{plan['compute_hours']:.1f} h; wall {plan['wall_hours'][1]:.1f} h on 1 worker, "
+              f"{plan['wall_hours'][8]:.1f} h on 8")
+        if os.environ.get("SIM2RADAR_BENCH_PAPER_SLICE"):
+            sl = out["paper_slice"] = _paper_slice(Path(tmp))
+            print(f"paper slice (5 %, 1 trial, both conditions): {sl['measured_s'] / 60:.1f} "
+                  f"min measured, {sl['predicted_s'] / 60:.1f} min predicted by the plan; "
+                  f"{sl['counts']}")
     if os.environ.get("SIM2RADAR_BENCH_DEMO"):
         out["demo"] = _demo_wall_time()
         d = out["demo"]

@@ -180,3 +180,44 @@ def has_cuda() -> bool:
         return torch.cuda.is_available()
     except ImportError:  # pragma: no cover
         return False
+
+
+#: /proc/cpuinfo flags of CPUs with native bfloat16 matrix arithmetic (AVX-512 BF16, Intel AMX)
+CPU_BF16_FLAGS = ("avx512_bf16", "amx_bf16")
+
+
+@functools.lru_cache(maxsize=1)
+def cpu_has_native_bf16() -> bool:
+    """True when this CPU multiplies bfloat16 natively (``avx512_bf16`` or ``amx_bf16`` in
+    ``/proc/cpuinfo``; False where that file does not exist). Without it, oneDNN emulates
+    bfloat16 and mixed precision is slower than float32."""
+    try:
+        with open("/proc/cpuinfo", encoding="ascii", errors="replace") as fh:
+            for line in fh:
+                if line.startswith("flags"):
+                    flags = set(line.split(":", 1)[1].split())
+                    return any(f in flags for f in CPU_BF16_FLAGS)
+    except OSError:
+        pass
+    return False
+
+
+def autocast_dtype(device, amp: bool | str):
+    """The autocast dtype of mixed-precision training on ``device``, or None for float32.
+
+    ``amp``: False (float32), True (mixed precision: bfloat16 on a CPU, bfloat16 on a CUDA GPU
+    that supports it, else float16), or ``"auto"`` (True where it is fast: every CUDA GPU, and
+    CPUs with native bfloat16, :func:`cpu_has_native_bf16`; float32 elsewhere).
+    """
+    import torch
+
+    device = torch.device(device)
+    if amp is False or amp is None:
+        return None
+    if amp not in (True, "auto"):
+        raise ValueError(f"amp must be true, false or 'auto', got {amp!r}")
+    if device.type == "cuda":
+        return torch.bfloat16 if torch.cuda.is_bf16_supported() else torch.float16
+    if device.type == "cpu" and (amp is True or cpu_has_native_bf16()):
+        return torch.bfloat16
+    return None

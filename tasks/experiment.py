@@ -47,6 +47,7 @@ __all__ = [
     "SweepContext",
     "SweepSettingsChanged",
     "prepare_sweep",
+    "plan_cost",
     "run_pretraining",
     "run_finetuning",
     "failed_row",
@@ -196,44 +197,28 @@ def prepare_sweep(
     """
 
     from sim2radar.experiment import (
-        ABLATIONS,
-        CONDITIONS,
-        load_profile,
         plan_sweep,
         pretrain_key_inputs,
         run_key_inputs,
     )
     from sim2radar.experiment.data import check_disjoint_worlds, fit_subset_intensity_match
     from sim2radar.experiment.plan import protocol_digest, protocol_settings
-    from sim2radar.experiment.profiles import ExperimentProfile
     from sim2radar.experiment.stats import DEFAULT_METRIC
 
     if not name or not all(c.isalnum() or c in "-_." for c in name):
         raise ValueError(f"sweep name {name!r}: use letters, digits, '-', '_' or '.'")
-    prof = profile if isinstance(profile, ExperimentProfile) else load_profile(profile)
-    if overrides:
-        try:
-            prof = ExperimentProfile.model_validate({**prof.model_dump(), **overrides})
-        except Exception as exc:  # pydantic's message names the field
-            raise ValueError(f"profile {prof.name!r} overrides: {exc}") from None
+    prof = _profile(profile, overrides)
     sweep_dir = Path(out) / name
-    settings = protocol_settings(prof, prof.detector_config("pretrain").model_dump(mode="json"),
-                                 prof.detector_config("finetune").model_dump(mode="json"))
+    pre_cfg = _resolve_precision(prof.detector_config("pretrain"), device)
+    ft_cfg = _resolve_precision(prof.detector_config("finetune"), device)
+    settings = protocol_settings(prof, pre_cfg.model_dump(mode="json"),
+                                 ft_cfg.model_dump(mode="json"))
     fixed_at = _check_settings_unchanged(sweep_dir, name, settings)
     sweep_dir.mkdir(parents=True, exist_ok=True)
     st = open_store(store)
 
-    conditions = list(prof.all_conditions)
-    if ablations:
-        conditions += [c for c in ABLATIONS if c not in conditions]
     sources = {"sim": sim, "real": real, "sim-gt": sim_gt, "sim-one-material": sim_one_material}
-    needed = {"real"} | {CONDITIONS[c].sim_role for c in conditions if CONDITIONS[c].sim_role}
-    missing = sorted(r for r in needed if sources[r] is None)
-    if missing:
-        flags = {"sim-gt": "--sim-gt", "sim-one-material": "--sim-one-material"}
-        raise ValueError("conditions " + ", ".join(c for c in conditions
-                                                     if CONDITIONS[c].sim_role in missing)
-                         + " need the dataset(s) " + ", ".join(flags.get(r, r) for r in missing))
+    conditions, needed = _conditions(prof, ablations, sources)
     domains = {role: _resolve_dataset(sources[role], role, st.root_uri, sweep_dir,
                                       prof.sweep_seed)
                for role in ROLES if role in needed}
@@ -246,7 +231,6 @@ def prepare_sweep(
             raise ValueError(f"{real_ds.root}/ImageSets/{split}.txt lists no frame: the real "
                              f"dataset needs a {split!r} split")
 
-    pre_cfg, ft_cfg = prof.detector_config("pretrain"), prof.detector_config("finetune")
     if device is not None:
         pre_cfg = pre_cfg.with_updates(runtime={"device": device})
         ft_cfg = ft_cfg.with_updates(runtime={"device": device})
@@ -307,6 +291,123 @@ def prepare_sweep(
     write_json(sweep_dir / "sweep.json", sweep)
     return {"name": name, "context": ctx.to_dict(), "pretrains": pre_out, "runs": run_out,
             "concurrent_runs": prof.concurrent_runs, "metric": DEFAULT_METRIC, "sweep": sweep}
+
+
+def _profile(profile: Any, overrides: dict[str, Any] | None):
+    """A profile (name, path or object) with ``overrides`` applied and validated."""
+    from sim2radar.experiment import load_profile
+    from sim2radar.experiment.profiles import ExperimentProfile
+
+    prof = profile if isinstance(profile, ExperimentProfile) else load_profile(profile)
+    if overrides:
+        try:
+            prof = ExperimentProfile.model_validate({**prof.model_dump(), **overrides})
+        except Exception as exc:  # pydantic's message names the field
+            raise ValueError(f"profile {prof.name!r} overrides: {exc}") from None
+    return prof
+
+
+def _conditions(prof, ablations: bool, sources: dict[str, Any]) -> tuple[list[str], set[str]]:
+    """The sweep's conditions and the dataset roles they need; raises ValueError naming the
+    missing datasets' flags."""
+    from sim2radar.experiment import ABLATIONS, CONDITIONS
+
+    conditions = list(prof.all_conditions)
+    if ablations:
+        conditions += [c for c in ABLATIONS if c not in conditions]
+    needed = {"real"} | {CONDITIONS[c].sim_role for c in conditions if CONDITIONS[c].sim_role}
+    missing = sorted(r for r in needed if sources[r] is None)
+    if missing:
+        flags = {"sim-gt": "--sim-gt", "sim-one-material": "--sim-one-material"}
+        raise ValueError("conditions " + ", ".join(c for c in conditions
+                                                     if CONDITIONS[c].sim_role in missing)
+                         + " need the dataset(s) " + ", ".join(flags.get(r, r) for r in missing))
+    return conditions, needed
+
+
+def plan_cost(
+    sim: str | os.PathLike,
+    real: str | os.PathLike,
+    *,
+    profile: Any = "demo",
+    store: str | os.PathLike = "out/store",
+    sim_gt: str | os.PathLike | None = None,
+    sim_one_material: str | os.PathLike | None = None,
+    ablations: bool = False,
+    overrides: dict[str, Any] | None = None,
+    device: str | None = None,
+    workers: tuple[int, ...] = (1, 8),
+    step_seconds: dict[str, float] | None = None,
+) -> dict[str, Any]:
+    """What a sweep would cost, without creating it (nothing is written to the sweeps folder):
+    its jobs, their optimiser steps, seconds per step measured here on the sweep's own frames
+    with its resolved configs (or ``step_seconds`` = ``{"pretrain": s, "finetune": s}``, e.g.
+    a GPU's figures), and the expected wall time on each of ``workers`` worker counts
+    (:func:`sim2radar.experiment.cost.wall_time`).
+
+    Returns ``profile``, ``precision`` (amp per stage), ``jobs`` (kind -> count, steps),
+    ``step_seconds``, ``measured`` (whether timed here), ``compute_hours`` and ``wall_hours``
+    (workers -> hours).
+    """
+    import tempfile
+
+    from sim2radar.experiment import plan_sweep
+    from sim2radar.experiment.cost import measure_step_seconds, sweep_jobs, wall_time
+
+    prof = _profile(profile, overrides)
+    sources = {"sim": sim, "real": real, "sim-gt": sim_gt, "sim-one-material": sim_one_material}
+    conditions, needed = _conditions(prof, ablations, sources)
+    pre_cfg = _resolve_precision(prof.detector_config("pretrain"), device)
+    ft_cfg = _resolve_precision(prof.detector_config("finetune"), device)
+    st = open_store(store)
+    with tempfile.TemporaryDirectory(prefix="sim2radar-plan-") as tmp:
+        domains = {role: _resolve_dataset(sources[role], role, st.root_uri, Path(tmp),
+                                          prof.sweep_seed) for role in needed}
+        real_ds = domains["real"]
+        train_ids = real_ds.splits.get(prof.train_split) or []
+        if not train_ids:
+            raise ValueError(f"{real_ds.root}/ImageSets/{prof.train_split}.txt lists no frame")
+        pretrains, runs = plan_sweep(prof, train_ids, conditions)
+        n_sim = {role: len(ds.ids()) for role, ds in domains.items() if role != "real"}
+        jobs = sweep_jobs(pretrains, runs, n_sim, prof.batch_size)
+        measured = step_seconds is None
+        if measured:
+            nfeat, classes = ft_cfg.model.num_point_features, ft_cfg.model.class_names
+            sec = {"finetune": measure_step_seconds(
+                ft_cfg, real_ds.frames(train_ids[: 3 * prof.batch_size], nfeat, classes),
+                device=device)}
+            if pretrains:
+                sim_ds = domains[pretrains[0].sim_role]
+                sec["pretrain"] = measure_step_seconds(
+                    pre_cfg, sim_ds.frames(sim_ds.ids()[: 3 * prof.batch_size], nfeat, classes),
+                    device=device)
+        else:
+            sec = {k: float(v) for k, v in step_seconds.items()}
+            missing = {j.kind for j in jobs} - set(sec)
+            if missing:
+                raise ValueError(f"step_seconds lacks {sorted(missing)} (give pretrain and "
+                                 "finetune seconds per step)")
+    by_kind = {k: {"jobs": sum(j.kind == k for j in jobs),
+                   "steps": sum(j.steps for j in jobs if j.kind == k)}
+               for k in ("pretrain", "finetune")}
+    compute_s = sum(j.steps * sec[j.kind] for j in jobs)
+    return {"profile": prof.name, "device": device or str(ft_cfg.runtime.device or "auto"),
+            "precision": {"pretrain": pre_cfg.runtime.amp, "finetune": ft_cfg.runtime.amp},
+            "threads_per_run": prof.threads_per_run, "jobs": by_kind, "step_seconds": sec,
+            "measured": measured, "compute_hours": compute_s / 3600,
+            "wall_hours": {int(n): wall_time(jobs, sec, int(n)) / 3600 for n in workers}}
+
+
+def _resolve_precision(cfg, device: str | None):
+    """``runtime.amp: auto`` decided once, for the sweep's device, on the machine that plans
+    it: every run of the sweep trains in the same precision wherever it executes, and the
+    choice is part of the runs' keys and the sweep's settings."""
+    from sim2radar.hardware import autocast_dtype, torch_device
+
+    if cfg.runtime.amp != "auto":
+        return cfg
+    dev = torch_device(device or cfg.runtime.device)
+    return cfg.with_updates(runtime={"amp": autocast_dtype(dev, "auto") is not None})
 
 
 class SweepSettingsChanged(ValueError):

@@ -3,6 +3,8 @@
 import subprocess
 import sys
 
+import pytest
+
 
 def _run(code: str, **env) -> subprocess.CompletedProcess:
     import os
@@ -69,3 +71,34 @@ def test_to_drjit_copies_and_keeps_components_apart():
                 "to_drjit(mi.Point3f, np.zeros((2, 4)))")
     assert "[0, 1] [2, 3] [4, 5] [4, 5]" in proc.stdout, proc.stdout + proc.stderr
     assert proc.returncode != 0 and "Point3f needs (3, N) values" in proc.stderr
+
+
+def test_mixed_precision_choice(monkeypatch):
+    """amp: false -> float32; true -> bfloat16 on a CPU; auto -> bfloat16 only on a CPU with
+    native bfloat16 (else float32, where emulated bfloat16 would be slower)."""
+    import torch
+
+    from sim2radar import hardware
+
+    assert hardware.autocast_dtype("cpu", False) is None
+    assert hardware.autocast_dtype("cpu", True) is torch.bfloat16
+    for native in (True, False):
+        monkeypatch.setattr(hardware, "cpu_has_native_bf16", lambda native=native: native)
+        assert hardware.autocast_dtype("cpu", "auto") is (torch.bfloat16 if native else None)
+    with pytest.raises(ValueError, match="amp must be"):
+        hardware.autocast_dtype("cpu", "fast")
+
+
+def test_native_bf16_is_read_from_the_cpu_flags():
+    from pathlib import Path
+
+    from sim2radar import hardware
+
+    info = Path("/proc/cpuinfo")
+    if not info.is_file():
+        assert hardware.cpu_has_native_bf16() is False
+        return
+    flags = next((line for line in info.read_text().splitlines() if line.startswith("flags")),
+                 "")
+    assert hardware.cpu_has_native_bf16() == any(f in flags.split()
+                                                 for f in hardware.CPU_BF16_FLAGS)

@@ -3,6 +3,7 @@
     sim2radar sweep data/sim data/proxy_real --profile demo --name demo --out out/sweeps
     sim2radar sweep data/sim data/ifr --profile paper --name ifr     # a GPU or a cluster
     sim2radar sweep store:demo store:reference --profile smoke --name s --store out/store
+    sim2radar sweep data/sim data/ifr --profile paper --plan --plan-workers 1,8   # cost only
 
 Prefect and torch are imported inside the command, so ``sim2radar --help`` stays fast.
 """
@@ -18,7 +19,7 @@ import typer
 
 from sim2radar.cli._app import app, exit_unless_writable
 
-__all__ = ["sweep", "run_sweep", "print_sweep_summary"]
+__all__ = ["sweep", "run_sweep", "print_sweep_summary", "print_plan"]
 
 
 def _fractions(text: str | None) -> list[float] | None:
@@ -29,6 +30,55 @@ def _fractions(text: str | None) -> list[float] | None:
     except ValueError:
         raise ValueError(f"--fractions: expected comma-separated numbers such as "
                          f"0.05,0.1,0.25, got {text!r}") from None
+
+
+def _ints(text: str, flag: str) -> tuple[int, ...]:
+    try:
+        values = tuple(int(v) for v in text.split(",") if v.strip())
+    except ValueError:
+        values = ()
+    if not values or min(values) < 1:
+        raise ValueError(f"{flag}: expected comma-separated positive integers such as 1,8, "
+                         f"got {text!r}")
+    return values
+
+
+def _step_seconds(text: str | None) -> dict[str, float] | None:
+    if text is None:
+        return None
+    try:
+        pre, ft = (float(v) for v in text.split(","))
+    except ValueError:
+        raise ValueError(f"--step-seconds: expected PRE,FT seconds per step such as 0.05,0.04, "
+                         f"got {text!r}") from None
+    if pre <= 0 or ft <= 0:
+        raise ValueError(f"--step-seconds: seconds per step must be > 0, got {text!r}")
+    return {"pretrain": pre, "finetune": ft}
+
+
+def print_plan(cost: dict[str, Any]) -> None:
+    """The grid's jobs, steps, seconds per step and expected wall times."""
+    from rich.console import Console
+    from rich.table import Table
+
+    console = Console()
+    how = "measured here" if cost["measured"] else "given"
+    table = Table(title=f"sweep plan: profile {cost['profile']}, device {cost['device']}, "
+                  f"mixed precision {cost['precision']['finetune']}")
+    for col in ("jobs", "count", "optimiser steps", f"s/step ({how})", "compute [h]"):
+        table.add_column(col, justify="right")
+    for kind in ("pretrain", "finetune"):
+        j = cost["jobs"][kind]
+        if not j["jobs"]:
+            continue
+        sec = cost["step_seconds"][kind]
+        table.add_row(kind, str(j["jobs"]), f"{j['steps']:,}", f"{sec:.3f}",
+                      f"{j['steps'] * sec / 3600:.2f}")
+    console.print(table)
+    console.print(f"compute: {cost['compute_hours']:.2f} h of training steps (validation, "
+                  "tests and start-up not included)")
+    for n, hours in cost["wall_hours"].items():
+        console.print(f"expected wall time on {n} worker(s), one run each: {hours:.2f} h")
 
 
 def run_sweep(sim: str, real: str, *, profile: str, name: str, out: str, store: str,
@@ -124,6 +174,13 @@ def sweep(
     device: str | None = typer.Option(None, help="Torch device (cpu, cuda, cuda:1)."),
     json_out: Path | None = typer.Option(None, "--json", help="Also write the summary as JSON."),
     verbose: bool = typer.Option(False, "--verbose", "-v", help="Show Prefect's logs."),
+    plan: bool = typer.Option(False, "--plan", help="Print the grid's cost (steps x seconds "
+                              "per step measured here) and wall time; run nothing."),
+    plan_workers: str = typer.Option("1,8", "--plan-workers",
+                                     help="With --plan: worker counts to estimate, e.g. 1,4,8."),
+    step_seconds: str | None = typer.Option(
+        None, "--step-seconds", help="With --plan: PRE,FT seconds per step to use instead of "
+        "timing them here (e.g. a GPU's figures)."),
 ) -> None:
     """Run the experiment grid: baseline vs sim-pretrain (and ablations) over real-data
     fractions x trials, with paired statistics, a results table and a dashboard.
@@ -141,6 +198,19 @@ def sweep(
         fr = _fractions(fractions)
         if fr is not None:
             overrides["fractions"] = fr
+        if plan:
+            from tasks.experiment import plan_cost
+
+            cost = plan_cost(sim, real, profile=profile, store=store, sim_gt=sim_gt,
+                             sim_one_material=sim_one_material, ablations=ablations,
+                             overrides=overrides or None, device=device,
+                             workers=_ints(plan_workers, "--plan-workers"),
+                             step_seconds=_step_seconds(step_seconds))
+            print_plan(cost)
+            if json_out is not None:
+                json_out.parent.mkdir(parents=True, exist_ok=True)
+                json_out.write_text(json.dumps(cost, indent=1, default=str))
+            return
         summary = run_sweep(sim, real, profile=profile, name=name, out=str(out), store=store,
                             sim_gt=sim_gt, sim_one_material=sim_one_material,
                             ablations=ablations, overrides=overrides or None, workers=workers,

@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
@@ -225,8 +225,11 @@ class RuntimeConfig(_Frozen):
 
     #: "cpu", "cuda", "cuda:1"...; None picks via sim2radar.hardware.torch_device()
     device: str | None = None
-    #: mixed precision (bfloat16 on CPU, float16 on CUDA)
-    amp: bool = False
+    #: mixed precision: true (bfloat16 autocast on a CPU, bfloat16 or float16 on CUDA), false
+    #: (float32), or "auto": true on CUDA and on CPUs with native bfloat16 (AVX-512 BF16 / AMX),
+    #: false elsewhere (sim2radar.hardware.autocast_dtype). The A/B that made "auto" the
+    #: default (baseline AP unchanged within noise, 1.9x faster steps) is in BENCHMARKS.md
+    amp: bool | Literal["auto"] = "auto"
     #: wrap the dense network (VFE..head) in torch.compile
     compile: bool = False
     #: torch intra-op threads on CPU (None: torch's default)

@@ -44,6 +44,7 @@ from sim2radar.detect.augment import GTDatabase, augment_frame, build_gt_databas
 from sim2radar.detect.config import DetectConfig, load_config
 from sim2radar.detect.model import Detections, PointPillars
 from sim2radar.evaluate.ap import evaluate_detections
+from sim2radar.hardware import autocast_dtype
 
 __all__ = [
     "TrainResult",
@@ -115,10 +116,10 @@ def collate(
     return pts.to(device), torch.from_numpy(gt).to(device)
 
 
-def _autocast(device: torch.device, enabled: bool):
-    if not enabled:
+def _autocast(device: torch.device, dtype: torch.dtype | None):
+    """Mixed precision in ``dtype`` (:func:`sim2radar.hardware.autocast_dtype`), or none."""
+    if dtype is None:
         return contextlib.nullcontext()
-    dtype = torch.float16 if device.type == "cuda" else torch.bfloat16
     return torch.autocast(device.type, dtype=dtype)
 
 
@@ -358,7 +359,9 @@ def _train(config, train_ids, out_dir: Path, init_encoder_from, seed, *, data_di
             "%g (eval-mode scores will be too low); use more epochs or bn_momentum >= %.2f",
             total_steps, mcfg.bn_momentum, min(1.0, 3.0 / total_steps),
         )
-    scaler = torch.amp.GradScaler("cuda", enabled=rt.amp and dev.type == "cuda")
+    amp_dtype = autocast_dtype(dev, rt.amp)
+    # float16 needs loss scaling against gradient underflow; bfloat16 has float32's range
+    scaler = torch.amp.GradScaler("cuda", enabled=amp_dtype == torch.float16)
 
     start_epoch, history = 0, []
     last = out_dir / "last.pt"
@@ -415,7 +418,7 @@ def _train(config, train_ids, out_dir: Path, init_encoder_from, seed, *, data_di
                    for f in batch]
             pts, gt = collate([a[0] for a in aug], [a[1] for a in aug], [a[2] for a in aug],
                               mcfg.class_names, dev)
-            with _autocast(dev, rt.amp):
+            with _autocast(dev, amp_dtype):
                 out = model(pts, len(batch))
             loss, parts = model.loss(out, gt)
             optimizer.zero_grad(set_to_none=True)

@@ -209,7 +209,7 @@ def ids_digest(ids: Sequence[str]) -> str:
 def _detector_identity(detector: Mapping[str, Any]) -> dict[str, Any]:
     """The parts of a resolved DetectConfig dump that change a run's result: model,
     augmentation, optimisation (epochs left out: the spec carries the run's own), mixed
-    precision. Name, data paths, seed (the spec's), pretrained_encoder (the pretrain's key)
+    precision (as resolved for the sweep's device: true or false). Name, data paths, seed (the spec's), pretrained_encoder (the pretrain's key)
     and the rest of runtime are left out."""
     det = dict(detector)
     missing = [k for k in ("model", "augmentation", "optimization") if k not in det]
@@ -217,7 +217,7 @@ def _detector_identity(detector: Mapping[str, Any]) -> dict[str, Any]:
         raise ValueError(f"detector: expected a DetectConfig dump, missing sections {missing}")
     optim = {k: v for k, v in dict(det["optimization"]).items() if k != "epochs"}
     return {"model": det["model"], "augmentation": det["augmentation"],
-            "optimization": optim, "amp": bool(dict(det.get("runtime") or {}).get("amp", False))}
+            "optimization": optim, "amp": dict(det.get("runtime") or {}).get("amp", False)}
 
 
 def pretrain_key_inputs(spec: PretrainSpec, detector: Mapping[str, Any],

@@ -141,7 +141,8 @@ class ExperimentProfile(BaseModel):
     #: pre-training per sim dataset, shared by all trials
     pretrain_per_trial: bool = True
     #: map simulated intensities onto the real ones (log-space histogram matching, §6.1),
-    #: fitted on the real TRAIN split only
+    #: fitted on each run's own real fine-tuning subset (one pre-training per trial and
+    #: fraction)
     intensity_matching: bool = True
     #: epochs between validation APs (3D, R40, IoU 0.3) on ``val_split``; 0 = none. Learning
     #: curves only: the last epoch is tested, as in the paper

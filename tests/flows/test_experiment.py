@@ -128,6 +128,8 @@ def test_a_sweep_refuses_changed_settings_but_not_changed_execution(first, data)
     from tasks.experiment import SweepSettingsChanged, prepare_sweep
 
     sweep = json.loads((first["dir"] / "sweep.json").read_text())
+    # amp "auto" is decided once, when the sweep is planned: every run trains the same way
+    assert isinstance(sweep["settings"]["detector"]["finetune"]["amp"], bool)
     md = (first["dir"] / "results.md").read_text()
     assert f"digest `{sweep['settings_digest']}`" in md and sweep["settings_fixed_at"] in md
     with pytest.raises(SweepSettingsChanged, match=r"(?s)profile\.lr: .*new sweep name"):
@@ -175,6 +177,36 @@ def test_bad_inputs_exit_2_with_one_line(data, tmp_path):
     res = CliRunner().invoke(app, ["sweep", str(data["sim"]), str(data["sim"]), "--profile",
                                    "smoke", "--out", str(tmp_path), "--ablations"])
     assert res.exit_code == 2 and "--sim-gt" in res.output
+
+
+def test_plan_prints_the_grid_cost_and_creates_nothing(data, tmp_path):
+    from typer.testing import CliRunner
+
+    from sim2radar.cli import app
+
+    out = tmp_path / "sweeps"
+    res = CliRunner().invoke(app, ["sweep", str(data["sim"]), str(data["real"]), "--profile",
+                                   "smoke", "--name", "p", "--out", str(out), "--plan",
+                                   "--plan-workers", "1,2", "--json", str(tmp_path / "c.json")])
+    assert res.exit_code == 0, res.output
+    assert "expected wall time on 2 worker(s)" in res.output and "measured here" in res.output
+    assert not (out / "p").exists()                       # nothing planned into the folder
+    cost = json.loads((tmp_path / "c.json").read_text())
+    # smoke: 2 trials x 2 fractions -> 4 pre-trainings (1 epoch x ceil(12 / 4) steps) and 8
+    # runs (2 epochs x ceil(4 or 8 / 4))
+    assert cost["jobs"] == {"pretrain": {"jobs": 4, "steps": 12},
+                            "finetune": {"jobs": 8, "steps": 24}}
+    res = CliRunner().invoke(app, ["sweep", str(data["sim"]), str(data["real"]), "--profile",
+                                   "smoke", "--plan", "--step-seconds", "2,1", "--json",
+                                   str(tmp_path / "g.json"), "--out", str(out)])
+    assert res.exit_code == 0, res.output
+    given = json.loads((tmp_path / "g.json").read_text())
+    assert not given["measured"]
+    assert given["compute_hours"] == pytest.approx((12 * 2 + 24 * 1) / 3600)
+    assert given["wall_hours"]["1"] == pytest.approx(given["compute_hours"])
+    res = CliRunner().invoke(app, ["sweep", str(data["sim"]), str(data["real"]), "--profile",
+                                   "smoke", "--plan", "--step-seconds", "fast"])
+    assert res.exit_code == 2 and "--step-seconds" in res.output
 
 
 def test_a_killed_sweep_resumes_and_only_finishes_the_missing_runs(data, tmp_path):
