@@ -51,8 +51,12 @@ def _step_time(profile_name: str, n_frames: int = 24, epochs: int = 4) -> dict:
         res = train(cfg, out_dir=tmp, frames=frames, epochs=epochs, seed=0)
     steps_per_epoch = res.steps // res.epochs
     per_step = [h["seconds"] / steps_per_epoch for h in res.history[1:]]
+    from sim2radar.hardware import autocast_dtype, torch_device
+
+    dtype = autocast_dtype(torch_device(cfg.runtime.device), cfg.runtime.amp)
     return {"profile": profile_name, "batch_size": cfg.optimization.batch_size,
             "threads": torch.get_num_threads(),
+            "precision": "float32" if dtype is None else str(dtype).removeprefix("torch."),
             "device": str(cfg.runtime.device or "auto"),
             "s_per_step_median": statistics.median(per_step), "steps_timed": len(per_step)
             * steps_per_epoch}
@@ -142,7 +146,7 @@ def main() -> dict:
         r = _step_time(name, n_frames=16 if name == "paper" else 24,
                        epochs=3 if name == "paper" else 4)
         out["step_times"].append(r)
-        print(f"{name:6s} batch {r['batch_size']} threads {r['threads']}: "
+        print(f"{name:6s} batch {r['batch_size']} threads {r['threads']} {r['precision']}: "
               f"{r['s_per_step_median']:.3f} s/step (median of {r['steps_timed']} steps)")
     with tempfile.TemporaryDirectory(prefix="sim2radar-bench-plan-") as tmp:
         plan = out["paper_plan"] = _paper_plan(Path(tmp))
