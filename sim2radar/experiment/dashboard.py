@@ -851,6 +851,8 @@ def _provenance(sweep: Mapping[str, Any] | None) -> dict[str, Any] | None:
     git = prov.get("git")
     return _clean({
         "created_at": sweep.get("created_at"),
+        "settings_fixed_at": sweep.get("settings_fixed_at"),
+        "settings_digest": sweep.get("settings_digest"),
         "versions": prov.get("versions") or {},
         "code": code if isinstance(code, Mapping) else ({"code": code} if code else {}),
         "git": git if isinstance(git, str) else (json.dumps(_clean(git)) if git else None),
@@ -1192,6 +1194,9 @@ function renderProvenance(p) {
   }
   let out = "<p>created " + esc(p.created_at || "—") + (p.git ? " · git " + esc(p.git) : "") +
     "</p>";
+  if (p.settings_digest) out += "<p>settings (digest " + esc(p.settings_digest) +
+    ") fixed at " + esc(p.settings_fixed_at || "—") +
+    ", before any run; a rerun with changed settings is refused</p>";
   const code = Object.entries(p.code || {});
   if (code.length) out += "<h3>Code</h3>" + table(["", ""], code, null);
   out += "<h3>Package versions</h3>" + table(["package", "version"],

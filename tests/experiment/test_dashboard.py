@@ -148,6 +148,8 @@ def make_sweep(folder: Path, *, conditions=("baseline", "sim-pretrain"),
                            "code": {"stage_version": 1, "sim2radar": "0.1.0"},
                            "configs": {"finetune": {"model": {"name": "pointpillars"}}}},
             "created_at": "2026-11-20T09:00:00+00:00",
+            "settings_fixed_at": "2026-11-20T08:00:00+00:00",
+            "settings_digest": "0123456789abcdef0123",
         }
         (folder / "sweep.json").write_text(json.dumps(sweep))
     if extras:
@@ -282,6 +284,8 @@ def test_progress_banner_datasets_gap_and_provenance(sweep_dir):
     assert ["points ratio sim / real", "25.0 %"] in gap["facts"]
     prov = data["provenance"]
     assert prov["versions"]["torch"] == "2.13.0" and "finetune" in prov["configs"]
+    assert (prov["settings_digest"], prov["settings_fixed_at"]) == ("0123456789abcdef0123",
+                                                                   "2026-11-20T08:00:00+00:00")
     json.dumps(data, allow_nan=False)   # no NaN reaches the page
 
 
