@@ -120,6 +120,12 @@ class OnnxModel:
                 return i.type
         raise KeyError(name)
 
+    def output_type(self, name: str) -> str:
+        for o in self.session.get_outputs():
+            if o.name == name:
+                return o.type
+        raise KeyError(name)
+
     def run(self, feeds: dict[str, np.ndarray], outputs: Sequence[str]) -> dict[str, np.ndarray]:
         feeds = {k: v for k, v in feeds.items() if k in self.input_names}
         try:

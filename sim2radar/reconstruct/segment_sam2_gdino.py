@@ -16,6 +16,15 @@ SAM2 — the common export split (e.g. ``samexporter``, 1024×1024 input):
   ``orig_im_size`` (2,) [H, W] -> ``masks`` (B, M, h, w) logits (any h, w; resized to the image)
   and ``iou_predictions`` (B, M).
 
+onnxruntime's own SAM2 exporter (``onnxruntime/python/tools/transformers/models/sam2``) names
+them differently and writes ``masks`` already resized and thresholded (boolean), which a decoder
+output of boolean type is refused for; its logits are ``low_res_masks``. Its mapping::
+
+    encoder_outputs: [image_features_0, image_features_1, image_embeddings]
+    decoder_inputs: [point_coords, point_labels, input_masks, has_input_masks,
+                     original_image_size]
+    decoder_outputs: [low_res_masks, iou_predictions]
+
 Automatic mask generation (SAM's ``SamAutomaticMaskGenerator`` without crops): a regular
 ``points_per_side``² grid of single foreground points; all M multimask outputs are candidates;
 keep those with predicted IoU ≥ ``pred_iou_thresh`` and stability score (IoU of the masks
@@ -26,12 +35,20 @@ than ``min_area_px`` after painting are dropped.
 
 Grounding DINO — the common ONNX export (e.g. X-AnyLabeling's ``export_grounding_dino_onnx``):
 
-* inputs ``img`` (1, 3, H, W) float32 (ImageNet-normalised; shorter side 800 px, longer ≤ 1333 when
-  the graph has dynamic H, W, otherwise the graph's fixed size), ``input_ids`` (1, T),
+* inputs ``img`` (1, 3, H, W) float32 (ImageNet-normalised RGB, plainly resized — not
+  letter-boxed — to ``input_hw``), ``input_ids`` (1, T),
   ``attention_mask`` (1, T), ``position_ids`` (1, T), ``token_type_ids`` (1, T),
   ``text_token_mask`` (1, T, T) — the integer/bool dtypes are read from the graph;
 * outputs ``logits`` (1, Q, 256) token-alignment logits, ``boxes`` (1, Q, 4) normalised
-  (cx, cy, w, h).
+  (cx, cy, w, h). A plain resize keeps normalised coordinates, so a box maps back to the frame as
+  ``(cx · W0, cy · H0, w · W0, h · H0)`` whatever ``input_hw`` is.
+
+Input size: public exports declare H and W dynamic, but the Swin backbone's window partition and
+attention mask are traced with the export's constant shapes, so the graph runs only at the size it
+was exported at (X-AnyLabeling's script traces 1×3×800×1200; 800×1067, 750×1333 and 800×800 fail
+with an onnxruntime Reshape error). ``input_hw`` therefore defaults to the graph's fixed H, W when
+it declares them, else to :data:`GDINO_EXPORT_HW`; a Reshape/shape failure at run time raises
+:class:`ModelSignatureError` naming the option.
 
 Tokenisation: no tokenizer is downloaded. The user supplies the BERT-base-uncased vocabulary that
 belongs to their Grounding DINO weights — either ``vocab.txt`` (one WordPiece token per line,
@@ -57,7 +74,7 @@ from pathlib import Path
 
 import numpy as np
 
-from sim2radar.reconstruct._onnx import OnnxModel, onnx_dtype
+from sim2radar.reconstruct._onnx import ModelSignatureError, OnnxModel, onnx_dtype
 from sim2radar.reconstruct.types import (
     SEGMENT_BACKENDS,
     DepthResult,
@@ -68,6 +85,7 @@ from sim2radar.reconstruct.types import (
 from sim2radar.vocab import DETECTION_PROMPT, SEMANTIC_CLASSES
 
 __all__ = [
+    "GDINO_EXPORT_HW",
     "Detections",
     "GroundingDino",
     "GroundingDinoConfig",
@@ -83,6 +101,11 @@ log = logging.getLogger(__name__)
 
 _IMAGENET_MEAN = np.array([0.485, 0.456, 0.406], np.float32)
 _IMAGENET_STD = np.array([0.229, 0.224, 0.225], np.float32)
+
+#: (H, W) [px] a Grounding DINO graph with symbolic H, W is fed by default: the size public exports
+#: are traced at and the only one their Swin backbone runs at (X-AnyLabeling's
+#: ``export_grounding_dino_onnx.py``: ``img = torch.randn(1, 3, 800, 1200)``).
+GDINO_EXPORT_HW = (800, 1200)
 
 
 def _normalise(rgb: np.ndarray, size_hw: tuple[int, int]) -> np.ndarray:
@@ -242,7 +265,8 @@ class GroundingDinoConfig:
     prompt : comma-separated class phrases (default: the paper's prompt). Each phrase maps to the
         semantic class with spaces -> underscores ("fire extinguisher" -> fire_extinguisher).
     box_threshold : minimum class score of a detection; nms_iou : per-class box NMS.
-    short_side, max_side : resize for dynamic-size graphs [px].
+    input_hw : (H, W) [px] the image is plainly resized to before the graph (None: the graph's
+        fixed H, W, or :data:`GDINO_EXPORT_HW` when they are symbolic — see the module docstring).
     max_text_len : the model's logits width (256 for the public weights).
     input_names : (img, input_ids, attention_mask, position_ids, token_type_ids, text_token_mask);
     output_names : (logits, boxes).
@@ -253,8 +277,7 @@ class GroundingDinoConfig:
     prompt: str = DETECTION_PROMPT
     box_threshold: float = 0.35
     nms_iou: float = 0.5
-    short_side: int = 800
-    max_side: int = 1333
+    input_hw: tuple[int, int] | None = None
     max_text_len: int = 256
     input_names: tuple[str, ...] = ("img", "input_ids", "attention_mask", "position_ids",
                                     "token_type_ids", "text_token_mask")
@@ -268,6 +291,12 @@ class GroundingDinoConfig:
             raise ValueError("gdino: input_names needs 6 names and output_names 2")
         if not 0 < self.box_threshold < 1:
             raise ValueError(f"gdino: box_threshold must lie in (0, 1), got {self.box_threshold}")
+        if self.input_hw is not None:
+            hw = tuple(self.input_hw)
+            if len(hw) != 2 or not all(isinstance(v, int) and v >= 32 for v in hw):
+                raise ValueError(f"gdino: input_hw must be [H, W], two integers >= 32 px, got "
+                                 f"{self.input_hw!r}")
+            object.__setattr__(self, "input_hw", hw)
 
 
 def _box_iou(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -301,6 +330,7 @@ class GroundingDino:
         self.model = OnnxModel(c.model_path, "Grounding DINO (sam2-gdino option gdino.model_path)",
                                inputs=c.input_names[:2], optional_inputs=c.input_names[2:],
                                outputs=c.output_names, providers=c.providers)
+        self.input_hw = self._input_hw()
         self.phrases = [p.strip() for p in c.prompt.split(",") if p.strip()]
         if not self.phrases:
             raise ValueError("gdino: empty prompt")
@@ -319,20 +349,46 @@ class GroundingDino:
             if unk:
                 log.warning("gdino: phrase %r has tokens unknown to the vocabulary", p)
 
-    def _input_size(self, h0: int, w0: int) -> tuple[int, int]:
+    def _input_hw(self) -> tuple[int, int]:
+        """The (H, W) [px] the image is resized to: ``input_hw``, else the graph's fixed size,
+        else :data:`GDINO_EXPORT_HW`; a fixed graph size that ``input_hw`` contradicts fails."""
         shape = self.model.input_shape(self.config.input_names[0])
-        if len(shape) == 4 and isinstance(shape[2], int) and isinstance(shape[3], int):
-            return int(shape[2]), int(shape[3])
-        c = self.config
-        f = c.short_side / min(h0, w0)
-        if max(h0, w0) * f > c.max_side:
-            f = c.max_side / max(h0, w0)
-        return max(1, round(h0 * f)), max(1, round(w0 * f))
+        fixed = (len(shape) == 4 and isinstance(shape[2], int) and isinstance(shape[3], int)
+                 and shape[2] > 0 and shape[3] > 0)
+        want = self.config.input_hw
+        if fixed and want is not None and tuple(want) != (shape[2], shape[3]):
+            raise ModelSignatureError(
+                f"Grounding DINO: {self.model.path.name} takes a fixed {shape[2]}x{shape[3]} "
+                f"image, but gdino input_hw is {list(want)}; set input_hw to "
+                f"[{shape[2]}, {shape[3]}] or leave it out"
+            )
+        if want is not None:
+            return tuple(want)
+        return (int(shape[2]), int(shape[3])) if fixed else GDINO_EXPORT_HW
+
+    def _run(self, feeds: dict) -> dict:
+        try:
+            return self.model.run(feeds, self.config.output_names)
+        except ModelSignatureError as exc:
+            said = " ".join(str(exc).split("}: ", 1)[-1].split())  # onnxruntime's own text
+            if not re.search(r"reshape|shape", said, re.I):
+                raise
+            h, w = self.input_hw
+            node = re.search(r"running (\w+) node", said)
+            said = (f"{node.group(1)} node: " if node else "") + (
+                said if len(said) <= 160 else "..." + said[-160:])
+            raise ModelSignatureError(
+                f"Grounding DINO: {self.model.path.name} does not run at {h}x{w}: a Swin-backbone "
+                "export fixes its attention-window shapes at the size it was traced at, even when "
+                "it declares dynamic H, W (X-AnyLabeling's export: 800x1200); set the sam2-gdino "
+                "option gdino_input_hw (gdino: {input_hw: [H, W]}) to that size "
+                f"(onnxruntime: {said})"
+            ) from None
 
     def detect(self, rgb: np.ndarray) -> Detections:
         c = self.config
         h0, w0 = rgb.shape[:2]
-        img = _normalise(rgb, self._input_size(h0, w0))
+        img = _normalise(rgb, self.input_hw)
         ids = self.input_ids[None]
         att, pos = text_masks(ids, self.tokenizer.special_ids())
         names = c.input_names
@@ -348,7 +404,7 @@ class GroundingDino:
         for n, v in values.items():
             if self.model.has_input(n):
                 feeds[n] = v.astype(onnx_dtype(self.model.input_type(n)))
-        out = self.model.run(feeds, c.output_names)
+        out = self._run(feeds)
         logits = np.asarray(out[c.output_names[0]], np.float32)[0]  # (Q, L)
         boxes = np.asarray(out[c.output_names[1]], np.float32)[0]  # (Q, 4)
         if logits.ndim != 2 or boxes.shape != (logits.shape[0], 4):
@@ -364,7 +420,7 @@ class GroundingDino:
         best = per_class.argmax(axis=1)
         score = per_class[np.arange(len(best)), best]
         keep = score >= c.box_threshold
-        cx, cy, bw, bh = boxes[keep].T
+        cx, cy, bw, bh = boxes[keep].T  # normalised: a plain resize maps them back unchanged
         xyxy = np.stack([(cx - bw / 2) * w0, (cy - bh / 2) * h0, (cx + bw / 2) * w0,
                          (cy + bh / 2) * h0], axis=1).astype(np.float32)
         xyxy = np.clip(xyxy, 0, [w0, h0, w0, h0]).astype(np.float32)
@@ -431,6 +487,13 @@ class Sam2AutoMasks:
                                  inputs=list(c.encoder_outputs) + [coords, labels],
                                  optional_inputs=[mask_in, has_mask, orig],
                                  outputs=c.decoder_outputs, providers=c.providers)
+        if self.decoder.output_type(c.decoder_outputs[0]) == "tensor(bool)":
+            raise ModelSignatureError(
+                f"SAM2 decoder: {self.decoder.path.name}'s output {c.decoder_outputs[0]!r} is "
+                "boolean (already thresholded, as onnxruntime's SAM2 exporter writes 'masks'), "
+                "but the mask logits are needed; set sam2 decoder_outputs: [low_res_masks, "
+                "iou_predictions] (see the README for its other names)"
+            )
         shp = self.decoder.input_shape(coords)
         self.fixed_batch = shp[0] if shp and isinstance(shp[0], int) else None
 
@@ -466,6 +529,38 @@ class Sam2AutoMasks:
             feeds[orig_n] = np.array([h0, w0], onnx_dtype(self.decoder.input_type(orig_n)))
         return feeds
 
+    def _encode(self, rgb: np.ndarray) -> dict[str, np.ndarray]:
+        c = self.config
+        s = c.input_size
+        out = self.encoder.run({c.encoder_input: _normalise(rgb, (s, s))}, c.encoder_outputs)
+        return {k: np.asarray(v) for k, v in out.items()}
+
+    def _decode(self, emb: dict, pts_in: np.ndarray, h0: int, w0: int,
+                n_real: int) -> tuple[np.ndarray, np.ndarray]:
+        """Mask logits (n_real, M, h, w) float32 and predicted IoUs (n_real, M) of one batch of
+        single-point prompts ``pts_in`` (B, 2) [px of the S×S input]."""
+        c = self.config
+        out = self.decoder.run(self._decoder_feeds(emb, pts_in, h0, w0), c.decoder_outputs)
+        logits = np.asarray(out[c.decoder_outputs[0]], np.float32)[:n_real]
+        ious = np.asarray(out[c.decoder_outputs[1]], np.float32)[:n_real]
+        if logits.ndim != 4 or ious.shape != logits.shape[:2]:
+            raise ReconstructionInputError(
+                f"SAM2 decoder outputs have shapes {logits.shape}, {ious.shape}; expected "
+                "(B, M, h, w) masks and (B, M) iou_predictions"
+            )
+        return logits, ious
+
+    def probe(self, rgb: np.ndarray) -> str:
+        """Run the encoder and one decoder batch (one point at the image centre) on ``rgb``;
+        return a one-line summary of the decoder's outputs (``sim2radar models check``)."""
+        h0, w0 = rgb.shape[:2]
+        s = self.config.input_size
+        n = self.fixed_batch or 1
+        pts = np.repeat(np.array([[s / 2, s / 2]], np.float32), n, 0)
+        logits, ious = self._decode(self._encode(rgb), pts, h0, w0, 1)
+        return (f"SAM2 masks {tuple(logits.shape[1:])} logits in [{logits.min():.1f}, "
+                f"{logits.max():.1f}], predicted IoU {float(ious.max()):.2f}")
+
     def generate(self, rgb: np.ndarray) -> tuple[list[np.ndarray], np.ndarray]:
         """Automatic masks of an image.
 
@@ -479,8 +574,7 @@ class Sam2AutoMasks:
         c = self.config
         h0, w0 = rgb.shape[:2]
         s = c.input_size
-        emb_out = self.encoder.run({c.encoder_input: _normalise(rgb, (s, s))}, c.encoder_outputs)
-        emb = {k: np.asarray(v) for k, v in emb_out.items()}
+        emb = self._encode(rgb)
         grid = self._grid(h0, w0)
         grid_in = grid * np.array([s / w0, s / h0])
         batch = self.fixed_batch or c.points_per_batch
@@ -492,14 +586,7 @@ class Sam2AutoMasks:
             n_real = len(pts)
             if self.fixed_batch and n_real < batch:
                 pts = np.concatenate([pts, np.repeat(pts[-1:], batch - n_real, 0)])
-            out = self.decoder.run(self._decoder_feeds(emb, pts, h0, w0), c.decoder_outputs)
-            logits = np.asarray(out[c.decoder_outputs[0]], np.float32)[:n_real]
-            ious = np.asarray(out[c.decoder_outputs[1]], np.float32)[:n_real]
-            if logits.ndim != 4 or ious.shape != logits.shape[:2]:
-                raise ReconstructionInputError(
-                    f"SAM2 decoder outputs have shapes {logits.shape}, {ious.shape}; expected "
-                    "(B, M, h, w) masks and (B, M) iou_predictions"
-                )
+            logits, ious = self._decode(emb, pts, h0, w0, n_real)
             hi = logits > c.mask_threshold + c.stability_offset
             lo = logits > c.mask_threshold - c.stability_offset
             stab = hi.sum((2, 3)) / np.maximum(lo.sum((2, 3)), 1)
@@ -662,6 +749,7 @@ class Sam2GdinoSegments:
             "n_masks": len(masks),
             "n_segments": len(labels),
             "n_labelled": int(sum(lab != "unknown" for lab in labels)),
+            "gdino_input_hw": list(self.gdino.input_hw),
             "detections": [[lab, float(sc), *map(float, box)] for lab, sc, box in
                            zip(dets.labels, dets.scores, dets.boxes, strict=True)],
         }

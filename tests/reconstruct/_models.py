@@ -222,8 +222,16 @@ def render_seg_scene() -> tuple[np.ndarray, dict[str, np.ndarray]]:
     return rgb, {name: owner == name for name in SEG_SCENE}
 
 
-def export_sam2_like(encoder_path: Path, decoder_path: Path, *, with_orig_size: bool = True):
+def export_sam2_like(encoder_path: Path, decoder_path: Path, *, with_orig_size: bool = True,
+                     onnxruntime_names: bool = False):
     """Tiny SAM2 encoder/decoder pair with the samexporter signatures (input size 64).
+
+    ``onnxruntime_names``: the signatures of onnxruntime's own SAM2 exporter
+    (``onnxruntime/python/tools/transformers/models/sam2``) instead: encoder outputs
+    ``image_features_0``, ``image_features_1``, ``image_embeddings``; decoder inputs those +
+    ``point_coords``, ``point_labels`` (int32), ``input_masks``, ``has_input_masks``,
+    ``original_image_size`` (int32); outputs ``masks`` (bool: the logits resized to the original
+    size and thresholded at 0), ``iou_predictions``, ``low_res_masks`` (the logits).
 
     Encoder: ``image`` (1, 3, 64, 64) -> ``image_embed`` (1, 3, 16, 16) (4x4 average colour),
     ``high_res_feats_0`` (1, 1, 64, 64), ``high_res_feats_1`` (1, 1, 32, 32).
@@ -259,6 +267,39 @@ def export_sam2_like(encoder_path: Path, decoder_path: Path, *, with_orig_size: 
             ious = torch.ones_like(logits[:, :, 0, 0]) * torch.tensor([0.95, 0.6, 0.5])
             return logits, ious
 
+    if onnxruntime_names:
+        class EncOrt(torch.nn.Module):
+            def forward(self, image):
+                emb, hr0, hr1 = Enc()(image)
+                return hr0, hr1, emb
+
+        class DecOrt(torch.nn.Module):
+            def forward(self, image_features_0, image_features_1, image_embeddings, point_coords,
+                        point_labels, input_masks, has_input_masks, original_image_size):
+                logits, ious = Dec()(image_embeddings, image_features_0, image_features_1,
+                                     point_coords, point_labels.to(torch.float32), input_masks,
+                                     has_input_masks)
+                size = (original_image_size[0], original_image_size[1])
+                masks = F.interpolate(logits, size=size, mode="bilinear") > 0.0
+                return masks, ious, logits
+
+        _export(EncOrt().eval(), (torch.rand(1, 3, SAM_INPUT, SAM_INPUT),), encoder_path,
+                ["image"], ["image_features_0", "image_features_1", "image_embeddings"])
+        names = ["image_features_0", "image_features_1", "image_embeddings", "point_coords",
+                 "point_labels", "input_masks", "has_input_masks", "original_image_size"]
+        dummy = (torch.rand(1, 1, 64, 64), torch.rand(1, 1, 32, 32), torch.rand(1, 3, 16, 16),
+                 torch.rand(2, 1, 2) * 64, torch.ones(2, 1, dtype=torch.int32),
+                 torch.zeros(2, 1, 16, 16), torch.zeros(1),
+                 torch.tensor(list(SEG_HW), dtype=torch.int32))
+        _export(DecOrt().eval(), dummy, decoder_path, names,
+                ["masks", "iou_predictions", "low_res_masks"],
+                {"point_coords": {0: "num_labels", 1: "num_points"},
+                 "point_labels": {0: "num_labels", 1: "num_points"},
+                 "input_masks": {0: "num_labels"}, "has_input_masks": {0: "num_labels"},
+                 "masks": {0: "num_labels", 2: "original_image_height",
+                           3: "original_image_width"},
+                 "low_res_masks": {0: "num_labels"}, "iou_predictions": {0: "num_labels"}})
+        return encoder_path, decoder_path
     _export(Enc().eval(), (torch.rand(1, 3, SAM_INPUT, SAM_INPUT),), encoder_path, ["image"],
             ["image_embed", "high_res_feats_0", "high_res_feats_1"])
     names = ["image_embed", "high_res_feats_0", "high_res_feats_1", "point_coords",
@@ -319,4 +360,53 @@ def export_gdino_like(path: Path, queries: list[tuple[str, int, tuple]], *, img_
              "text_token_mask"]
     _export(Gd().eval(), dummy, path, names, ["logits", "boxes"],
             {n: {1: "t"} for n in names[1:5]} | {"text_token_mask": {1: "t", 2: "t"}})
+    return path
+
+
+def export_gdino_swin_like(path: Path, *, export_hw: tuple[int, int] = (800, 1200)) -> Path:
+    """Grounding DINO look-alike that behaves like a public Swin export: its ``img`` input
+    *declares* dynamic H, W, but the graph reshapes the image to the constant
+    ``(3, *export_hw)`` it was traced at (as Swin's window partition does), so onnxruntime fails
+    with a Reshape error at any other size.
+
+    One query fires on the token "door" (position 0 in its phrase); its box is *measured* from
+    the image: the bounding box, normalised by ``export_hw``, of the pixels whose ImageNet-
+    normalised red channel exceeds 0.5 (a saturated red patch on a dark background).
+    """
+    import torch
+
+    eh, ew = export_hw
+    door = TINY_VOCAB.index("door")
+
+    class SwinLike(torch.nn.Module):
+        def forward(self, img, input_ids, attention_mask, position_ids, token_type_ids,
+                    text_token_mask):
+            x = img.reshape(3, eh, ew)  # constant shape: only the traced size fits
+            red = (x[0] > 0.5).to(torch.float32)  # (eh, ew)
+            cols, rows = red.amax(0), red.amax(1)
+            ci, ri = torch.arange(ew, dtype=torch.float32), torch.arange(eh, dtype=torch.float32)
+            c0 = torch.argmax(cols * (ew - ci)).to(torch.float32)  # first red column
+            c1 = torch.argmax(cols * (ci + 1)).to(torch.float32) + 1  # one past the last
+            r0 = torch.argmax(rows * (eh - ri)).to(torch.float32)
+            r1 = torch.argmax(rows * (ri + 1)).to(torch.float32) + 1
+            box = torch.stack([(c0 + c1) / 2 / ew, (r0 + r1) / 2 / eh, (c1 - c0) / ew,
+                               (r1 - r0) / eh])
+            ids = input_ids[0]
+            pos = torch.ones_like(ids).cumsum(0) - 1
+            onehot = (pos[:, None] == torch.arange(256)[None, :]).to(torch.float32)  # (T, 256)
+            ok = (ids == door) & (position_ids[0] == 0) & attention_mask[0].to(torch.bool)
+            ok = ok & text_token_mask[0].diagonal().to(torch.bool)
+            logits = ok.to(torch.float32)[None] @ onehot * 16.0 - 8.0  # (1, 256)
+            logits = logits + token_type_ids.sum().to(torch.float32) * 0.0
+            return logits[None], box[None, None]
+
+    t = 6
+    dummy = (torch.rand(1, 3, eh, ew), torch.zeros(1, t, dtype=torch.int64),
+             torch.ones(1, t, dtype=torch.bool), torch.zeros(1, t, dtype=torch.int64),
+             torch.zeros(1, t, dtype=torch.int64), torch.ones(1, t, t, dtype=torch.bool))
+    names = ["img", "input_ids", "attention_mask", "position_ids", "token_type_ids",
+             "text_token_mask"]
+    _export(SwinLike().eval(), dummy, path, names, ["logits", "boxes"],
+            {"img": {2: "height", 3: "width"}} | {n: {1: "t"} for n in names[1:5]}
+            | {"text_token_mask": {1: "t", 2: "t"}})
     return path

@@ -10,7 +10,10 @@ import pytest
 from sim2radar.camera import CameraIntrinsics
 from sim2radar.reconstruct._onnx import ModelSignatureError
 from sim2radar.reconstruct.segment_sam2_gdino import (
+    GDINO_EXPORT_HW,
     Detections,
+    GroundingDino,
+    GroundingDinoConfig,
     Sam2GdinoSegments,
     WordPieceTokenizer,
     match_masks_to_detections,
@@ -27,6 +30,7 @@ from tests.reconstruct._models import (
     SEG_HW,
     TINY_VOCAB,
     export_gdino_like,
+    export_gdino_swin_like,
     export_sam2_like,
     render_seg_scene,
     seg_scene_boxes,
@@ -175,3 +179,120 @@ def test_errors_are_clear(models, frame, tmp_path):
         )
     with pytest.raises(ReconstructionInputError, match="no masks"):
         _backend(models, sam2={"pred_iou_thresh": 0.99}).segment(frame, _depth())
+
+
+# --- Grounding DINO input size: a Swin export runs only at the size it was traced at ---------
+
+#: A 640 x 480 capture with a saturated red door [px]: rows 120..300, columns 200..360.
+DOOR_RC = (120, 300, 200, 360)
+
+
+def _red_door_frame() -> FrameInput:
+    rgb = np.full((480, 640, 3), 40, np.uint8)
+    r0, r1, c0, c1 = DOOR_RC
+    rgb[r0:r1, c0:c1] = (255, 0, 0)
+    return FrameInput(rgb, CameraIntrinsics.from_fov(640, 480, 65), name="cam640x480")
+
+
+@pytest.fixture(scope="module")
+def swin_gd(tmp_path_factory):
+    return export_gdino_swin_like(tmp_path_factory.mktemp("swin") / "gd_swin.onnx")
+
+
+def test_dynamic_declared_swin_graph_runs_a_640x480_frame_at_800x1200(models, swin_gd):
+    gd = GroundingDino(GroundingDinoConfig(model_path=str(swin_gd),
+                                           vocab_path=str(models["vocab"])))
+    h, w = gd.model.input_shape("img")[2:]
+    assert not isinstance(h, int) and not isinstance(w, int)  # the graph says "any size"
+    assert gd.input_hw == GDINO_EXPORT_HW == (800, 1200)
+    frame = _red_door_frame()
+    dets = gd.detect(frame.rgb)
+    assert dets.labels == ("door",)
+    # the graph measured the red patch in its 800 x 1200 input; back in the frame's pixels it
+    # is the patch itself (a plain resize keeps normalised coordinates), to a pixel
+    r0, r1, c0, c1 = DOOR_RC
+    np.testing.assert_allclose(dets.boxes[0], [c0, r0, c1, r1], atol=1.0)
+
+
+def test_the_whole_backend_labels_the_door_of_a_640x480_frame(models, swin_gd):
+    backend = Sam2GdinoSegments(
+        sam2=dict(encoder_path=str(models["enc"]), decoder_path=str(models["dec"]),
+                  input_size=SAM_INPUT, points_per_side=16, min_area_px=4),
+        gdino=dict(model_path=str(swin_gd), vocab_path=str(models["vocab"])))
+    frame = _red_door_frame()
+    seg = backend.segment(frame, DepthResult(np.ones(frame.shape, np.float32)))
+    assert seg.info["gdino_input_hw"] == [800, 1200]
+    truth = np.zeros(frame.shape, bool)
+    r0, r1, c0, c1 = DOOR_RC
+    truth[r0:r1, c0:c1] = True
+    door = seg.segment_id == seg.labels.index("door")
+    assert (door & truth).sum() / (door | truth).sum() > 0.9
+
+
+def test_a_wrong_input_hw_is_one_line_naming_swin_and_the_option(models, swin_gd):
+    backend = Sam2GdinoSegments(  # flat option, a YAML list
+        sam2_encoder_path=str(models["enc"]), sam2_decoder_path=str(models["dec"]),
+        sam2_input_size=SAM_INPUT, sam2_points_per_side=16, sam2_min_area_px=4,
+        gdino_model_path=str(swin_gd), gdino_vocab_path=str(models["vocab"]),
+        gdino_input_hw=[480, 640])
+    assert backend.gdino.input_hw == (480, 640)
+    frame = _red_door_frame()
+    with pytest.raises(ModelSignatureError) as err:
+        backend.segment(frame, DepthResult(np.ones(frame.shape, np.float32)))
+    msg = str(err.value)
+    assert "\n" not in msg
+    assert "480x640" in msg and "Swin" in msg and "gdino_input_hw" in msg and "800x1200" in msg
+    assert "Reshape" in msg  # what onnxruntime said, condensed
+
+
+def test_input_hw_against_a_fixed_graph_and_bad_values(models):
+    # the tiny graph of the other tests is fixed at 64 x 64: that is its size unless told
+    gd = GroundingDino(GroundingDinoConfig(model_path=str(models["gd"]),
+                                           vocab_path=str(models["vocab"])))
+    assert gd.input_hw == SEG_HW
+    with pytest.raises(ModelSignatureError, match=r"fixed 64x64 image.*input_hw is \[32, 48\]"):
+        GroundingDino(GroundingDinoConfig(model_path=str(models["gd"]),
+                                          vocab_path=str(models["vocab"]), input_hw=(32, 48)))
+    with pytest.raises(ValueError, match="input_hw must be"):
+        GroundingDinoConfig(model_path="x", vocab_path="y", input_hw=(800,))
+
+
+# --- SAM2 exported by onnxruntime's own exporter: other names, boolean ``masks`` ---------------
+
+#: The sam2 options for onnxruntime's exporter, as the README gives them.
+ORT_SAM2 = {
+    "encoder_outputs": ["image_features_0", "image_features_1", "image_embeddings"],
+    "decoder_inputs": ["point_coords", "point_labels", "input_masks", "has_input_masks",
+                       "original_image_size"],
+    "decoder_outputs": ["low_res_masks", "iou_predictions"],
+}
+
+
+@pytest.fixture(scope="module")
+def ort_sam2(tmp_path_factory):
+    d = tmp_path_factory.mktemp("ortsam2")
+    return export_sam2_like(d / "sam2_image_encoder.onnx", d / "sam2_image_decoder.onnx",
+                            onnxruntime_names=True)
+
+
+def test_onnxruntime_exporter_names_segment_like_samexporter(models, frame, ort_sam2):
+    enc, dec = ort_sam2
+    ref = _backend(models).segment(frame, _depth())
+    backend = Sam2GdinoSegments(  # flat options, as a YAML would give them
+        sam2_encoder_path=str(enc), sam2_decoder_path=str(dec), sam2_input_size=SAM_INPUT,
+        sam2_points_per_side=16, sam2_points_per_batch=48, sam2_min_area_px=4,
+        **{f"sam2_{k}": v for k, v in ORT_SAM2.items()},
+        gdino_model_path=str(models["gd"]), gdino_vocab_path=str(models["vocab"]))
+    assert backend.sam.decoder.input_type("point_labels") == "tensor(int32)"
+    seg = backend.segment(frame, _depth())
+    assert seg.labels == ref.labels  # same graph arithmetic, other names: the same segments
+    np.testing.assert_array_equal(seg.segment_id, ref.segment_id)
+
+
+def test_onnxruntime_boolean_masks_output_is_refused_with_the_mapping(models, ort_sam2):
+    enc, dec = ort_sam2
+    renamed = {k: v for k, v in ORT_SAM2.items() if k != "decoder_outputs"}
+    with pytest.raises(ModelSignatureError,
+                       match=r"'masks' is boolean.*decoder_outputs: \[low_res_masks, "
+                             r"iou_predictions\]"):
+        _backend(models, sam2={"encoder_path": str(enc), "decoder_path": str(dec), **renamed})
