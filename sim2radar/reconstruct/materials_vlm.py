@@ -3,8 +3,11 @@
 Any VLM served behind an OpenAI-compatible ``POST {base_url}/chat/completions`` endpoint works;
 the reference is InternVL2.5-8B served by vLLM or LMDeploy, e.g.::
 
-    vllm serve OpenGVLab/InternVL2_5-8B --trust-remote-code --limit-mm-per-prompt image=2
+    vllm serve OpenGVLab/InternVL2_5-8B --trust-remote-code --limit-mm-per-prompt '{"image": 2}'
     lmdeploy serve api_server OpenGVLab/InternVL2_5-8B --server-port 23333
+
+(a server started from a local folder serves it under the folder's path unless given
+``--served-model-name`` (vLLM) / ``--model-name`` (LMDeploy); ``model`` must be a name it serves).
 
 Per segment the backend sends (one request, in a thread pool of ``max_concurrency``):
 
@@ -23,9 +26,16 @@ synonyms), the confidence is clipped to [0, 1]. An unparseable or out-of-vocabul
 ``unknown`` with confidence 0, the reason logged and stored in ``MaterialLabel.reason``.
 
 Transport: only the standard library (``urllib``). Timeouts per request; retries with exponential
-backoff for timeouts, connection errors, HTTP 5xx and 429 only — other 4xx fail at once (wrong
-URL, model name or key). When retries are exhausted, ``on_error: raise`` raises
-:class:`VlmError`; ``on_error: unknown`` records ``unknown`` with the error as the reason.
+backoff for timeouts, connection errors, HTTP 5xx and 429 only. When retries are exhausted,
+``on_error: raise`` raises :class:`VlmError`; ``on_error: unknown`` records ``unknown`` with the
+error as the reason.
+
+A server that cannot serve this run at all stops it with :class:`VlmSetupError` — one line naming
+the fix — whatever ``on_error`` says (``on_error`` is for per-segment failures, not for a
+misconfigured server, which would otherwise label every segment ``unknown``): HTTP 401/403 (API
+key), HTTP 404 (``base_url`` or model name), a model name the server does not list, and HTTP 400
+"at most N image(s)" (vLLM's ``--limit-mm-per-prompt``). Before its first request the backend
+asks ``GET {base_url}/models`` once and compares ``model`` with the names the server serves.
 
 Cache: valid answers are stored in a small SQLite file (``cache_path``) keyed by
 SHA-256(crop PNG, context PNG, semantic label, model, prompt version); a second run on the same
@@ -67,6 +77,7 @@ __all__ = [
     "VlmConfig",
     "VlmError",
     "VlmMaterials",
+    "VlmSetupError",
     "ChatClient",
     "AnswerCache",
     "build_prompt",
@@ -91,6 +102,17 @@ _MATERIAL_HINTS = (
 
 class VlmError(RuntimeError):
     """The VLM server could not be reached or refused the request; the message says how to fix."""
+
+
+class VlmSetupError(VlmError):
+    """The VLM server cannot serve this run at all (API key refused, wrong URL, a model name it does
+    not serve, too few images per prompt): no segment can succeed. One line naming the fix; it
+    stops the run whatever ``on_error`` says."""
+
+
+def _one_line(text: str, limit: int = 200) -> str:
+    text = " ".join(str(text).split())
+    return text if len(text) <= limit else text[:limit] + "..."
 
 
 class AnswerError(ValueError):
@@ -161,6 +183,10 @@ class VlmConfig:
     @property
     def url(self) -> str:
         return self.base_url.rstrip("/") + "/chat/completions"
+
+    @property
+    def models_url(self) -> str:
+        return self.base_url.rstrip("/") + "/models"
 
 
 # ---------------------------------------------------------------------------------------------
@@ -366,13 +392,29 @@ class ChatClient:
             with urllib.request.urlopen(req, timeout=c.timeout_s) as resp:
                 raw = resp.read()
         except urllib.error.HTTPError as exc:
-            detail = exc.read()[:300].decode("utf-8", "replace") if exc.fp else ""
+            detail = _one_line(exc.read()[:600].decode("utf-8", "replace") if exc.fp else "")
             if exc.code >= 500 or exc.code == 429:
                 raise _Retryable(f"HTTP {exc.code} from {c.url}: {detail}") from None
+            if exc.code in (401, 403):
+                raise VlmSetupError(self._auth_message(exc.code, c.url)) from None
+            if exc.code == 404:
+                raise VlmSetupError(
+                    f"the VLM server at {c.base_url} answered HTTP 404 for {c.url} ({detail}): "
+                    "set materials.options.base_url to its API root (ending in /v1) and "
+                    f"materials.options.model ({c.model!r}) to a name it serves (GET "
+                    f"{c.models_url} lists them)"
+                ) from None
+            if exc.code == 400 and re.search(r"at most \d+ image|limit.mm.per.prompt", detail,
+                                             re.I):
+                raise VlmSetupError(
+                    f"the VLM server at {c.base_url} accepts fewer images per prompt than this "
+                    f"backend sends (HTTP 400: {detail}): start vLLM with --limit-mm-per-prompt "
+                    "'{\"image\": 2}', or set materials.options.send_context: false (one image)"
+                ) from None
             raise VlmError(
                 f"VLM server {c.url} refused the request with HTTP {exc.code}: {detail}; check "
                 f"base_url, model ({c.model!r}) and the API key variable {c.api_key_env!r}"
-            ) from exc
+            ) from None
         except urllib.error.URLError as exc:
             raise _Retryable(f"cannot reach {c.url}: {exc.reason}") from None
         except TimeoutError as exc:
@@ -390,6 +432,50 @@ class ChatClient:
             content = "".join(p.get("text", "") for p in content if isinstance(p, dict))
         return content if isinstance(content, str) else ""
 
+    def _auth_message(self, code: int, url: str) -> str:
+        c = self.config
+        sent = bool(c.api_key_env and os.environ.get(c.api_key_env))
+        if sent:
+            fix = (f"set ${c.api_key_env} to the key the server was started with (vLLM / "
+                   "LMDeploy --api-key)")
+            return f"the VLM server at {c.base_url} refused the API key in ${c.api_key_env} " \
+                   f"(HTTP {code} from {url}): {fix}"
+        where = (f"export {c.api_key_env}=<the key the server was started with (--api-key)>"
+                 if c.api_key_env else
+                 "set materials.options.api_key_env to the variable that holds the key")
+        return (f"the VLM server at {c.base_url} wants an API key and none was sent (HTTP {code} "
+                f"from {url}): {where}")
+
+    def list_models(self) -> list[str] | None:
+        """The model names the server serves (``GET {base_url}/models``, OpenAI's model list).
+
+        Returns None when the server does not list them (HTTP 404 or another 4xx, or an answer
+        that is not a model list). Raises :class:`VlmSetupError` on HTTP 401/403 and
+        :class:`VlmError` when the server cannot be reached or answers 5xx/429.
+        """
+        c = self.config
+        req = urllib.request.Request(c.models_url, headers=self._headers(), method="GET")
+        try:
+            with urllib.request.urlopen(req, timeout=min(c.timeout_s, 30.0)) as resp:
+                raw = resp.read()
+        except urllib.error.HTTPError as exc:
+            if exc.code in (401, 403):
+                raise VlmSetupError(self._auth_message(exc.code, c.models_url)) from None
+            if exc.code >= 500 or exc.code == 429:
+                raise VlmError(f"HTTP {exc.code} from {c.models_url}") from None
+            return None
+        except (urllib.error.URLError, TimeoutError, ConnectionError,
+                http.client.HTTPException) as exc:
+            reason = getattr(exc, "reason", exc)
+            raise VlmError(
+                f"cannot reach the VLM server at {c.base_url} ({reason}): is it running? (vLLM: "
+                "`vllm serve <model>`; LMDeploy: `lmdeploy serve api_server <model>`)"
+            ) from None
+        try:
+            return [str(m["id"]) for m in json.loads(raw)["data"]]
+        except (ValueError, KeyError, TypeError):
+            return None
+
     def complete(self, messages: list) -> str:
         """POST one chat completion and return the assistant's text.
 
@@ -401,6 +487,9 @@ class ChatClient:
             with_rf = self._response_format_ok
             try:
                 return self._post_once(self._payload(messages, with_rf))
+            except VlmSetupError:
+                self._count("errors")
+                raise
             except VlmError as exc:
                 if with_rf and "HTTP 400" in str(exc):
                     log.warning("vlm: server rejected response_format; retrying without it")
@@ -502,6 +591,46 @@ class VlmMaterials:
         self.stats = {"cache_hits": 0, "fallbacks": 0}
         self._stats_lock = threading.Lock()
         self._abort = threading.Event()
+        self._server_checked = False
+        self._setup_error: VlmSetupError | None = None
+
+    def check(self) -> str:
+        """Ask the server which models it serves (``GET {base_url}/models``) and compare.
+
+        Returns a one-line description. Raises :class:`VlmSetupError` when the key is refused or
+        ``model`` is not among the served names (the message lists them), :class:`VlmError` when
+        the server cannot be reached.
+        """
+        c = self.config
+        served = self.client.list_models()
+        if served is None:
+            return (f"the server at {c.base_url} answers but does not list its models "
+                    f"(GET {c.models_url}); model name {c.model!r} not verified")
+        if c.model not in served:
+            raise VlmSetupError(
+                f"the server at {c.base_url} serves {served}, not {c.model!r}: set "
+                "materials.options.model to one of them, or start vLLM with "
+                f"--served-model-name {c.model} (LMDeploy: --model-name {c.model})"
+            )
+        return f"the server at {c.base_url} serves {c.model!r}"
+
+    def _check_server_once(self) -> None:
+        """Before the first request: :meth:`check`, once per backend. A refused key or an unknown
+        model name is remembered and raised for every later frame too; an unreachable server is
+        left to the requests (their retries and ``on_error``) and asked again next frame."""
+        if self._setup_error is not None:
+            raise VlmSetupError(str(self._setup_error))
+        if self._server_checked:
+            return
+        try:
+            log.info("vlm: %s", self.check())
+        except VlmSetupError as exc:
+            self._setup_error = exc
+            raise
+        except VlmError as exc:
+            log.info("vlm: model list not checked: %s", exc)
+            return
+        self._server_checked = True
 
     def _fallback(self) -> None:
         with self._stats_lock:
@@ -531,6 +660,11 @@ class VlmMaterials:
             raise VlmError(f"{name}: segment {index}: skipped after an earlier VLM failure")
         try:
             text = self.client.complete(self._messages(crop, ctx, label))
+        except VlmSetupError as exc:  # whatever on_error says: no segment can succeed
+            if self._setup_error is None:
+                self._setup_error = exc
+            self._abort.set()
+            raise
         except VlmError as exc:
             if self.config.on_error == "raise":
                 self._abort.set()
@@ -579,6 +713,7 @@ class VlmMaterials:
             else:
                 jobs.append((i, crop, ctx, label, key))
         if jobs:
+            self._check_server_once()
             self._abort.clear()
             with ThreadPoolExecutor(max_workers=self.config.max_concurrency,
                                     thread_name_prefix="vlm") as pool:
@@ -592,6 +727,8 @@ class VlmMaterials:
                 except BaseException:
                     for fut in futures.values():
                         fut.cancel()
+                    if self._setup_error is not None:  # the cause, not a skipped segment's echo
+                        raise VlmSetupError(str(self._setup_error)) from None
                     raise
         self.stats.update(self.client.stats)
         return [r for r in results if r is not None]

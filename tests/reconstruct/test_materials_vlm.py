@@ -4,6 +4,9 @@ from __future__ import annotations
 
 import base64
 import json
+import time
+import urllib.error
+import urllib.request
 
 import cv2
 import numpy as np
@@ -13,6 +16,7 @@ from sim2radar.camera import CameraIntrinsics
 from sim2radar.reconstruct.materials_vlm import (
     VlmError,
     VlmMaterials,
+    VlmSetupError,
     build_prompt,
     parse_answer,
 )
@@ -218,3 +222,114 @@ def test_bad_options():
         VlmMaterials(base_url="localhost:8000")
     with pytest.raises(ValueError, match="on_error"):
         VlmMaterials(on_error="ignore")
+
+
+# --- a misconfigured server stops the run, whatever on_error says -------------------------------
+
+
+def _one_line_error(excinfo) -> str:
+    msg = str(excinfo.value)
+    assert "\n" not in msg, msg
+    return msg
+
+
+@pytest.mark.parametrize("on_error", ["unknown", "raise"])
+def test_a_model_name_the_server_does_not_serve_stops_with_the_served_names(scene, on_error):
+    """vLLM started from a local folder serves it under the folder's path: asking for the hub name
+    is HTTP 404 on every request; before it, GET /v1/models says so, once."""
+    frame, depth, segs = scene
+    with VlmTestServer("json", served_models=("/models/internvl",)) as srv:
+        backend = _backend(srv, model="OpenGVLab/InternVL2_5-8B", on_error=on_error)
+        with pytest.raises(VlmSetupError) as err:
+            backend.label(frame, depth, segs)
+        assert _one_line_error(err) == (
+            f"the server at {srv.base_url} serves ['/models/internvl'], not "
+            "'OpenGVLab/InternVL2_5-8B': set materials.options.model to one of them, or start "
+            "vLLM with --served-model-name OpenGVLab/InternVL2_5-8B (LMDeploy: --model-name "
+            "OpenGVLab/InternVL2_5-8B)")
+        assert srv.n_requests == 0 and srv.model_queries == 1  # no segment was sent
+        with pytest.raises(VlmSetupError, match="serves"):  # the next frame: at once, no query
+            backend.label(frame, depth, segs)
+        assert srv.model_queries == 1 and backend.stats["fallbacks"] == 0
+
+
+def test_the_model_list_is_asked_once_and_a_served_name_labels(scene):
+    frame, depth, segs = scene
+    with VlmTestServer("json", served_models=("other", "test-vlm")) as srv:
+        backend = _backend(srv)
+        for _ in range(2):
+            labels = backend.label(frame, depth, segs)
+        assert [lab.material for lab in labels[:4]] == EXPECTED
+        assert srv.model_queries == 1
+        assert "serves 'test-vlm'" in backend.check()
+
+
+@pytest.mark.parametrize("status", [401, 403])
+def test_a_refused_or_missing_api_key_stops_naming_the_variable(scene, monkeypatch, status):
+    frame, depth, segs = scene
+    monkeypatch.delenv("SIM2RADAR_VLM_API_KEY", raising=False)
+    with VlmTestServer("json", api_key="s3cret", auth_status=status) as srv:
+        with pytest.raises(VlmSetupError) as err:
+            _backend(srv, on_error="unknown").label(frame, depth, segs)
+        msg = _one_line_error(err)
+        assert f"HTTP {status}" in msg and "none was sent" in msg
+        assert "export SIM2RADAR_VLM_API_KEY=" in msg
+        monkeypatch.setenv("SIM2RADAR_VLM_API_KEY", "wrong")
+        with pytest.raises(VlmSetupError, match=r"refused the API key in \$SIM2RADAR_VLM_API_KEY"):
+            _backend(srv, on_error="unknown").label(frame, depth, segs)
+        assert srv.n_requests == 0
+        monkeypatch.setenv("SIM2RADAR_VLM_API_KEY", "s3cret")
+        labels = _backend(srv).label(frame, depth, segs)
+        assert [lab.material for lab in labels[:4]] == EXPECTED
+
+
+def test_http_404_on_chat_stops_even_when_the_server_lists_no_models(scene):
+    """A server without GET /v1/models cannot be asked first: the chat request's 404 stops."""
+    frame, depth, segs = scene
+    with VlmTestServer("json", list_models=False) as srv:
+        backend = _backend(srv, model="OpenGVLab/InternVL2_5-8B", on_error="unknown",
+                           max_concurrency=1)
+        assert "does not list its models" in backend.check()
+        with pytest.raises(VlmSetupError) as err:
+            backend.label(frame, depth, segs)
+        msg = _one_line_error(err)
+        assert "HTTP 404" in msg and "does not exist" in msg and "materials.options.model" in msg
+        assert srv.n_requests == 1  # not retried, and no segment after it is sent
+        assert backend.stats["fallbacks"] == 0
+
+
+def test_too_few_images_per_prompt_stops_naming_limit_mm_per_prompt(scene):
+    frame, depth, segs = scene
+    with VlmTestServer("json", max_images=1) as srv:
+        with pytest.raises(VlmSetupError) as err:
+            _backend(srv, on_error="unknown", max_concurrency=1).label(frame, depth, segs)
+        msg = _one_line_error(err)
+        assert """--limit-mm-per-prompt '{"image": 2}'""" in msg and "send_context: false" in msg
+        assert srv.n_requests == 1  # not mistaken for a rejected response_format
+        labels = _backend(srv, send_context=False).label(frame, depth, segs)
+        assert [lab.material for lab in labels[:4]] == EXPECTED
+
+
+def test_on_error_unknown_still_covers_a_server_that_is_down(scene):
+    """Network errors stay retried and, with on_error: unknown, recorded per segment."""
+    frame, depth, segs = scene
+    srv = VlmTestServer("json")
+    url = srv.base_url
+    srv.close()
+    backend = VlmMaterials(base_url=url, model="test-vlm", max_retries=0, timeout_s=1.0,
+                           on_error="unknown")
+    with pytest.raises(VlmError, match="cannot reach"):
+        backend.check()
+    labels = backend.label(frame, depth, segs)
+    assert all(lab.material == "unknown" for lab in labels)
+
+
+def test_the_test_server_binds_loopback_and_stops_by_itself():
+    srv = VlmTestServer("json", lifetime_s=0.3)
+    assert srv.httpd.server_address[0] == "127.0.0.1"
+    with urllib.request.urlopen(srv.base_url + "/models", timeout=2) as resp:
+        assert json.loads(resp.read())["data"][0]["id"] == "test-vlm"
+    time.sleep(0.8)
+    with pytest.raises(urllib.error.URLError):
+        urllib.request.urlopen(srv.base_url + "/models", timeout=2)
+    srv.close()  # idempotent
