@@ -24,6 +24,7 @@ from sim2radar.cli import demo as _demo  # noqa: E402,F401  isort: skip
 from sim2radar.cli import gap as _gap  # noqa: E402,F401  isort: skip
 from sim2radar.cli import dashboard as _dashboard  # noqa: E402,F401  isort: skip
 from sim2radar.cli import server as _server  # noqa: E402,F401  isort: skip
+from sim2radar.cli import models as _models  # noqa: E402,F401  isort: skip
 
 __all__ = ["app", "main"]
 

@@ -57,6 +57,9 @@ def _unavailable(name: str, module: str, error: BaseException) -> type:
         def __init__(self, *args, **kwargs) -> None:
             raise ImportError(message)
 
+        def check(self) -> str:  # so ``sim2radar models check`` constructs it and reports why
+            raise ImportError(message)
+
     Unavailable.__name__ = f"Unavailable_{module}"
     Unavailable.__doc__ = message
     return Unavailable

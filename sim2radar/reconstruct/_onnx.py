@@ -64,8 +64,8 @@ class OnnxModel:
         self.path = Path(path).expanduser()
         if not self.path.is_file():
             raise FileNotFoundError(
-                f"{what}: model file {self.path} not found; export the model to ONNX (see the "
-                "backend's docstring for the expected signature) and pass its path"
+                f"{what}: model file {self.path} not found; export the model to ONNX (README, "
+                "'Plugging in real models', gives each model's recipe) and set its path"
             )
         try:
             import onnxruntime as ort

@@ -63,6 +63,9 @@ __all__ = [
 
 log = logging.getLogger(__name__)
 
+#: (H, W) [px] of the synthetic frame :meth:`MogeDepth.check` runs.
+CHECK_HW = (72, 96)
+
 
 def _subsample(points: np.ndarray, valid: np.ndarray, rays: np.ndarray, max_n: int, seed: int = 0):
     idx = np.flatnonzero(valid.reshape(-1))
@@ -284,6 +287,24 @@ class MogeDepth:
         mask = np.asarray(res[mask_name]).reshape(1, h, w)[0].astype(np.float32)
         scale = float(np.asarray(res[scale_name]).reshape(-1)[0]) if self.has_metric else None
         return pts[0].astype(np.float64), mask > c.mask_threshold, scale
+
+    def check(self) -> str:
+        """Run one small synthetic frame (:data:`CHECK_HW`, a vertical brightness ramp, 60° HFOV)
+        through the graph and the post-processing; a one-line summary (``sim2radar models
+        check``). Raises what :meth:`estimate` raises."""
+        import time
+
+        h, w = CHECK_HW
+        ramp = np.linspace(40, 220, h, dtype=np.float32)[:, None, None]
+        rgb = np.broadcast_to(ramp, (h, w, 3)).astype(np.uint8)
+        t0 = time.perf_counter()
+        res = self.estimate(FrameInput(rgb, CameraIntrinsics.from_fov(w, h, 60.0),
+                                       name="models-check"))
+        d = res.depth_m[res.depth_m > 0]
+        kind = "metric" if res.info.get("metric") else "relative"
+        span = f"{d.min():.2f}-{d.max():.2f} m" if d.size else "no valid pixel"
+        return (f"{self.model.path.name} ran a {w}x{h} image in {time.perf_counter() - t0:.2f} s: "
+                f"{kind} depth {span} on {d.size / res.depth_m.size:.0%} of the pixels")
 
     def estimate(self, frame: FrameInput) -> DepthResult:
         import cv2

@@ -558,8 +558,8 @@ class Sam2AutoMasks:
         n = self.fixed_batch or 1
         pts = np.repeat(np.array([[s / 2, s / 2]], np.float32), n, 0)
         logits, ious = self._decode(self._encode(rgb), pts, h0, w0, 1)
-        return (f"SAM2 masks {tuple(logits.shape[1:])} logits in [{logits.min():.1f}, "
-                f"{logits.max():.1f}], predicted IoU {float(ious.max()):.2f}")
+        return (f"SAM2 ({self.decoder.path.name}) masks {tuple(logits.shape[1:])}, logits in "
+                f"[{logits.min():.1f}, {logits.max():.1f}], predicted IoU {float(ious.max()):.2f}")
 
     def generate(self, rgb: np.ndarray) -> tuple[list[np.ndarray], np.ndarray]:
         """Automatic masks of an image.
@@ -724,6 +724,21 @@ class Sam2GdinoSegments:
         self.match_iou = float(match_iou)
         self.keep_unmatched = bool(keep_unmatched)
         self.last_detections: Detections | None = None
+
+    def check(self) -> str:
+        """Run one small synthetic image (96 × 128 px: a red door on a grey wall) through the SAM2
+        encoder, one decoder batch and Grounding DINO; a one-line summary (``sim2radar models
+        check``). Raises what they raise."""
+        import time
+
+        rgb = np.full((96, 128, 3), 180, np.uint8)
+        rgb[24:96, 40:72] = (150, 30, 30)
+        t0 = time.perf_counter()
+        sam = self.sam.probe(rgb)
+        dets = self.gdino.detect(rgb)
+        h, w = self.gdino.input_hw
+        return (f"{sam}; Grounding DINO ({self.gdino.model.path.name}) ran at {h}x{w} "
+                f"(input_hw), {len(dets)} detection(s); {time.perf_counter() - t0:.2f} s")
 
     def segment(self, frame: FrameInput, depth: DepthResult) -> Segments:
         masks, _ = self.sam.generate(frame.rgb)
