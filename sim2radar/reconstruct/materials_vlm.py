@@ -436,11 +436,12 @@ class ChatClient:
         c = self.config
         sent = bool(c.api_key_env and os.environ.get(c.api_key_env))
         if sent:
-            fix = (f"set ${c.api_key_env} to the key the server was started with (vLLM / "
-                   "LMDeploy --api-key)")
+            fix = (f"set ${c.api_key_env} to the key the server was started with (vLLM "
+                   "--api-key, LMDeploy --api-keys)")
             return f"the VLM server at {c.base_url} refused the API key in ${c.api_key_env} " \
                    f"(HTTP {code} from {url}): {fix}"
-        where = (f"export {c.api_key_env}=<the key the server was started with (--api-key)>"
+        where = (f"export {c.api_key_env}=<the key the server was started with (vLLM "
+                 "--api-key, LMDeploy --api-keys)>"
                  if c.api_key_env else
                  "set materials.options.api_key_env to the variable that holds the key")
         return (f"the VLM server at {c.base_url} wants an API key and none was sent (HTTP {code} "

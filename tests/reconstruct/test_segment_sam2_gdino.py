@@ -3,9 +3,12 @@
 from __future__ import annotations
 
 import json
+import re
+from pathlib import Path
 
 import numpy as np
 import pytest
+import yaml
 
 from sim2radar.camera import CameraIntrinsics
 from sim2radar.reconstruct._onnx import ModelSignatureError
@@ -296,3 +299,11 @@ def test_onnxruntime_boolean_masks_output_is_refused_with_the_mapping(models, or
                        match=r"'masks' is boolean.*decoder_outputs: \[low_res_masks, "
                              r"iou_predictions\]"):
         _backend(models, sam2={"encoder_path": str(enc), "decoder_path": str(dec), **renamed})
+
+
+def test_the_readme_gives_this_mapping():
+    """The README's recipe for onnxruntime's exporter is the one these tests run."""
+    readme = (Path(__file__).resolve().parents[2] / "README.md").read_text()
+    block = re.search(r"```yaml\n(\s*sam2_encoder_outputs:.*?)```", readme, re.S)
+    assert block, "README lost the onnxruntime SAM2 mapping"
+    assert yaml.safe_load(block.group(1)) == {f"sam2_{k}": v for k, v in ORT_SAM2.items()}
