@@ -131,8 +131,11 @@ def generate_from_captures(captures: Path, *, config: Path | None, out: str,
         settings = capture_settings(cfg, config, frames=frames, radar=radar,
                                     reconstruction=reconstruction, seed=seed)
 
-        CaptureSpec(**settings)  # every field checked before any work
+        capture_spec = CaptureSpec(**settings)  # every field checked before any work
         find_captures(captures)
+        from sim2radar.cli.generate import _preflight
+
+        _preflight(capture_spec.reconstruction)
         if dask:
             from sim2radar.cli.simulate import _prefect_env
             from tasks.runners import task_runner

@@ -31,6 +31,16 @@ def _progress_columns():
             TextColumn("{task.description}")]
 
 
+def _preflight(reconstruction) -> None:
+    """A misconfigured VLM server stops the run before any work (ValueError, one line); an
+    unreachable one is a warning (the run's retries and ``on_error`` handle it)."""
+    from sim2radar.reconstruct.check import preflight_servers
+
+    warning = preflight_servers(reconstruction)
+    if warning:
+        typer.secho(f"warning: {warning}", fg="yellow", err=True)
+
+
 def run_generate(
     seeds: list[int],
     *,
@@ -323,10 +333,13 @@ def generate(
         from sim2radar.factory.spec import resolve_spec
 
         # validate every config before any work (bad field -> exit 2 with its name)
-        resolve_spec(params["frames"], params["geometry"], params["radar"],
-                     params["reconstruction"], params["world"], params["rig"], params["seed"],
-                     params["class_name"], params["labels"], params["material_override"],
-                     _label_range(params["export_label_range_m"]))
+        checked = resolve_spec(params["frames"], params["geometry"], params["radar"],
+                               params["reconstruction"], params["world"], params["rig"],
+                               params["seed"], params["class_name"], params["labels"],
+                               params["material_override"],
+                               _label_range(params["export_label_range_m"]))
+        if "reconstructed" in checked.geometries:
+            _preflight(checked.reconstruction)   # a misconfigured VLM server: exit 2 here
         dataset_name = dataset or cfg.get("dataset", "generated")
         seeds = list(range(first, first + n_worlds))
         if retry_failed:

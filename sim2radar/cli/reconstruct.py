@@ -73,6 +73,13 @@ def reconstruct_cmd(
             param_hint="--lidar",
         )
     cfg = ReconstructionConfig.from_yaml(config) if config else ReconstructionConfig.preset(preset)
+    from sim2radar.cli.generate import _preflight
+
+    try:
+        _preflight(cfg)   # a misconfigured VLM server stops here, before any image
+    except ValueError as exc:
+        typer.secho(f"error: {exc}", fg="red", err=True)
+        raise typer.Exit(2) from None
     if any(s.name == "oracle" for s in (cfg.depth, cfg.segments, cfg.materials)):
         raise typer.BadParameter("oracle backends need procedural-world ground truth; use the "
                                  "benchmark or the Python API for them", param_hint="--config")

@@ -21,7 +21,7 @@ from sim2radar.reconstruct.pipeline import ReconstructionConfig
 from sim2radar.reconstruct.types import DEPTH_BACKENDS, MATERIAL_BACKENDS, SEGMENT_BACKENDS
 from sim2radar.registry import UnknownBackendError
 
-__all__ = ["BUILTIN", "BackendCheck", "SelfCheck", "check_models"]
+__all__ = ["BUILTIN", "BackendCheck", "SelfCheck", "check_models", "preflight_servers"]
 
 #: What a backend without model files reports.
 BUILTIN = "ok (built-in, no model file)"
@@ -90,3 +90,26 @@ def check_models(config: ReconstructionConfig) -> list[BackendCheck]:
             message, ok = _one_line(exc), False
         out.append(BackendCheck(stage, spec.name, ok, message, time.perf_counter() - t0))
     return out
+
+
+def preflight_servers(config: ReconstructionConfig) -> str | None:
+    """Before a run that reconstructs: ask the VLM server (when the materials backend is
+    ``vlm``) which models it serves. A server that cannot serve the run at all — key refused,
+    or not serving the configured model — is a configuration error: raises ValueError with one
+    line naming the fix, before any frame is worked on. A server that cannot be reached is left
+    to the run (its retries and ``on_error``); returns that warning as a line (None when all is
+    well or there is no server)."""
+    from sim2radar.reconstruct.materials_vlm import VlmError, VlmSetupError
+
+    if config.materials.name != "vlm":
+        return None
+    import sim2radar.reconstruct  # noqa: F401  (registers every backend module)
+
+    backend = MATERIAL_BACKENDS.get("vlm")(**dict(config.materials.options))
+    try:
+        backend.check()
+    except VlmSetupError as exc:
+        raise ValueError(f"materials (vlm): {_one_line(exc)}") from None
+    except VlmError as exc:
+        return f"materials (vlm): {_one_line(exc)}"
+    return None

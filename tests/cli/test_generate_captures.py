@@ -41,6 +41,30 @@ def test_missing_capture_folder_is_one_line(tmp_path):
     assert res.exit_code == 2 and "capture folder not found" in res.output, res.output
 
 
+def test_a_misnamed_vlm_model_stops_generate_before_any_work(one_scene, tmp_path):
+    """Both entry points that reconstruct ask the VLM server first: `generate --captures` and
+    procedural `generate` exit 2 with one line naming the served models, before any frame."""
+    import yaml
+
+    from tests.reconstruct._vlm_server import VlmTestServer
+
+    with VlmTestServer("json", served_models=("/models/internvl",)) as srv:
+        cfg = tmp_path / "vlm.yaml"
+        cfg.write_text(yaml.safe_dump({"materials": {"name": "vlm", "options": {
+            "base_url": srv.base_url, "model": "OpenGVLab/InternVL2_5-8B",
+            "on_error": "unknown"}}}))
+        for args in (["--captures", str(one_scene)], ["--worlds", "1", "--frames", "1"]):
+            res = CliRunner().invoke(app, ["generate", *args, "--no-prefect", "--reconstruction",
+                                           str(cfg), "--out", str(tmp_path / "store")],
+                                     env={"COLUMNS": "400"})
+            assert res.exit_code == 2, res.output
+            assert "error: materials (vlm): the server at" in res.output
+            assert "not 'OpenGVLab/InternVL2_5-8B'" in res.output
+            assert "Traceback" not in res.output
+        assert srv.n_requests == 0 and srv.model_queries == 2
+    assert not (tmp_path / "store" / "manifests").exists()
+
+
 def test_capture_folder_to_openpcdet_in_one_command(one_scene, tmp_path):
     cfg = tmp_path / "gen.yaml"
     cfg.write_text("poses: {frames: 3, forward_m: [0.0, 1.5]}\nseed: 2\n")

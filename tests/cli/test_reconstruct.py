@@ -72,10 +72,12 @@ def test_bad_intrinsics_and_unwritable_store_are_one_line(inputs, tmp_path, unwr
         assert len(lines) == 1 and lines[0].startswith(expect), res.output
 
 
-def test_a_vlm_model_name_the_server_does_not_serve_fails_the_frame_not_unknown(inputs, tmp_path):
+def test_a_vlm_model_name_the_server_does_not_serve_stops_the_run_before_any_image(
+        inputs, tmp_path):
     """With ``on_error: unknown``, a misnamed model used to label every segment ``unknown``
-    (HTTP 404, not retried, then the fallback); now the frame fails with one line naming the
-    served names, and no segment is sent."""
+    (HTTP 404, not retried, then the fallback); now the command asks the server once before any
+    image, and stops with exit 2 and one line naming the served names and the fix. Nothing is
+    written and no segment is sent."""
     from tests.reconstruct._vlm_server import VlmTestServer
 
     with VlmTestServer("json", served_models=("/models/internvl",)) as srv:
@@ -88,9 +90,9 @@ def test_a_vlm_model_name_the_server_does_not_serve_fails_the_frame_not_unknown(
                                   "--config", str(cfg), "--out", str(tmp_path / "store")],
                             env={"COLUMNS": "400"})
         assert srv.n_requests == 0 and srv.model_queries == 1
-    assert res.exit_code == 1, res.output
-    assert ("corridor: failed: VlmSetupError: the server at "
-            f"{srv.base_url} serves ['/models/internvl'], not 'OpenGVLab/InternVL2_5-8B'"
-            in res.output), res.output
-    row, = ArtifactStore(tmp_path / "store").manifest("reconstruction").rows()
-    assert row["status"] == "failed" and "--served-model-name" in row["error"]
+    assert res.exit_code == 2, res.output
+    lines = res.output.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith(
+        f"error: materials (vlm): the server at {srv.base_url} serves ['/models/internvl'], "
+        "not 'OpenGVLab/InternVL2_5-8B'") and "--served-model-name" in lines[0], res.output
+    assert not (tmp_path / "store" / "manifests").exists()
