@@ -650,7 +650,11 @@ def export_openpcdet(store, outcomes: list[WorldDatasetOutcome], export_dir: str
            "labels_dropped_out_of_range": n_dropped,
            "splits": {k: len(v) for k, v in by_split.items()}, "warnings": []}
     empty = [k for k, v in by_split.items() if not v]
-    if frames and empty:
+    if not frames:
+        out["warnings"].append(
+            "no frame to export: every world/scene failed or was skipped (the manifest's error "
+            "column says why); the folder holds an empty dataset")
+    elif empty:
         n_groups = len(set(world_of.values()))
         out["warnings"].append(
             f"split(s) {empty} are empty: {n_groups} world(s)/scene(s) cannot fill train, val "

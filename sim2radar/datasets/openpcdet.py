@@ -234,6 +234,8 @@ def write_dataset(
     temporary files of an export killed mid-write. Other files in the folder are left alone.
     """
     root = Path(root)
+    for sub in ("points", "labels", "ImageSets"):  # an export of no frame is still a dataset
+        (root / sub).mkdir(parents=True, exist_ok=True)
     written = set()
     for f in frames:
         write_frame(root, f)
