@@ -62,6 +62,11 @@ def _finish(proc: subprocess.Popen) -> None:
     assert proc.returncode == 0, out[-2000:] + err[-3000:]
 
 
+def _published_frames(store: Path) -> set[str]:
+    """Keys of the frames a run has published (in-flight ``.tmp-*`` files are not frames)."""
+    return {p.stem for p in store.glob("dataset_frames/*.parquet") if not p.name.startswith(".")}
+
+
 def _frames(store: Path) -> dict[str, str]:
     """frame row -> its dataset_frames key, from the manifest (asserting one row per id)."""
     rows = ArtifactStore(store).manifest("generated").rows()
@@ -123,13 +128,13 @@ def test_a_run_killed_mid_world_then_rerun_is_the_uninterrupted_dataset(referenc
     store, export = tmp_path / "store", tmp_path / "export"
     proc = _generate(store, export)
     deadline = time.monotonic() + 240
-    while not list(store.glob("dataset_frames/*.parquet")) and proc.poll() is None \
+    while not _published_frames(store) and proc.poll() is None \
             and time.monotonic() < deadline:
         time.sleep(0.02)
     os.kill(proc.pid, signal.SIGKILL)
     proc.communicate(timeout=60)
     assert proc.returncode == -signal.SIGKILL, "the run ended before it was killed"
-    done = {p.stem for p in store.glob("dataset_frames/*.parquet")}
+    done = _published_frames(store)
     assert 0 < len(done) < 6 and not export.exists()
 
     _finish(_generate(store, export))
