@@ -56,6 +56,20 @@ def test_demo_and_smoke_profiles():
     assert set(bundled_profiles()) >= {"paper", "demo", "smoke"}
 
 
+def test_study_profile_is_the_papers_protocol_on_a_small_model_with_its_design_record():
+    """The study keeps the paper's protocol (only the detector is smaller) and records the
+    pilots it was designed from before any sim-pretrain run (issue #22)."""
+    study, paper = load_profile("study"), load_profile("paper")
+    same = ("pretrain_epochs", "finetune_epochs", "batch_size", "lr", "fractions", "trials",
+            "conditions", "min_steps", "eval_split", "intensity_matching", "pretrain_per_trial")
+    assert {k: getattr(study, k) for k in same} == {k: getattr(paper, k) for k in same}
+    cfg = study.detector_config("finetune")
+    assert cfg.model.voxel_size_m[:2] == (0.2, 0.2) and cfg.model.num_filters == (32, 64)
+    header = (PROFILE_DIR / "study.yaml").read_text().split("description:")[0]
+    assert "DESIGN RECORD" in header and "PENDING" not in header
+    assert "Decision:" in header and "MDE" in header and "sd" in header
+
+
 def _write(tmp_path: Path, name: str = "mine.yaml", **fields) -> Path:
     shutil.copy(DETECT_DIR / "pointpillars_door_cpu_small.yaml", tmp_path / "det.yaml")
     doc = {"detector": "det.yaml", **fields}
