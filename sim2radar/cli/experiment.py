@@ -157,7 +157,7 @@ def sweep(
     sim: str = typer.Argument(..., help="Simulated dataset: folder or store:NAME[:geometry]."),
     real: str = typer.Argument(..., help="Real dataset (measured, or the reference proxy)."),
     profile: str = typer.Option("demo", "--profile", "-p",
-                                help="paper | demo | smoke or a profile YAML."),
+                                help="paper | study | demo | smoke or a profile YAML."),
     name: str = typer.Option("sweep", "--name", help="Sweep name (its folder under --out)."),
     out: Path = typer.Option(Path("out/sweeps"), "--out", "-o", help="Sweeps folder."),
     store: str = typer.Option("out/store", "--store", help="Artifact store (runs table)."),
