@@ -19,6 +19,7 @@ are written.
 The sweep folder (``<out>/<name>/``)::
 
     sweep.json        profile, conditions, datasets (+ domain, digest), provenance
+    plan.json         the prepared plan the flow runs (run specs, configs, intensity matches)
     runs.parquet      one experiment_runs row per run (storage/schemas.py)
     progress.json     total / finished / failed runs
     stats.json        paired statistics (sim2radar.experiment.stats)
@@ -58,9 +59,11 @@ def progress_callback(fn: Callable[[dict], None]):
 
 
 @flow(name="run-experiment", log_prints=False)
-def run_experiment_flow(plan: dict) -> dict[str, Any]:
-    """Run a prepared sweep (:func:`tasks.experiment.prepare_sweep`'s ``plan``): every
-    pre-training and fine-tuning task, the tables, statistics, artifacts and dashboard."""
+def run_experiment_flow(plan_path: str) -> dict[str, Any]:
+    """Run a prepared sweep — the ``plan.json`` :func:`tasks.experiment.prepare_sweep` wrote
+    (its ``plan_path``; a paper-sized plan is over Prefect's 512 KiB limit on a flow run's
+    parameters, its path is not): every pre-training and fine-tuning task, the tables,
+    statistics, artifacts and dashboard."""
     from prefect.artifacts import (
         create_markdown_artifact,
         create_progress_artifact,
@@ -68,8 +71,9 @@ def run_experiment_flow(plan: dict) -> dict[str, Any]:
         update_progress_artifact,
     )
 
-    from tasks.experiment import finish_sweep
+    from tasks.experiment import finish_sweep, read_plan
 
+    plan = read_plan(plan_path)
     logger = get_run_logger()
     ctx, sweep_dir, name = plan["context"], Path(plan["context"]["sweep_dir"]), plan["name"]
     runs, pretrains = plan["runs"], plan["pretrains"]
@@ -187,7 +191,7 @@ def run_experiment(
                          overrides=overrides, device=device)
     n = int(workers or plan["concurrent_runs"])
     runner = task_runner(n, dask_address)
-    return run_experiment_flow.with_options(task_runner=runner)(plan=plan)
+    return run_experiment_flow.with_options(task_runner=runner)(plan_path=plan["plan_path"])
 
 
 @flow(name="run-experiment-job", log_prints=False)

@@ -65,6 +65,7 @@ log = logging.getLogger(__name__)
 #: or the row's content changed): every run is recomputed.
 EXPERIMENT_STAGE_VERSION = 1
 RUNS_FILE = "runs.parquet"
+PLAN_FILE = "plan.json"
 #: dataset roles of the conditions (sim2radar.experiment.profiles.CONDITIONS) and their flags
 ROLES = ("sim", "real", "sim-gt", "sim-one-material")
 
@@ -189,7 +190,8 @@ def prepare_sweep(
     Returns the plan the flow runs: ``name``, ``context`` (:class:`SweepContext` dict),
     ``pretrains`` and ``runs`` (spec dicts with their content ``key``; a run names its
     pre-training by ``pretrain_id``), ``concurrent_runs``, ``metric``, ``sweep`` (what
-    sweep.json holds).
+    sweep.json holds) and ``plan_path``: the plan as written to ``<out>/<name>/plan.json``,
+    which is what the flow is given.
 
     Raises
     ------
@@ -289,8 +291,22 @@ def prepare_sweep(
         "created_at": datetime.now(UTC).isoformat(timespec="seconds"),
     }
     write_json(sweep_dir / "sweep.json", sweep)
-    return {"name": name, "context": ctx.to_dict(), "pretrains": pre_out, "runs": run_out,
+    plan = {"name": name, "context": ctx.to_dict(), "pretrains": pre_out, "runs": run_out,
             "concurrent_runs": prof.concurrent_runs, "metric": DEFAULT_METRIC, "sweep": sweep}
+    # the flow takes this file's path, not the plan: a paper-sized grid's plan (run subsets,
+    # 25 intensity matches) is ~1 MB, over the 512 KiB Prefect allows for a flow run's parameters
+    plan["plan_path"] = str(write_json(sweep_dir / PLAN_FILE, plan).resolve())
+    return plan
+
+
+def read_plan(plan_path: str | os.PathLike) -> dict[str, Any]:
+    """The plan :func:`prepare_sweep` wrote (``<sweep>/plan.json``), with its ``plan_path``."""
+    path = Path(plan_path)
+    try:
+        return {**json.loads(path.read_text()), "plan_path": str(path)}
+    except (OSError, json.JSONDecodeError) as exc:
+        raise FileNotFoundError(f"{path}: not a sweep plan ({exc}); prepare the sweep again "
+                                "(sim2radar sweep writes it before the flow starts)") from exc
 
 
 def _profile(profile: Any, overrides: dict[str, Any] | None):

@@ -116,7 +116,8 @@ def run_sweep(sim: str, real: str, *, profile: str, name: str, out: str, store: 
                             f"{100 * row['fraction']:g}% t{row['trial']}: {shown}")
 
         with progress_callback(on_run):
-            return run_experiment_flow.with_options(task_runner=runner)(plan=plan)
+            return run_experiment_flow.with_options(task_runner=runner)(
+                plan_path=plan["plan_path"])
 
 
 def print_sweep_summary(summary: dict[str, Any]) -> None:

@@ -141,6 +141,31 @@ def test_a_sweep_refuses_changed_settings_but_not_changed_execution(first, data)
     assert plan["sweep"]["settings_digest"] == sweep["settings_digest"]
 
 
+def test_a_paper_sized_plan_reaches_the_flow_as_a_file(data, tmp_path):
+    """A paper-sized grid's plan (run subsets, one intensity match per pre-training) is over
+    the 512 KiB Prefect's API accepts as a flow run's parameters — the study's first launch
+    was refused with a 422 — so the flow is given the plan file's path, whatever the grid."""
+    import inspect
+
+    from prefect._internal.schemas.validators import validate_parameter_size
+
+    from flows.run_experiment import run_experiment_flow
+    from tasks.experiment import prepare_sweep, read_plan
+
+    limit = 524_288  # Prefect 3's default server.flow_run max parameter size
+    plan = prepare_sweep(data["sim"], data["real"], profile="smoke", name="big",
+                         out=tmp_path / "sweeps", store=tmp_path / "store",
+                         overrides={"trials": 24, "pretrain_per_trial": True})
+    path = Path(plan["plan_path"])
+    assert path == (tmp_path / "sweeps" / "big" / "plan.json").resolve()
+    assert path.stat().st_size > limit and len(plan["pretrains"]) >= 24
+    with pytest.raises(ValueError, match="less than 524,288 bytes"):
+        validate_parameter_size({"plan": read_plan(path)}, limit)  # what was sent before
+    assert list(inspect.signature(run_experiment_flow.fn).parameters) == ["plan_path"]
+    validate_parameter_size({"plan_path": str(path)}, limit)  # what is sent now
+    assert read_plan(path) == json.loads(json.dumps(plan, default=str))
+
+
 def test_a_broken_frame_fails_only_the_runs_that_read_it(data, prefect_server, tmp_path):
     from flows.run_experiment import run_experiment
 
