@@ -110,9 +110,22 @@ class Manifest:
         return row
 
     # -- read -------------------------------------------------------------------------------
-    def _read_file(self, path: str) -> pa.Table:
-        with self.store.fs.open(path, "rb") as fh:
-            table = pq.read_table(fh)
+    def _read_file(self, path: str) -> pa.Table | None:
+        """The row file at ``path``; None (the file moved into the store's quarantine, one
+        warning) when it does not read — the run that records the scene again rebuilds it from
+        the scene's artifacts, which are found cached."""
+        from storage.store import is_corrupt_file_error
+
+        try:
+            with self.store.fs.open(path, "rb") as fh:
+                table = pq.read_table(fh, page_checksum_verification=True)
+        except FileNotFoundError:
+            return None
+        except Exception as exc:
+            if not is_corrupt_file_error(exc):
+                raise  # an I/O error (worth the store's retries), not a damaged file
+            self.store.quarantine(path, f"manifest row not readable: {' '.join(str(exc).split())}")
+            return None
         MANIFEST.check_file_schema(table.schema, path)
         return table
 
@@ -121,7 +134,8 @@ class Manifest:
         path = self._path(scene_id)
         if not self.store._io(f"exists {path}", lambda: self.store.fs.exists(path)):
             return None
-        rows = _to_rows(self.store._io(f"read {path}", lambda: self._read_file(path)))
+        table = self.store._io(f"read {path}", lambda: self._read_file(path))
+        rows = _to_rows(table) if table is not None else []
         return rows[0] if rows else None
 
     def table(self) -> pa.Table:
@@ -137,7 +151,10 @@ class Manifest:
             )
             if not paths:
                 return MANIFEST.schema.empty_table()
-            tables = [self._read_file(p).replace_schema_metadata(None) for p in paths]
+            tables = [t.replace_schema_metadata(None) for t in map(self._read_file, paths)
+                      if t is not None]
+            if not tables:
+                return MANIFEST.schema.empty_table()
             return pa.concat_tables(tables).sort_by("scene_id")
 
         return self.store._io(f"read manifest {self.dataset}", gather)

@@ -6,11 +6,20 @@ Layout under the root (a local folder or any fsspec URI: ``s3://bucket/x``, ``gs
     <root>/<stage>/<key>.parquet              published artifacts (complete by construction)
     <root>/<stage>/.tmp-<key>-<uuid>.parquet  in-flight writes (never read; see clean_partial)
     <root>/manifests/<dataset>/<scene>.parquet  one manifest row per scene (see manifest.py)
+    <root>/quarantine/<path>.<UTC time>         files that did not verify, moved aside (kept)
 
 Atomic publish: a file is written under a hidden temporary name in the same folder and then
 renamed to its final name (``os.replace`` after ``fsync`` on local disks; on object stores the
 final object appears whole when its upload/copy completes). A reader never sees half a file, and
 a killed run leaves only ``.tmp-*`` files, which ``exists``/``keys``/``read`` ignore.
+
+Self-healing: a published file that does not verify (truncated, overwritten, not Parquet — its
+footer does not parse or its row groups do not add up to its row count) is never served. The
+cache check :meth:`ArtifactStore.exists` verifies the footer, moves a file that fails into
+``quarantine/`` (nothing is deleted) with one warning naming it, and answers False, so the run
+that asked recomputes it; :meth:`ArtifactStore.read` does the same for a body that does not
+decode (:class:`CorruptArtifactError`). :meth:`ArtifactStore.verify_all` reads every file
+(``sim2radar store verify``).
 
 Remote I/O can flake: on non-local file systems every operation is retried ``io_retries`` times
 with exponential backoff (transient ``OSError``/``TimeoutError``/``ConnectionError`` only, see
@@ -43,6 +52,8 @@ from storage.schemas import SchemaError, get_schema
 __all__ = [
     "ArtifactStore",
     "ArtifactNotFoundError",
+    "CorruptArtifactError",
+    "QUARANTINE",
     "SCHEMA_KEY",
     "check_writable",
     "is_transient_io_error",
@@ -53,6 +64,8 @@ log = logging.getLogger(__name__)
 #: Parquet key-value metadata key holding ``"<stage>:<schema version>"``.
 SCHEMA_KEY = b"sim2radar.schema"
 TMP_PREFIX = ".tmp-"
+#: folder of the store root that receives files which did not verify
+QUARANTINE = "quarantine"
 _KEY_RE = re.compile(r"[0-9a-f]{8,64}")  # content keys (storage.keys.KEY_LENGTH) or digests
 _DATASET_RE = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]*$")
 T = TypeVar("T")
@@ -60,6 +73,11 @@ T = TypeVar("T")
 
 class ArtifactNotFoundError(FileNotFoundError):
     """No published artifact for (stage, key); the message names the path."""
+
+
+class CorruptArtifactError(SchemaError):
+    """A published file that does not read as the Parquet it should be (truncated, damaged).
+    It has been moved into the store's ``quarantine/``; the next run recomputes it."""
 
 
 #: OSError subclasses that say the same thing on every attempt (retrying cannot help).
@@ -224,9 +242,79 @@ class ArtifactStore:
 
     # -- queries ------------------------------------------------------------------------------
     def exists(self, stage: str, key: str) -> bool:
-        """True if a complete artifact (stage, key) is published."""
+        """True if a complete artifact (stage, key) is published and its footer verifies.
+
+        A published file that does not verify is moved into ``quarantine/`` (one warning names
+        it) and the answer is False: the caller recomputes it, as if it had never been written.
+        """
         path = self.path(stage, key)
-        return bool(self._io(f"exists {path}", lambda: self.fs.exists(path)))
+        if not self._io(f"exists {path}", lambda: self.fs.exists(path)):
+            return False
+        problem = self._io(f"verify {path}", lambda: file_problem(self.fs, path))
+        if problem is None:
+            return True
+        self.quarantine(path, problem)
+        return False
+
+    def verify(self, stage: str, key: str, *, deep: bool = True) -> str | None:
+        """What is wrong with a published artifact (None when it reads; ``deep`` decodes every
+        page, otherwise only the footer is checked). Moves nothing."""
+        path = self.path(stage, key)
+        return self._io(f"verify {path}", lambda: file_problem(self.fs, path, deep=deep))
+
+    def quarantine(self, path: str, reason: str) -> str | None:
+        """Move the file at ``path`` (inside the store) to ``quarantine/<same relative path>.<UTC
+        time>`` with a ``.why.txt`` beside it; returns the new location (None when another
+        process moved or replaced it first). Nothing is deleted."""
+        rel = path[len(self._base):].lstrip("/") if path.startswith(self._base) else \
+            path.rsplit("/", 1)[-1]
+        stamp = time.strftime("%Y%m%dT%H%M%SZ", time.gmtime())
+        dest = self._join(QUARANTINE, f"{rel}.{stamp}-{uuid.uuid4().hex[:6]}")
+        try:
+            self.fs.makedirs(dest.rsplit("/", 1)[0], exist_ok=True)
+            self.fs.mv(path, dest)
+        except FileNotFoundError:
+            return None
+        with self.fs.open(f"{dest}.why.txt", "wb") as fh:
+            fh.write(f"{path}\n{reason}\n".encode())
+        log.warning("storage: %s does not verify (%s); moved to %s; it is recomputed when next needed",
+                    path, reason, dest)
+        return dest
+
+    def quarantined(self) -> list[str]:
+        """Files moved aside by :meth:`quarantine` (their ``.why.txt`` notes not listed)."""
+        folder = self._join(QUARANTINE)
+        if not self.fs.exists(folder):
+            return []
+        return sorted(p for p in self.fs.find(folder) if not p.endswith(".why.txt"))
+
+    def verify_all(self, *, repair: bool = False) -> list[dict[str, str]]:
+        """Read every published artifact and manifest row file in full; returns one
+        ``{"path", "problem", "moved_to"}`` per file that does not verify (``moved_to`` only
+        with ``repair``, which quarantines them so the next run recomputes them)."""
+        from storage.schemas import schema_names
+
+        found = []
+        targets = [(stage, self._join(stage)) for stage in schema_names() if stage != "manifest"]
+        targets += [("manifest", self._join("manifests", name)) for name in self.manifests()]
+        for stage, folder in targets:
+            if not self.fs.exists(folder):
+                continue
+            for path in sorted(self.fs.ls(folder, detail=False)):
+                name = path.rsplit("/", 1)[-1]
+                if not name.endswith(".parquet") or name.startswith("."):
+                    continue
+                if stage != "manifest" and not _KEY_RE.fullmatch(name[: -len(".parquet")]):
+                    continue
+                problem = self._io(f"verify {path}", lambda p=path, s=stage: file_problem(
+                    self.fs, p, deep=True, expected_schema=s))
+                if problem is None:
+                    continue
+                row = {"path": path, "problem": problem}
+                if repair:
+                    row["moved_to"] = self.quarantine(path, problem) or ""
+                found.append(row)
+        return found
 
     def keys(self, stage: str) -> list[str]:
         """Published keys of ``stage``, sorted (in-flight ``.tmp-*`` files are not listed)."""
@@ -298,14 +386,16 @@ class ArtifactStore:
             if self.is_local:
                 os.makedirs(folder, exist_ok=True)
                 with open(tmp, "wb") as fh:
-                    pq.write_table(table, fh, compression=self.compression)
+                    pq.write_table(table, fh, compression=self.compression,
+                                   write_page_checksum=True)
                     fh.flush()
                     os.fsync(fh.fileno())
                 os.replace(tmp, final)  # atomic on POSIX within one file system
             else:
                 self.fs.makedirs(folder, exist_ok=True)
                 with self.fs.open(tmp, "wb") as fh:
-                    pq.write_table(table, fh, compression=self.compression)
+                    pq.write_table(table, fh, compression=self.compression,
+                                   write_page_checksum=True)
                 self.fs.mv(tmp, final)
         except BaseException:
             try:
@@ -326,10 +416,15 @@ class ArtifactStore:
                 f"no artifact {stage}/{key} in store {self.root}: {path} does not exist"
             ) from None
         try:
-            pf = pq.ParquetFile(fh)
+            pf = pq.ParquetFile(fh, page_checksum_verification=True)
         except Exception as exc:
             fh.close()
-            raise SchemaError(f"{path}: not a readable Parquet file: {exc}") from exc
+            if not is_corrupt_file_error(exc):
+                raise
+            self.quarantine(path, f"not a readable Parquet file: {exc}")
+            raise CorruptArtifactError(
+                f"{path}: not a readable Parquet file ({exc}); moved to the store's "
+                f"{QUARANTINE}/, the next run recomputes it") from exc
         recorded = (pf.schema_arrow.metadata or {}).get(SCHEMA_KEY, b"").decode()
         expected = f"{stage}:{schema.version}"
         if recorded != expected:
@@ -354,9 +449,17 @@ class ArtifactStore:
         """
 
         def go() -> pa.Table:
-            _, pf, fh = self._open_checked(stage, key)
+            path, pf, fh = self._open_checked(stage, key)
             with fh:
-                return pf.read(columns=columns)
+                try:
+                    return pf.read(columns=columns)
+                except Exception as exc:
+                    if not is_corrupt_file_error(exc):
+                        raise
+                    problem = f"a page does not decode: {' '.join(str(exc).split())}"
+            self.quarantine(path, problem)
+            raise CorruptArtifactError(f"{path}: {problem}; moved to the store's {QUARANTINE}/, "
+                                       "the next run recomputes it")
 
         return self._io(f"read {stage}/{key}", go)
 
@@ -421,6 +524,41 @@ class ArtifactStore:
         if not self.fs.exists(folder):
             return []
         return sorted(p.rstrip("/").rsplit("/", 1)[-1] for p in self.fs.ls(folder, detail=False))
+
+
+def file_problem(fs, path: str, *, deep: bool = False,
+                 expected_schema: str | None = None) -> str | None:
+    """What keeps the Parquet file at ``path`` from reading (None when nothing does): the
+    footer must parse and its row groups add up to its row count; ``deep`` also decodes every
+    page and, with ``expected_schema`` (a stage name), checks the recorded schema's stage."""
+    try:
+        with fs.open(path, "rb") as fh:
+            pf = pq.ParquetFile(fh, page_checksum_verification=True)
+            meta = pf.metadata
+            if sum(meta.row_group(i).num_rows for i in range(meta.num_row_groups)) \
+                    != meta.num_rows:
+                return "its row groups do not add up to its row count"
+            if deep:
+                pf.read()
+                recorded = (pf.schema_arrow.metadata or {}).get(SCHEMA_KEY, b"").decode()
+                if expected_schema and recorded.split(":")[0] != expected_schema:
+                    return f"it records schema {recorded or '(none)'!r}, not {expected_schema!r}"
+    except Exception as exc:
+        if not is_corrupt_file_error(exc):
+            raise
+        return f"not a readable Parquet file: {' '.join(str(exc).split())}"
+    return None
+
+
+def is_corrupt_file_error(exc: BaseException) -> bool:
+    """True if ``exc``, raised while parsing or decoding a Parquet file, says the file's bytes
+    are wrong (Arrow's invalid-data errors, an unexpected end of file, a page checksum that
+    fails — Arrow raises that as an ``OSError`` without an errno) rather than that the file
+    could not be read (a missing file, a permission error, a timeout, a dropped connection)."""
+    if isinstance(exc, pa.ArrowException | EOFError):
+        return not isinstance(exc, FileNotFoundError | PermissionError)
+    return (isinstance(exc, OSError) and exc.errno is None
+            and not isinstance(exc, ConnectionError | TimeoutError))
 
 
 def _protocols(fs) -> tuple[str, ...]:

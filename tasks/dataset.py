@@ -311,6 +311,23 @@ def _digest(frame) -> str:
 # ---------------------------------------------------------------------------------------------
 # One world
 # ---------------------------------------------------------------------------------------------
+def _upstream_verifies(st: ArtifactStore, rkeys: dict[str, str], spec) -> bool:
+    """Whether a cached frame's reconstruction artifacts (scene meshes, reconstruction and the
+    depth / segment / material steps it was built from) all verify. ``exists`` moves one that
+    does not into quarantine, so the frame is recomputed and the store healed by this run. The
+    steps' keys come from the reconstruction's recorded image digest: no frame is loaded."""
+    from sim2radar.reconstruct.pipeline import STAGE_VERSION
+    from storage.reconstruction import stage_keys
+
+    if not all(st.exists(stage, key) for stage, key in rkeys.items()):
+        return False
+    if "reconstruction" not in rkeys:
+        return True
+    inputs = st.read_provenance("reconstruction", rkeys["reconstruction"]).get("inputs") or {}
+    steps = stage_keys(inputs, spec.reconstruction.to_dict(), stage_version=STAGE_VERSION)
+    return all(st.exists(stage, key) for stage, key in steps.items())
+
+
 class _WorldInputs:
     """Lazily loaded world geometry and frames (only when some frame must be computed)."""
 
@@ -438,13 +455,14 @@ def generate_world_dataset(
             try:
                 if not force and st.exists("dataset_frames", key):
                     df = read_dataset_frame(st, key)
-                    done(k, df, df.stats.get("reconstruction_keys") or {})
-                    continue
+                    rkeys = df.stats.get("reconstruction_keys") or {}
+                    if _upstream_verifies(st, rkeys, spec):
+                        done(k, df, rkeys)
+                        continue
                 if geometry == "reconstructed":
                     src = _world_frame_source(inputs.frames()[k], world_id, spec)
                     fresh[k] = False
-                    if not all(st.exists(s, src.keys[s]) for s in ("scene_meshes",
-                                                                   "reconstruction")):
+                    if not all(st.exists(s, v) for s, v in src.keys.items()):
                         steps = reconstruction_steps(src, spec.reconstruction, st, run)
                         fresh[k] = steps["scene"].status == "ok"
                 todo[geometry].append(k)
