@@ -256,6 +256,11 @@ class ArtifactStore:
         self.quarantine(path, problem)
         return False
 
+    def all_exist(self, keys: Mapping[str, str]) -> bool:
+        """``exists`` for every ``stage -> key`` (each one checked: every file that does not
+        verify is quarantined, not only the first)."""
+        return all([self.exists(stage, key) for stage, key in keys.items()])
+
     def verify(self, stage: str, key: str, *, deep: bool = True) -> str | None:
         """What is wrong with a published artifact (None when it reads; ``deep`` decodes every
         page, otherwise only the footer is checked). Moves nothing."""

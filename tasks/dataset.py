@@ -319,13 +319,16 @@ def _upstream_verifies(st: ArtifactStore, rkeys: dict[str, str], spec) -> bool:
     from sim2radar.reconstruct.pipeline import STAGE_VERSION
     from storage.reconstruction import stage_keys
 
-    if not all(st.exists(stage, key) for stage, key in rkeys.items()):
+    if not st.all_exist(rkeys):
         return False
     if "reconstruction" not in rkeys:
         return True
     inputs = st.read_provenance("reconstruction", rkeys["reconstruction"]).get("inputs") or {}
     steps = stage_keys(inputs, spec.reconstruction.to_dict(), stage_version=STAGE_VERSION)
-    return all(st.exists(stage, key) for stage, key in steps.items())
+    # (stage_keys' own scene_meshes / reconstruction keys are for the camera frame; the
+    # frame's, in the radar frame, are rkeys)
+    return st.all_exist({s: steps[s] for s in ("depth_maps", "segmentations",
+                                               "material_labels")})
 
 
 class _WorldInputs:
@@ -462,7 +465,7 @@ def generate_world_dataset(
                 if geometry == "reconstructed":
                     src = _world_frame_source(inputs.frames()[k], world_id, spec)
                     fresh[k] = False
-                    if not all(st.exists(s, v) for s, v in src.keys.items()):
+                    if not st.all_exist(src.keys):
                         steps = reconstruction_steps(src, spec.reconstruction, st, run)
                         fresh[k] = steps["scene"].status == "ok"
                 todo[geometry].append(k)

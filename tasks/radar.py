@@ -170,7 +170,7 @@ def simulate_scene(
     artifacts = {"scene_meshes": keys["scene_meshes"], "radar_points": keys["radar_points"]}
     timings: dict[str, float] = {"keys": time.perf_counter() - t_start}
 
-    cached = not force and all(store.exists(stage, key) for stage, key in artifacts.items())
+    cached = not force and store.all_exist(artifacts)
     n_points: list[int]
     if cached:
         status = "skipped"

@@ -126,7 +126,7 @@ def reconstruct_image(
     cfg_dict = cfg.to_dict()
     rgb, k, pts, rig, note, inputs = _inputs(job)
     keys = reconstruction_keys(inputs, cfg_dict, stage_version=RECONSTRUCTION_STAGE_VERSION)
-    if not force and all(st.exists(s, key) for s, key in keys.items()):
+    if not force and st.all_exist(keys):
         return ReconOutcome(job.name, job.image, "skipped", artifacts=keys,
                             timings_s={"total": time.perf_counter() - t0})
     if force:

@@ -158,7 +158,7 @@ def generate_world_artifacts(
     keys = world_keys(seed, n_frames, world_cfg, rig, trajectory_seed, radar, rgb=rgb)
     world_id = world_id_for(seed)
     timings: dict[str, float] = {}
-    if not force and all(store.exists(stage, key) for stage, key in keys.items()):
+    if not force and store.all_exist(keys):
         table = store.read("world_frames", keys["world_frames"], columns=["door_visible"])
         visible = [int(sum(v)) for v in table.column("door_visible").to_pylist()]
         timings["total"] = time.perf_counter() - t_start
