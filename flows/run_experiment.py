@@ -170,6 +170,7 @@ def run_experiment(
     workers: int | None = None,
     dask_address: str | None = None,
     device: str | None = None,
+    force: list[str] | None = None,
 ) -> dict[str, Any]:
     """Prepare and run a sweep (see the module docstring); configs and datasets are validated
     before the flow starts, so a bad input fails fast with the file and field named.
@@ -183,12 +184,14 @@ def run_experiment(
     overrides : profile fields to replace (e.g. ``{"trials": 3}``).
     workers : concurrent runs (default: the profile's ``concurrent_runs``); with
         ``dask_address`` (``"local"`` or ``tcp://...``) the runs go to Dask instead of threads.
+    force : run ids (``baseline-f0.05-t2``) or keys to redo from scratch (their stored rows and
+        checkpoints are moved aside, not deleted).
     """
     from tasks.experiment import prepare_sweep
 
     plan = prepare_sweep(sim, real, profile=profile, name=name, out=out, store=store,
                          sim_gt=sim_gt, sim_one_material=sim_one_material, ablations=ablations,
-                         overrides=overrides, device=device)
+                         overrides=overrides, device=device, force=force or ())
     n = int(workers or plan["concurrent_runs"])
     runner = task_runner(n, dask_address)
     return run_experiment_flow.with_options(task_runner=runner)(plan_path=plan["plan_path"])

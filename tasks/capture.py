@@ -60,11 +60,18 @@ CAPTURE_STAGES = ("depth", "segments", "materials", "scene", "poses", "simulate"
 
 def _source(scene: CaptureScene, spec: CaptureSpec) -> tuple[FrameSource, dict[str, str]]:
     """The scene as a :class:`~tasks.steps.FrameSource` (reconstruction in the level frame)
-    and every key of the scene: input digests + the reconstruction steps' artifact keys."""
+    and every key of the scene: input digests + the reconstruction steps' artifact keys.
+
+    Raises
+    ------
+    ValueError naming the file, field and fix: an unreadable image or intrinsics, a
+    ``radar.yaml`` that does not validate (checked here, before any reconstruction step).
+    """
     from sim2radar.reconstruct.pipeline import STAGE_VERSION
     from storage.reconstruction import frame_input_digests, stage_keys
 
     frame, _ = load_capture_frame(scene)
+    read_radar_yaml(scene.radar)  # a bad radar.yaml fails the scene before reconstruction
     inputs = frame_input_digests(frame)
     keys = stage_keys(inputs, spec.reconstruction.to_dict(), stage_version=STAGE_VERSION)
     src = FrameSource(scene.scene_id, scene.folder, lambda: load_capture_frame(scene), inputs,

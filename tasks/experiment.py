@@ -30,6 +30,7 @@ import functools
 import json
 import logging
 import os
+from collections.abc import Sequence
 from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
@@ -40,6 +41,7 @@ from prefect.cache_policies import NO_CACHE
 
 from storage import content_key, get_schema
 from storage.provenance import jsonable, package_versions
+from storage.store import CorruptArtifactError
 from tasks.common import open_store
 
 __all__ = [
@@ -171,6 +173,14 @@ def _resolve_dataset(source: str | os.PathLike, role: str, store: str, sweep_dir
     return open_domain(text, role)
 
 
+def check_sweep_name(name: str) -> None:
+    """A sweep name is one safe path component (its folder is ``<out>/<name>``): letters,
+    digits, '-', '_' and '.', not starting with '.' (so never ``.`` or ``..``)."""
+    if not name or name.startswith(".") or not all(c.isalnum() or c in "-_." for c in name):
+        raise ValueError(f"--name {name!r}: a sweep name is one folder name under --out — use "
+                         "letters, digits, '-', '_' or '.', not starting with '.'")
+
+
 def prepare_sweep(
     sim: str | os.PathLike,
     real: str | os.PathLike,
@@ -184,8 +194,10 @@ def prepare_sweep(
     ablations: bool = False,
     overrides: dict[str, Any] | None = None,
     device: str | None = None,
+    force: Sequence[str] = (),
 ) -> dict[str, Any]:
-    """Validate the inputs and plan a sweep; writes ``<out>/<name>/sweep.json``.
+    """Validate the inputs and plan a sweep; writes ``<out>/<name>/sweep.json``. The runs
+    named in ``force`` (ids or keys) are redone from scratch (:func:`force_runs`).
 
     Returns the plan the flow runs: ``name``, ``context`` (:class:`SweepContext` dict),
     ``pretrains`` and ``runs`` (spec dicts with their content ``key``; a run names its
@@ -203,12 +215,16 @@ def prepare_sweep(
         pretrain_key_inputs,
         run_key_inputs,
     )
-    from sim2radar.experiment.data import check_disjoint_worlds, fit_subset_intensity_match
+    from sim2radar.experiment.data import (
+        check_disjoint_worlds,
+        check_no_shared_frames,
+        check_not_the_same,
+        fit_subset_intensity_match,
+    )
     from sim2radar.experiment.plan import protocol_digest, protocol_settings
     from sim2radar.experiment.stats import DEFAULT_METRIC
 
-    if not name or not all(c.isalnum() or c in "-_." for c in name):
-        raise ValueError(f"sweep name {name!r}: use letters, digits, '-', '_' or '.'")
+    check_sweep_name(name)
     prof = _profile(profile, overrides)
     sweep_dir = Path(out) / name
     pre_cfg = _resolve_precision(prof.detector_config("pretrain"), device)
@@ -227,6 +243,7 @@ def prepare_sweep(
     real_ds = domains["real"]
     for role, ds in domains.items():
         if role != "real":
+            check_not_the_same(ds, real_ds)
             check_disjoint_worlds(ds, real_ds)
     for split in (prof.train_split, prof.eval_split):
         if not real_ds.splits.get(split):
@@ -238,14 +255,23 @@ def prepare_sweep(
         ft_cfg = ft_cfg.with_updates(runtime={"device": device})
     nfeat, classes = ft_cfg.model.num_point_features, ft_cfg.model.class_names
     pretrain_dump, ft_dump = pre_cfg.model_dump(mode="json"), ft_cfg.model_dump(mode="json")
+    # every frame the sweep will read is loaded — so checked (shape, dtype, finite values,
+    # labels; the file named) — before the first run, and a simulated dataset that holds a
+    # real validation or test frame is refused
+    held_out_splits = [s for s in dict.fromkeys((prof.val_split, prof.eval_split))
+                       if real_ds.splits.get(s)]
+    real_train = real_ds.frames(real_ds.splits[prof.train_split], nfeat, classes)
+    held_out = real_ds.frames(real_ds.ids(held_out_splits), nfeat, classes)
+    sims = {role: ds.frames(ds.ids(), nfeat, classes) for role, ds in domains.items()
+            if role != "real"}
+    for role, frames in sims.items():
+        check_no_shared_frames(domains[role], real_ds, frames, held_out)
+    del held_out
     pretrains, runs = plan_sweep(prof, real_ds.splits[prof.train_split], conditions)
     # intensity matching: each pre-training's sim frames mapped onto the intensities of its
     # runs' own real fine-tuning subset (plan.PretrainSpec.real_ids)
     matches: dict[str, dict] = {}
     if prof.intensity_matching and nfeat > 3:
-        real_train = real_ds.frames(real_ds.splits[prof.train_split], nfeat, classes)
-        sims = {role: ds.frames(ds.ids(), nfeat, classes) for role, ds in domains.items()
-                if role != "real" and any(p.sim_role == role for p in pretrains)}
         for p in pretrains:
             matches[p.name] = fit_subset_intensity_match(sims[p.sim_role], real_train,
                                                          p.real_ids).to_dict()
@@ -291,6 +317,8 @@ def prepare_sweep(
         "created_at": datetime.now(UTC).isoformat(timespec="seconds"),
     }
     write_json(sweep_dir / "sweep.json", sweep)
+    if force:
+        force_runs(store, sweep_dir, run_out, force)
     plan = {"name": name, "context": ctx.to_dict(), "pretrains": pre_out, "runs": run_out,
             "concurrent_runs": prof.concurrent_runs, "metric": DEFAULT_METRIC, "sweep": sweep}
     # the flow takes this file's path, not the plan: a paper-sized grid's plan (run subsets,
@@ -528,12 +556,53 @@ def run_finetuning(ctx: SweepContext | dict, spec: dict[str, Any],
     st = open_store(ctx.store)
     key = spec["key"]
     out = Path(ctx.sweep_dir) / "runs" / key
-    claim = _claim(ctx, key, lambda: st.exists("experiment_runs", key), out, f"run {spec['id']}")
-    if claim is None:
-        row = st.read("experiment_runs", key).to_pylist()[0]
+    for _ in range(2):
+        claim = _claim(ctx, key, lambda: st.exists("experiment_runs", key), out,
+                       f"run {spec['id']}")
+        if claim is not None:
+            break
+        try:
+            row = st.read("experiment_runs", key).to_pylist()[0]
+        except CorruptArtifactError:  # moved into quarantine by the read: compute it again
+            continue
         return {**row, "sweep": ctx.name, "status": "skipped"}
     with claim:
         return _finetune(ctx, st, spec, pretrain, out)
+
+
+def force_runs(store: str, sweep_dir: Path, runs: list[dict[str, Any]],
+               wanted: Sequence[str]) -> list[str]:
+    """Make the sweep redo the runs named in ``wanted`` (run ids such as
+    ``sim-pretrain-f0.05-t2``, or run keys): each one's stored row is moved into the store's
+    quarantine and its run folder (checkpoints) into ``<sweep>/quarantine/runs/``, so it trains
+    from scratch; nothing is deleted. Returns the ids forced.
+
+    Raises
+    ------
+    ValueError — for a name that is no run of this sweep, with an example of the ids.
+    """
+    by_name = {r["id"]: r for r in runs} | {r["key"]: r for r in runs}
+    unknown = [w for w in wanted if w not in by_name]
+    if unknown:
+        raise ValueError(f"--force-run {unknown[0]!r}: no run of this sweep has that id or key; "
+                         f"run ids look like {runs[0]['id']!r} (results.md, the dashboard, "
+                         "runs.parquet's run_key)")
+    st = open_store(store)
+    stamp = datetime.now(UTC).strftime("%Y%m%dT%H%M%SZ")
+    forced = []
+    for name in dict.fromkeys(wanted):
+        run = by_name[name]
+        path = st.path("experiment_runs", run["key"])
+        if st.fs.exists(path):
+            st.quarantine(path, f"--force-run {name}: redone on request")
+        folder = Path(sweep_dir) / "runs" / run["key"]
+        if folder.exists():
+            dest = Path(sweep_dir) / "quarantine" / "runs" / f"{run['key']}.{stamp}"
+            dest.parent.mkdir(parents=True, exist_ok=True)
+            os.replace(folder, dest)
+            log.warning("sweep: %s forced; its run folder moved to %s", run["id"], dest)
+        forced.append(run["id"])
+    return forced
 
 
 def _finetune(ctx: SweepContext, st, spec: dict[str, Any], pretrain: dict[str, Any] | None,

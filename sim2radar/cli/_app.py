@@ -33,6 +33,14 @@ def exit_unless_writable(store: str, option: str = "--out") -> None:
         raise typer.Exit(2) from None
 
 
+def exit_unless_writable_outputs(outputs: dict[str, object]) -> None:
+    """:func:`exit_unless_writable` for each ``option -> folder`` given (None: not used), so a
+    read-only export or picture folder stops the command before any work, not after it."""
+    for option, path in outputs.items():
+        if path is not None:
+            exit_unless_writable(str(path), option)
+
+
 class _RecordedTaskFailures(logging.Filter):
     """Drops, from a console handler, the ERROR records Prefect's task engine writes when one
     of ``task_names`` fails (the exception with its traceback, then "Finished in state

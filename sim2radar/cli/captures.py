@@ -32,7 +32,7 @@ def run_captures(captures: Path, *, store: str, dataset: str, settings: dict[str
     from sim2radar.cli.generate import _progress_columns
     from sim2radar.factory.captures import find_captures
 
-    n_scenes = len(find_captures(captures))
+    n_scenes = len(find_captures(captures, warn=False))  # the flow warns once
     with Progress(*_progress_columns(), disable=not show_progress, transient=False) as progress:
         bar = progress.add_task("starting" + (" Prefect" if use_prefect else ""), total=n_scenes)
 
@@ -132,7 +132,7 @@ def generate_from_captures(captures: Path, *, config: Path | None, out: str,
                                     reconstruction=reconstruction, seed=seed)
 
         capture_spec = CaptureSpec(**settings)  # every field checked before any work
-        find_captures(captures)
+        find_captures(captures, warn=False)  # the flow lists it again and warns once
         from sim2radar.cli.generate import _preflight
 
         _preflight(capture_spec.reconstruction)

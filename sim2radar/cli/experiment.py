@@ -17,7 +17,7 @@ from typing import Any
 
 import typer
 
-from sim2radar.cli._app import app, exit_unless_writable
+from sim2radar.cli._app import app, exit_unless_writable, exit_unless_writable_outputs
 
 __all__ = ["sweep", "run_sweep", "print_sweep_summary", "print_plan"]
 
@@ -86,7 +86,7 @@ def run_sweep(sim: str, real: str, *, profile: str, name: str, out: str, store: 
               ablations: bool = False, overrides: dict[str, Any] | None = None,
               workers: int | None = None, dask_address: str | None = None,
               device: str | None = None, show_progress: bool = True,
-              verbose: bool = False) -> dict[str, Any]:
+              verbose: bool = False, force: list[str] | None = None) -> dict[str, Any]:
     """Prepare (validating every input first) and run a sweep with a progress bar; returns
     the flow's summary."""
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
@@ -100,7 +100,7 @@ def run_sweep(sim: str, real: str, *, profile: str, name: str, out: str, store: 
 
     plan = prepare_sweep(sim, real, profile=profile, name=name, out=out, store=store,
                          sim_gt=sim_gt, sim_one_material=sim_one_material, ablations=ablations,
-                         overrides=overrides, device=device)
+                         overrides=overrides, device=device, force=force or ())
     runner = task_runner(int(workers or plan["concurrent_runs"]), dask_address)
     columns = [TextColumn("[bold]sweep"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
                TextColumn("{task.description}")]
@@ -182,6 +182,10 @@ def sweep(
     step_seconds: str | None = typer.Option(
         None, "--step-seconds", help="With --plan: PRE,FT seconds per step to use instead of "
         "timing them here (e.g. a GPU's figures)."),
+    force_run: list[str] | None = typer.Option(
+        None, "--force-run", help="Redo this run from scratch (its id, e.g. "
+        "sim-pretrain-f0.05-t2, or key); repeatable. Its row and checkpoints are moved "
+        "aside, not deleted."),
 ) -> None:
     """Run the experiment grid: baseline vs sim-pretrain (and ablations) over real-data
     fractions x trials, with paired statistics, a results table and a dashboard.
@@ -190,10 +194,17 @@ def sweep(
     checkpoint. Exit status 0, 1 when a run failed, 2 for bad arguments or inputs.
     """
     from sim2radar.datasets import DatasetError
+    from tasks.experiment import check_sweep_name
 
     exit_unless_writable(store, "--store")
+    if not plan:
+        exit_unless_writable_outputs({"--out": out})
+    exit_unless_writable_outputs({"--json": None if json_out is None else json_out.parent})
     overrides: dict[str, Any] = {}
     try:
+        if workers is not None and workers < 1:
+            raise ValueError(f"--workers must be >= 1, got {workers}")
+        check_sweep_name(name)
         if trials is not None:
             overrides["trials"] = trials
         fr = _fractions(fractions)
@@ -215,7 +226,8 @@ def sweep(
         summary = run_sweep(sim, real, profile=profile, name=name, out=str(out), store=store,
                             sim_gt=sim_gt, sim_one_material=sim_one_material,
                             ablations=ablations, overrides=overrides or None, workers=workers,
-                            dask_address=dask, device=device, verbose=verbose)
+                            dask_address=dask, device=device, verbose=verbose,
+                            force=force_run)
     except (ValueError, FileNotFoundError, DatasetError, ImportError) as exc:
         typer.secho(f"error: {exc}", fg="red", err=True)
         raise typer.Exit(2) from None

@@ -18,7 +18,7 @@ from typing import Any
 
 import typer
 
-from sim2radar.cli._app import app, exit_unless_writable
+from sim2radar.cli._app import app, exit_unless_writable, exit_unless_writable_outputs
 from sim2radar.factory.spec import label_range as _label_range
 from sim2radar.factory.spec import load_generate_config
 
@@ -287,6 +287,13 @@ def generate(
     from sim2radar.cli.simulate import _default_png_dir, _prefect_env
 
     exit_unless_writable(out)
+    exit_unless_writable_outputs({"--export-openpcdet": export_openpcdet,
+                                  "--png-dir": None if no_png else png_dir,
+                                  "--json": None if json_out is None else json_out.parent})
+    for option, value in (("--frames", frames), ("--worlds", worlds)):
+        if value is not None and value < 1:
+            typer.secho(f"error: {option} must be >= 1, got {value}", fg="red", err=True)
+            raise typer.Exit(2)
     if captures is not None:
         from sim2radar.cli.captures import generate_from_captures
 

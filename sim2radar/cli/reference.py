@@ -16,7 +16,7 @@ from pathlib import Path
 
 import typer
 
-from sim2radar.cli._app import app, exit_unless_writable
+from sim2radar.cli._app import app, exit_unless_writable, exit_unless_writable_outputs
 
 __all__ = ["reference"]
 
@@ -55,6 +55,9 @@ def reference(
     from sim2radar.factory.reference import DOMAIN_LABEL
 
     exit_unless_writable(out)
+    exit_unless_writable_outputs({"--export-openpcdet": export_openpcdet,
+                                  "--png-dir": None if no_png else png_dir,
+                                  "--json": None if json_out is None else json_out.parent})
     if not no_prefect:
         _prefect_env(verbose)
     try:

@@ -14,7 +14,9 @@ distribution of more real frames than it trains on.
 
 A proxy "real" domain (the reference radar) must not share worlds with the simulated domain —
 the transfer experiment would then test on scenes the encoder was pre-trained on
-(:func:`check_disjoint_worlds`).
+(:func:`check_disjoint_worlds`). Whatever the domains, a simulated dataset that *is* the real
+one, or holds any frame whose points equal a real validation or test frame's, is refused
+(:func:`check_no_shared_frames`): pre-training would see the frames the sweep evaluates on.
 """
 
 from __future__ import annotations
@@ -39,6 +41,9 @@ __all__ = [
     "dataset_digest",
     "world_of_frame",
     "check_disjoint_worlds",
+    "check_no_shared_frames",
+    "check_not_the_same",
+    "points_digest",
     "fit_subset_intensity_match",
     "with_intensity",
 ]
@@ -144,6 +149,46 @@ def check_disjoint_worlds(sim: DomainDataset, real: DomainDataset) -> None:
             f"{real.root} ({real.domain}) and {sim.root} share {len(shared)} world(s), e.g. "
             f"{sorted(shared)[:3]}: build the reference dataset from other world seeds "
             "(`sim2radar reference --first-seed ...`)")
+
+
+def points_digest(points: np.ndarray) -> str:
+    """SHA-256 of a frame's point positions (x y z as float32, row order kept): equal for the
+    same frame whatever extra columns (intensity, Doppler) or file it was saved with."""
+    xyz = np.ascontiguousarray(np.asarray(points)[:, :3], dtype=np.float32)
+    return hashlib.sha256(np.asarray(xyz.shape).tobytes() + xyz.tobytes()).hexdigest()
+
+
+def check_not_the_same(sim: DomainDataset, real: DomainDataset) -> None:
+    """Refuse a simulated dataset that is the real one (same folder or same content)."""
+    if sim.root == real.root or sim.key == real.key:
+        same = "is" if sim.root == real.root else "has the same content as"
+        raise DatasetError(
+            f"the {sim.role} dataset {sim.root} {same} the real dataset {real.root}: "
+            "pre-training would see the real test frames; give a simulated dataset "
+            "(sim2radar generate --export-openpcdet ...) as SIM")
+
+
+def check_no_shared_frames(sim: DomainDataset, real: DomainDataset,
+                           sim_frames: Sequence[Frame], held_out: Sequence[Frame]) -> None:
+    """Refuse a simulated dataset that is the real one (same folder or same content) or that
+    holds a frame whose points equal one of the real dataset's held-out frames (``held_out``:
+    its validation and test frames) — pre-training on it would see what the sweep evaluates.
+
+    Raises
+    ------
+    DatasetError — naming both folders, an example frame pair and the fix.
+    """
+    check_not_the_same(sim, real)
+    held = {points_digest(f.points): f.frame_id for f in held_out if len(f.points)}
+    shared = [(f.frame_id, held[d]) for f in sim_frames if len(f.points)
+              and (d := points_digest(f.points)) in held]
+    if shared:
+        a, b = shared[0]
+        raise DatasetError(
+            f"the {sim.role} dataset {sim.root} shares {len(shared)} frame(s) with the "
+            f"validation/test splits of {real.root} (same points), e.g. {sim.role} {a} = real "
+            f"{b}: pre-training would see frames the sweep evaluates on; remove them from the "
+            f"{sim.role} dataset or build it from other worlds")
 
 
 @dataclasses.dataclass(frozen=True)

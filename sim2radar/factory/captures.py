@@ -36,6 +36,7 @@ procedural path).
 from __future__ import annotations
 
 import dataclasses
+import logging
 import math
 import os
 from pathlib import Path
@@ -64,11 +65,18 @@ __all__ = [
     "free_space_mask",
     "capture_frame",
     "read_radar_yaml",
+    "rigid_transform",
     "write_capture_folder",
 ]
 
+log = logging.getLogger(__name__)
+
 _IMAGE_NAMES = ("rgb", "image")
 _IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg")
+#: how far ``radar_from_camera``'s rotation part may be from a rotation (max |R^T R - I| and
+#: |det R - 1|) [-]: loose enough for a calibration printed to 5 decimals, tight enough to
+#: refuse a scale (1.001 is a 1 mm error per metre) or a shear
+RIGID_TOLERANCE = 1e-4
 
 
 # ---------------------------------------------------------------------------------------------
@@ -249,10 +257,37 @@ def _image_in(folder: Path) -> Path | None:
     return found[0] if found else None
 
 
-def find_captures(root: str | os.PathLike) -> list[CaptureScene]:
+def _holds_scene_files(folder: Path) -> bool:
+    """Whether ``folder`` holds an image or an ``intrinsics.yaml`` (what makes a scene)."""
+    try:
+        return _image_in(folder) is not None or (folder / "intrinsics.yaml").is_file()
+    except OSError:  # unreadable: not a scene
+        return False
+
+
+def _note_outside_links(paths, root: Path, said: set[str]) -> None:
+    """Log one line per path in ``paths`` that is a symlink to somewhere outside ``root``
+    (followed all the same; said once per link)."""
+    inside = root.resolve()
+    for p in paths:
+        if p is None or not p.is_symlink() or str(p) in said:
+            continue
+        target = p.resolve()
+        if target != inside and inside not in target.parents:
+            said.add(str(p))
+            log.warning("capture folder %s: %s is a symlink to %s, outside the capture folder; "
+                        "following it", root, p, target)
+
+
+def find_captures(root: str | os.PathLike, *, warn: bool = True) -> list[CaptureScene]:
     """The scenes of a capture folder: every sub-folder holding an image or an intrinsics
     file, sorted by name. Missing files are left None here and reported per scene by
     :func:`load_capture_frame`, so one broken scene does not stop the others.
+
+    With ``warn``, one warning line (logger ``sim2radar.factory.captures``) for each folder
+    that looks like a scene but is skipped (a name starting with ``.``, such as ``...``; a
+    symlink to nothing) and for each symlink to outside the folder (a scene folder or one of
+    its files; followed). Pass ``warn=False`` where the folder was already listed.
 
     Raises
     ------
@@ -264,24 +299,47 @@ def find_captures(root: str | os.PathLike) -> list[CaptureScene]:
                          "per scene (rgb.png, intrinsics.yaml, optional lidar.npy)")
     shared_k = root / "intrinsics.yaml"
     shared_radar = root / "radar.yaml"
-    scenes = []
-    for folder in sorted(p for p in root.iterdir() if p.is_dir() and not p.name.startswith(".")):
+    scenes, hidden, said = [], [], set()
+    for entry in sorted(root.iterdir()):
+        if entry.is_symlink() and not entry.exists():
+            if warn:
+                log.warning("capture folder %s: skipped %r: a symlink to %s, which does not "
+                            "exist; fix or remove the link", root, entry.name,
+                            os.readlink(entry))
+            continue
+        if not entry.is_dir():
+            continue
+        if entry.name.startswith("."):
+            if _holds_scene_files(entry):
+                hidden.append(entry.name)
+                if warn:
+                    log.warning("capture folder %s: skipped folder %r: a name starting with '.' "
+                                "is hidden (like .git); rename it without the leading dot to "
+                                "make it a scene", root, entry.name)
+            continue
+        folder = entry
         image = _image_in(folder)
         k = folder / "intrinsics.yaml"
         if image is None and not k.is_file():
             continue
         lidar = folder / "lidar.npy"
         radar = folder / "radar.yaml"
-        scenes.append(CaptureScene(
+        scene = CaptureScene(
             scene_id=folder.name, folder=str(folder),
             image=None if image is None else str(image),
             intrinsics=str(k) if k.is_file() else (str(shared_k) if shared_k.is_file() else None),
             lidar=str(lidar) if lidar.is_file() else None,
             radar=str(radar) if radar.is_file() else (
-                str(shared_radar) if shared_radar.is_file() else None)))
+                str(shared_radar) if shared_radar.is_file() else None))
+        scenes.append(scene)
+        if warn:
+            _note_outside_links([folder] + [None if f is None else Path(f) for f in (
+                scene.image, scene.intrinsics, scene.lidar, scene.radar)], root, said)
     if not scenes:
+        also = (f"; skipped hidden folder(s) {hidden}: rename them without the leading dot"
+                if hidden else "")
         raise ValueError(f"{root}: no scene folders (each needs rgb.png or image.png/.jpg and "
-                         "intrinsics.yaml, here or shared at the top)")
+                         f"intrinsics.yaml, here or shared at the top){also}")
     return scenes
 
 
@@ -312,9 +370,53 @@ def load_capture_frame(scene: CaptureScene):
     return FrameInput(rgb, k, pts, name=scene.scene_id, **rig), note
 
 
+def rigid_transform(value: Any, where: str, field: str) -> np.ndarray:
+    """``value`` as a (4, 4) float64 rigid transform ``[R t; 0 0 0 1]``, or a ValueError
+    naming ``where`` (the file), ``field`` and the fix.
+
+    Rigid: finite numbers, last row ``0 0 0 1``, ``R`` orthonormal with ``det R = +1``
+    (within :data:`RIGID_TOLERANCE`); a singular, scaled, sheared or mirrored matrix is
+    refused here, not later as a singular inverse or a failed pose check per frame.
+    """
+    fix = (f"give {field} as a 4x4 rigid transform [R t; 0 0 0 1] with R a rotation "
+           f"(orthonormal, det +1, within {RIGID_TOLERANCE:g}) and t [m]")
+    try:
+        m = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise ValueError(f"{where}: {field} is not a 4x4 matrix of numbers ({value!r}); "
+                         f"{fix}") from None
+    if m.shape != (4, 4):
+        raise ValueError(f"{where}: {field} has shape {m.shape}, expected (4, 4) "
+                         f"(got {value!r}); {fix}")
+    if not np.isfinite(m).all():
+        raise ValueError(f"{where}: {field} holds NaN or infinite values; {fix}")
+    if not np.allclose(m[3], [0, 0, 0, 1], rtol=0.0, atol=RIGID_TOLERANCE):
+        raise ValueError(f"{where}: {field} has last row {m[3].tolist()}, expected "
+                         f"[0, 0, 0, 1]; {fix}")
+    r = m[:3, :3]
+    det = float(np.linalg.det(r))
+    off = float(np.abs(r.T @ r - np.eye(3)).max())
+    if abs(det) < 1e-9:
+        why = "its rotation part is singular (det 0)"
+    elif off > RIGID_TOLERANCE:
+        why = (f"its rotation part is not orthonormal (max |R^T R - I| = {off:.3g}, det "
+               f"{det:.4g}: a scale or shear?)")
+    elif abs(det - 1.0) > RIGID_TOLERANCE:
+        why = f"its rotation part is a reflection (det {det:.4g}: a left-handed axis?)"
+    else:
+        return m
+    raise ValueError(f"{where}: {field} is not a rigid transform: {why}; {fix}")
+
+
 def read_radar_yaml(path: str | os.PathLike | None) -> dict:
     """``radar_from_camera`` (4, 4) or None and ``poses`` (P, 3) ``x_m, y_m, yaw_deg`` or None
-    of a ``radar.yaml`` (None: neither)."""
+    of a ``radar.yaml`` (None: neither).
+
+    Raises
+    ------
+    ValueError naming the file, the field and the fix: an unknown key, a ``radar_from_camera``
+    that is not a rigid transform (:func:`rigid_transform`), malformed ``poses``.
+    """
     from sim2radar.configio import read_yaml_mapping
 
     out: dict = {"radar_from_camera": None, "poses": None}
@@ -326,13 +428,13 @@ def read_radar_yaml(path: str | os.PathLike | None) -> dict:
         raise ValueError(f"{path}: unknown key(s) {unknown}; allowed: radar_from_camera (4x4), "
                          "poses ([[x_m, y_m, yaw_deg], ...])")
     if doc.get("radar_from_camera") is not None:
-        m = np.asarray(doc["radar_from_camera"], dtype=np.float64)
-        if m.shape != (4, 4) or not np.isfinite(m).all() or not np.allclose(m[3], [0, 0, 0, 1]):
-            raise ValueError(f"{path}: radar_from_camera must be a 4x4 rigid transform (last "
-                             f"row 0 0 0 1), got {doc['radar_from_camera']!r}")
-        out["radar_from_camera"] = m
+        out["radar_from_camera"] = rigid_transform(doc["radar_from_camera"], str(path),
+                                                   "radar_from_camera")
     if doc.get("poses") is not None:
-        p = np.asarray(doc["poses"], dtype=np.float64)
+        try:
+            p = np.asarray(doc["poses"], dtype=np.float64)
+        except (TypeError, ValueError):
+            p = np.zeros((0, 0))
         if p.ndim != 2 or p.shape[1] != 3 or not np.isfinite(p).all() or len(p) == 0:
             raise ValueError(f"{path}: poses must be a list of [x_m, y_m, yaw_deg] rows, got "
                              f"{doc['poses']!r}")

@@ -343,3 +343,84 @@ def test_a_dask_worker_killed_mid_run_loses_nothing(data, prefect_server, tmp_pa
     assert victim[2]["resume"] is True and victim[2]["pid"] != killed["pid"]
     for key in {e["key"] for e in events}:                  # finished once each
         assert sum(e["event"] == "released" for e in events if e["key"] == key) == 1
+
+
+def test_unsafe_sweep_inputs_are_refused_before_any_work(data, tmp_path, unwritable_dir):
+    """Issue #24 probes 3, 4, 5, 7 and 8: each refused with exit 2 and one line naming the
+    option, file or frame and the fix — before any folder is made or run trained."""
+    import shutil
+
+    from typer.testing import CliRunner
+
+    from sim2radar.cli import app
+
+    out = tmp_path / "sweeps"
+
+    def sweep(sim, real, *more):
+        res = CliRunner().invoke(app, ["sweep", str(sim), str(real), "--profile", "smoke",
+                                       "--out", str(out), "--store", str(tmp_path / "store"),
+                                       *more])
+        assert res.exit_code == 2, res.output
+        assert "Traceback" not in res.output and res.output.count("error:") == 1
+        return " ".join(res.output.split())
+
+    # the same dataset as SIM and REAL: pre-training would see the real test frames
+    assert "is the real dataset" in sweep(data["real"], data["real"])
+    # a SIM dataset holding one of REAL's test frames (a copy under another name)
+    sim = tmp_path / "sim_leak"
+    shutil.copytree(data["sim"], sim)
+    test_id = (data["real"] / "ImageSets" / "test.txt").read_text().split()[0]
+    leaked = (sim / "ImageSets" / "train.txt").read_text().split()[0]
+    shutil.copy(data["real"] / "points" / f"{test_id}.npy", sim / "points" / f"{leaked}.npy")
+    said = sweep(sim, data["real"])
+    assert "shares 1 frame(s)" in said and f"= real {test_id}" in said
+    # a sweep name is one folder under --out
+    for name in ("..", ".", "../x", ".hidden"):
+        assert "a sweep name is one folder name under --out" in sweep(
+            data["sim"], data["real"], "--name", name)
+    assert not list(tmp_path.glob("*.json")) and not list(out.glob("*.json"))  # nothing
+    assert "--workers must be >= 1" in sweep(data["sim"], data["real"], "--workers", "0")
+    # outputs that cannot be written
+    assert "--out" in sweep(data["sim"], data["real"], "--out", str(unwritable_dir / "o"))
+    # a frame of REAL's test split that does not load: found before the first run
+    real = tmp_path / "real_bad"
+    shutil.copytree(data["real"], real)
+    bad = real / "points" / f"{test_id}.npy"
+    pts = np.load(bad)
+    pts[0, 0] = np.nan
+    np.save(bad, pts)
+    said = sweep(data["sim"], real, "--name", "bad")
+    assert f"{bad}: points contain NaN or inf" in said
+    assert not (out / "bad" / "runs").exists() and not (out / "bad" / "pretrain").exists()
+
+
+def test_a_truncated_run_row_heals_and_force_run_redoes_a_run(data, prefect_server, tmp_path):
+    """Issue #24 probe 2 for sweeps: a truncated experiment_runs file is quarantined and its
+    run computed again (from its final checkpoint: same AP) instead of failing on every
+    rerun; ``--force-run`` redoes a run from scratch, its old row and checkpoints kept aside."""
+    from flows.run_experiment import run_experiment
+
+    kw = dict(profile="smoke", name="h", out=tmp_path / "o", store=tmp_path / "store",
+              overrides={"trials": 1, "fractions": [1.0]})
+    first = run_experiment(data["sim"], data["real"], **kw)
+    assert first["counts"] == {"ok": 2, "skipped": 0, "failed": 0}
+    rows = {r["run_key"]: r for r in pq.read_table(tmp_path / "o/h/runs.parquet").to_pylist()}
+    st = ArtifactStore(tmp_path / "store")
+    key = next(k for k, r in rows.items() if r["condition"] == "baseline")
+    path = Path(st.path("experiment_runs", key))
+    path.write_bytes(path.read_bytes()[:300])
+    again = run_experiment(data["sim"], data["real"], **kw)
+    assert again["counts"] == {"ok": 1, "skipped": 1, "failed": 0}
+    healed = {r["run_key"]: r for r in pq.read_table(tmp_path / "o/h/runs.parquet").to_pylist()}
+    assert healed[key]["status"] == "ok" and healed[key]["error"] == ""
+    assert healed[key]["ap_3d_r40_iou03"] == pytest.approx(rows[key]["ap_3d_r40_iou03"])
+    assert len(st.quarantined()) == 1
+
+    forced = run_experiment(data["sim"], data["real"], **kw, force=["baseline-f1-t0"])
+    assert forced["counts"] == {"ok": 1, "skipped": 1, "failed": 0}
+    assert len(st.quarantined()) == 2
+    assert len(list((tmp_path / "o/h/quarantine/runs").iterdir())) == 1  # old checkpoints kept
+    redone = {r["run_key"]: r for r in pq.read_table(tmp_path / "o/h/runs.parquet").to_pylist()}
+    assert redone[key]["steps"] == rows[key]["steps"]  # trained from scratch, all its steps
+    with pytest.raises(ValueError, match="no run of this sweep has that id"):
+        run_experiment(data["sim"], data["real"], **kw, force=["baseline-f0.33-t9"])
