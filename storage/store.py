@@ -89,6 +89,10 @@ _PERMANENT_ERRNOS = frozenset({errno.EACCES, errno.EPERM, errno.EROFS, errno.ENO
                                errno.EDQUOT, errno.ENAMETOOLONG, errno.ENOTDIR, errno.EISDIR})
 
 
+#: errno values of a full disk or quota
+_FULL_ERRNOS = frozenset({errno.ENOSPC, errno.EDQUOT})
+
+
 def is_transient_io_error(exc: BaseException) -> bool:
     """True if ``exc`` is an I/O error that may succeed when tried again (a timeout, a dropped
     connection, a remote store's 5xx as ``OSError``); False for everything else, including
@@ -402,12 +406,18 @@ class ArtifactStore:
                     pq.write_table(table, fh, compression=self.compression,
                                    write_page_checksum=True)
                 self.fs.mv(tmp, final)
-        except BaseException:
+        except BaseException as exc:
             try:
                 if self.fs.exists(tmp):
                     self.fs.rm(tmp)
             except Exception:  # noqa: BLE001 - best effort; the tmp name is ignored anyway
                 log.warning("storage: could not remove partial file %s", tmp)
+            if isinstance(exc, OSError) and exc.errno in _FULL_ERRNOS and final not in str(exc):
+                # Arrow's own message for a full disk names no file
+                raise type(exc)(exc.errno, f"{exc.strerror or exc} while writing {final}: free "
+                                "space on that disk (or raise the quota), or choose another "
+                                "store folder; rerun and the finished work is kept",
+                                final) from exc
             raise
 
     # -- read ---------------------------------------------------------------------------------

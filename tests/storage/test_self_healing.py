@@ -137,3 +137,21 @@ def test_a_corrupt_read_is_a_corrupt_artifact_error_subclass_of_schema_error(tmp
     with pytest.raises(SchemaError) as info:
         store.read("radar_points", KEY)
     assert isinstance(info.value, CorruptArtifactError)
+
+
+def test_a_full_disk_names_the_file_and_leaves_nothing_half_written(tmp_path, frames_table,
+                                                                     monkeypatch):
+    """Issue #24 probe 8: Arrow's 'No space left on device' names no file; the store's does."""
+    import errno
+
+    store = ArtifactStore(tmp_path / "store")
+
+    def full(*args, **kwargs):
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    monkeypatch.setattr(pq, "write_table", full)
+    with pytest.raises(OSError, match="No space left on device while writing .*radar_points"
+                                      rf"/{KEY}\.parquet: free space") as info:
+        store.write("radar_points", KEY, frames_table)
+    assert info.value.errno == errno.ENOSPC
+    assert not store.exists("radar_points", KEY) and store.partial_files() == []
