@@ -4,6 +4,9 @@ procedural-only options and bad folders are one line, exit 2."""
 from __future__ import annotations
 
 import json
+import os
+import subprocess
+import sys
 
 import numpy as np
 import pytest
@@ -86,3 +89,53 @@ def test_capture_folder_to_openpcdet_in_one_command(one_scene, tmp_path):
     assert "warning:" in res.output and "are empty" in res.output
     meta = json.loads((export / "dataset.json").read_text())
     assert any("['val', 'test'] are empty" in w for w in meta["warnings"])
+
+
+def test_bad_radar_yaml_fails_its_scene_in_one_line_while_the_others_finish(one_scene, tmp_path):
+    """Issue #24, the probe's steps through `generate --captures`: a scene whose radar.yaml
+    has a singular `radar_from_camera` and one whose matrix is scaled (non-rigid) each fail
+    in one line naming the file, the field and the fix (no `LinAlgError`, no per-frame
+    `pose[:3, :3] must be a rotation`); a scene folder named `...` is skipped with a warning;
+    a scene reached through a symlink out of the folder runs, with a line naming the link."""
+    import shutil
+
+    import yaml
+
+    src = one_scene / "scene_004"
+    caps = tmp_path / "caps"
+    caps.mkdir()
+    (caps / "linked").symlink_to(src, target_is_directory=True)
+    for name, matrix in (("singular", np.diag([1.0, 1.0, 0.0, 1.0])),
+                         ("scaled", np.diag([1.1, 1.1, 1.1, 1.0]))):
+        shutil.copytree(src, caps / name)
+        (caps / name / "radar.yaml").write_text(
+            yaml.safe_dump({"radar_from_camera": matrix.tolist()}))
+    shutil.copytree(src, caps / "...")
+    # a real process: the warnings go where a user sees them (stderr), not into a test's log
+    run = subprocess.run([sys.executable, "-c", "from sim2radar.cli import main; main()",
+                          "generate", "--captures", str(caps), "--no-prefect", "--frames", "1",
+                          "--no-png", "--out", str(tmp_path / "store"), "--json",
+                          str(tmp_path / "summary.json")], capture_output=True, text=True,
+                         env={**os.environ, "COLUMNS": "1000"}, timeout=300)
+    output = run.stdout + run.stderr
+    assert run.returncode == 0, output
+    assert "Traceback" not in output and "LinAlgError" not in output
+    assert "must be a rotation" not in output
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    assert summary["counts"] == {"ok": 1, "skipped": 0, "failed": 2}
+    assert summary["frame_counts"]["ok"] == 1
+    failed = {w["world_id"]: w for w in summary["worlds"] if w["status"] == "failed"}
+    assert sorted(failed) == ["scaled", "singular"]
+    for name, why in (("singular", "its rotation part is singular (det 0)"),
+                      ("scaled", "its rotation part is not orthonormal")):
+        line = next(ln for ln in output.splitlines() if f"✗ {name}:" in ln)
+        path = caps / name / "radar.yaml"
+        assert f"[inputs] ValueError: {path}: radar_from_camera is not a rigid transform: " \
+               f"{why}" in line, line
+        assert "give radar_from_camera as a 4x4 rigid transform" in line
+        assert failed[name]["frames"] == []  # refused before any reconstruction or frame
+    lines = output.splitlines()
+    hidden = [ln for ln in lines if "skipped folder '...'" in ln]
+    assert len(hidden) == 1 and "rename it without the leading dot" in hidden[0], output
+    linked = [ln for ln in lines if f"{caps / 'linked'} is a symlink to {src}" in ln]
+    assert len(linked) == 1 and "following it" in linked[0], output

@@ -16,6 +16,7 @@ from sim2radar.factory.captures import (
     radar_mount,
     read_radar_yaml,
     rig_pose,
+    rigid_transform,
     sample_radar_poses,
 )
 
@@ -123,5 +124,101 @@ def test_capture_folder_layout_and_errors_name_the_file(tmp_path):
     with pytest.raises(ValueError, match=r"radar.yaml: unknown key\(s\) \['pose'\]"):
         read_radar_yaml(scenes[0].radar)
     (root / "a" / "radar.yaml").write_text(yaml.safe_dump({"radar_from_camera": [[1, 0], [0, 1]]}))
-    with pytest.raises(ValueError, match="radar_from_camera must be a 4x4"):
+    with pytest.raises(ValueError, match=r"radar_from_camera has shape \(2, 2\), expected"):
         read_radar_yaml(scenes[0].radar)
+
+
+# --- issue #24: radar.yaml's radar_from_camera must be rigid, checked when the file is read ---
+def _extrinsic(yaw_deg: float = 30.0, t=(0.1, -0.05, 0.2)) -> np.ndarray:
+    """A camera (OpenCV) -> radar rigid transform: the axis swap, a turn, an offset [m]."""
+    swap = np.array([[0, 0, 1], [-1, 0, 0], [0, -1, 0]], float)  # x fwd = z cam, y left = -x
+    m = rig_pose(0.0, 0.0, yaw_deg)
+    m[:3, :3] = m[:3, :3] @ swap
+    m[:3, 3] = t
+    return m
+
+
+@pytest.mark.parametrize("case, matrix, why", [
+    ("singular", np.diag([1.0, 1.0, 0.0, 1.0]), "rotation part is singular (det 0)"),
+    ("scaled", np.diag([1.1, 1.1, 1.1, 1.0]), "not orthonormal (max |R^T R - I| = 0.21"),
+    ("sheared", np.array([[1, 0.01, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]]),
+     "not orthonormal"),
+    ("mirrored", np.diag([1.0, -1.0, 1.0, 1.0]), "a reflection (det -1"),
+    ("last row", np.vstack([np.eye(4)[:3], [0, 0, 1, 1]]),
+     "last row [0.0, 0.0, 1.0, 1.0], expected [0, 0, 0, 1]"),
+    ("NaN", np.where(np.eye(4) > 0, np.nan, 0.0), "holds NaN or infinite values"),
+    ("text", [["a", 0, 0, 0]] * 4, "is not a 4x4 matrix of numbers"),
+])
+def test_a_radar_yaml_whose_extrinsic_is_not_rigid_is_refused_naming_file_field_and_fix(
+        tmp_path, case, matrix, why):
+    """The probe: a singular radar_from_camera gave `[poses] LinAlgError: Singular matrix`, a
+    scaled one passed and failed every frame at simulate. Now reading the file refuses it in
+    one line with the file, the field, what is wrong and the fix."""
+    path = tmp_path / "radar.yaml"
+    m = matrix.tolist() if isinstance(matrix, np.ndarray) else matrix
+    path.write_text(yaml.safe_dump({"radar_from_camera": m}))
+    with pytest.raises(ValueError) as info:
+        read_radar_yaml(path)
+    msg = str(info.value)
+    assert msg.startswith(f"{path}: radar_from_camera ") and why in msg, msg
+    assert "give radar_from_camera as a 4x4 rigid transform [R t; 0 0 0 1]" in msg
+    assert "\n" not in msg
+
+
+def test_a_rigid_extrinsic_printed_to_five_decimals_is_kept():
+    m = _extrinsic()
+    assert np.isclose(np.linalg.det(m[:3, :3]), 1.0)
+    rounded = np.round(m, 5)
+    got = rigid_transform(rounded.tolist(), "radar.yaml", "radar_from_camera")
+    np.testing.assert_array_equal(got, rounded)
+    # the radar's mount is then the exact rigid inverse: the camera seen from the radar
+    mount = radar_mount(np.eye(4), got)
+    np.testing.assert_allclose(mount[:3, :3].T @ mount[:3, :3], np.eye(3), atol=1e-4)
+
+
+# --- issue #24: folders that are skipped, and symlinks out of the folder, are said ----------
+def _scene(folder):
+    import cv2
+
+    folder.mkdir(parents=True)
+    cv2.imwrite(str(folder / "rgb.png"), np.full((24, 32, 3), 128, np.uint8))
+    k = {"fx": 100.0, "fy": 100.0, "cx": 16.0, "cy": 12.0, "width": 32, "height": 24}
+    (folder / "intrinsics.yaml").write_text(yaml.safe_dump(k))
+    return folder
+
+
+def test_skipped_hidden_scene_folders_and_symlinks_out_are_one_warning_line_each(tmp_path, caplog):
+    import logging
+
+    root = tmp_path / "caps"
+    _scene(root / "a")
+    _scene(root / "...")  # the probe's folder: skipped, as hidden folders are, but said
+    (root / ".git").mkdir()  # hidden and no scene files: skipped quietly
+    elsewhere = _scene(tmp_path / "elsewhere" / "b")
+    (root / "b").symlink_to(elsewhere, target_is_directory=True)
+    _scene(root / "c")
+    (root / "c" / "rgb.png").unlink()
+    (root / "c" / "rgb.png").symlink_to(elsewhere / "rgb.png")
+    (root / "d").symlink_to(tmp_path / "gone")  # a link to nothing
+    (root / "e").symlink_to("a", target_is_directory=True)  # inside the folder: unremarkable
+    with caplog.at_level(logging.WARNING, logger="sim2radar.factory.captures"):
+        scenes = find_captures(root)
+    assert [s.scene_id for s in scenes] == ["a", "b", "c", "e"]  # links still followed
+    assert load_capture_frame(scenes[1])[0].rgb.shape == (24, 32, 3)
+    lines = [r.getMessage() for r in caplog.records]
+    assert len(lines) == 4 and all("\n" not in line for line in lines), lines
+    assert lines[0].endswith("skipped folder '...': a name starting with '.' is hidden (like "
+                             ".git); rename it without the leading dot to make it a scene")
+    assert f"{root / 'b'} is a symlink to {elsewhere}, outside the capture folder; " \
+           "following it" in lines[1]
+    assert f"{root / 'c' / 'rgb.png'} is a symlink to {elsewhere / 'rgb.png'}" in lines[2]
+    assert f"skipped 'd': a symlink to {tmp_path / 'gone'}, which does not exist" in lines[3]
+    caplog.clear()
+    with caplog.at_level(logging.WARNING, logger="sim2radar.factory.captures"):
+        assert len(find_captures(root, warn=False)) == 4
+    assert caplog.records == []
+    # only hidden scene folders: the error names them
+    only = tmp_path / "only"
+    _scene(only / "...")
+    with pytest.raises(ValueError, match=r"no scene folders .*skipped hidden folder\(s\) \['...'\]"):
+        find_captures(only, warn=False)
