@@ -29,6 +29,7 @@ from typing import TYPE_CHECKING, Any
 import pyarrow as pa
 import pyarrow.parquet as pq
 
+from storage.integrity import is_corrupt_file_error
 from storage.schemas import MANIFEST
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -114,8 +115,6 @@ class Manifest:
         """The row file at ``path``; None (the file moved into the store's quarantine, one
         warning) when it does not read — the run that records the scene again rebuilds it from
         the scene's artifacts, which are found cached."""
-        from storage.store import is_corrupt_file_error
-
         try:
             with self.store.fs.open(path, "rb") as fh:
                 table = pq.read_table(fh, page_checksum_verification=True)
