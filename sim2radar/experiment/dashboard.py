@@ -70,6 +70,7 @@ __all__ = [
     "load_sweep",
     "render_html",
     "serve_dashboard",
+    "allowed_host",
     "write_dashboard",
 ]
 
@@ -1426,13 +1427,48 @@ def _check_loopback(host: str) -> None:
                          "(ssh -L PORT:127.0.0.1:PORT)")
 
 
+#: Host names a request to the live dashboard may carry (any port): a page of another site
+#: that resolves its own name to 127.0.0.1 (DNS rebinding) sends its own name and is refused
+LOOPBACK_HOST_NAMES = ("127.0.0.1", "localhost", "[::1]")
+
+
+def _host_name(header: str | None) -> str | None:
+    """The host of a ``Host`` header without its port, lower-cased (``[::1]`` keeps its
+    brackets); None for a missing or malformed header."""
+    if not header:
+        return None
+    value = header.strip().lower()
+    if value.startswith("["):  # [v6]:port
+        end = value.find("]")
+        if end < 0:
+            return None
+        name, rest = value[:end + 1], value[end + 1:]
+    else:
+        name, sep, port = value.partition(":")
+        rest = sep + port
+    if rest and not (rest.startswith(":") and rest[1:].isdigit()):
+        return None
+    return name
+
+
+def allowed_host(header: str | None, bind_host: str = "127.0.0.1") -> bool:
+    """Whether a request's ``Host`` header names this loopback server: ``127.0.0.1``,
+    ``localhost``, ``[::1]`` or the address it is bound to, with or without a port."""
+    name = _host_name(header)
+    bind = f"[{bind_host}]" if ":" in bind_host else bind_host
+    return name is not None and name in (*LOOPBACK_HOST_NAMES, bind.lower())
+
+
 class DashboardServer:
     """The live dashboard of one sweep folder on a loopback address.
 
     ``/`` is the live page, ``/data.json`` :func:`dashboard_data` of the folder as it is now
     (re-read when one of its files changed; 503 with ``{"error"}`` while it cannot be read);
-    anything else is 404. Requests are served by a :class:`~http.server.ThreadingHTTPServer` in
-    a daemon thread.
+    anything else is 404. A request whose ``Host`` header is not a loopback name
+    (:func:`allowed_host`: ``127.0.0.1``, ``localhost`` or ``[::1]``, any port) gets 403 with a
+    one-line body: a web page cannot read the dashboard by pointing its own domain at
+    127.0.0.1 (DNS rebinding). Requests are served by a
+    :class:`~http.server.ThreadingHTTPServer` in a daemon thread.
 
     Parameters
     ----------
@@ -1458,7 +1494,12 @@ class DashboardServer:
         class Handler(BaseHTTPRequestHandler):
             def do_GET(self) -> None:  # noqa: N802  (http.server's name)
                 path = self.path.split("?", 1)[0]
-                if path in ("/", "/index.html"):
+                host = self.headers.get("Host")
+                if not allowed_host(host, server.host):
+                    why = (f"forbidden: Host {host!r} is not this loopback server; open "
+                           f"http://127.0.0.1:{server.port}/\n")
+                    self._send(403, "text/plain; charset=utf-8", why.encode("utf-8"))
+                elif path in ("/", "/index.html"):
                     self._send(200, "text/html; charset=utf-8", server.page().encode("utf-8"))
                 elif path == "/data.json":
                     status, body = server.data_json()

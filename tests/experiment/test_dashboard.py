@@ -637,6 +637,10 @@ def test_cli_serve_prints_the_url_serves_and_stops_on_ctrl_c(sweep_dir):
         url = re.search(r"http://127\.0\.0\.1:\d+/", line).group(0)
         with urllib.request.urlopen(url + "data.json", timeout=10) as r:
             assert json.load(r)["progress"]["finished"] == 18
+        # issue #24: a page of another site resolving its name to 127.0.0.1 is refused
+        port = int(url.rsplit(":", 1)[1].strip("/"))
+        status, body = _get_with_host(port, "/data.json", f"rebind.example:{port}")
+        assert status == 403 and body.startswith(b"forbidden: Host 'rebind.example:")
         proc.send_signal(signal.SIGINT)
         assert proc.wait(timeout=10) == 0
         assert "stopped" in proc.stdout.read()
@@ -677,6 +681,48 @@ def test_server_serves_the_live_page_and_fresh_data(sweep_dir):
         url = server.url
     with pytest.raises(urllib.error.URLError):
         urllib.request.urlopen(url + "data.json", timeout=2)
+
+
+def _get_with_host(port: int, path: str, host: str | None) -> tuple[int, bytes]:
+    """GET ``path`` from 127.0.0.1:``port`` with this ``Host`` header (None: none sent)."""
+    import http.client
+
+    conn = http.client.HTTPConnection("127.0.0.1", port, timeout=10)
+    try:
+        conn.putrequest("GET", path, skip_host=True)
+        if host is not None:
+            conn.putheader("Host", host)
+        conn.endheaders()
+        r = conn.getresponse()
+        return r.status, r.read()
+    finally:
+        conn.close()
+
+
+@pytest.mark.parametrize("host, allowed", [
+    ("127.0.0.1:{port}", True), ("127.0.0.1", True), ("localhost:{port}", True),
+    ("LocalHost", True), ("[::1]:{port}", True), ("[::1]", True),
+    ("localhost:9000", True),  # a port forward (ssh -L 9000:127.0.0.1:PORT) keeps working
+    ("rebind.example:{port}", False), ("rebind.example", False),
+    ("127.0.0.1.rebind.example:{port}", False), ("localhost.evil:{port}", False),
+    ("127.0.0.1:{port}@evil", False), ("[::1]evil", False), ("", False), (None, False),
+])
+def test_server_answers_only_requests_for_a_loopback_host(sweep_dir, host, allowed):
+    """Issue #24 (DNS rebinding): a page on rebind.example whose name resolves to 127.0.0.1
+    reaches the port, but its requests carry ``Host: rebind.example``; they get 403 and a
+    one-line body naming the URL to open; loopback names (any port) are served."""
+    with serve_dashboard(sweep_dir) as server:
+        h = None if host is None else host.format(port=server.port)
+        for path in ("/", "/data.json", "/nothing-here"):
+            status, body = _get_with_host(server.port, path, h)
+            if allowed:
+                assert status in (200, 404), (h, path, status)
+            else:
+                assert status == 403, (h, path, status)
+                text = body.decode()
+                assert text == (f"forbidden: Host {h!r} is not this loopback server; open "
+                                f"http://127.0.0.1:{server.port}/\n")
+                assert b"<html" not in body and b"finished" not in body
 
 
 def test_server_binds_loopback_only_and_checks_the_folder_first(sweep_dir, tmp_path):
