@@ -83,12 +83,22 @@ class ServerState:
 
     @property
     def api_url(self) -> str:
-        """What ``PREFECT_API_URL`` is set to."""
-        return f"http://{HOST}:{self.port}/api"
+        """What ``PREFECT_API_URL`` is set to (and the server's UI calls)."""
+        return _api_url(self.port)
 
     @property
     def ui_url(self) -> str:
-        return f"http://{HOST}:{self.port}"
+        return _ui_url(self.port)
+
+
+def _ui_url(port: int) -> str:
+    """The managed server's UI on ``port``."""
+    return f"http://{HOST}:{int(port)}"
+
+
+def _api_url(port: int) -> str:
+    """The managed server's API on ``port``."""
+    return f"{_ui_url(port)}/api"
 
 
 # --- the record and its lock -------------------------------------------------------------
@@ -220,9 +230,17 @@ def _prefect_version() -> str:
 
 
 def _spawn(home: Path, port: int) -> ServerState:
-    """Start a detached server on ``port`` (own session, stdin closed, output to the log)."""
+    """Start a detached server on ``port`` (own session, stdin closed, output to the log).
+
+    Its UI is told its own address: without ``PREFECT_UI_API_URL`` the server's
+    ``/ui-settings`` answers Prefect's default ``http://127.0.0.1:4200/api`` and the UI on any
+    other port shows "Oops. Something went wrong." (issue #24).
+    """
     env = {**os.environ, "PREFECT_HOME": str(home), "PREFECT__SERVER_FINAL": "1"}
     env.pop("PREFECT_API_URL", None)
+    # both names of the setting: Prefect reads PREFECT_SERVER_UI_API_URL first
+    env.update({"PREFECT_UI_API_URL": _api_url(port), "PREFECT_SERVER_UI_API_URL": _api_url(port),
+                "PREFECT_UI_URL": _ui_url(port)})
     env.setdefault("PREFECT_SERVER_ANALYTICS_ENABLED", "false")
     args = [sys.executable, "-m", "uvicorn", "--factory", _APP, "--host", HOST,
             "--port", str(port), "--log-level", "warning", "--lifespan", "on"]
