@@ -29,7 +29,7 @@ def file_problem(fs, path: str, *, deep: bool = False,
                     != meta.num_rows:
                 return "its row groups do not add up to its row count"
             if deep:
-                pf.read()
+                pf.read(use_threads=False)  # a check, not a load: no Arrow thread pool
                 recorded = (pf.schema_arrow.metadata or {}).get(SCHEMA_KEY, b"").decode()
                 if expected_schema and recorded.split(":")[0] != expected_schema:
                     return f"it records schema {recorded or '(none)'!r}, not {expected_schema!r}"

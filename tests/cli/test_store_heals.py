@@ -110,4 +110,5 @@ def test_store_verify_finds_damage_a_cached_run_would_not_read(untouched, tmp_pa
     _generate(store, tmp_path / "export")
     assert path.exists()  # recomputed by the next run
     assert _export_files(tmp_path / "export") == _export_files(untouched[1])
-    assert _run("store", "verify", str(store)).returncode == 0
+    final = _run("store", "verify", str(store))
+    assert final.returncode == 0, final.stdout + final.stderr[-3000:]

@@ -166,26 +166,33 @@ def test_a_paper_sized_plan_reaches_the_flow_as_a_file(data, tmp_path):
     assert read_plan(path) == json.loads(json.dumps(plan, default=str))
 
 
-def test_a_broken_frame_fails_only_the_runs_that_read_it(data, prefect_server, tmp_path):
-    from flows.run_experiment import run_experiment
+def test_a_frame_broken_before_or_during_a_sweep_trains_nothing_on_it(data, prefect_server,
+                                                                      tmp_path):
+    """A frame broken before the sweep is refused up front, naming the file (every frame of
+    every split is loaded first); one broken while the sweep is planned or running fails the
+    runs with "changed while the sweep ran" instead of training on altered data, and the
+    rerun after the fix finishes them."""
+    from flows.run_experiment import run_experiment_flow
+    from sim2radar.datasets import DatasetError
+    from tasks.experiment import prepare_sweep
 
     real = _write(tmp_path / "real", 2, {"train": 8, "val": 4, "test": 4}, 100_000, proxy=True)
-    # the frame only the 100 % subsets contain (nested subsets: 50 % is a prefix)
-    from sim2radar.experiment import real_subset, trial_seed
-
-    train_ids = (real / "ImageSets" / "train.txt").read_text().split()
-    half = set(real_subset(train_ids, 0.5, trial_seed(0, 0))) | set(
-        real_subset(train_ids, 0.5, trial_seed(0, 1)))
-    victim = next(i for i in train_ids if i not in half)
-    (real / "points" / f"{victim}.npy").write_bytes(b"not a numpy file")
-    s = run_experiment(data["sim"], real, profile="smoke", name="broken", out=tmp_path / "o",
-                       store=tmp_path / "store", overrides={"intensity_matching": False})
+    victim = real / "points" / f"{(real / 'ImageSets' / 'train.txt').read_text().split()[-1]}.npy"
+    good = victim.read_bytes()
+    kw = dict(profile="smoke", name="broken", out=tmp_path / "o", store=tmp_path / "store",
+              overrides={"intensity_matching": False, "trials": 1})
+    plan = prepare_sweep(data["sim"], real, **kw)
+    victim.write_bytes(b"not a numpy file")
+    with pytest.raises(DatasetError, match=f"{victim.name}: not a NumPy .npy array"):
+        prepare_sweep(data["sim"], real, **kw)
+    s = run_experiment_flow(plan_path=plan["plan_path"])
     rows = pq.read_table(tmp_path / "o" / "broken" / "runs.parquet").to_pylist()
-    failed = [r for r in rows if r["status"] == "failed"]
-    assert s["counts"]["failed"] == len(failed) == 4       # 100 % x 2 trials x 2 conditions
-    assert all(r["fraction"] == 1.0 and victim in r["error"] for r in failed)
-    assert all(r["ap_3d_r40_iou03"] is None for r in failed)
-    assert {c["n_failed"] for c in s["stats"]["cells"] if c["fraction"] == 1.0} == {2}
+    assert s["counts"]["failed"] == len(rows) == 4 and s["counts"]["ok"] == 0
+    assert all("changed while the sweep ran" in r["error"] and r["ap_3d_r40_iou03"] is None
+               for r in rows)
+    victim.write_bytes(good)
+    again = run_experiment_flow(plan_path=prepare_sweep(data["sim"], real, **kw)["plan_path"])
+    assert again["counts"] == {"ok": 4, "skipped": 0, "failed": 0}
 
 
 def test_bad_inputs_exit_2_with_one_line(data, tmp_path):
