@@ -194,7 +194,6 @@ def sweep(
     checkpoint. Exit status 0, 1 when a run failed, 2 for bad arguments or inputs.
     """
     from sim2radar.datasets import DatasetError
-    from tasks.experiment import check_sweep_name
 
     exit_unless_writable(store, "--store")
     if not plan:
@@ -204,7 +203,6 @@ def sweep(
     try:
         if workers is not None and workers < 1:
             raise ValueError(f"--workers must be >= 1, got {workers}")
-        check_sweep_name(name)
         if trials is not None:
             overrides["trials"] = trials
         fr = _fractions(fractions)

@@ -12,7 +12,6 @@ generate`` processes (2 worlds x 2 frames, both geometries, OpenPCDet export, ~1
 
 from __future__ import annotations
 
-import json
 import shutil
 import subprocess
 import sys
@@ -21,6 +20,7 @@ from pathlib import Path
 import pytest
 
 from storage import ArtifactStore
+from tests.cli.test_kill_and_rerun import _export_files
 
 REPO = Path(__file__).resolve().parents[2]
 ARGS = ["generate", "--worlds", "2", "--frames", "2", "--width", "80", "--height", "60",
@@ -39,19 +39,6 @@ def _generate(store: Path, export: Path) -> subprocess.CompletedProcess:
     assert proc.returncode == 0, proc.stdout[-2000:] + proc.stderr[-3000:]
     assert "Traceback" not in proc.stdout + proc.stderr
     return proc
-
-
-def _export_files(export: Path) -> dict[str, bytes]:
-    out = {}
-    for p in sorted(export.rglob("*")):
-        if p.is_file():
-            data = p.read_bytes()
-            if p.name == "dataset.json":
-                doc = json.loads(data)
-                doc.pop("exported_at"), doc.pop("root")
-                data = json.dumps(doc, sort_keys=True).encode()
-            out[str(p.relative_to(export))] = data
-    return out
 
 
 @pytest.fixture(scope="module")
