@@ -29,7 +29,7 @@ STEPS = ("depth", "segments", "materials", "scene", "poses", "simulate")
 
 
 def _run(captures: str, store: str, use_prefect: bool) -> tuple[dict, float]:
-    from flows.capture_dataset import capture_dataset
+    from sim2radar.flows.capture_dataset import capture_dataset
 
     t0 = time.perf_counter()
     summary = capture_dataset(captures, store, "bench", use_prefect=use_prefect,

@@ -21,8 +21,9 @@ import statistics
 import tempfile
 import time
 
+from sim2radar.tasks.dataset import generate_dataset_plain
+
 from sim2radar.factory.spec import resolve_spec
-from tasks.dataset import generate_dataset_plain
 
 N_FRAMES = int(os.environ.get("SIM2RADAR_BENCH_GENERATE_FRAMES", "3"))
 WORLD_SEED = 0

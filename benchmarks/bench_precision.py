@@ -71,8 +71,8 @@ def paired_ab(real: Path, out: Path) -> dict:
     """The demo profile's baseline in float32 and in bfloat16 on ``real``; paired statistics."""
     import numpy as np
     from scipy import stats
+    from sim2radar.flows.run_experiment import run_experiment
 
-    from flows.run_experiment import run_experiment
     from sim2radar.experiment import load_profile
 
     demo = load_profile("demo")

@@ -35,7 +35,7 @@ GEOMETRY = "both"
 
 
 def _run(store: str, *, first_seed: int = 0, n_worlds: int = N_WORLDS, **runner) -> tuple:
-    from flows.generate_dataset import generate_dataset
+    from sim2radar.flows.generate_dataset import generate_dataset
 
     t0 = time.perf_counter()
     summary = generate_dataset(n_worlds=n_worlds, frames_per_world=FRAMES, store=store,
@@ -50,8 +50,7 @@ def _run(store: str, *, first_seed: int = 0, n_worlds: int = N_WORLDS, **runner)
 def main() -> dict:
     import distributed
     from prefect.testing.utilities import prefect_test_harness
-
-    from tasks.runners import local_cluster_kwargs
+    from sim2radar.tasks.runners import local_cluster_kwargs
 
     n_frames = N_WORLDS * FRAMES
     print(f"{N_WORLDS} worlds x {FRAMES} frames ({n_frames} frames), rig {RIG['width']}x"

@@ -33,9 +33,15 @@ def main() -> dict:
     os.environ.setdefault("PREFECT_LOGGING_LEVEL", "WARNING")
     os.environ.setdefault("PREFECT_SERVER_ANALYTICS_ENABLED", "false")
 
+    from sim2radar.storage import (
+        ArtifactStore,
+        content_key,
+        radar_frames_from_table,
+        radar_frames_to_table,
+    )
+    from sim2radar.tasks.radar import scene_keys, simulate_scenes_plain
+
     from sim2radar.scenes import demo_scene_paths
-    from storage import ArtifactStore, content_key, radar_frames_from_table, radar_frames_to_table
-    from tasks.radar import scene_keys, simulate_scenes_plain
 
     out: dict = {}
     # -- store throughput ------------------------------------------------------------------
@@ -90,7 +96,7 @@ def main() -> dict:
     )
 
     # -- the same through the Prefect flow -----------------------------------------------------
-    from flows.simulate import run_simulation
+    from sim2radar.flows.simulate import run_simulation
 
     flow_store = str(tmp / "flow-store")
     t0 = time.perf_counter()

@@ -90,7 +90,7 @@ def _paper_grid() -> dict:
     root = Path(tempfile.mkdtemp(prefix="sim2radar-bench-grid-"))
     try:
         sim, real = _paper_data(root)
-        from flows.run_experiment import run_experiment
+        from sim2radar.flows.run_experiment import run_experiment
 
         concurrent = int(os.environ.get("SIM2RADAR_BENCH_CONCURRENT", "4"))
         t0 = time.perf_counter()
@@ -118,15 +118,15 @@ def _paper_data(root: Path) -> tuple[Path, Path]:
 
 
 def _paper_plan(root: Path) -> dict:
-    from tasks.experiment import plan_cost
+    from sim2radar.tasks.experiment import plan_cost
 
     sim, real = _paper_data(root)
     return plan_cost(sim, real, profile="paper", store=root / "store", workers=(1, 8))
 
 
 def _paper_slice(root: Path) -> dict:
-    from flows.run_experiment import run_experiment
-    from tasks.experiment import plan_cost
+    from sim2radar.flows.run_experiment import run_experiment
+    from sim2radar.tasks.experiment import plan_cost
 
     sim, real = (root / "sim", root / "real") if (root / "real").is_dir() else _paper_data(root)
     overrides = {"fractions": [0.05], "trials": 1, "val_every": 0, "concurrent_runs": 1}

@@ -4,7 +4,7 @@ existed, so the UI shows per scene which step ran, was cached, retried or failed
 two factory flows (procedural worlds, capture folders) do with their scene tasks alike:
 gather them as they finish, record each in the manifest, move the progress artifact.
 
-The step functions themselves (:mod:`tasks.steps`, :mod:`tasks.capture`, :mod:`tasks.dataset`)
+The step functions themselves (:mod:`sim2radar.tasks.steps`, :mod:`sim2radar.tasks.capture`, :mod:`sim2radar.tasks.dataset`)
 take a ``run(stage, fn, *args)`` callable: plain calls without Prefect, :func:`run_as_tasks` in
 a flow. Steps are called inside their scene's task (nested task runs, in that worker), so their
 arguments never leave the process. Only ``materials`` is retried (backoff 2 s, 8 s) and only on
@@ -20,10 +20,9 @@ from prefect import get_run_logger, task
 from prefect.cache_policies import NO_CACHE
 from prefect.futures import as_completed
 from prefect.states import Completed, State
-
-from flows import _progress
-from tasks.common import REMOTE_IO_RETRIES, REMOTE_IO_RETRY_DELAYS_S, retry_transient_io
-from tasks.dataset import WorldDatasetOutcome, record_world_dataset
+from sim2radar.flows import _progress
+from sim2radar.tasks.common import REMOTE_IO_RETRIES, REMOTE_IO_RETRY_DELAYS_S, retry_transient_io
+from sim2radar.tasks.dataset import WorldDatasetOutcome, record_world_dataset
 
 __all__ = ["STEP_NAMES", "run_as_tasks", "record_scene_task", "gather_scenes"]
 

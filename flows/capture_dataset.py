@@ -1,10 +1,10 @@
 """Flow: a lab's RGB capture folder -> a radar dataset, one scene at a time, stage by stage.
 
-    from flows.capture_dataset import capture_dataset
+    from sim2radar.flows.capture_dataset import capture_dataset
     summary = capture_dataset("captures/", store="out/store", dataset="lab",
                               export_dir="out/openpcdet")
 
-Per scene (one RGB view) a ``capture-scene`` task runs :func:`tasks.capture.process_capture_scene`
+Per scene (one RGB view) a ``capture-scene`` task runs :func:`sim2radar.tasks.capture.process_capture_scene`
 with every step as its own Prefect task (``depth``, ``segments``, ``materials``, ``scene``,
 ``poses``, ``simulate`` per batch of ``frames_per_task`` radar poses), so the UI shows per scene
 which stage ran, was **Cached** (its artifact existed: the task ends in a ``Cached`` state), was
@@ -16,7 +16,7 @@ seconds per stage).
 
 A failing scene is recorded ``failed`` with its stage and error and the others finish; a
 second run recomputes nothing. Scenes run one at a time by default (Mitsuba uses every core);
-``workers > 1`` uses threads, ``dask_address`` a Dask cluster (:func:`tasks.runners.task_runner`).
+``workers > 1`` uses threads, ``dask_address`` a Dask cluster (:func:`sim2radar.tasks.runners.task_runner`).
 """
 
 from __future__ import annotations
@@ -27,20 +27,20 @@ from typing import Any
 
 from prefect import flow, task
 from prefect.cache_policies import NO_CACHE
-
-from flows import _progress
-from flows._steps import gather_scenes, run_as_tasks
-from sim2radar.factory.captures import CaptureScene, CaptureSpec, find_captures
-from storage import ArtifactStore
-from tasks import capture as steps
-from tasks.dataset import (
+from sim2radar.flows import _progress
+from sim2radar.flows._steps import gather_scenes, run_as_tasks
+from sim2radar.storage import ArtifactStore
+from sim2radar.tasks import capture as steps
+from sim2radar.tasks.dataset import (
     WorldDatasetOutcome,
     export_all,
     failed_scene_outcome,
     record_world_dataset,
     summarize_dataset,
 )
-from tasks.runners import ThreadRunner
+from sim2radar.tasks.runners import ThreadRunner
+
+from sim2radar.factory.captures import CaptureScene, CaptureSpec, find_captures
 
 __all__ = ["capture_dataset_flow", "capture_dataset", "capture_dataset_job", "progress_callback",
            "CAPTURE_DOMAIN", "stage_table"]
@@ -56,7 +56,7 @@ def _simulate_batch_name(stage: str, args: tuple) -> str:
 @task(name="capture-scene", cache_policy=NO_CACHE, retries=0, persist_result=False)
 def capture_scene_task(scene: CaptureScene, spec: CaptureSpec, store: str,
                        force: bool = False) -> WorldDatasetOutcome:
-    """One scene, every step a Prefect task (:func:`tasks.capture.process_capture_scene`)."""
+    """One scene, every step a Prefect task (:func:`sim2radar.tasks.capture.process_capture_scene`)."""
     return steps.process_capture_scene(scene, spec, store, force=force,
                                        run=run_as_tasks(scene.scene_id, _simulate_batch_name))
 
@@ -96,7 +96,7 @@ def capture_dataset_flow(
 
     Returns
     -------
-    dict — :func:`tasks.dataset.summarize_dataset` (+ ``export``, ``stage_table``)
+    dict — :func:`sim2radar.tasks.dataset.summarize_dataset` (+ ``export``, ``stage_table``)
     """
     from prefect.artifacts import create_progress_artifact, create_table_artifact
 
@@ -133,7 +133,7 @@ def capture_dataset_plain(scenes: list[CaptureScene], spec: CaptureSpec, store: 
                           dataset: str = "captures", *, export_dir: str | None = None,
                           force: bool = False, on_scene=None) -> dict[str, Any]:
     """The flow's semantics without the Prefect engine (``--no-prefect``, notebooks): the same
-    :func:`tasks.capture.process_capture_scene` per scene, with plain calls."""
+    :func:`sim2radar.tasks.capture.process_capture_scene` per scene, with plain calls."""
     st = ArtifactStore(store)
     st.manifest(dataset)
     outcomes = []
@@ -167,8 +167,8 @@ def capture_dataset(
     ``retry_failed``: only the scenes the ``dataset`` manifest records as failed run; the
     export then holds every frame the manifest lists.
     """
-    from tasks.common import failed_scene_ids
-    from tasks.runners import task_runner
+    from sim2radar.tasks.common import failed_scene_ids
+    from sim2radar.tasks.runners import task_runner
 
     t0 = time.perf_counter()
     spec = CaptureSpec(**spec_fields)
@@ -193,7 +193,7 @@ def capture_dataset(
                 scenes=scenes, spec=spec, store=os.fspath(store), dataset=dataset,
                 export_dir=export, force=force)
     if whole_export is not None:
-        from tasks.dataset import outcomes_from_manifest
+        from sim2radar.tasks.dataset import outcomes_from_manifest
 
         st = ArtifactStore(os.fspath(store))
         summary["export"] = export_all(st, outcomes_from_manifest(st, dataset), whole_export,
@@ -231,7 +231,7 @@ def capture_dataset_job(
 
     # run the package's copy (a deployment loads this file as a top-level module, whose
     # objects Dask workers could not import by reference): see flows/generate_dataset.py
-    package = importlib.import_module("flows.capture_dataset")
+    package = importlib.import_module("sim2radar.flows.capture_dataset")
     return package.capture_dataset(
         captures, store, dataset, export_dir=export_dir, force=force, workers=workers,
         dask_address=dask_address, retry_failed=retry_failed, radar=radar,

@@ -2,19 +2,19 @@
 boxes (on reconstructed and/or ground-truth geometry) in the store, optionally exported to
 OpenPCDet's custom layout.
 
-    from flows.generate_dataset import generate_dataset
+    from sim2radar.flows.generate_dataset import generate_dataset
     summary = generate_dataset(n_worlds=4, frames_per_world=8, store="out/store",
                                dataset="nightly", geometry="both", export_dir="out/openpcdet")
 
 One task per world seed (``generate_world_dataset_task``), its steps (render, reconstruction
 steps per frame, one simulate per geometry) as nested tasks that end **Cached** when
-their artifact exists (:mod:`flows._steps`); worlds are gathered as they complete; each
+their artifact exists (:mod:`sim2radar.flows._steps`); worlds are gathered as they complete; each
 world's outcome (world row + one row per frame) goes into the dataset manifest. A second run
 with the same inputs recomputes nothing (every frame ``skipped`` by content key). A failing
 world or frame is recorded as ``failed`` with its error and the others finish; ``strict=True``
 raises :class:`DatasetFailures` at the end (after everything is recorded and exported).
 
-Task runner (:func:`tasks.runners.task_runner`): worlds run one at a time by default (Mitsuba
+Task runner (:func:`sim2radar.tasks.runners.task_runner`): worlds run one at a time by default (Mitsuba
 already uses every core for one frame); ``workers > 1`` uses a thread pool; ``dask_address`` =
 a Dask scheduler address (``tcp://host:8786``) or ``"local"`` (a LocalCluster of ``workers``
 single-threaded processes) fans worlds out over Dask (``pip install 'sim2radar[dask]'``). A
@@ -32,19 +32,19 @@ from typing import Any
 
 from prefect import flow, get_run_logger, task
 from prefect.cache_policies import NO_CACHE
-
-from flows import _progress
-from flows._steps import gather_scenes, run_as_tasks
-from sim2radar.factory.spec import resolve_spec
-from storage import ArtifactStore
-from tasks.dataset import (
+from sim2radar.flows import _progress
+from sim2radar.flows._steps import gather_scenes, run_as_tasks
+from sim2radar.storage import ArtifactStore
+from sim2radar.tasks.dataset import (
     WorldDatasetOutcome,
     export_all,
     failed_world_outcome,
     generate_world_dataset,
     summarize_dataset,
 )
-from tasks.runners import ThreadRunner, task_runner
+from sim2radar.tasks.runners import ThreadRunner, task_runner
+
+from sim2radar.factory.spec import resolve_spec
 
 __all__ = ["generate_dataset_flow", "generate_dataset", "generate_dataset_job", "DatasetFailures",
            "progress_callback"]
@@ -101,10 +101,10 @@ def _step_name(stage: str, args: tuple) -> str:
 @task(name="generate-world-dataset", cache_policy=NO_CACHE, retries=0, persist_result=False)
 def generate_world_dataset_task(seed: int, spec: dict, store: str, force: bool = False,
                                 n_frames: int | None = None) -> WorldDatasetOutcome:
-    """One world, every step a Prefect task (:func:`tasks.dataset.generate_world_dataset`):
+    """One world, every step a Prefect task (:func:`sim2radar.tasks.dataset.generate_world_dataset`):
     ``render``, per frame ``depth``/``segments``/``materials``/``scene`` (reconstructed, when
     not cached) and one ``simulate`` per geometry. No retries: the steps are deterministic."""
-    from storage.worlds import world_id_for
+    from sim2radar.storage.worlds import world_id_for
 
     return generate_world_dataset(seed, spec, store, force=force, n_frames=n_frames,
                                   run=run_as_tasks(world_id_for(seed), _step_name))
@@ -129,7 +129,7 @@ def generate_dataset_flow(
     Parameters
     ----------
     seeds : world seeds (one seed -> one world)
-    spec : :meth:`tasks.dataset.DatasetSpec.to_dict` (frames per world, geometry, radar,
+    spec : :meth:`sim2radar.tasks.dataset.DatasetSpec.to_dict` (frames per world, geometry, radar,
         reconstruction, world, rig, seed, class name)
     store : artifact store root (local path or fsspec URI)
     dataset : manifest name
@@ -143,7 +143,7 @@ def generate_dataset_flow(
 
     Returns
     -------
-    dict — :func:`tasks.dataset.summarize_dataset` (+ ``export``)
+    dict — :func:`sim2radar.tasks.dataset.summarize_dataset` (+ ``export``)
     """
     from prefect.artifacts import create_progress_artifact, create_table_artifact
 
@@ -265,7 +265,7 @@ def generate_dataset_job(
     # Prefect loads a deployment's entrypoint file as a top-level module ("generate_dataset");
     # objects from that copy would pickle by reference to a module Dask's scheduler and workers
     # cannot import. Run the package's copy of the flow instead (the same code).
-    package = importlib.import_module("flows.generate_dataset")
+    package = importlib.import_module("sim2radar.flows.generate_dataset")
     return package.generate_dataset(
         n_worlds=n_worlds, frames_per_world=frames_per_world, store=store, dataset=dataset,
         radar=radar, geometry=geometry, reconstruction=reconstruction, world=world, rig=rig,

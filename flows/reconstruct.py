@@ -1,6 +1,6 @@
 """Flow: reconstruct RGB [+ LiDAR] frames into material-labelled scenes in the artifact store.
 
-    from flows.reconstruct import run_reconstruction
+    from sim2radar.flows.reconstruct import run_reconstruction
     summary = run_reconstruction(["img/0001.png", ...], intrinsics="K.yaml",
                                  lidar=["lidar/0001.npy", ...], store="out/store",
                                  dataset="my-building", config=ReconstructionConfig())
@@ -18,9 +18,8 @@ from typing import Any
 
 from prefect import flow, get_run_logger
 from prefect.futures import as_completed
-
-from storage import ArtifactStore
-from tasks.reconstruct import (
+from sim2radar.storage import ArtifactStore
+from sim2radar.tasks.reconstruct import (
     ImageJob,
     ReconOutcome,
     failed_outcome,
@@ -28,7 +27,7 @@ from tasks.reconstruct import (
     record_recon_outcome_task,
     summarize_recon,
 )
-from tasks.runners import ThreadRunner
+from sim2radar.tasks.runners import ThreadRunner
 
 __all__ = ["reconstruct_flow", "run_reconstruction"]
 

@@ -2,7 +2,7 @@
 ground-truth geometry of procedural worlds disjoint from the simulated domain's, exported in
 OpenPCDet's custom layout and labelled as a proxy for measured radar.
 
-    from flows.reference_dataset import reference_dataset
+    from sim2radar.flows.reference_dataset import reference_dataset
     summary = reference_dataset(store="out/store", export_dir="data/proxy_real")  # 618 frames
 
 It is the factory's generate-dataset flow (one task per world, one cached ``dataset_frames``
@@ -36,7 +36,7 @@ REFERENCE_SPEED_MPS = (0.5, 1.5)
 def reference_spec(frames_per_world: int = 10, radar: Any = REFERENCE_RADAR, world: Any = None,
                    rig: Any = None, seed: int = 0, labels: Any = None,
                    speed_mps: tuple[float, float] = REFERENCE_SPEED_MPS):
-    """The :class:`tasks.dataset.DatasetSpec` of a reference dataset: ground-truth geometry,
+    """The :class:`sim2radar.tasks.dataset.DatasetSpec` of a reference dataset: ground-truth geometry,
     the reference radar on a rig walking at ``speed_mps`` (min, max) [m/s] along its heading
     (a speed drawn per frame), no RGB / LiDAR rendering."""
     from sim2radar.factory.spec import resolve_spec
@@ -51,7 +51,7 @@ def reference_run(first_seed: int = REFERENCE_FIRST_SEED, worlds: int | None = N
     """The generate flow's arguments that make a reference dataset of this plan: ``seeds``,
     ``frames_by_seed``, ``splits`` (world ids), ``export_doppler``, ``domain``, plus ``plan``
     (:class:`~sim2radar.factory.reference.ReferencePlan`)."""
-    from storage.worlds import world_id_for
+    from sim2radar.storage.worlds import world_id_for
 
     plan = plan_reference(first_seed, worlds=worlds, frames_per_world=frames_per_world,
                           seed=seed)
@@ -88,10 +88,10 @@ def reference_dataset(
         371 / 92 / 155 split, :func:`~sim2radar.factory.reference.plan_reference`).
     first_seed : seed of the first world (keep it disjoint from the simulated domain's worlds).
     speed_mps : the rig's walking speed range [m/s] (min, max; drawn per frame).
-    Other parameters as :func:`flows.generate_dataset.generate_dataset`.
+    Other parameters as :func:`sim2radar.flows.generate_dataset.generate_dataset`.
     """
-    from flows.generate_dataset import generate_dataset_flow
-    from tasks.runners import task_runner
+    from sim2radar.flows.generate_dataset import generate_dataset_flow
+    from sim2radar.tasks.runners import task_runner
 
     args = reference_run(first_seed, worlds, frames_per_world, seed)
     plan = args.pop("plan")
@@ -124,7 +124,7 @@ def reference_dataset_job(
 ) -> dict[str, Any]:
     """Deployment entry point (``deploy/prefect.yaml``): :func:`reference_dataset` as a
     subflow (the package's copy, so Dask workers can import it)."""
-    package = importlib.import_module("flows.reference_dataset")
+    package = importlib.import_module("sim2radar.flows.reference_dataset")
     return package.reference_dataset(
         store=store, dataset=dataset, export_dir=export_dir, first_seed=first_seed,
         worlds=worlds, frames_per_world=frames_per_world, radar=radar, seed=seed,

@@ -1,11 +1,11 @@
 """Flow: the paper's experiment grid — pre-train on simulated radar, fine-tune on real radar,
 compare with training from scratch over real-data fractions × trials — as a resumable sweep.
 
-    from flows.run_experiment import run_experiment
+    from sim2radar.flows.run_experiment import run_experiment
     summary = run_experiment("data/sim", "data/proxy_real", profile="demo", name="demo",
                              out="out/sweeps")
 
-Every training run is its own Prefect task keyed by content (:mod:`tasks.experiment`): a
+Every training run is its own Prefect task keyed by content (:mod:`sim2radar.tasks.experiment`): a
 finished run is ``skipped`` on a rerun, a run killed half-way resumes from its last checkpoint,
 and a pre-training shared by several cells runs once (per trial seed with the profile's
 ``pretrain_per_trial``). Baseline runs start at once; a pre-trained condition's runs start when
@@ -39,16 +39,15 @@ from typing import Any
 
 from prefect import flow, get_run_logger
 from prefect.futures import as_completed
-
-from flows import _progress
-from tasks.experiment import (
+from sim2radar.flows import _progress
+from sim2radar.tasks.experiment import (
     failed_row,
     finetune_task,
     pretrain_task,
     write_json,
     write_runs_table,
 )
-from tasks.runners import task_runner
+from sim2radar.tasks.runners import task_runner
 
 __all__ = ["run_experiment_flow", "run_experiment", "run_experiment_job", "progress_callback"]
 
@@ -60,7 +59,7 @@ def progress_callback(fn: Callable[[dict], None]):
 
 @flow(name="run-experiment", log_prints=False)
 def run_experiment_flow(plan_path: str) -> dict[str, Any]:
-    """Run a prepared sweep — the ``plan.json`` :func:`tasks.experiment.prepare_sweep` wrote
+    """Run a prepared sweep — the ``plan.json`` :func:`sim2radar.tasks.experiment.prepare_sweep` wrote
     (its ``plan_path``; a paper-sized plan is over Prefect's 512 KiB limit on a flow run's
     parameters, its path is not): every pre-training and fine-tuning task, the tables,
     statistics, artifacts and dashboard."""
@@ -70,8 +69,7 @@ def run_experiment_flow(plan_path: str) -> dict[str, Any]:
         create_table_artifact,
         update_progress_artifact,
     )
-
-    from tasks.experiment import finish_sweep, read_plan
+    from sim2radar.tasks.experiment import finish_sweep, read_plan
 
     plan = read_plan(plan_path)
     logger = get_run_logger()
@@ -187,7 +185,7 @@ def run_experiment(
     force : run ids (``baseline-f0.05-t2``) or keys to redo from scratch (their stored rows and
         checkpoints are moved aside, not deleted).
     """
-    from tasks.experiment import prepare_sweep
+    from sim2radar.tasks.experiment import prepare_sweep
 
     plan = prepare_sweep(sim, real, profile=profile, name=name, out=out, store=store,
                          sim_gt=sim_gt, sim_one_material=sim_one_material, ablations=ablations,
@@ -213,7 +211,7 @@ def run_experiment_job(
 ) -> dict[str, Any]:
     """Deployment entry point (``deploy/prefect.yaml``): :func:`run_experiment` as a subflow
     (the package's copy, so Dask workers can import it)."""
-    package = importlib.import_module("flows.run_experiment")
+    package = importlib.import_module("sim2radar.flows.run_experiment")
     return package.run_experiment(sim, real, profile=profile, name=name, out=out, store=store,
                                   sim_gt=sim_gt, sim_one_material=sim_one_material,
                                   ablations=ablations, workers=workers,

@@ -1,6 +1,6 @@
 """Flow: simulate radar point clouds for scene files into the artifact store.
 
-    from flows.simulate import run_simulation
+    from sim2radar.flows.simulate import run_simulation
     summary = run_simulation(["scene.yaml"], radar="ti-mmwcas", store="out/store", dataset="demo")
 
 One task per scene (``simulate_scene_task.submit``), gathered as they complete; each outcome
@@ -14,7 +14,7 @@ batch job that should keep what succeeded — unless ``strict=True``, which rais
 :class:`SceneFailures` after every scene has been recorded (Prefect marks the run failed). The
 CLI maps this to its exit code: 0 by default, 1 with ``--strict`` when any scene failed.
 
-Task runner (:func:`tasks.runners.task_runner`): scenes run one at a time by default
+Task runner (:func:`sim2radar.tasks.runners.task_runner`): scenes run one at a time by default
 (``workers=1``: Mitsuba/Dr.Jit already uses every core for one frame). ``workers>1`` uses a
 thread pool; ``dask_address`` = a scheduler address (``tcp://host:8786``) or ``"local"`` (a
 LocalCluster of ``workers`` processes) uses ``prefect_dask.DaskTaskRunner`` (``pip install
@@ -31,18 +31,17 @@ from typing import Any
 
 from prefect import flow, get_run_logger
 from prefect.futures import as_completed
-
-from flows import _progress
-from storage import ArtifactStore
-from tasks.common import expand_scenes
-from tasks.radar import (
+from sim2radar.flows import _progress
+from sim2radar.storage import ArtifactStore
+from sim2radar.tasks.common import expand_scenes
+from sim2radar.tasks.radar import (
     SceneOutcome,
     failed_outcome,
     record_outcome_task,
     simulate_scene_task,
     summarize,
 )
-from tasks.runners import ThreadRunner, task_runner
+from sim2radar.tasks.runners import ThreadRunner, task_runner
 
 __all__ = [
     "simulate_flow",
@@ -74,7 +73,7 @@ def _notify_progress(outcome: SceneOutcome) -> None:
 
 
 def _check_unique_ids(scenes: Sequence[str]) -> None:
-    from tasks.common import scene_id_for
+    from sim2radar.tasks.common import scene_id_for
 
     seen: dict[str, str] = {}
     for s in scenes:
@@ -200,7 +199,7 @@ def simulate_dataset(
     # Prefect loads a deployment's entrypoint file as a top-level module ("simulate"); objects
     # from that copy would pickle by reference to a module Dask's scheduler and workers cannot
     # import. Run the package's copy of the flow instead (the same code).
-    package = importlib.import_module("flows.simulate")
+    package = importlib.import_module("sim2radar.flows.simulate")
     return package.run_simulation(
         expand_scenes(scenes),
         radar=radar,

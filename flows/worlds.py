@@ -1,6 +1,6 @@
 """Flow: generate N procedural worlds x M rendered frames into the artifact store.
 
-    from flows.worlds import run_worlds
+    from sim2radar.flows.worlds import run_worlds
     summary = run_worlds(range(4), n_frames=8, store="out/store", dataset="worlds")
 
 One task per world seed, gathered as they complete; each outcome goes into the dataset
@@ -16,10 +16,9 @@ from typing import Any
 
 from prefect import flow, get_run_logger
 from prefect.futures import as_completed
-
-from storage import ArtifactStore
-from tasks.runners import ThreadRunner
-from tasks.worlds import (
+from sim2radar.storage import ArtifactStore
+from sim2radar.tasks.runners import ThreadRunner
+from sim2radar.tasks.worlds import (
     WorldOutcome,
     failed_world,
     generate_world_task,

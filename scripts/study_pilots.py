@@ -49,8 +49,8 @@ def main() -> None:
     args = ap.parse_args()
 
     import pyarrow.parquet as pq
+    from sim2radar.flows.run_experiment import run_experiment
 
-    from flows.run_experiment import run_experiment
     from sim2radar.experiment import load_profile
     from sim2radar.experiment.stats import minimum_detectable_effect
 

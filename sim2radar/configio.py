@@ -5,17 +5,69 @@ own fields; this module only turns a path into a top-level mapping, or raises an
 names the file and says what is wrong with it; :func:`whole_number` and :func:`real_number`
 check one scalar field of such a mapping (YAML reads ``[1]``, ``two``, ``2.5`` and ``true`` as
 a list, a string, a float and a bool: none of them may pass as a count or be truncated).
+
+:func:`config_path` turns a bundled config's *name* (``demo``, ``production``, ``small``) into
+its file. The bundled configs are the package data ``sim2radar.configs`` (the ``configs/``
+folder of the checkout, installed under that name) and are found through
+:mod:`importlib.resources`, never through the checkout's layout, so a name works the same from
+a clone, an editable install and a wheel.
 """
 
 from __future__ import annotations
 
+import importlib.resources
 import math
 from pathlib import Path
 from typing import Any
 
 import yaml
 
-__all__ = ["read_yaml_mapping", "real_number", "whole_number"]
+__all__ = ["CONFIG_KINDS", "bundled_configs", "config_path", "read_yaml_mapping", "real_number",
+           "whole_number"]
+
+#: folders of ``sim2radar.configs``: the kinds of config a command loads by name
+CONFIG_KINDS = ("detect", "experiment", "generate", "reconstruct", "worlds")
+
+
+def _bundled_dir(kind: str) -> Path:
+    if kind not in CONFIG_KINDS:
+        raise ValueError(f"unknown config kind {kind!r}; known: {list(CONFIG_KINDS)}")
+    folder = importlib.resources.files("sim2radar.configs") / kind
+    # installed packages are folders on disk (a wheel unpacks, an editable install points at the
+    # checkout); a zipped install would need importlib.resources.as_file, which nothing here uses
+    return Path(str(folder))
+
+
+def bundled_configs(kind: str) -> list[str]:
+    """Names (file stems) of the bundled configs of ``kind``, e.g. ``["demo", "paper", ...]``."""
+    folder = _bundled_dir(kind)
+    return sorted(p.stem for p in folder.glob("*.yaml")) if folder.is_dir() else []
+
+
+def looks_like_path(value: str | Path) -> bool:
+    """True for text with a folder separator or a YAML suffix, or naming a file that exists;
+    False for a bare name such as ``demo`` (also as a :class:`~pathlib.Path`, as command-line
+    options arrive)."""
+    text = str(value)
+    return text.endswith((".yaml", ".yml")) or "/" in text or "\\" in text \
+        or Path(text).exists()
+
+
+def config_path(name_or_path: str | Path, kind: str, *, what: str = "config") -> Path:
+    """The file of a config given as a path (returned as it is) or as the name of a bundled
+    config of ``kind`` (``config_path("demo", "experiment")``).
+
+    Raises
+    ------
+    FileNotFoundError — a name with no bundled config; the message lists the bundled ones.
+    """
+    if looks_like_path(name_or_path):
+        return Path(name_or_path)
+    path = _bundled_dir(kind) / f"{name_or_path}.yaml"
+    if not path.is_file():
+        raise FileNotFoundError(f"no bundled {what} {str(name_or_path)!r}; bundled: "
+                                f"{bundled_configs(kind)} (or pass a YAML path)")
+    return path
 
 
 def read_yaml_mapping(

@@ -1,30 +1,71 @@
-"""Atomic file writes for the library's own outputs (dataset exports, reports, run records).
+"""Atomic file writes and JSON-able values for the library's own outputs (dataset exports,
+reports, run records, provenance).
 
 A file is written under a temporary name in its folder and renamed over the target, so a
 killed process leaves the old file or the new one, never half of one (POSIX rename within one
-file system). The Parquet artifact store publishes the same way (:mod:`storage.store`).
+file system). The Parquet artifact store publishes the same way (:mod:`sim2radar.storage.store`).
 """
 
 from __future__ import annotations
 
 import json
+import math
 import os
 import re
+from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
 
-__all__ = ["atomic_write", "write_json", "abandoned_temp_files"]
+import numpy as np
+
+__all__ = ["atomic_write", "atomic_write_with", "write_json", "jsonable", "abandoned_temp_files"]
 
 _TEMP = re.compile(r"^\..+\.tmp(\d+)$")
 
 
-def atomic_write(path: str | os.PathLike, data: bytes) -> Path:
-    """Write ``data`` to ``path`` atomically (the parent folder must exist); returns the path."""
+def atomic_write_with(path: str | os.PathLike, write: Callable[[Path], object]) -> Path:
+    """Publish what ``write(tmp_path)`` writes as ``path`` atomically (the parent folder must
+    exist), for writers that take a path (``torch.save``, ``pq.write_table``); a writer that
+    raises leaves no temporary file behind. Returns the path."""
     path = Path(path)
     tmp = path.with_name(f".{path.name}.tmp{os.getpid()}")
-    tmp.write_bytes(data)
-    os.replace(tmp, path)
+    try:
+        write(tmp)
+        os.replace(tmp, path)
+    finally:
+        tmp.unlink(missing_ok=True)
     return path
+
+
+def atomic_write(path: str | os.PathLike, data: bytes) -> Path:
+    """Write ``data`` to ``path`` atomically (the parent folder must exist); returns the path."""
+    return atomic_write_with(path, lambda tmp: tmp.write_bytes(data))
+
+
+def jsonable(obj: Any, *, max_array: int | None = None) -> Any:
+    """A copy of ``obj`` that :func:`json.dumps` writes as standard JSON.
+
+    Mappings become dicts with ``str`` keys, tuples and lists lists, NumPy scalars Python
+    numbers, NaN and +-inf ``None`` (JSON has no such numbers), arrays lists — or, above
+    ``max_array`` elements, the text ``"<array (shape) dtype>"`` — and anything else its
+    ``str``."""
+    if obj is None or isinstance(obj, bool | str):
+        return obj
+    if isinstance(obj, Mapping):
+        return {str(k): jsonable(v, max_array=max_array) for k, v in obj.items()}
+    if isinstance(obj, list | tuple):
+        return [jsonable(v, max_array=max_array) for v in obj]
+    if isinstance(obj, np.ndarray):
+        if max_array is not None and obj.size > max_array:
+            return f"<array {obj.shape} {obj.dtype}>"
+        return jsonable(obj.tolist())
+    if isinstance(obj, np.generic):
+        obj = obj.item()
+    if isinstance(obj, bool | int | str):
+        return obj
+    if isinstance(obj, float):
+        return obj if math.isfinite(obj) else None
+    return str(obj)
 
 
 def abandoned_temp_files(folder: str | os.PathLike) -> list[Path]:

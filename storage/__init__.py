@@ -4,7 +4,7 @@ per-dataset manifests. Local folder by default; any fsspec URI (``s3://``, ``gs:
 
 Typical use by a stage::
 
-    from storage import ArtifactStore, content_key
+    from sim2radar.storage import ArtifactStore, content_key
 
     store = ArtifactStore("out/store")
     key = content_key(stage="radar_points", stage_version=1,
@@ -16,11 +16,11 @@ Typical use by a stage::
     table = store.read("radar_points", key)            # validated against storage/schemas.py
     store.manifest("demo").upsert("corridor", "ok", artifacts={"radar_points": key})
 
-Schemas are declared once in :mod:`storage.schemas` (other stages append blocks there); array
-columns are built with :mod:`storage.codecs`. This package never imports Prefect.
+Schemas are declared once in :mod:`sim2radar.storage.schemas` (other stages append blocks there); array
+columns are built with :mod:`sim2radar.storage.codecs`. This package never imports Prefect.
 """
 
-from storage.codecs import (
+from sim2radar.storage.codecs import (
     RadarPointsFrame,
     fixed_rows,
     fixed_rows_column,
@@ -31,10 +31,21 @@ from storage.codecs import (
     ragged_arrays,
     ragged_column,
 )
-from storage.keys import KEY_LENGTH, bytes_digest, canonical_json, content_key, file_digest
-from storage.manifest import STATUSES, Manifest
-from storage.provenance import PROVENANCE_KEY, build_provenance, model_file_hashes, package_versions
-from storage.schemas import (
+from sim2radar.storage.keys import (
+    KEY_LENGTH,
+    bytes_digest,
+    canonical_json,
+    content_key,
+    file_digest,
+)
+from sim2radar.storage.manifest import STATUSES, Manifest
+from sim2radar.storage.provenance import (
+    PROVENANCE_KEY,
+    build_provenance,
+    model_file_hashes,
+    package_versions,
+)
+from sim2radar.storage.schemas import (
     ArtifactSchema,
     SchemaError,
     field,
@@ -42,7 +53,7 @@ from storage.schemas import (
     register_schema,
     schema_names,
 )
-from storage.store import (
+from sim2radar.storage.store import (
     ArtifactNotFoundError,
     ArtifactStore,
     check_writable,

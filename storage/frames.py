@@ -1,5 +1,5 @@
 """Codec of ``dataset_frames`` artifacts: :class:`~sim2radar.factory.frames.DatasetFrame` <->
-one-row Arrow table (schema ``dataset_frames`` in :mod:`storage.schemas`)."""
+one-row Arrow table (schema ``dataset_frames`` in :mod:`sim2radar.storage.schemas`)."""
 
 from __future__ import annotations
 
@@ -7,10 +7,10 @@ import json
 
 import numpy as np
 import pyarrow as pa
+from sim2radar.storage.codecs import ragged_arrays, ragged_column
 
 from sim2radar.factory.frames import DatasetFrame
-from storage.codecs import ragged_arrays, ragged_column
-from storage.provenance import jsonable
+from sim2radar.fileio import jsonable
 
 __all__ = ["dataset_frame_to_table", "dataset_frame_from_table"]
 

@@ -28,12 +28,11 @@ from typing import TYPE_CHECKING, Any
 
 import pyarrow as pa
 import pyarrow.parquet as pq
-
-from storage.integrity import is_corrupt_file_error
-from storage.schemas import MANIFEST
+from sim2radar.storage.integrity import is_corrupt_file_error
+from sim2radar.storage.schemas import MANIFEST
 
 if TYPE_CHECKING:  # pragma: no cover
-    from storage.store import ArtifactStore
+    from sim2radar.storage.store import ArtifactStore
 
 __all__ = ["Manifest", "STATUSES"]
 
@@ -48,7 +47,7 @@ def _row_name(scene_id: str) -> str:
 
 
 class Manifest:
-    """The manifest of one dataset in an :class:`~storage.store.ArtifactStore`.
+    """The manifest of one dataset in an :class:`~sim2radar.storage.store.ArtifactStore`.
 
     Obtain it with ``store.manifest("name")``.
     """

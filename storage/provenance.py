@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import functools
 import importlib.metadata as md
-import math
 import platform
 import socket
 from collections.abc import Mapping
@@ -22,12 +21,9 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
-import numpy as np
+from sim2radar.storage.keys import _normalise, file_digest
 
-from storage.keys import _normalise, file_digest
-
-__all__ = ["PROVENANCE_KEY", "package_versions", "build_provenance", "model_file_hashes",
-           "jsonable"]
+__all__ = ["PROVENANCE_KEY", "package_versions", "build_provenance", "model_file_hashes"]
 
 #: Parquet key-value metadata key holding the provenance JSON.
 PROVENANCE_KEY = b"sim2radar.provenance"
@@ -93,21 +89,3 @@ def build_provenance(
     doc["created_utc"] = datetime.now(UTC).strftime("%Y-%m-%dT%H:%M:%S.%fZ")
     doc["host"] = socket.gethostname()
     return doc
-
-
-def jsonable(obj: Any) -> Any:
-    """Best-effort conversion of stats/timings dicts to JSON-safe values (for provenance)."""
-    if isinstance(obj, dict):
-        return {str(k): jsonable(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [jsonable(v) for v in obj]
-    if isinstance(obj, np.ndarray):
-        return jsonable(obj.tolist()) if obj.size <= 64 else f"<array {obj.shape} {obj.dtype}>"
-    if isinstance(obj, (np.integer,)):
-        return int(obj)
-    if isinstance(obj, (float, np.floating)):
-        v = float(obj)
-        return v if math.isfinite(v) else repr(v)
-    if obj is None or isinstance(obj, (bool, int, str)):
-        return obj
-    return repr(obj)

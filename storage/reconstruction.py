@@ -18,11 +18,12 @@ import json
 
 import numpy as np
 import pyarrow as pa
+from sim2radar.storage.codecs import meshes_to_table
+from sim2radar.storage.keys import bytes_digest, content_key
+from sim2radar.storage.schemas import RECONSTRUCTION as RECONSTRUCTION_SCHEMA
 
 from sim2radar.camera import CameraIntrinsics
-from storage.codecs import meshes_to_table
-from storage.keys import bytes_digest, content_key
-from storage.schemas import RECONSTRUCTION as RECONSTRUCTION_SCHEMA
+from sim2radar.fileio import jsonable
 
 __all__ = ["RECONSTRUCTION_SCHEMA", "scene_to_tables", "write_scene_artifacts",
            "read_reconstruction", "frame_digest", "reconstruction_keys", "depth_to_table",
@@ -42,18 +43,6 @@ def frame_digest(rgb: np.ndarray, lidar_points: np.ndarray | None = None,
         data += json.dumps({k: np.round(np.asarray(v, np.float64), 9).tolist()
                             for k, v in rig_calibration.items()}, sort_keys=True).encode()
     return bytes_digest(data)
-
-
-def _jsonable(obj):
-    if isinstance(obj, dict):
-        return {str(k): _jsonable(v) for k, v in obj.items()}
-    if isinstance(obj, list | tuple):
-        return [_jsonable(v) for v in obj]
-    if isinstance(obj, np.ndarray):
-        return f"<array {obj.shape} {obj.dtype}>" if obj.size > 16 else obj.tolist()
-    if isinstance(obj, np.generic):
-        return obj.item()
-    return obj
 
 
 def scene_to_tables(scene, camera_to_target: np.ndarray | None = None) -> dict[str, pa.Table]:
@@ -83,7 +72,7 @@ def scene_to_tables(scene, camera_to_target: np.ndarray | None = None) -> dict[s
         "level_from_camera": [np.asarray(scene.level_from_camera, np.float64).ravel()],
         "floor_z_m": [float(scene.floor_z_m)],
         "timings_s": [list(scene.timings_s.items())],
-        "info_json": [json.dumps(_jsonable(scene.info), sort_keys=True)],
+        "info_json": [json.dumps(jsonable(scene.info, max_array=16), sort_keys=True)],
     }
     table = pa.Table.from_pydict(
         {name: pa.array(v, type=RECONSTRUCTION_SCHEMA.schema.field(name).type)
@@ -200,12 +189,12 @@ def _schema_table(schema, row: dict) -> pa.Table:
 
 def depth_to_table(name: str, depth, seconds: float) -> pa.Table:
     """One-row ``depth_maps`` table of a :class:`~sim2radar.reconstruct.DepthResult`."""
-    from storage.schemas import DEPTH_MAPS
+    from sim2radar.storage.schemas import DEPTH_MAPS
 
     d = np.asarray(depth.depth_m, np.float32)
     return _schema_table(DEPTH_MAPS, {
         "name": name, "width": d.shape[1], "height": d.shape[0], "depth_m": d.ravel(),
-        "info_json": json.dumps(_jsonable(depth.info), sort_keys=True),
+        "info_json": json.dumps(jsonable(depth.info, max_array=16), sort_keys=True),
         "seconds": float(seconds)})
 
 
@@ -220,7 +209,7 @@ def depth_from_table(table: pa.Table):
 
 def segments_to_table(name: str, segments, seconds: float) -> pa.Table:
     """One-row ``segmentations`` table of a :class:`~sim2radar.reconstruct.Segments`."""
-    from storage.schemas import SEGMENTATIONS
+    from sim2radar.storage.schemas import SEGMENTATIONS
 
     ids = np.asarray(segments.segment_id, np.int32)
     return _schema_table(SEGMENTATIONS, {
@@ -228,7 +217,7 @@ def segments_to_table(name: str, segments, seconds: float) -> pa.Table:
         "labels": list(segments.labels), "scores": np.asarray(segments.scores, np.float32),
         "up_cam": None if segments.up_cam is None else np.asarray(segments.up_cam, np.float64),
         "door_boxes_level": np.asarray(segments.door_boxes_level, np.float32).tolist(),
-        "info_json": json.dumps(_jsonable(segments.info), sort_keys=True),
+        "info_json": json.dumps(jsonable(segments.info, max_array=16), sort_keys=True),
         "seconds": float(seconds)})
 
 
@@ -248,7 +237,7 @@ def segments_from_table(table: pa.Table):
 def materials_to_table(name: str, labels, fallbacks, seconds: float) -> pa.Table:
     """One-row ``material_labels`` table of a list of
     :class:`~sim2radar.reconstruct.MaterialLabel` (one per segment)."""
-    from storage.schemas import MATERIAL_LABELS
+    from sim2radar.storage.schemas import MATERIAL_LABELS
 
     return _schema_table(MATERIAL_LABELS, {
         "name": name, "materials": [x.material for x in labels],

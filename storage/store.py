@@ -45,10 +45,9 @@ from typing import Any, TypeVar
 import fsspec
 import pyarrow as pa
 import pyarrow.parquet as pq
-
-from storage.integrity import SCHEMA_KEY, file_problem, is_corrupt_file_error
-from storage.provenance import PROVENANCE_KEY, build_provenance
-from storage.schemas import SchemaError, get_schema
+from sim2radar.storage.integrity import SCHEMA_KEY, file_problem, is_corrupt_file_error
+from sim2radar.storage.provenance import PROVENANCE_KEY, build_provenance
+from sim2radar.storage.schemas import SchemaError, get_schema
 
 __all__ = [
     "ArtifactStore",
@@ -65,7 +64,7 @@ log = logging.getLogger(__name__)
 TMP_PREFIX = ".tmp-"
 #: folder of the store root that receives files which did not verify
 QUARANTINE = "quarantine"
-_KEY_RE = re.compile(r"[0-9a-f]{8,64}")  # content keys (storage.keys.KEY_LENGTH) or digests
+_KEY_RE = re.compile(r"[0-9a-f]{8,64}")  # content keys (sim2radar.storage.keys.KEY_LENGTH) or digests
 _DATASET_RE = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]*$")
 T = TypeVar("T")
 
@@ -100,7 +99,7 @@ def is_transient_io_error(exc: BaseException) -> bool:
     (schema, value, type errors).
 
     The one rule behind both :class:`ArtifactStore`'s own retries and the Prefect task retries
-    of storage I/O (:mod:`tasks.common`).
+    of storage I/O (:mod:`sim2radar.tasks.common`).
     """
     if not isinstance(exc, OSError) or isinstance(exc, _PERMANENT_OS_ERRORS):
         return False
@@ -300,7 +299,7 @@ class ArtifactStore:
         """Read every published artifact and manifest row file in full; returns one
         ``{"path", "problem", "moved_to"}`` per file that does not verify (``moved_to`` only
         with ``repair``, which quarantines them so the next run recomputes them)."""
-        from storage.schemas import schema_names
+        from sim2radar.storage.schemas import schema_names
 
         found = []
         targets = [(stage, self._join(stage)) for stage in schema_names() if stage != "manifest"]
@@ -359,7 +358,7 @@ class ArtifactStore:
             The artifact; converted losslessly to the declared column order and types.
         provenance : mapping, optional
             ``inputs``, ``config``, ``seed``, ``timings_s``, ``model_files``, ``extra`` (see
-            :func:`storage.provenance.build_provenance`); package versions, time and host are
+            :func:`sim2radar.storage.provenance.build_provenance`); package versions, time and host are
             added here.
         stage_version : int, optional
             The stage version that went into ``key`` (recorded for humans).
@@ -478,7 +477,7 @@ class ArtifactStore:
         return self._io(f"read {stage}/{key}", go)
 
     def read_provenance(self, stage: str, key: str) -> dict[str, Any]:
-        """The provenance document stored with an artifact (see :mod:`storage.provenance`)."""
+        """The provenance document stored with an artifact (see :mod:`sim2radar.storage.provenance`)."""
 
         def go() -> dict[str, Any]:
             _, pf, fh = self._open_checked(stage, key)
@@ -523,8 +522,8 @@ class ArtifactStore:
 
     # -- manifests ----------------------------------------------------------------------------
     def manifest(self, dataset: str):
-        """The :class:`storage.manifest.Manifest` of ``dataset`` in this store."""
-        from storage.manifest import Manifest
+        """The :class:`sim2radar.storage.manifest.Manifest` of ``dataset`` in this store."""
+        from sim2radar.storage.manifest import Manifest
 
         if not isinstance(dataset, str) or not _DATASET_RE.match(dataset):
             raise ValueError(

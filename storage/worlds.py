@@ -17,10 +17,10 @@ import json
 
 import numpy as np
 import pyarrow as pa
+from sim2radar.storage.codecs import ragged_arrays, ragged_column
 
 from sim2radar.camera import CameraIntrinsics
 from sim2radar.worlds.frame import World, WorldFrame
-from storage.codecs import ragged_arrays, ragged_column
 
 __all__ = ["world_spec_to_table", "frames_to_table", "frames_from_table", "encode_png",
            "decode_png", "world_id_for"]

@@ -1,12 +1,12 @@
 """The capture factory's stages as cached steps: a capture scene (one RGB view) -> depth ->
 segments -> materials -> meshes + door boxes -> radar poses -> radar frames, each step keyed by
-content and skipped when its artifact exists. :mod:`flows.capture_dataset` runs every step as
+content and skipped when its artifact exists. :mod:`sim2radar.flows.capture_dataset` runs every step as
 a Prefect task; ``--no-prefect`` runs the same :func:`process_capture_scene` with plain calls.
 
 The science is in the library (:mod:`sim2radar.reconstruct.pipeline` stage functions,
 :mod:`sim2radar.factory.captures`); this module holds keys, caching, store I/O and outcomes.
 
-Artifacts per scene (keys: :func:`storage.reconstruction.stage_keys`): ``depth_maps``,
+Artifacts per scene (keys: :func:`sim2radar.storage.reconstruction.stage_keys`): ``depth_maps``,
 ``segmentations``, ``material_labels``, ``scene_meshes`` + ``reconstruction`` (level frame;
 the same keys ``sim2radar reconstruct``'s flow gives the same image), and one
 ``dataset_frames`` per radar pose. Manifest rows: one per scene (``<scene>``) and one per frame
@@ -21,6 +21,17 @@ from collections.abc import Callable
 from typing import Any
 
 import numpy as np
+from sim2radar.storage import content_key, meshes_from_table
+from sim2radar.storage.frames import dataset_frame_to_table
+from sim2radar.tasks.common import open_store
+from sim2radar.tasks.dataset import (
+    DATASET_STAGE_VERSION,
+    FrameOutcome,
+    WorldDatasetOutcome,
+    _fill_frame_outcome,
+    read_dataset_frame,
+)
+from sim2radar.tasks.steps import FrameSource, call_step, reconstruction_steps
 
 from sim2radar.factory.captures import (
     CaptureScene,
@@ -32,17 +43,6 @@ from sim2radar.factory.captures import (
     sample_radar_poses,
 )
 from sim2radar.factory.seeds import frame_seed, pose_seed, scene_seed
-from storage import content_key, meshes_from_table
-from storage.frames import dataset_frame_to_table
-from tasks.common import open_store
-from tasks.dataset import (
-    DATASET_STAGE_VERSION,
-    FrameOutcome,
-    WorldDatasetOutcome,
-    _fill_frame_outcome,
-    read_dataset_frame,
-)
-from tasks.steps import FrameSource, call_step, reconstruction_steps
 
 __all__ = [
     "CAPTURE_STAGES",
@@ -59,7 +59,7 @@ CAPTURE_STAGES = ("depth", "segments", "materials", "scene", "poses", "simulate"
 
 
 def _source(scene: CaptureScene, spec: CaptureSpec) -> tuple[FrameSource, dict[str, str]]:
-    """The scene as a :class:`~tasks.steps.FrameSource` (reconstruction in the level frame)
+    """The scene as a :class:`~sim2radar.tasks.steps.FrameSource` (reconstruction in the level frame)
     and every key of the scene: input digests + the reconstruction steps' artifact keys.
 
     Raises
@@ -67,8 +67,9 @@ def _source(scene: CaptureScene, spec: CaptureSpec) -> tuple[FrameSource, dict[s
     ValueError naming the file, field and fix: an unreadable image or intrinsics, a
     ``radar.yaml`` that does not validate (checked here, before any reconstruction step).
     """
+    from sim2radar.storage.reconstruction import frame_input_digests, stage_keys
+
     from sim2radar.reconstruct.pipeline import STAGE_VERSION
-    from storage.reconstruction import frame_input_digests, stage_keys
 
     frame, _ = load_capture_frame(scene)
     read_radar_yaml(scene.radar)  # a bad radar.yaml fails the scene before reconstruction
@@ -90,8 +91,9 @@ def poses_stage(scene: CaptureScene, spec: CaptureSpec, store: str, keys: dict) 
     (:func:`sim2radar.factory.captures.sample_radar_poses`); returns ``{"poses": (F, 4, 4)
     list, "candidates", "rejected", "wanted", "seconds"}`` (deterministic, so not stored: every
     pose is kept in its frame's ``radar_to_world``)."""
+    from sim2radar.storage.reconstruction import read_reconstruction
+
     from sim2radar.factory.labels import scene_ray_caster
-    from storage.reconstruction import read_reconstruction
 
     t0, st = time.perf_counter(), open_store(store)
     rec = read_reconstruction(st, keys["reconstruction"])
@@ -135,7 +137,7 @@ def capture_frame_key(keys: dict, scene_id: str, frame_index: int, spec: Capture
 def _radar_yaml_digest(scene: CaptureScene) -> str:
     from pathlib import Path
 
-    from storage.keys import bytes_digest
+    from sim2radar.storage.keys import bytes_digest
 
     return bytes_digest(Path(scene.radar).read_bytes()) if scene.radar else ""
 
@@ -145,7 +147,7 @@ def simulate_stage(scene: CaptureScene, spec: CaptureSpec, store: str, keys: dic
     """Radar frames at ``poses`` (frame numbers ``indices``) -> ``dataset_frames``; a cached
     frame is read back (``skipped``), a failing frame is recorded ``failed`` and the others
     go on."""
-    from storage.reconstruction import read_reconstruction
+    from sim2radar.storage.reconstruction import read_reconstruction
 
     st = open_store(store)
     yaml_digest = _radar_yaml_digest(scene)
@@ -213,7 +215,7 @@ def process_capture_scene(scene: CaptureScene, spec: CaptureSpec, store: str, *,
     """Make (or find cached) every artifact of one capture scene, step by step.
 
     ``run(stage, fn, *args)`` calls each step: the plain call by default, a Prefect task in
-    :mod:`flows.capture_dataset` (the same function either way). A failing step marks the
+    :mod:`sim2radar.flows.capture_dataset` (the same function either way). A failing step marks the
     scene ``failed`` with ``[stage] Type: message`` and stops it; a failing frame is recorded
     and the others go on. Never raises for a bad scene.
 

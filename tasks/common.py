@@ -14,9 +14,9 @@ from collections.abc import Sequence
 from pathlib import Path
 
 import yaml
+from sim2radar.storage import ArtifactStore, is_transient_io_error
 
-from storage import ArtifactStore, is_transient_io_error
-from storage.provenance import jsonable
+from sim2radar.fileio import jsonable
 
 __all__ = [
     "FRAME_ROW",

@@ -1,13 +1,13 @@
 """The factory's main job, per world: procedural world -> (reconstructed | ground-truth)
 geometry -> radar frames with door boxes -> the artifact store. Keys, caching, store I/O and
 outcome records only: the science is in :mod:`sim2radar.factory` (spec, per-frame pipeline),
-:mod:`tasks.steps` runs the reconstruction's steps, :mod:`flows.generate_dataset` makes every
+:mod:`sim2radar.tasks.steps` runs the reconstruction's steps, :mod:`sim2radar.flows.generate_dataset` makes every
 step a Prefect task (the plain loop calls the same functions).
 
 Per world seed, :func:`generate_world_dataset`:
 
 1. makes sure the world's artifacts exist (``scene_meshes``, ``world_specs``, ``world_frames``
-   through :func:`tasks.worlds.generate_world_artifacts`: the same content keys as
+   through :func:`sim2radar.tasks.worlds.generate_world_artifacts`: the same content keys as
    ``sim2radar worlds generate``, so worlds rendered before are reused, not re-rendered);
 2. per frame and geometry computes a ``dataset_frames`` content key from (world_frames key,
    world scene_meshes key, frame index, geometry, resolved radar config, resolved
@@ -26,7 +26,7 @@ Per world seed, :func:`generate_world_dataset`:
      geometry (the same visibility rule), the paper's pre-training pseudo-labels. The
      ground-truth doors the radar sees are stored alongside for scoring. The reconstruction
      itself is cached as its own ``scene_meshes`` + ``reconstruction`` artifacts
-     (:func:`storage.reconstruction.write_scene_artifacts`), so changing only the
+     (:func:`sim2radar.storage.reconstruction.write_scene_artifacts`), so changing only the
      radar re-simulates without re-reconstructing;
 
 3. one failing frame is recorded as ``failed`` (with its error) and the other frames finish; a
@@ -48,6 +48,16 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from sim2radar.storage import ArtifactStore, content_key, meshes_from_table
+from sim2radar.storage.frames import dataset_frame_from_table, dataset_frame_to_table
+from sim2radar.storage.schemas import DATASET_FRAMES as DATASET_FRAMES_SCHEMA
+from sim2radar.tasks.common import (
+    FRAME_ROW,
+    failed_scene_ids,
+    jsonable,
+    open_store,
+)
+from sim2radar.tasks.steps import call_step, reconstruction_steps
 
 from sim2radar.datasets.splits import split_groups as split_worlds
 from sim2radar.evaluate.dataset import LABEL_IOU_THRESHOLD
@@ -65,16 +75,6 @@ from sim2radar.factory.spec import (
     dataset_metadata,
     resolve_spec,
 )
-from storage import ArtifactStore, content_key, meshes_from_table
-from storage.frames import dataset_frame_from_table, dataset_frame_to_table
-from storage.schemas import DATASET_FRAMES as DATASET_FRAMES_SCHEMA
-from tasks.common import (
-    FRAME_ROW,
-    failed_scene_ids,
-    jsonable,
-    open_store,
-)
-from tasks.steps import call_step, reconstruction_steps
 
 __all__ = [
     "DATASET_STAGE_VERSION",
@@ -149,8 +149,9 @@ def frame_key(world_keys: dict[str, str], frame_index: int, geometry: str,
 def _reconstruction_keys(frame, camera_to_target: np.ndarray, config) -> dict[str, str]:
     """Keys of this frame's reconstruction artifacts (computed up front so a cached
     reconstruction is read instead of recomputed)."""
+    from sim2radar.storage.reconstruction import reconstruction_keys
+
     from sim2radar.reconstruct.pipeline import STAGE_VERSION
-    from storage.reconstruction import reconstruction_keys
 
     return reconstruction_keys({"image": _digest(frame)}, config.to_dict(), camera_to_target,
                                stage_version=STAGE_VERSION)
@@ -249,7 +250,7 @@ def failed_scene_outcome(scene_id: str, error: BaseException | str, *, seed: int
 
 def failed_world_outcome(seed: int, error: BaseException | str) -> WorldDatasetOutcome:
     """A ``failed`` outcome for world ``seed``."""
-    from storage.worlds import world_id_for
+    from sim2radar.storage.worlds import world_id_for
 
     return failed_scene_outcome(world_id_for(seed), error, seed=seed)
 
@@ -263,13 +264,14 @@ def read_dataset_frame(store: str | os.PathLike | ArtifactStore, key: str) -> Da
 
 
 def _world_frame_source(frame, world_id: str, spec: DatasetSpec):
-    """A world frame as a :class:`~tasks.steps.FrameSource`: its reconstruction goes into the
+    """A world frame as a :class:`~sim2radar.tasks.steps.FrameSource`: its reconstruction goes into the
     rig's radar frame (``inv(radar_to_world) @ camera_to_world``); ``oracle`` backends get the
     frame as ground truth."""
+    from sim2radar.storage.reconstruction import stage_keys
+    from sim2radar.tasks.steps import FrameSource
+
     from sim2radar.factory.pipeline import world_frame_input
     from sim2radar.reconstruct.pipeline import STAGE_VERSION
-    from storage.reconstruction import stage_keys
-    from tasks.steps import FrameSource
 
     cam_to_radar = np.linalg.inv(frame.radar_to_world) @ frame.camera_to_world
     inputs = {"image": _digest(frame)}
@@ -285,8 +287,9 @@ def _reconstructed_frame(frame, world_id, world_scene, store, spec, radar_seed,
                          fresh: bool = False) -> tuple[DatasetFrame, dict[str, str]]:
     """The paper's pipeline on one world frame, from its reconstruction in the store (made by
     the reconstruction steps before; ``fresh``: in this run)."""
+    from sim2radar.storage.reconstruction import read_reconstruction
+
     from sim2radar.factory.pipeline import reconstructed_frame
-    from storage.reconstruction import read_reconstruction
 
     cam_to_radar = np.linalg.inv(frame.radar_to_world) @ frame.camera_to_world
     rkeys = _reconstruction_keys(frame, cam_to_radar, spec.reconstruction)
@@ -303,7 +306,7 @@ def _reconstructed_frame(frame, world_id, world_scene, store, spec, radar_seed,
 
 
 def _digest(frame) -> str:
-    from storage.reconstruction import frame_digest
+    from sim2radar.storage.reconstruction import frame_digest
 
     return frame_digest(frame.rgb, frame.lidar_points, frame.rig_calibration)
 
@@ -316,8 +319,9 @@ def _upstream_verifies(st: ArtifactStore, rkeys: dict[str, str], spec) -> bool:
     depth / segment / material steps it was built from) all verify. ``exists`` moves one that
     does not into quarantine, so the frame is recomputed and the store healed by this run. The
     steps' keys come from the reconstruction's recorded image digest: no frame is loaded."""
+    from sim2radar.storage.reconstruction import stage_keys
+
     from sim2radar.reconstruct.pipeline import STAGE_VERSION
-    from storage.reconstruction import stage_keys
 
     if not st.all_exist(rkeys):
         return False
@@ -343,7 +347,7 @@ class _WorldInputs:
 
     def frames(self):
         if self._frames is None:
-            from storage.worlds import frames_from_table
+            from sim2radar.storage.worlds import frames_from_table
 
             self._frames = frames_from_table(self.store.read("world_frames",
                                                              self.keys["world_frames"]))
@@ -400,9 +404,9 @@ def generate_world_dataset(
 ) -> WorldDatasetOutcome:
     """Make (or find cached) every dataset frame of world ``seed``, step by step: ``render``
     (the world's artifacts), per frame the reconstruction's steps (``reconstructed``, when its
-    reconstruction is not cached: :func:`tasks.steps.reconstruction_steps`) and one
+    reconstruction is not cached: :func:`sim2radar.tasks.steps.reconstruction_steps`) and one
     ``simulate`` per geometry for the frames still to compute, each through
-    ``run(stage, fn, *args)`` (plain calls, or Prefect tasks in :mod:`flows.generate_dataset`).
+    ``run(stage, fn, *args)`` (plain calls, or Prefect tasks in :mod:`sim2radar.flows.generate_dataset`).
 
     Parameters
     ----------
@@ -419,7 +423,7 @@ def generate_world_dataset(
     WorldDatasetOutcome — a world that cannot be generated raises (the caller records it);
     a failing frame is recorded in its FrameOutcome and does not raise.
     """
-    from storage.worlds import world_id_for
+    from sim2radar.storage.worlds import world_id_for
 
     t_start = time.perf_counter()
     spec = as_spec(spec)
@@ -503,9 +507,9 @@ def generate_world_dataset(
 
 def render_world(seed: int, n_frames: int, store, spec: DatasetSpec):
     """The ``render`` step: the world's meshes, spec and rendered frames
-    (:func:`tasks.worlds.generate_world_artifacts`, the keys of ``sim2radar worlds
+    (:func:`sim2radar.tasks.worlds.generate_world_artifacts`, the keys of ``sim2radar worlds
     generate``: worlds rendered before are reused)."""
-    from tasks.worlds import generate_world_artifacts
+    from sim2radar.tasks.worlds import generate_world_artifacts
 
     return generate_world_artifacts(int(seed), n_frames, store, spec.world, spec.rig,
                                     trajectory_seed=spec.seed, rgb=spec.render_rgb)

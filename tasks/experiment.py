@@ -38,11 +38,12 @@ from typing import Any
 import pyarrow as pa
 from prefect import task
 from prefect.cache_policies import NO_CACHE
+from sim2radar.storage import content_key, get_schema
+from sim2radar.storage.provenance import package_versions
+from sim2radar.storage.store import CorruptArtifactError
+from sim2radar.tasks.common import open_store
 
-from storage import content_key, get_schema
-from storage.provenance import jsonable, package_versions
-from storage.store import CorruptArtifactError
-from tasks.common import open_store
+from sim2radar.fileio import atomic_write_with, jsonable
 
 __all__ = [
     "EXPERIMENT_STAGE_VERSION",
@@ -155,8 +156,9 @@ def _split_ids(ctx: SweepContext, role: str, split: str) -> list[str]:
 def _resolve_dataset(source: str | os.PathLike, role: str, store: str, sweep_dir: Path,
                      seed: int):
     """A dataset folder, or ``store:NAME[:geometry]`` exported from the store."""
+    from sim2radar.tasks.dataset import export_store_dataset
+
     from sim2radar.experiment.data import open_domain
-    from tasks.dataset import export_store_dataset
 
     text = os.fspath(source)
     if text.startswith("store:"):
@@ -690,9 +692,7 @@ def write_runs_table(sweep_dir: str | os.PathLike, rows: list[dict[str, Any]]) -
     schema = get_schema("experiment_runs")
     table = schema.validate(pa.Table.from_pylist(rows, schema=schema.schema))
     path = Path(sweep_dir) / RUNS_FILE
-    tmp = path.with_name(f".{path.name}.tmp{os.getpid()}")
-    pq.write_table(table, tmp)
-    os.replace(tmp, path)
+    atomic_write_with(path, lambda tmp: pq.write_table(table, tmp))
     return path
 
 
@@ -706,7 +706,7 @@ def read_runs_table(sweep_dir: str | os.PathLike) -> list[dict[str, Any]]:
 
 def write_json(path: str | os.PathLike, doc: Any) -> Path:
     """Write JSON atomically (for sweep.json, stats.json, progress.json), numpy values as
-    numbers (:func:`storage.provenance.jsonable`)."""
+    numbers (:func:`sim2radar.fileio.jsonable`)."""
     from sim2radar.fileio import write_json as write
 
     return write(path, jsonable(doc))

@@ -28,16 +28,14 @@ from typing import Any
 import numpy as np
 from prefect import task
 from prefect.cache_policies import NO_CACHE
-
-from sim2radar.factory.seeds import scene_file_frame_seed
-from storage import (
+from sim2radar.storage import (
     ArtifactStore,
     content_key,
     meshes_to_table,
     radar_frames_from_table,
     radar_frames_to_table,
 )
-from tasks.common import (
+from sim2radar.tasks.common import (
     REMOTE_IO_RETRIES,
     REMOTE_IO_RETRY_DELAYS_S,
     jsonable,
@@ -45,6 +43,8 @@ from tasks.common import (
     retry_transient_io,
     scene_id_for,
 )
+
+from sim2radar.factory.seeds import scene_file_frame_seed
 
 __all__ = [
     "RADAR_POINTS_STAGE_VERSION",

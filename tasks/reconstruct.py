@@ -4,7 +4,7 @@ Per image, :func:`reconstruct_image`:
 
 1. digests the image bytes (+ LiDAR) and keys both artifacts (``reconstruction`` and
    ``scene_meshes``) on that digest + the resolved :class:`ReconstructionConfig`
-   (:func:`storage.reconstruction.write_scene_artifacts`);
+   (:func:`sim2radar.storage.reconstruction.write_scene_artifacts`);
 2. if both exist: status ``skipped`` (resume, no recompute);
 3. otherwise runs the four stages and publishes both artifacts atomically with provenance
    (status ``ok``), plus the stage sheet PNG and a ``scene.yaml`` folder when asked.
@@ -25,15 +25,15 @@ from typing import Any
 
 from prefect import task
 from prefect.cache_policies import NO_CACHE
-
-from sim2radar.reconstruct.pipeline import STAGE_VERSION
-from tasks.common import (
+from sim2radar.tasks.common import (
     REMOTE_IO_RETRIES,
     REMOTE_IO_RETRY_DELAYS_S,
     jsonable,
     open_store,
     retry_transient_io,
 )
+
+from sim2radar.reconstruct.pipeline import STAGE_VERSION
 
 __all__ = [
     "RECONSTRUCTION_STAGE_VERSION",
@@ -82,10 +82,11 @@ class ReconOutcome:
 
 
 def _inputs(job: ImageJob):
+    from sim2radar.storage.reconstruction import frame_input_digests
+
     from sim2radar.camera import CameraIntrinsics
     from sim2radar.reconstruct import FrameInput
     from sim2radar.reconstruct.inputs import load_image, load_lidar, load_rig_calibration
-    from storage.reconstruction import frame_input_digests
 
     rgb = load_image(Path(job.image))
     k = CameraIntrinsics.from_yaml(job.intrinsics)
@@ -117,8 +118,9 @@ def reconstruct_image(
     backends : the config's backends, built once for many frames
         (:func:`sim2radar.reconstruct.build_backends`; default: built here).
     """
+    from sim2radar.storage.reconstruction import reconstruction_keys, write_scene_artifacts
+
     from sim2radar.reconstruct import FrameInput, ReconstructionConfig, reconstruct
-    from storage.reconstruction import reconstruction_keys, write_scene_artifacts
 
     t0 = time.perf_counter()
     st = open_store(store)

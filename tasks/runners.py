@@ -1,6 +1,6 @@
 """Task runners for the factory's flows: one thread pool, or a Dask cluster.
 
-    from tasks.runners import task_runner
+    from sim2radar.tasks.runners import task_runner
     runner = task_runner(workers=2, dask_address="local")      # LocalCluster, 2 processes
     runner = task_runner(workers=1, dask_address="tcp://10.0.0.5:8786")   # existing scheduler
     runner = task_runner(workers=1)                              # thread pool (default)

@@ -1,8 +1,8 @@
 """The reconstruction of one RGB view as four cached steps — depth, segments, materials, scene
-— shared by both sources of the factory: a capture folder's scene (:mod:`tasks.capture`) and a
-procedural world's frame (:mod:`tasks.dataset`). Each step reads its inputs from the store,
+— shared by both sources of the factory: a capture folder's scene (:mod:`sim2radar.tasks.capture`) and a
+procedural world's frame (:mod:`sim2radar.tasks.dataset`). Each step reads its inputs from the store,
 runs one stage of :mod:`sim2radar.reconstruct.pipeline` and writes its artifact under its
-content key (:func:`storage.reconstruction.stage_keys`), or returns ``skipped`` when the
+content key (:func:`sim2radar.storage.reconstruction.stage_keys`), or returns ``skipped`` when the
 artifact exists. ``flows/_steps.py`` wraps every step in a Prefect task; plain calls run the
 same functions.
 """
@@ -16,8 +16,7 @@ from collections.abc import Callable
 from typing import Any
 
 import numpy as np
-
-from tasks.common import open_store
+from sim2radar.tasks.common import open_store
 
 __all__ = ["RECONSTRUCTION_STEPS", "FrameSource", "StageResult", "depth_stage",
            "segments_stage", "materials_stage", "scene_stage", "reconstruction_steps",
@@ -105,8 +104,9 @@ def _write(st, stage: str, table, src: FrameSource, config, inputs: dict,
 
 def depth_stage(src: FrameSource, config, store: str) -> StageResult:
     """Stage 1, metric depth -> ``depth_maps``."""
+    from sim2radar.storage.reconstruction import depth_from_table, depth_to_table
+
     from sim2radar.reconstruct.pipeline import estimate_depth
-    from storage.reconstruction import depth_from_table, depth_to_table
 
     t0, st, key = time.perf_counter(), open_store(store), src.keys["depth_maps"]
     if st.exists("depth_maps", key):
@@ -122,8 +122,13 @@ def depth_stage(src: FrameSource, config, store: str) -> StageResult:
 
 def segments_stage(src: FrameSource, config, store: str) -> StageResult:
     """Stage 2, segments with semantic labels -> ``segmentations``."""
+    from sim2radar.storage.reconstruction import (
+        depth_from_table,
+        segments_from_table,
+        segments_to_table,
+    )
+
     from sim2radar.reconstruct.pipeline import segment_image
-    from storage.reconstruction import depth_from_table, segments_from_table, segments_to_table
 
     t0, st, key = time.perf_counter(), open_store(store), src.keys["segmentations"]
     if st.exists("segmentations", key):
@@ -141,13 +146,14 @@ def segments_stage(src: FrameSource, config, store: str) -> StageResult:
 
 def materials_stage(src: FrameSource, config, store: str) -> StageResult:
     """Stage 3, a material per segment (the VLM's or the prior's) -> ``material_labels``."""
-    from sim2radar.reconstruct.pipeline import label_materials
-    from storage.reconstruction import (
+    from sim2radar.storage.reconstruction import (
         depth_from_table,
         materials_from_table,
         materials_to_table,
         segments_from_table,
     )
+
+    from sim2radar.reconstruct.pipeline import label_materials
 
     t0, st, key = time.perf_counter(), open_store(store), src.keys["material_labels"]
     if st.exists("material_labels", key):
@@ -167,15 +173,16 @@ def materials_stage(src: FrameSource, config, store: str) -> StageResult:
 
 def scene_stage(src: FrameSource, config, store: str) -> StageResult:
     """Stage 4, meshes + door boxes in ``src.camera_to_target`` -> ``scene_meshes`` +
-    ``reconstruction`` (the keys :func:`storage.reconstruction.reconstruction_keys` gives)."""
-    from sim2radar.reconstruct.pipeline import STAGE_VERSION, build_scene
-    from storage.reconstruction import (
+    ``reconstruction`` (the keys :func:`sim2radar.storage.reconstruction.reconstruction_keys` gives)."""
+    from sim2radar.storage.reconstruction import (
         depth_from_table,
         materials_from_table,
         read_reconstruction,
         segments_from_table,
         write_scene_artifacts,
     )
+
+    from sim2radar.reconstruct.pipeline import STAGE_VERSION, build_scene
 
     t0, st = time.perf_counter(), open_store(store)
     key = src.keys["reconstruction"]

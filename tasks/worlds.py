@@ -28,9 +28,8 @@ from typing import Any
 
 from prefect import task
 from prefect.cache_policies import NO_CACHE
-
-from storage import ArtifactStore, content_key, meshes_to_table
-from tasks.common import (
+from sim2radar.storage import ArtifactStore, content_key, meshes_to_table
+from sim2radar.tasks.common import (
     REMOTE_IO_RETRIES,
     REMOTE_IO_RETRY_DELAYS_S,
     jsonable,
@@ -149,8 +148,9 @@ def generate_world_artifacts(
     radar : str or RadarConfig, optional — also simulate radar point clouds per frame
     rgb : bool — path trace RGB and cast the LiDAR (False: exact maps, poses, boxes only)
     """
+    from sim2radar.storage.worlds import frames_to_table, world_id_for, world_spec_to_table
+
     from sim2radar.worlds import generate_world, render_frame, trajectory
-    from storage.worlds import frames_to_table, world_id_for, world_spec_to_table
 
     t_start = time.perf_counter()
     store = open_store(store)
@@ -205,10 +205,11 @@ def generate_world_artifacts(
 
 def _simulate_radar(world, frames, radar, store, keys, seed, world_id) -> None:
     """Radar point clouds of every frame on the world's ground-truth geometry."""
+    from sim2radar.storage import radar_frames_to_table
+
     from sim2radar.factory import LabelConfig
     from sim2radar.factory.pipeline import world_radar_frames
     from sim2radar.radar import RadarConfig, load_radar_config
-    from storage import radar_frames_to_table
 
     radar_cfg = radar if isinstance(radar, RadarConfig) else load_radar_config(radar)
     labels = LabelConfig()
@@ -242,7 +243,7 @@ def _render_version() -> int:
 
 def failed_world(seed: int, error: BaseException | str) -> WorldOutcome:
     """A ``failed`` outcome for world ``seed``."""
-    from storage.worlds import world_id_for
+    from sim2radar.storage.worlds import world_id_for
 
     text = error if isinstance(error, str) else f"{type(error).__name__}: {error}"
     return WorldOutcome(world_id_for(seed), int(seed), "failed", error=text)

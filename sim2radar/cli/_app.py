@@ -24,7 +24,7 @@ def exit_unless_writable(store: str, option: str = "--out") -> None:
     """Before any work: exit with status 2 and one line naming the path and the fix when the
     local store ``store`` cannot be written (:func:`storage.check_writable`; remote URIs are not
     probed)."""
-    from storage import check_writable
+    from sim2radar.storage import check_writable
 
     try:
         check_writable(store)

@@ -2,7 +2,7 @@
 ``sim2radar worlds captures``: a sample capture folder rendered from procedural worlds.
 
 The folder layout is documented in :mod:`sim2radar.factory.captures`; the flow in
-:mod:`flows.capture_dataset`. Prefect and the flows are imported inside the commands.
+:mod:`sim2radar.flows.capture_dataset`. Prefect and the flows are imported inside the commands.
 """
 
 from __future__ import annotations
@@ -28,9 +28,9 @@ def run_captures(captures: Path, *, store: str, dataset: str, settings: dict[str
         _prefect_env(verbose)
     from rich.progress import Progress
 
-    from flows.capture_dataset import capture_dataset
     from sim2radar.cli.generate import _progress_columns
     from sim2radar.factory.captures import find_captures
+    from sim2radar.flows.capture_dataset import capture_dataset
 
     n_scenes = len(find_captures(captures, warn=False))  # the flow warns once
     with Progress(*_progress_columns(), disable=not show_progress, transient=False) as progress:
@@ -43,8 +43,8 @@ def run_captures(captures: Path, *, store: str, dataset: str, settings: dict[str
 
         from contextlib import nullcontext
 
-        from flows._steps import STEP_NAMES
         from sim2radar.cli._app import quiet_recorded_failures
+        from sim2radar.flows._steps import STEP_NAMES
 
         quiet = (quiet_recorded_failures(["capture-scene", *STEP_NAMES], verbose)
                  if use_prefect else nullcontext())
@@ -56,7 +56,7 @@ def run_captures(captures: Path, *, store: str, dataset: str, settings: dict[str
     summary["pngs"] = []
     if png_dir is not None:
         from sim2radar.factory.captures import CaptureSpec
-        from tasks.dataset import outcomes_from_summary, world_bev_pngs
+        from sim2radar.tasks.dataset import outcomes_from_summary, world_bev_pngs
 
         summary["pngs"] = world_bev_pngs(store, outcomes_from_summary(summary), png_dir,
                                          CaptureSpec(**settings))
@@ -138,7 +138,7 @@ def generate_from_captures(captures: Path, *, config: Path | None, out: str,
         _preflight(capture_spec.reconstruction)
         if dask:
             from sim2radar.cli.simulate import _prefect_env
-            from tasks.runners import task_runner
+            from sim2radar.tasks.runners import task_runner
 
             _prefect_env(verbose)  # before Prefect is imported
 

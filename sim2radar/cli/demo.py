@@ -48,10 +48,14 @@ def _manifest_status(summary: dict[str, Any], name: str, role: str) -> dict[str,
 
 def _reference_dataset(store: str, dataset: str, export_dir: Path, png_dir: Path | None,
                        verbose: bool, **plan: Any) -> dict[str, Any]:
-    """The reference radar's dataset of a plan (:func:`flows.reference_dataset.reference_run`
+    """The reference radar's dataset of a plan (:func:`sim2radar.flows.reference_dataset.reference_run`
     arguments) through the generate flow, exported to ``export_dir``."""
-    from flows.reference_dataset import REFERENCE_RADAR, REFERENCE_SPEED_MPS, reference_run
     from sim2radar.cli.generate import run_generate
+    from sim2radar.flows.reference_dataset import (
+        REFERENCE_RADAR,
+        REFERENCE_SPEED_MPS,
+        reference_run,
+    )
 
     args = reference_run(**plan)
     args.pop("plan")
@@ -79,7 +83,7 @@ def run_demo(
     from sim2radar.cli.experiment import run_sweep
     from sim2radar.cli.generate import run_generate
     from sim2radar.evaluate.gap import write_gap_report
-    from tasks.experiment import write_json
+    from sim2radar.tasks.experiment import write_json
 
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)

@@ -94,9 +94,9 @@ def run_sweep(sim: str, real: str, *, profile: str, name: str, out: str, store: 
     from sim2radar.cli.simulate import _prefect_env
 
     _prefect_env(verbose)
-    from flows.run_experiment import progress_callback, run_experiment_flow
-    from tasks.experiment import prepare_sweep
-    from tasks.runners import task_runner
+    from sim2radar.flows.run_experiment import progress_callback, run_experiment_flow
+    from sim2radar.tasks.experiment import prepare_sweep
+    from sim2radar.tasks.runners import task_runner
 
     plan = prepare_sweep(sim, real, profile=profile, name=name, out=out, store=store,
                          sim_gt=sim_gt, sim_one_material=sim_one_material, ablations=ablations,
@@ -209,7 +209,7 @@ def sweep(
         if fr is not None:
             overrides["fractions"] = fr
         if plan:
-            from tasks.experiment import plan_cost
+            from sim2radar.tasks.experiment import plan_cost
 
             cost = plan_cost(sim, real, profile=profile, store=store, sim_gt=sim_gt,
                              sim_one_material=sim_one_material, ablations=ablations,

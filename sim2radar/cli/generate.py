@@ -83,7 +83,7 @@ def run_generate(
 
     ``render_rgb``, ``frames_by_seed``, ``splits``, ``export_doppler``, ``domain``,
     ``flow_name`` and ``motion`` (the rig's speed range) serve the reference dataset
-    (:mod:`flows.reference_dataset`).
+    (:mod:`sim2radar.flows.reference_dataset`).
     ``export_whole_dataset`` (``--retry-failed``): the export holds every frame the dataset's
     manifest lists, not only this run's worlds.
 
@@ -99,7 +99,7 @@ def run_generate(
     from rich.progress import Progress
 
     from sim2radar.factory.spec import resolve_spec
-    from tasks.dataset import generate_dataset_plain, world_bev_pngs
+    from sim2radar.tasks.dataset import generate_dataset_plain, world_bev_pngs
 
     spec = resolve_spec(frames, geometry, radar, reconstruction, world, rig, seed, class_name,
                         labels, material_override, _label_range(export_label_range_m),
@@ -118,16 +118,16 @@ def run_generate(
                             description=f"{outcome.world_id}: {outcome.status} ({pts} pts)")
 
         if use_prefect:
-            from flows.generate_dataset import (
+            from sim2radar.flows.generate_dataset import (
                 DatasetFailures,
                 generate_dataset_flow,
                 progress_callback,
             )
-            from tasks.runners import task_runner
+            from sim2radar.tasks.runners import task_runner
 
             runner = task_runner(workers, dask_address)
-            from flows._steps import STEP_NAMES
             from sim2radar.cli._app import quiet_recorded_failures
+            from sim2radar.flows._steps import STEP_NAMES
 
             with progress_callback(on_world), \
                     quiet_recorded_failures(["generate-world-dataset", *STEP_NAMES], verbose):
@@ -142,14 +142,14 @@ def run_generate(
             summary = generate_dataset_plain(seeds, spec, store, dataset, export_dir=export_dir,
                                              force=force, on_world=on_world, **extras)
     if whole_export is not None:
-        from tasks.dataset import export_all, outcomes_from_manifest
+        from sim2radar.tasks.dataset import export_all, outcomes_from_manifest
 
         summary["export"] = export_all(store, outcomes_from_manifest(store, dataset),
                                        whole_export, spec, splits=splits,
                                        with_doppler=export_doppler, domain=domain)
     summary["pngs"] = []
     if png_dir is not None:
-        from tasks.dataset import outcomes_from_summary
+        from sim2radar.tasks.dataset import outcomes_from_summary
 
         summary["pngs"] = world_bev_pngs(store, outcomes_from_summary(summary), png_dir, spec)
     return summary
@@ -322,7 +322,7 @@ def generate(
         if dask and no_prefect:
             raise ValueError("--dask needs the Prefect engine: drop --no-prefect")
         if dask:
-            from tasks.runners import task_runner
+            from sim2radar.tasks.runners import task_runner
 
             task_runner(workers, dask)  # prefect-dask installed, address well-formed
         params = dict(
@@ -350,7 +350,7 @@ def generate(
         dataset_name = dataset or cfg.get("dataset", "generated")
         seeds = list(range(first, first + n_worlds))
         if retry_failed:
-            from tasks.dataset import failed_world_seeds
+            from sim2radar.tasks.dataset import failed_world_seeds
 
             seeds = failed_world_seeds(out, dataset_name)
     except (ValueError, FileNotFoundError, ImportError) as exc:

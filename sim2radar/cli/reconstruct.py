@@ -52,8 +52,8 @@ def reconstruct_cmd(
     from sim2radar.camera import CameraIntrinsics
     from sim2radar.reconstruct import ReconstructionConfig, build_backends
     from sim2radar.reconstruct.inputs import load_rig_calibration
-    from storage import ArtifactStore, meshes_from_table
-    from tasks.reconstruct import ImageJob, reconstruct_images_plain
+    from sim2radar.storage import ArtifactStore, meshes_from_table
+    from sim2radar.tasks.reconstruct import ImageJob, reconstruct_images_plain
 
     exit_unless_writable(str(out))
     console = Console()

@@ -61,7 +61,7 @@ def reference(
     if not no_prefect:
         _prefect_env(verbose)
     try:
-        from flows.reference_dataset import reference_run, reference_spec
+        from sim2radar.flows.reference_dataset import reference_run, reference_spec
 
         args = reference_run(first_seed, worlds, frames, seed)
         plan = args.pop("plan")

@@ -67,7 +67,7 @@ def run_scenes(
 
         if use_prefect:
             _prefect_env(verbose)
-            from flows.simulate import progress_callback, run_simulation
+            from sim2radar.flows.simulate import progress_callback, run_simulation
 
             # a broken scene is recorded as failed and printed in the summary: no traceback
             with progress_callback(on_scene), quiet_recorded_failures(["simulate-scene"], verbose):
@@ -82,7 +82,7 @@ def run_scenes(
                     workers=workers,
                     dask_address=dask_address,
                 )
-        from tasks.radar import simulate_scenes_plain
+        from sim2radar.tasks.radar import simulate_scenes_plain
 
         return simulate_scenes_plain(
             scene_strs, radar, store, dataset, seed=seed, png_dir=png_dir, force=force, on_scene=on_scene
@@ -152,7 +152,7 @@ def simulate(
         raise typer.Exit(2) from None
     if png_dir is None and not no_png:
         png_dir = _default_png_dir(out)
-    from tasks.common import expand_scenes
+    from sim2radar.tasks.common import expand_scenes
 
     try:
         scene_files = expand_scenes(scenes)

@@ -5,7 +5,7 @@
 
 Every published artifact of every stage and every manifest row file is read in full (footer,
 row groups, every page, the recorded schema's stage). A run does the footer check itself on
-every cache lookup and heals what fails (:mod:`storage.store`); ``verify`` also finds damage a
+every cache lookup and heals what fails (:mod:`sim2radar.storage.store`); ``verify`` also finds damage a
 run would only meet when it reads the file, and files no run currently asks for. ``--repair``
 moves each file that fails into the store's ``quarantine/`` (nothing is deleted) so that the
 next run that needs it recomputes it. Exit status: 0 when every file verifies (or every file
@@ -35,7 +35,7 @@ def verify_cmd(
     that cannot be opened."""
     from pathlib import Path
 
-    from storage import ArtifactStore
+    from sim2radar.storage import ArtifactStore
 
     if "://" not in store and not Path(store).is_dir():
         typer.secho(f"error: {store}: no such store folder; pass the folder given to "

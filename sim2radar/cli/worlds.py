@@ -91,12 +91,12 @@ def generate(
     world_cfg, rig = _configs(config, width, height, spp)
     seeds = list(range(first_seed, first_seed + worlds))
     if no_prefect:
-        from tasks.worlds import generate_worlds_plain
+        from sim2radar.tasks.worlds import generate_worlds_plain
 
         summary = generate_worlds_plain(seeds, frames, out, dataset, world_cfg, rig, force=force,
                                         radar=radar)
     else:
-        from flows.worlds import run_worlds
+        from sim2radar.flows.worlds import run_worlds
 
         summary = run_worlds(seeds, frames, out, dataset, world_cfg, rig, force=force,
                              radar=radar)

@@ -25,7 +25,7 @@ from typing import Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
-from sim2radar.configio import read_yaml_mapping
+from sim2radar.configio import config_path, read_yaml_mapping
 
 __all__ = [
     "AnchorConfig",
@@ -284,7 +284,7 @@ def load_config(path: str | Path, **overrides: Any) -> DetectConfig:
     ------
     FileNotFoundError, ValueError — naming the file and the offending field.
     """
-    path = Path(path)
+    path = config_path(path, "detect", what="detector config")
     raw = read_yaml_mapping(path, what="detector config", missing_error=FileNotFoundError,
                             expect="a mapping of sections")
     try:

@@ -27,7 +27,6 @@ import contextlib
 import json
 import logging
 import math
-import os
 import pickle
 import threading
 import time
@@ -44,6 +43,7 @@ from sim2radar.detect.augment import GTDatabase, augment_frame, build_gt_databas
 from sim2radar.detect.config import DetectConfig, load_config
 from sim2radar.detect.model import Detections, PointPillars
 from sim2radar.evaluate.ap import evaluate_detections
+from sim2radar.fileio import atomic_write_with
 from sim2radar.hardware import autocast_dtype
 
 __all__ = [
@@ -131,9 +131,7 @@ def _resolve_device(cfg: DetectConfig, device) -> torch.device:
 
 # ---------------------------------------------------------------------------- checkpoints
 def _save(path: Path, payload: dict[str, Any]) -> None:
-    tmp = path.with_name(f".{path.name}.tmp{os.getpid()}")
-    torch.save(payload, tmp)
-    os.replace(tmp, path)
+    atomic_write_with(path, lambda tmp: torch.save(payload, tmp))
 
 
 def _versions() -> dict[str, str]:

@@ -1,7 +1,7 @@
 """Figures of a generated radar dataset, per geometry: points and labels per frame, label
 recall / precision against the ground-truth doors in the radar's view, sim-vs-GT comparison of
 one frame (points ratio, radar Chamfer distance), seconds per stage. Inputs are the factory's
-per-frame outcome records (:class:`tasks.dataset.FrameOutcome`: ``n_points``, ``n_labels``,
+per-frame outcome records (:class:`sim2radar.tasks.dataset.FrameOutcome`: ``n_points``, ``n_labels``,
 ``n_gt_doors``, ``gt_points_near``, ``label_match``, ``timings_s``), so the figures of a run
 come from its records without reading a frame back."""
 

@@ -57,7 +57,7 @@ from sim2radar.evaluate.artefacts import (
     stack_points,
 )
 from sim2radar.evaluate.reconstruction import chamfer_distance
-from sim2radar.fileio import atomic_write, write_json
+from sim2radar.fileio import atomic_write, jsonable, write_json
 from sim2radar.radar.intensity import IntensityMatch, fit_intensity_match
 
 __all__ = [
@@ -758,21 +758,6 @@ def _fit_frames(real_root: Path, real_ids: list[str], max_frames: int | None,
     return real_ids, f"all analysed REAL frames ({why}: no train split to fit on)"
 
 
-def _json_safe(obj: Any) -> Any:
-    """NaN/inf -> None, NumPy scalars -> Python, recursively."""
-    if isinstance(obj, dict):
-        return {str(k): _json_safe(v) for k, v in obj.items()}
-    if isinstance(obj, list | tuple):
-        return [_json_safe(v) for v in obj]
-    if isinstance(obj, np.ndarray):
-        return [_json_safe(v) for v in obj.tolist()]
-    if isinstance(obj, np.integer):
-        return int(obj)
-    if isinstance(obj, float | np.floating):
-        return float(obj) if math.isfinite(obj) else None
-    return obj
-
-
 def write_gap_report(
     sim_root: str | Path,
     real_root: str | Path,
@@ -872,7 +857,7 @@ def write_gap_report(
     for name, data in gap_figures(rep).items():
         atomic_write(out_dir / FIGURES[name], data)
 
-    doc = _json_safe({
+    doc = jsonable({
         "sim": _dataset_dict(sim_root, rep.sim, rep.info_sim),
         "real": _dataset_dict(real_root, rep.real, rep.info_real),
         "points_ratio": rep.points_ratio,

@@ -6,7 +6,7 @@ the wall time on N workers.
          "finetune": measure_step_seconds(ft_cfg, real_frames)}
     hours = wall_time(jobs, s, workers=8) / 3600
 
-:func:`wall_time` replays the sweep flow's dispatch (:mod:`flows.run_experiment`): every
+:func:`wall_time` replays the sweep flow's dispatch (:mod:`sim2radar.flows.run_experiment`): every
 pre-training and every from-scratch run is queued at the start in plan order, a pre-trained
 run is queued when its pre-training finishes, and each free worker takes the oldest queued
 job (Dask and the thread pool both run tasks roughly first-in, first-out). Jobs last ``steps x

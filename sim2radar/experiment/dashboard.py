@@ -167,7 +167,7 @@ def _require(doc: Mapping[str, Any], keys: Sequence[str], path: Path, role: str,
 def _read_runs(folder: Path) -> list[dict[str, Any]]:
     import pyarrow.parquet as pq
 
-    from storage import get_schema
+    from sim2radar.storage import get_schema
 
     path = folder / FILES["runs"]
     try:

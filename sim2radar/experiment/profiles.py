@@ -37,22 +37,19 @@ from typing import Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
 
-from sim2radar.configio import read_yaml_mapping
+from sim2radar.configio import bundled_configs, config_path, read_yaml_mapping
 
 __all__ = [
     "ABLATIONS",
     "BASELINE",
     "CONDITIONS",
     "PAPER_FRACTIONS",
-    "PROFILE_DIR",
     "Condition",
     "ExperimentProfile",
     "bundled_profiles",
     "load_profile",
 ]
 
-#: bundled profiles: ``configs/experiment/`` of the source tree
-PROFILE_DIR = Path(__file__).resolve().parents[2] / "configs" / "experiment"
 #: shares of the real train split in the paper's Table 1
 PAPER_FRACTIONS = (0.05, 0.10, 0.25, 0.50, 1.00)
 BASELINE = "baseline"
@@ -250,8 +247,8 @@ def _describe(exc: ValidationError) -> str:
 
 
 def bundled_profiles() -> list[str]:
-    """Names of the profiles in :data:`PROFILE_DIR`."""
-    return sorted(p.stem for p in PROFILE_DIR.glob("*.yaml"))
+    """Names of the bundled profiles (package data ``sim2radar.configs``, folder ``experiment``)."""
+    return bundled_configs("experiment")
 
 
 def load_profile(name_or_path: str | Path) -> ExperimentProfile:
@@ -265,16 +262,7 @@ def load_profile(name_or_path: str | Path) -> ExperimentProfile:
     FileNotFoundError — no such file or bundled profile (the message lists the bundled ones).
     ValueError — naming the file and each field at fault.
     """
-    text = str(name_or_path)
-    looks_like_path = isinstance(name_or_path, Path) or text.endswith((".yaml", ".yml")) \
-        or "/" in text or "\\" in text
-    if looks_like_path:
-        path = Path(name_or_path)
-    else:
-        path = PROFILE_DIR / f"{text}.yaml"
-        if not path.is_file():
-            raise FileNotFoundError(f"no bundled experiment profile {text!r}; bundled: "
-                                    f"{bundled_profiles()} (or pass a YAML path)")
+    path = config_path(name_or_path, "experiment", what="experiment profile")
     raw = read_yaml_mapping(path, what="experiment profile", missing_error=FileNotFoundError)
     raw.setdefault("name", path.stem)
     try:

@@ -14,7 +14,7 @@ from typing import Any
 import numpy as np
 import yaml
 
-from sim2radar.configio import whole_number
+from sim2radar.configio import config_path, whole_number
 from sim2radar.factory.labels import (
     DEFAULT_POINT_CLOUD_RANGE_M,
     LabelConfig,
@@ -290,7 +290,7 @@ def load_generate_config(path: str | Path) -> dict[str, Any]:
     ------
     ValueError naming the file and the bad key.
     """
-    path = Path(path)
+    path = config_path(path, "generate", what="generate config")
     if not path.is_file():
         raise ValueError(f"{path}: config file not found")
     try:

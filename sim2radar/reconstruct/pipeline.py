@@ -28,7 +28,7 @@ import yaml
 from pydantic import BaseModel, ConfigDict, Field, create_model, field_validator
 
 from sim2radar.camera import CameraIntrinsics
-from sim2radar.configio import read_yaml_mapping
+from sim2radar.configio import config_path, read_yaml_mapping
 from sim2radar.mesh import MaterialMesh, save_ply
 from sim2radar.reconstruct.backproject import (
     gravity_up,
@@ -160,7 +160,7 @@ class ReconstructionConfig(BaseModel):
     @classmethod
     def from_yaml(cls, path: str | Path) -> ReconstructionConfig:
         """Load a YAML config; relative ``*path*`` options resolve against the file's folder."""
-        path = Path(path)
+        path = config_path(path, "reconstruct", what="reconstruction config")
         doc = read_yaml_mapping(path, what="reconstruction config",
                                 missing_error=FileNotFoundError,
                                 expect="a mapping (depth, segments, materials, ...)")

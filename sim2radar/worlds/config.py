@@ -22,7 +22,7 @@ from typing import Any
 
 from pydantic import BaseModel, ConfigDict, ValidationError, field_validator, model_validator
 
-from sim2radar.configio import read_yaml_mapping
+from sim2radar.configio import config_path, read_yaml_mapping
 from sim2radar.vocab import MATERIAL_CLASSES
 
 __all__ = [
@@ -410,7 +410,7 @@ def make_rig_config(values: dict[str, Any] | None = None, *, source: str = "") -
 
 def load_worlds_config(path: str | Path) -> tuple[WorldConfig, RigConfig]:
     """Read ``world:`` and ``rig:`` sections from a YAML file (both optional)."""
-    path = Path(path)
+    path = config_path(path, "worlds", what="world config")
     doc = read_yaml_mapping(path, error=WorldConfigError,
                             expect="a mapping with 'world' and/or 'rig' sections")
     unknown = sorted(set(doc) - {"world", "rig"})

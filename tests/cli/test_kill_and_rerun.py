@@ -28,9 +28,8 @@ from pathlib import Path
 import numpy as np
 import pyarrow.parquet as pq
 import pytest
-
-from storage import ArtifactStore
-from tasks.dataset import read_dataset_frame
+from sim2radar.storage import ArtifactStore
+from sim2radar.tasks.dataset import read_dataset_frame
 
 REPO = Path(__file__).resolve().parents[2]
 ARGS = ["generate", "--worlds", "2", "--frames", "3", "--width", "80", "--height", "60",

@@ -16,11 +16,11 @@ import cv2
 import numpy as np
 import pytest
 import yaml
+from sim2radar.storage import ArtifactStore
 from typer.testing import CliRunner
 
 from sim2radar.camera import CameraIntrinsics
 from sim2radar.cli import app
-from storage import ArtifactStore
 from tests.reconstruct._models import (
     SAM_INPUT,
     TINY_VOCAB,
@@ -102,7 +102,7 @@ def _run(captures, model_dir, tmp_path, base_url: str, **segments):
 
 def test_a_640x480_capture_runs_through_an_800x1200_grounding_dino(captures, model_dir,
                                                                     tmp_path):
-    from storage.reconstruction import segments_from_table
+    from sim2radar.storage.reconstruction import segments_from_table
 
     with VlmTestServer("json") as srv:
         code, output, rows, export = _run(captures, model_dir, tmp_path, srv.base_url)

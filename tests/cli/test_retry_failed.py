@@ -7,10 +7,10 @@ import json
 import shutil
 
 import pytest
+from sim2radar.storage import ArtifactStore
 from typer.testing import CliRunner
 
 from sim2radar.cli import app
-from storage import ArtifactStore
 
 
 def _invoke(args):
@@ -18,9 +18,9 @@ def _invoke(args):
 
 
 def test_retry_failed_worlds_reruns_only_them(tmp_path, monkeypatch):
-    import tasks.worlds
+    import sim2radar.tasks.worlds
 
-    real = tasks.worlds.generate_world_artifacts
+    real = sim2radar.tasks.worlds.generate_world_artifacts
 
     def flaky(seed, *a, **k):
         if seed == 1:
@@ -31,15 +31,15 @@ def test_retry_failed_worlds_reruns_only_them(tmp_path, monkeypatch):
     args = ["generate", "--no-prefect", "--no-png", "--worlds", "2", "--frames", "1",
             "--geometry", "ground_truth", "--width", "64", "--height", "48", "--spp", "1",
             "--out", str(store), "--dataset", "d", "--export-openpcdet", str(export)]
-    monkeypatch.setattr(tasks.worlds, "generate_world_artifacts", flaky)
+    monkeypatch.setattr(sim2radar.tasks.worlds, "generate_world_artifacts", flaky)
     first = _invoke(args + ["--json", str(tmp_path / "first.json")])
     assert first.exit_code == 0, first.output
     rows = {r["scene_id"]: r for r in ArtifactStore(store).manifest("d").rows()}
     assert rows["world_000001"]["status"] == "failed"
-    monkeypatch.setattr(tasks.worlds, "generate_world_artifacts", real)
+    monkeypatch.setattr(sim2radar.tasks.worlds, "generate_world_artifacts", real)
 
     seen = []
-    monkeypatch.setattr(tasks.worlds, "generate_world_artifacts",
+    monkeypatch.setattr(sim2radar.tasks.worlds, "generate_world_artifacts",
                         lambda seed, *a, **k: seen.append(seed) or real(seed, *a, **k))
     again = _invoke(args + ["--retry-failed", "--json", str(tmp_path / "again.json")])
     assert again.exit_code == 0, again.output

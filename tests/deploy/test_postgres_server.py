@@ -36,8 +36,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
-from storage import ArtifactStore
+from sim2radar.storage import ArtifactStore
 
 REPO = Path(__file__).resolve().parents[2]
 PREFECT_FILE = REPO / "deploy" / "prefect.yaml"
@@ -269,7 +268,7 @@ def prefect_server(postgres: Postgres, tmp_path: Path) -> Iterator[PrefectServer
 def test_deployment_run_on_a_postgres_backed_server_completes_and_stores_the_frames(
     postgres: Postgres, prefect_server: PrefectServer, tmp_path: Path
 ):
-    from tasks.radar import scene_keys
+    from sim2radar.tasks.radar import scene_keys
 
     env = _prefect_env(PREFECT_API_URL=prefect_server.api_url,
                        PREFECT_HOME=str(tmp_path / "client-home"),

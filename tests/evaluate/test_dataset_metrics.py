@@ -6,9 +6,9 @@ import math
 
 import numpy as np
 import pytest
+from sim2radar.tasks.dataset import FrameOutcome
 
 from sim2radar.evaluate.dataset import compare_frames, finite_mean, geometry_metrics, stage_seconds
-from tasks.dataset import FrameOutcome
 
 
 def _frame(n_points, n_labels, tp, n_gt, near, timings):
@@ -65,7 +65,7 @@ def test_dataset_figures_and_the_factory_tasks_do_not_import_torch():
     import subprocess
     import sys
 
-    code = ("import sys, tasks.dataset, sim2radar.evaluate.dataset, sim2radar.evaluate; "
+    code = ("import sys, sim2radar.tasks.dataset, sim2radar.evaluate.dataset, sim2radar.evaluate; "
             "print('torch' in sys.modules)")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          check=True)

@@ -12,12 +12,12 @@ import yaml
 from sim2radar.experiment.profiles import (
     ABLATIONS,
     CONDITIONS,
-    PROFILE_DIR,
     ExperimentProfile,
     bundled_profiles,
     load_profile,
 )
 
+PROFILE_DIR = Path(__file__).resolve().parents[2] / "configs" / "experiment"
 DETECT_DIR = PROFILE_DIR.parent / "detect"
 
 

@@ -8,8 +8,7 @@ import shutil
 
 import numpy as np
 import pytest
-
-from storage import ArtifactStore
+from sim2radar.storage import ArtifactStore
 
 FRAMES = 3
 
@@ -45,7 +44,7 @@ def _task_runs(flow_run_name_filter: str = "capture-dataset"):
 
 
 def test_capture_folder_to_radar_dataset_stage_by_stage(prefect_server, capture_folder, tmp_path):
-    from flows.capture_dataset import CAPTURE_DOMAIN, capture_dataset
+    from sim2radar.flows.capture_dataset import CAPTURE_DOMAIN, capture_dataset
 
     store_root, export = tmp_path / "store", tmp_path / "openpcdet"
     first = capture_dataset(capture_folder, store_root, "lab", export_dir=export,
@@ -99,10 +98,11 @@ def test_capture_folder_to_radar_dataset_stage_by_stage(prefect_server, capture_
 
 
 def test_staged_reconstruction_equals_the_one_call_pipeline(capture_folder, tmp_path):
+    from sim2radar.storage.reconstruction import read_reconstruction
+    from sim2radar.tasks.capture import process_capture_scene
+
     from sim2radar.factory.captures import CaptureSpec, find_captures, load_capture_frame
     from sim2radar.reconstruct import reconstruct
-    from storage.reconstruction import read_reconstruction
-    from tasks.capture import process_capture_scene
 
     scene = find_captures(capture_folder)[0]
     spec = CaptureSpec(radar="ti-mmwcas", reconstruction=None, poses={"frames": 1})

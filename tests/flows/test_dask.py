@@ -37,7 +37,7 @@ def cluster():
     """A 2-process LocalCluster on loopback (no dashboard), closed after the module."""
     pytest.importorskip("prefect_dask")
     distributed = pytest.importorskip("distributed")
-    from tasks.runners import local_cluster_kwargs
+    from sim2radar.tasks.runners import local_cluster_kwargs
 
     with distributed.LocalCluster(**local_cluster_kwargs(2)) as lc:
         assert lc.scheduler_address.startswith("tcp://127.0.0.1:")
@@ -80,8 +80,7 @@ def _parquet_mtimes(root):
 def test_task_runner_choice_and_errors(monkeypatch):
     from prefect.task_runners import ThreadPoolTaskRunner
     from prefect_dask import DaskTaskRunner
-
-    from tasks.runners import task_runner
+    from sim2radar.tasks.runners import task_runner
 
     threads = task_runner(3)
     assert isinstance(threads, ThreadPoolTaskRunner) and threads._max_workers == 3
@@ -103,7 +102,7 @@ def test_task_runner_choice_and_errors(monkeypatch):
 
 
 def test_workers_are_probed_before_use(cluster):
-    from tasks.runners import _worker_problems, check_dask_workers, task_runner
+    from sim2radar.tasks.runners import _worker_problems, check_dask_workers, task_runner
 
     probes = check_dask_workers(cluster.scheduler_address)
     assert len(probes) == 2
@@ -124,9 +123,9 @@ def test_workers_are_probed_before_use(cluster):
 
 def test_simulate_flow_on_dask_matches_threads(cluster, prefect_server, tmp_path,
                                                broken_scenes):
-    from flows.simulate import run_simulation
-    from storage import ArtifactStore
-    from storage.codecs import radar_frames_from_table
+    from sim2radar.flows.simulate import run_simulation
+    from sim2radar.storage import ArtifactStore
+    from sim2radar.storage.codecs import radar_frames_from_table
 
     def read_points(root, key):
         return [f.points for f in radar_frames_from_table(
@@ -170,12 +169,13 @@ def test_simulate_flow_on_dask_matches_threads(cluster, prefect_server, tmp_path
 
 
 def test_generate_flow_on_dask_matches_threads(cluster, prefect_server, tmp_path):
-    from flows.generate_dataset import generate_dataset
+    from sim2radar.flows.generate_dataset import generate_dataset
+    from sim2radar.storage import ArtifactStore
+    from sim2radar.tasks import dataset as td
+
     from sim2radar.datasets import OpenPCDetDataset
     from sim2radar.evaluate.reconstruction import chamfer_distance
     from sim2radar.radar import load_radar_config
-    from storage import ArtifactStore
-    from tasks import dataset as td
 
     radar = load_radar_config("ti-mmwcas", ray_spacing_deg=0.5)
     args = dict(seeds=[5, 6, BROKEN_SEED], frames_per_world=1, dataset="g", radar=radar,

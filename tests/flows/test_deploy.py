@@ -68,7 +68,7 @@ def test_generate_deployments_resolve_to_the_factory_job(monkeypatch):
 
 
 def test_expand_scenes_folders_globs_and_files(tmp_path):
-    from flows.simulate import expand_scenes
+    from sim2radar.flows.simulate import expand_scenes
 
     (tmp_path / "a").mkdir()
     (tmp_path / "a" / "one.yaml").write_text("meshes: []")

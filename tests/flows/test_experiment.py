@@ -14,9 +14,9 @@ from pathlib import Path
 import numpy as np
 import pyarrow.parquet as pq
 import pytest
+from sim2radar.storage import ArtifactStore, get_schema
 
 from sim2radar.datasets import make_door_frames, write_dataset, write_metadata
-from storage import ArtifactStore, get_schema
 
 REPO = Path(__file__).resolve().parents[2]
 PROXY = "proxy-real (reference radar simulation)"
@@ -50,7 +50,7 @@ def data(tmp_path_factory):
 
 @pytest.fixture(scope="module")
 def first(data, prefect_server):
-    from flows.run_experiment import run_experiment
+    from sim2radar.flows.run_experiment import run_experiment
 
     out, store = data["root"] / "sweeps", data["root"] / "store"
     summary = run_experiment(data["sim"], data["real"], profile="smoke", name="t", out=out,
@@ -109,8 +109,9 @@ def test_prefect_artifacts_are_published(first):
 
 
 def test_a_rerun_trains_nothing(first, data, monkeypatch):
+    from sim2radar.flows.run_experiment import run_experiment
+
     import sim2radar.detect.train as train_mod
-    from flows.run_experiment import run_experiment
 
     calls = []
     real_train = train_mod.train
@@ -125,7 +126,7 @@ def test_a_rerun_trains_nothing(first, data, monkeypatch):
 def test_a_sweep_refuses_changed_settings_but_not_changed_execution(first, data):
     """The settings are fixed when the sweep is created: a rerun with a changed protocol (lr)
     is refused with the field named, one with changed execution (concurrency) runs."""
-    from tasks.experiment import SweepSettingsChanged, prepare_sweep
+    from sim2radar.tasks.experiment import SweepSettingsChanged, prepare_sweep
 
     sweep = json.loads((first["dir"] / "sweep.json").read_text())
     # amp "auto" is decided once, when the sweep is planned: every run trains the same way
@@ -148,9 +149,8 @@ def test_a_paper_sized_plan_reaches_the_flow_as_a_file(data, tmp_path):
     import inspect
 
     from prefect._internal.schemas.validators import validate_parameter_size
-
-    from flows.run_experiment import run_experiment_flow
-    from tasks.experiment import prepare_sweep, read_plan
+    from sim2radar.flows.run_experiment import run_experiment_flow
+    from sim2radar.tasks.experiment import prepare_sweep, read_plan
 
     limit = 524_288  # Prefect 3's default server.flow_run max parameter size
     plan = prepare_sweep(data["sim"], data["real"], profile="smoke", name="big",
@@ -172,9 +172,10 @@ def test_a_frame_broken_before_or_during_a_sweep_trains_nothing_on_it(data, pref
     every split is loaded first); one broken while the sweep is planned or running fails the
     runs with "changed while the sweep ran" instead of training on altered data, and the
     rerun after the fix finishes them."""
-    from flows.run_experiment import run_experiment_flow
+    from sim2radar.flows.run_experiment import run_experiment_flow
+    from sim2radar.tasks.experiment import prepare_sweep
+
     from sim2radar.datasets import DatasetError
-    from tasks.experiment import prepare_sweep
 
     real = _write(tmp_path / "real", 2, {"train": 8, "val": 4, "test": 4}, 100_000, proxy=True)
     victim = real / "points" / f"{(real / 'ImageSets' / 'train.txt').read_text().split()[-1]}.npy"
@@ -279,8 +280,8 @@ def test_a_sweep_on_a_dask_cluster_gives_the_thread_runners_results(first, data,
     run and reports the thread runner's APs: training is seeded per run, not per process."""
     pytest.importorskip("prefect_dask")
     distributed = pytest.importorskip("distributed")
-    from flows.run_experiment import run_experiment
-    from tasks.runners import local_cluster_kwargs
+    from sim2radar.flows.run_experiment import run_experiment
+    from sim2radar.tasks.runners import local_cluster_kwargs
 
     with distributed.LocalCluster(**local_cluster_kwargs(2)) as lc:
         summary = run_experiment(data["sim"], data["real"], profile="smoke", name="t",
@@ -306,9 +307,10 @@ def test_a_dask_worker_killed_mid_run_loses_nothing(data, prefect_server, tmp_pa
     distributed = pytest.importorskip("distributed")
     import threading
 
-    from flows.run_experiment import run_experiment
+    from sim2radar.flows.run_experiment import run_experiment
+    from sim2radar.tasks.runners import local_cluster_kwargs
+
     from sim2radar.experiment.claims import read_events
-    from tasks.runners import local_cluster_kwargs
 
     sweep = tmp_path / "sweeps" / "kill"
     killed: dict = {}
@@ -405,7 +407,7 @@ def test_a_truncated_run_row_heals_and_force_run_redoes_a_run(data, prefect_serv
     """Issue #24 probe 2 for sweeps: a truncated experiment_runs file is quarantined and its
     run computed again (from its final checkpoint: same AP) instead of failing on every
     rerun; ``--force-run`` redoes a run from scratch, its old row and checkpoints kept aside."""
-    from flows.run_experiment import run_experiment
+    from sim2radar.flows.run_experiment import run_experiment
 
     kw = dict(profile="smoke", name="h", out=tmp_path / "o", store=tmp_path / "store",
               overrides={"trials": 1, "fractions": [1.0]})

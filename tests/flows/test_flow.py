@@ -3,14 +3,13 @@
 from __future__ import annotations
 
 import pytest
-
-from storage import ArtifactStore
+from sim2radar.storage import ArtifactStore
 
 
 def test_flow_runs_twice_second_computes_nothing_and_failures_are_recorded(
     prefect_server, plate_scene, broken_scenes, tmp_path, count_sim
 ):
-    from flows.simulate import SceneFailures, progress_callback, run_simulation
+    from sim2radar.flows.simulate import SceneFailures, progress_callback, run_simulation
 
     root = tmp_path / "store"
     scenes = [plate_scene, broken_scenes["unknown"]]

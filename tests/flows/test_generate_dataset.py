@@ -12,6 +12,8 @@ import os
 import numpy as np
 import pytest
 import yaml
+from sim2radar.storage import ArtifactStore
+from sim2radar.tasks import dataset as td
 
 from sim2radar.datasets import OpenPCDetDataset
 from sim2radar.radar import load_radar_config
@@ -22,8 +24,6 @@ from sim2radar.worlds import (
     rig_extrinsics,
     trajectory,
 )
-from storage import ArtifactStore
-from tasks import dataset as td
 
 WORLD = {"corridor_length_m": [10, 12], "layout_probs": {"straight": 1.0}}
 RIG = {"width": 80, "height": 60, "spp": 2, "lidar_azimuth_step_deg": 1.0}
@@ -238,7 +238,7 @@ def test_cli_writes_pngs_and_summary(run, tmp_path):
 
 
 def test_prefect_flow_run_strict(run, prefect_server):
-    from flows.generate_dataset import DatasetFailures, generate_dataset
+    from sim2radar.flows.generate_dataset import DatasetFailures, generate_dataset
 
     with pytest.raises(DatasetFailures) as info:
         generate_dataset(seeds=[SEED, BROKEN_SEED], frames_per_world=2,

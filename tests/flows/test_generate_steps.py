@@ -10,7 +10,7 @@ RIG = {"width": 160, "height": 120, "spp": 4}
 
 
 def test_world_steps_are_tasks_and_a_rerun_is_cached(prefect_server, tmp_path):
-    from flows.generate_dataset import generate_dataset
+    from sim2radar.flows.generate_dataset import generate_dataset
 
     kw = dict(n_worlds=1, frames_per_world=1, store=tmp_path / "store", dataset="steps",
               geometry="both", rig=RIG, first_seed=3)
@@ -35,8 +35,7 @@ def test_a_run_publishes_a_world_table_and_a_finished_progress_artifact(prefect_
 
     from prefect.client.orchestration import get_client
     from prefect.client.schemas.filters import ArtifactFilter
-
-    from flows.generate_dataset import generate_dataset
+    from sim2radar.flows.generate_dataset import generate_dataset
 
     generate_dataset(n_worlds=1, frames_per_world=1, store=tmp_path / "store",
                      dataset="table-run", geometry="ground_truth", rig=RIG, first_seed=4)

@@ -1,4 +1,4 @@
-"""tasks.radar through plain functions (no Prefect engine): store, skip, recompute, failures."""
+"""sim2radar.tasks.radar through plain functions (no Prefect engine): store, skip, recompute, failures."""
 
 from __future__ import annotations
 
@@ -8,10 +8,15 @@ import os
 import numpy as np
 import pytest
 import yaml
+from sim2radar.storage import (
+    ArtifactStore,
+    canonical_json,
+    meshes_from_table,
+    radar_frames_from_table,
+)
+from sim2radar.tasks.radar import scene_keys, simulate_scene, simulate_scenes_plain
 
 from sim2radar.radar import load_radar_config
-from storage import ArtifactStore, canonical_json, meshes_from_table, radar_frames_from_table
-from tasks.radar import scene_keys, simulate_scene, simulate_scenes_plain
 from tests.flows._scenes import PLATE_RANGE_M, write_scene
 
 

@@ -6,14 +6,13 @@ from __future__ import annotations
 import errno
 
 import pytest
-
-from flows._steps import record_scene_task
-from storage.manifest import Manifest
-from tasks.common import REMOTE_IO_RETRIES
-from tasks.dataset import WorldDatasetOutcome
-from tasks.radar import SceneOutcome, record_outcome_task
-from tasks.reconstruct import ReconOutcome, record_recon_outcome_task
-from tasks.worlds import WorldOutcome, record_world_outcome_task
+from sim2radar.flows._steps import record_scene_task
+from sim2radar.storage.manifest import Manifest
+from sim2radar.tasks.common import REMOTE_IO_RETRIES
+from sim2radar.tasks.dataset import WorldDatasetOutcome
+from sim2radar.tasks.radar import SceneOutcome, record_outcome_task
+from sim2radar.tasks.reconstruct import ReconOutcome, record_recon_outcome_task
+from sim2radar.tasks.worlds import WorldOutcome, record_world_outcome_task
 
 #: every task retried with REMOTE_IO_RETRIES that this file covers, with an outcome to record
 RECORD_TASKS = [

@@ -89,8 +89,8 @@ def test_write_scene_is_loadable_and_mitsuba_xml(tmp_path, builtin_scene):
 
 
 def test_artifacts_round_trip_through_the_store(tmp_path, builtin_scene, frame):
-    from storage import ArtifactStore, meshes_from_table
-    from storage.reconstruction import (
+    from sim2radar.storage import ArtifactStore, meshes_from_table
+    from sim2radar.storage.reconstruction import (
         frame_digest,
         read_reconstruction,
         write_scene_artifacts,
@@ -230,8 +230,7 @@ def test_shipped_configs_parse():
 def _write_job(tmp_path, frame, name="f0"):
     import cv2
     import yaml
-
-    from tasks.reconstruct import ImageJob
+    from sim2radar.tasks.reconstruct import ImageJob
 
     cv2.imwrite(str(tmp_path / f"{name}.png"), frame.rgb[..., ::-1])
     (tmp_path / "K.yaml").write_text(yaml.safe_dump(frame.intrinsics.to_dict()))
@@ -241,7 +240,7 @@ def _write_job(tmp_path, frame, name="f0"):
 
 
 def test_task_function_caches_by_content_key(tmp_path, frame):
-    from tasks.reconstruct import reconstruct_image, record_recon_outcome
+    from sim2radar.tasks.reconstruct import reconstruct_image, record_recon_outcome
 
     job = _write_job(tmp_path, frame)
     store = tmp_path / "store"
@@ -258,7 +257,7 @@ def test_task_function_caches_by_content_key(tmp_path, frame):
 @pytest.mark.slow
 def test_flow_records_ok_skipped_and_failed(tmp_path, frame, monkeypatch):
     monkeypatch.setenv("PREFECT_HOME", str(tmp_path / "prefect"))
-    from flows.reconstruct import run_reconstruction
+    from sim2radar.flows.reconstruct import run_reconstruction
 
     job = _write_job(tmp_path, frame)
     (tmp_path / "broken.png").write_bytes(b"not an image")
@@ -301,7 +300,7 @@ def test_up_from_pitch_roll_matches_a_rotated_camera():
 def test_rig_calibration_is_validated_used_and_switchable(frame):
     """A frame's rig calibration is checked, reaches the depth stage (its up and floor), is
     recorded in the scene, changes the frame digest, and ``rig_calibration: false`` drops it."""
-    from storage.reconstruction import frame_digest
+    from sim2radar.storage.reconstruction import frame_digest
 
     k = frame.intrinsics
     with pytest.raises(ReconstructionInputError, match="up_cam"):

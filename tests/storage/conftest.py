@@ -6,8 +6,7 @@ import uuid
 
 import numpy as np
 import pytest
-
-from storage import radar_frames_to_table
+from sim2radar.storage import radar_frames_to_table
 
 
 @pytest.fixture

@@ -5,8 +5,7 @@ from __future__ import annotations
 from concurrent.futures import ThreadPoolExecutor
 
 import pytest
-
-from storage import ArtifactStore
+from sim2radar.storage import ArtifactStore
 
 
 @pytest.fixture(params=["local", "memory"])

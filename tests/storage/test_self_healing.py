@@ -9,10 +9,9 @@ from pathlib import Path
 
 import pyarrow.parquet as pq
 import pytest
+from sim2radar.storage import ArtifactStore, content_key
+from sim2radar.storage.store import CorruptArtifactError
 from typer.testing import CliRunner
-
-from storage import ArtifactStore, content_key
-from storage.store import CorruptArtifactError
 
 KEY = content_key(stage="radar_points", stage_version=1, inputs={"scene": "s"}, config={"a": 1})
 
@@ -44,7 +43,7 @@ def test_a_truncated_artifact_is_quarantined_and_recomputed(store, frames_table,
     store.write("radar_points", KEY, frames_table)
     path = store.path("radar_points", KEY)
     original = _truncate(store, path)
-    with caplog.at_level(logging.WARNING, logger="storage.store"):
+    with caplog.at_level(logging.WARNING, logger="sim2radar.storage.store"):
         assert not store.exists("radar_points", KEY)  # the cache check says "recompute"
     assert path in caplog.text and "quarantine" in caplog.text
     assert not store.fs.exists(path)
@@ -98,7 +97,7 @@ def test_a_manifest_row_that_does_not_read_is_rebuilt_by_the_next_record(tmp_pat
         man.upsert(scene, "ok", artifacts={"x": "1"})
     row_file = next(p for p in (tmp_path / "store/manifests/d").iterdir() if p.name[0] == "a")
     row_file.write_bytes(row_file.read_bytes()[:100])
-    with caplog.at_level(logging.WARNING, logger="storage.store"):
+    with caplog.at_level(logging.WARNING, logger="sim2radar.storage.store"):
         assert [r["scene_id"] for r in man.rows()] == ["b"]  # the others still read
     assert row_file.name in caplog.text
     assert man.get("a") is None and len(store.quarantined()) == 1
@@ -129,7 +128,7 @@ def test_store_verify_command(tmp_path, frames_table):
 def test_a_corrupt_read_is_a_corrupt_artifact_error_subclass_of_schema_error(tmp_path,
                                                                              frames_table):
     """Callers that catch SchemaError (one bad frame fails its frame) keep working."""
-    from storage import SchemaError
+    from sim2radar.storage import SchemaError
 
     store = ArtifactStore(tmp_path / "store")
     store.write("radar_points", KEY, frames_table)

@@ -12,8 +12,7 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
 import pytest
-
-from storage import (
+from sim2radar.storage import (
     ArtifactNotFoundError,
     ArtifactStore,
     SchemaError,
@@ -129,7 +128,7 @@ def test_killed_process_leaves_only_an_ignored_tmp_file(tmp_path, frames_table):
     script = textwrap.dedent(
         f"""
         import os, numpy as np, pyarrow.parquet as pq
-        from storage import ArtifactStore, radar_frames_to_table
+        from sim2radar.storage import ArtifactStore, radar_frames_to_table
         real = pq.write_table
         def dying(table, where, **kw):
             real(table, where, **kw)
@@ -189,7 +188,7 @@ def test_bad_keys_and_store_pickles(tmp_path):
 
 
 def test_check_writable_names_the_path_and_the_fix(tmp_path, unwritable_dir, memory_root):
-    from storage import check_writable
+    from sim2radar.storage import check_writable
 
     check_writable(tmp_path / "new" / "store")  # missing folders are fine: a parent is writable
     assert not (tmp_path / "new").exists()  # and the check created nothing
@@ -207,7 +206,7 @@ def test_check_writable_names_the_path_and_the_fix(tmp_path, unwritable_dir, mem
 def test_permanent_io_errors_are_not_retried(memory_root, monkeypatch):
     import errno
 
-    from storage import is_transient_io_error
+    from sim2radar.storage import is_transient_io_error
 
     assert is_transient_io_error(ConnectionError("reset")) and is_transient_io_error(TimeoutError())
     for exc in (PermissionError(errno.EACCES, "denied"), OSError(errno.EROFS, "read-only"),

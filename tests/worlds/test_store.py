@@ -7,11 +7,11 @@ import tempfile
 
 import numpy as np
 import pytest
+from sim2radar.storage import ArtifactStore, meshes_from_table
+from sim2radar.storage.worlds import decode_png, encode_png, frames_from_table
+from sim2radar.tasks.worlds import generate_world_artifacts, generate_worlds_plain, world_keys
 
 from sim2radar.worlds import generate_world, make_world_config
-from storage import ArtifactStore, meshes_from_table
-from storage.worlds import decode_png, encode_png, frames_from_table
-from tasks.worlds import generate_world_artifacts, generate_worlds_plain, world_keys
 from tests.worlds._helpers import SMALL_RIG
 
 SHORT = make_world_config({"corridor_length_m": [10, 12], "layout_probs": {"straight": 1.0}})
@@ -72,7 +72,7 @@ def test_world_artifacts_round_trip_and_skip(tmp_path):
 
 def test_plain_run_records_manifest_and_failures(tmp_path, monkeypatch):
     store = tmp_path / "store"
-    import tasks.worlds as tw
+    import sim2radar.tasks.worlds as tw
 
     real = tw.generate_world_artifacts
 
@@ -103,7 +103,7 @@ def prefect_home():
 
 
 def test_flow_generates_and_then_skips(tmp_path, prefect_home):
-    from flows.worlds import run_worlds
+    from sim2radar.flows.worlds import run_worlds
 
     store = tmp_path / "store"
     first = run_worlds([3], 1, store, "flowds", SHORT, SMALL_RIG)
@@ -115,7 +115,7 @@ def test_flow_generates_and_then_skips(tmp_path, prefect_home):
 
 
 def test_radar_point_clouds_per_frame(tmp_path):
-    from storage import radar_frames_from_table
+    from sim2radar.storage import radar_frames_from_table
 
     store = ArtifactStore(tmp_path / "store")
     out = generate_world_artifacts(6, 2, store, SHORT, SMALL_RIG, radar="ti-mmwcas")
