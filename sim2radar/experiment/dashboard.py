@@ -81,9 +81,7 @@ FILES = {"runs": "runs.parquet", "sweep": "sweep.json", "stats": "stats.json",
 POLL_S = 3.0
 #: PNG file signature (PNG spec, §5.2)
 _PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
-#: condition colours: baseline blue, sim-pretrain red (paper Figure 4), ablations after
-_COLORS = {BASELINE: "#1f77b4", "sim-pretrain": "#d62728", "sim-gt-pretrain": "#2ca02c",
-           "sim-one-material-pretrain": "#9467bd"}
+#: colours of conditions outside the registry (profiles.CONDITIONS holds the known ones')
 _MORE_COLORS = ("#ff7f0e", "#8c564b", "#e377c2", "#7f7f7f", "#bcbd22", "#17becf")
 #: multiplicative x offset between conditions on the log fraction axis (keeps error bars apart)
 _DODGE = 0.035
@@ -343,9 +341,9 @@ def _metric_label(metric: str) -> str:
 
 
 def _color(condition: str, conditions: Sequence[str]) -> str:
-    if condition in _COLORS:
-        return _COLORS[condition]
-    others = [c for c in conditions if c not in _COLORS]
+    if condition in CONDITIONS:
+        return CONDITIONS[condition].colour
+    others = [c for c in conditions if c not in CONDITIONS]
     return _MORE_COLORS[others.index(condition) % len(_MORE_COLORS)]
 
 

@@ -44,6 +44,7 @@ __all__ = [
     "BASELINE",
     "CONDITIONS",
     "PAPER_FRACTIONS",
+    "ROLES",
     "Condition",
     "ExperimentProfile",
     "bundled_profiles",
@@ -57,7 +58,9 @@ BASELINE = "baseline"
 
 @dataclasses.dataclass(frozen=True)
 class Condition:
-    """One arm of the experiment.
+    """One arm of the experiment: its entry in :data:`CONDITIONS` is all a new condition needs
+    (the sweep's data roles and command-line flags, report headings and dashboard colours are
+    derived from it).
 
     Attributes
     ----------
@@ -66,26 +69,42 @@ class Condition:
         (:class:`sim2radar.experiment.data.DomainDataset` roles); None trains from scratch.
     ablation : bool — opt-in (``ablations:`` in a profile) rather than a main condition.
     description : str — one line for reports.
+    label : str — table heading (``Sim Pretrain``).
+    colour : str — the dashboard's colour (``#rrggbb``).
     """
 
     name: str
     sim_role: str | None
     ablation: bool
     description: str
+    label: str
+    colour: str
+
+    @property
+    def flag(self) -> str | None:
+        """The ``sim2radar sweep`` option that names this condition's sim dataset
+        (``--sim``, ``--sim-gt``), None for a condition without pre-training."""
+        return f"--{self.sim_role}" if self.sim_role else None
 
 
-#: the registry of conditions, by name
+#: the registry of conditions, by name (colours: baseline blue, sim-pretrain red as in the
+#: paper's Figure 4, ablations after)
 CONDITIONS: dict[str, Condition] = {c.name: c for c in (
-    Condition(BASELINE, None, False, "random initialisation, trained on real data only"),
+    Condition(BASELINE, None, False, "random initialisation, trained on real data only",
+              "Baseline", "#1f77b4"),
     Condition("sim-pretrain", "sim", False,
-              "encoder pre-trained on the factory's simulated radar, then fine-tuned on real"),
+              "encoder pre-trained on the factory's simulated radar, then fine-tuned on real",
+              "Sim Pretrain", "#d62728"),
     Condition("sim-gt-pretrain", "sim-gt", True,
               "encoder pre-trained on simulated radar of ground-truth geometry and materials "
-              "(reconstruction errors removed)"),
+              "(reconstruction errors removed)", "Sim-GT Pretrain", "#2ca02c"),
     Condition("sim-one-material-pretrain", "sim-one-material", True,
               "encoder pre-trained on simulated radar whose materials are all one material "
-              "(material labelling removed)"),
+              "(material labelling removed)", "Sim One-Material Pretrain", "#9467bd"),
 )}
+#: dataset roles of a sweep: ``real`` and each condition's pre-training role, in order
+ROLES: tuple[str, ...] = ("real", *dict.fromkeys(c.sim_role for c in CONDITIONS.values()
+                                                 if c.sim_role))
 ABLATIONS = tuple(n for n, c in CONDITIONS.items() if c.ablation)
 
 

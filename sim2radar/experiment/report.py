@@ -11,25 +11,20 @@ from collections.abc import Iterable, Mapping
 from typing import Any
 
 from sim2radar.datasets import UNDECLARED
-from sim2radar.experiment.profiles import BASELINE
+from sim2radar.experiment.profiles import BASELINE, CONDITIONS
 from sim2radar.experiment.stats import DEGENERATE, as_rows
 
 __all__ = ["UNDECLARED", "condition_label", "detectability_sentences", "domain_kind",
            "domain_line", "results_markdown", "results_table_rows"]
 
 
-_LABELS = {
-    BASELINE: "Baseline",
-    "sim-pretrain": "Sim Pretrain",
-    "sim-gt-pretrain": "Sim-GT Pretrain",
-    "sim-one-material-pretrain": "Sim One-Material Pretrain",
-}
 _DASH = "—"
 
 
 def condition_label(condition: str) -> str:
     """Table heading of a condition (``sim-pretrain`` -> ``Sim Pretrain``)."""
-    return _LABELS.get(condition, condition)
+    known = CONDITIONS.get(condition)
+    return known.label if known else condition
 
 
 def _f(v: float | None, digits: int = 1, signed: bool = False) -> str:
