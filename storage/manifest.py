@@ -24,19 +24,31 @@ import hashlib
 import re
 from collections.abc import Mapping
 from datetime import UTC, datetime
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import pyarrow as pa
 import pyarrow.parquet as pq
+
+from sim2radar.storage._files import FileRoot
 from sim2radar.storage.integrity import is_corrupt_file_error
 from sim2radar.storage.schemas import MANIFEST
 
-if TYPE_CHECKING:  # pragma: no cover
-    from sim2radar.storage.store import ArtifactStore
-
-__all__ = ["Manifest", "STATUSES"]
+__all__ = ["MANIFESTS", "Manifest", "STATUSES", "check_dataset_name"]
 
 STATUSES: tuple[str, ...] = ("ok", "skipped", "failed")
+#: folder of the store root that holds one folder of row files per dataset
+MANIFESTS = "manifests"
+_DATASET_RE = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]*$")
+
+
+def check_dataset_name(dataset: str) -> str:
+    """``dataset``, if it is a valid dataset name (one folder name: letters, digits, ``_ . -``,
+    not starting with a dot); ValueError otherwise."""
+    if not isinstance(dataset, str) or not _DATASET_RE.match(dataset):
+        raise ValueError(
+            f"dataset name must match {_DATASET_RE.pattern} (letters, digits, _ . -), got {dataset!r}"
+        )
+    return dataset
 
 
 def _row_name(scene_id: str) -> str:
@@ -50,12 +62,21 @@ class Manifest:
     """The manifest of one dataset in an :class:`~sim2radar.storage.store.ArtifactStore`.
 
     Obtain it with ``store.manifest("name")``.
+
+    Parameters
+    ----------
+    store : FileRoot
+        The store (any :class:`~sim2radar.storage._files.FileRoot`: the manifest only needs its
+        paths, retried I/O, atomic publish and quarantine); rows go to
+        ``<root>/manifests/<dataset>/``.
+    dataset : str
+        The dataset's name (:func:`check_dataset_name`).
     """
 
-    def __init__(self, store: ArtifactStore, dataset: str) -> None:
+    def __init__(self, store: FileRoot, dataset: str) -> None:
         self.store = store
-        self.dataset = dataset
-        self._folder = store._join("manifests", dataset)
+        self.dataset = check_dataset_name(dataset)
+        self._folder = store.join(MANIFESTS, dataset)
 
     def __repr__(self) -> str:
         return f"Manifest({self.store.root!r}, {self.dataset!r})"
@@ -106,7 +127,7 @@ class Manifest:
         table = MANIFEST.validate(table)
         table = table.replace_schema_metadata({b"sim2radar.schema": f"manifest:{MANIFEST.version}".encode()})
         path = self._path(scene_id)
-        self.store._io(f"manifest upsert {path}", lambda: self.store._publish(path, table))
+        self.store.retrying(f"manifest upsert {path}", lambda: self.store.publish(path, table))
         return row
 
     # -- read -------------------------------------------------------------------------------
@@ -130,9 +151,9 @@ class Manifest:
     def get(self, scene_id: str) -> dict[str, Any] | None:
         """The row of ``scene_id`` as a dict (``artifacts``/``timings_s`` as dicts), or None."""
         path = self._path(scene_id)
-        if not self.store._io(f"exists {path}", lambda: self.store.fs.exists(path)):
+        if not self.store.retrying(f"exists {path}", lambda: self.store.fs.exists(path)):
             return None
-        table = self.store._io(f"read {path}", lambda: self._read_file(path))
+        table = self.store.retrying(f"read {path}", lambda: self._read_file(path))
         rows = _to_rows(table) if table is not None else []
         return rows[0] if rows else None
 
@@ -155,7 +176,7 @@ class Manifest:
                 return MANIFEST.schema.empty_table()
             return pa.concat_tables(tables).sort_by("scene_id")
 
-        return self.store._io(f"read manifest {self.dataset}", gather)
+        return self.store.retrying(f"read manifest {self.dataset}", gather)
 
     def rows(self) -> list[dict[str, Any]]:
         """All rows as dicts, sorted by ``scene_id``."""

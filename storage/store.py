@@ -11,7 +11,9 @@ Layout under the root (a local folder or any fsspec URI: ``s3://bucket/x``, ``gs
 Atomic publish: a file is written under a hidden temporary name in the same folder and then
 renamed to its final name (``os.replace`` after ``fsync`` on local disks; on object stores the
 final object appears whole when its upload/copy completes). A reader never sees half a file, and
-a killed run leaves only ``.tmp-*`` files, which ``exists``/``keys``/``read`` ignore.
+a killed run leaves only ``.tmp-*`` files, which ``exists``/``keys``/``read`` ignore. The
+mechanics (paths, retries, atomic publish, quarantine) are :class:`~sim2radar.storage._files.FileRoot`'s,
+which the store extends and the manifests (:mod:`sim2radar.storage.manifest`) write through.
 
 Self-healing: a published file that does not verify (truncated, overwritten, not Parquet — its
 footer does not parse or its row groups do not add up to its row count) is never served. The
@@ -30,22 +32,21 @@ front whether a local store root can be written.
 
 from __future__ import annotations
 
-import errno
 import json
-import logging
 import os
 import re
 import tempfile
 import time
-import uuid
-from collections.abc import Callable, Mapping
+from collections.abc import Mapping
 from pathlib import Path
-from typing import Any, TypeVar
+from typing import Any
 
-import fsspec
 import pyarrow as pa
 import pyarrow.parquet as pq
+
+from sim2radar.storage._files import QUARANTINE, TMP_PREFIX, FileRoot, is_transient_io_error
 from sim2radar.storage.integrity import SCHEMA_KEY, file_problem, is_corrupt_file_error
+from sim2radar.storage.manifest import MANIFESTS, Manifest
 from sim2radar.storage.provenance import PROVENANCE_KEY, build_provenance
 from sim2radar.storage.schemas import SchemaError, get_schema
 
@@ -59,14 +60,7 @@ __all__ = [
     "is_transient_io_error",
 ]
 
-log = logging.getLogger(__name__)
-
-TMP_PREFIX = ".tmp-"
-#: folder of the store root that receives files which did not verify
-QUARANTINE = "quarantine"
 _KEY_RE = re.compile(r"[0-9a-f]{8,64}")  # content keys (sim2radar.storage.keys.KEY_LENGTH) or digests
-_DATASET_RE = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]*$")
-T = TypeVar("T")
 
 
 class ArtifactNotFoundError(FileNotFoundError):
@@ -76,34 +70,6 @@ class ArtifactNotFoundError(FileNotFoundError):
 class CorruptArtifactError(SchemaError):
     """A published file that does not read as the Parquet it should be (truncated, damaged).
     It has been moved into the store's ``quarantine/``; the next run recomputes it."""
-
-
-#: OSError subclasses that say the same thing on every attempt (retrying cannot help).
-_PERMANENT_OS_ERRORS = (FileNotFoundError, PermissionError, NotADirectoryError,
-                        IsADirectoryError, FileExistsError)
-#: errno values with the same meaning: no permission, read-only file system, disk/quota full,
-#: name too long.
-_PERMANENT_ERRNOS = frozenset({errno.EACCES, errno.EPERM, errno.EROFS, errno.ENOSPC,
-                               errno.EDQUOT, errno.ENAMETOOLONG, errno.ENOTDIR, errno.EISDIR})
-
-
-#: errno values of a full disk or quota
-_FULL_ERRNOS = frozenset({errno.ENOSPC, errno.EDQUOT})
-
-
-def is_transient_io_error(exc: BaseException) -> bool:
-    """True if ``exc`` is an I/O error that may succeed when tried again (a timeout, a dropped
-    connection, a remote store's 5xx as ``OSError``); False for everything else, including
-    local file-system errors that repeat on every attempt (permission denied, read-only file
-    system, disk full, a file where a folder should be, a missing file) and non-I/O errors
-    (schema, value, type errors).
-
-    The one rule behind both :class:`ArtifactStore`'s own retries and the Prefect task retries
-    of storage I/O (:mod:`sim2radar.tasks.common`).
-    """
-    if not isinstance(exc, OSError) or isinstance(exc, _PERMANENT_OS_ERRORS):
-        return False
-    return exc.errno not in _PERMANENT_ERRNOS
 
 
 def check_writable(root: str | os.PathLike) -> None:
@@ -144,22 +110,15 @@ def check_writable(root: str | os.PathLike) -> None:
         ) from None
 
 
-class ArtifactStore:
+class ArtifactStore(FileRoot):
     """Parquet artifacts keyed by content, under a local path or fsspec URI.
 
     Parameters
     ----------
-    root : str or Path
-        Local folder (created on first write) or URI such as ``s3://bucket/prefix`` or
-        ``memory://store``.
-    io_retries : int, optional
-        Retries of a failed remote I/O operation (default 3 for remote file systems, 0 local).
-    retry_backoff_s : float
-        First backoff delay [s]; doubles on each retry.
-    compression : str
-        Parquet codec (``zstd`` by default).
-    storage_options : mapping, optional
-        Passed to fsspec (credentials, endpoint URLs, ...).
+    root, io_retries, retry_backoff_s, compression, storage_options
+        As for :class:`~sim2radar.storage._files.FileRoot` (the root folder or fsspec URI,
+        retries of remote I/O, first backoff [s], Parquet codec, fsspec options), whose paths,
+        retried I/O, atomic publish and quarantine the store builds on.
 
     Examples
     --------
@@ -170,26 +129,6 @@ class ArtifactStore:
     ...     store.write("radar_points", key, table, provenance={"config": radar.to_dict()})
     >>> table = store.read("radar_points", key)
     """
-
-    def __init__(
-        self,
-        root: str | os.PathLike,
-        *,
-        io_retries: int | None = None,
-        retry_backoff_s: float = 0.5,
-        compression: str = "zstd",
-        storage_options: Mapping[str, Any] | None = None,
-    ) -> None:
-        self.root_uri = os.fspath(root)
-        self.storage_options = dict(storage_options or {})
-        self.fs, base = fsspec.core.url_to_fs(self.root_uri, **self.storage_options)
-        self._base = base.rstrip("/") or "/"
-        self.is_local = "file" in _protocols(self.fs)
-        if self.is_local:
-            self._base = str(Path(self._base).resolve())
-        self.io_retries = (0 if self.is_local else 3) if io_retries is None else int(io_retries)
-        self.retry_backoff_s = float(retry_backoff_s)
-        self.compression = compression
 
     # -- pickling (Prefect / Dask workers rebuild the file system from the URI) ---------------
     def __reduce__(self):
@@ -202,45 +141,17 @@ class ArtifactStore:
         return f"ArtifactStore({self.root_uri!r})"
 
     # -- paths --------------------------------------------------------------------------------
-    def _join(self, *parts: str) -> str:
-        return "/".join([self._base.rstrip("/"), *parts]) if self._base != "/" else "/" + "/".join(parts)
+    #: The former private name of :meth:`join`, still called by ``sim2radar.tasks``.
+    _join = FileRoot.join
 
     def path(self, stage: str, key: str) -> str:
         """Path of an artifact inside the store's file system."""
         _check_stage_key(stage, key)
-        return self._join(stage, f"{key}.parquet")
+        return self.join(stage, f"{key}.parquet")
 
     def uri(self, stage: str, key: str) -> str:
         """Human-readable location of an artifact (local path, or ``protocol://path``)."""
-        p = self.path(stage, key)
-        if self.is_local:
-            return p
-        proto = _protocols(self.fs)[0]
-        return f"{proto}://{p.lstrip('/')}" if proto != "memory" else f"memory://{p}"
-
-    @property
-    def root(self) -> str:
-        """The store root as a path (local) or URI."""
-        if self.is_local:
-            return self._base
-        return self.root_uri
-
-    # -- retries ------------------------------------------------------------------------------
-    def _io(self, what: str, fn: Callable[[], T]) -> T:
-        delay = self.retry_backoff_s
-        for attempt in range(self.io_retries + 1):
-            try:
-                return fn()
-            except (OSError, TimeoutError, ConnectionError) as exc:
-                if attempt == self.io_retries or not is_transient_io_error(exc):
-                    raise
-                log.warning(
-                    "storage: %s failed (%s); retry %d/%d in %.1f s",
-                    what, exc, attempt + 1, self.io_retries, delay,
-                )
-                time.sleep(delay)
-                delay *= 2
-        raise AssertionError("unreachable")  # pragma: no cover
+        return self.location(self.path(stage, key))
 
     # -- queries ------------------------------------------------------------------------------
     def exists(self, stage: str, key: str) -> bool:
@@ -250,9 +161,9 @@ class ArtifactStore:
         it) and the answer is False: the caller recomputes it, as if it had never been written.
         """
         path = self.path(stage, key)
-        if not self._io(f"exists {path}", lambda: self.fs.exists(path)):
+        if not self.retrying(f"exists {path}", lambda: self.fs.exists(path)):
             return False
-        problem = self._io(f"verify {path}", lambda: file_problem(self.fs, path))
+        problem = self.retrying(f"verify {path}", lambda: file_problem(self.fs, path))
         if problem is None:
             return True
         self.quarantine(path, problem)
@@ -267,33 +178,7 @@ class ArtifactStore:
         """What is wrong with a published artifact (None when it reads; ``deep`` decodes every
         page, otherwise only the footer is checked). Moves nothing."""
         path = self.path(stage, key)
-        return self._io(f"verify {path}", lambda: file_problem(self.fs, path, deep=deep))
-
-    def quarantine(self, path: str, reason: str) -> str | None:
-        """Move the file at ``path`` (inside the store) to ``quarantine/<same relative path>.<UTC
-        time>`` with a ``.why.txt`` beside it; returns the new location (None when another
-        process moved or replaced it first). Nothing is deleted."""
-        rel = path[len(self._base):].lstrip("/") if path.startswith(self._base) else \
-            path.rsplit("/", 1)[-1]
-        stamp = time.strftime("%Y%m%dT%H%M%SZ", time.gmtime())
-        dest = self._join(QUARANTINE, f"{rel}.{stamp}-{uuid.uuid4().hex[:6]}")
-        try:
-            self.fs.makedirs(dest.rsplit("/", 1)[0], exist_ok=True)
-            self.fs.mv(path, dest)
-        except FileNotFoundError:
-            return None
-        with self.fs.open(f"{dest}.why.txt", "wb") as fh:
-            fh.write(f"{path}\n{reason}\n".encode())
-        log.warning("storage: %s does not verify (%s); moved to %s; it is recomputed when next needed",
-                    path, reason, dest)
-        return dest
-
-    def quarantined(self) -> list[str]:
-        """Files moved aside by :meth:`quarantine` (their ``.why.txt`` notes not listed)."""
-        folder = self._join(QUARANTINE)
-        if not self.fs.exists(folder):
-            return []
-        return sorted(p for p in self.fs.find(folder) if not p.endswith(".why.txt"))
+        return self.retrying(f"verify {path}", lambda: file_problem(self.fs, path, deep=deep))
 
     def verify_all(self, *, repair: bool = False) -> list[dict[str, str]]:
         """Read every published artifact and manifest row file in full; returns one
@@ -302,8 +187,8 @@ class ArtifactStore:
         from sim2radar.storage.schemas import schema_names
 
         found = []
-        targets = [(stage, self._join(stage)) for stage in schema_names() if stage != "manifest"]
-        targets += [("manifest", self._join("manifests", name)) for name in self.manifests()]
+        targets = [(stage, self.join(stage)) for stage in schema_names() if stage != "manifest"]
+        targets += [("manifest", self.join(MANIFESTS, name)) for name in self.manifests()]
         for stage, folder in targets:
             if not self.fs.exists(folder):
                 continue
@@ -313,7 +198,7 @@ class ArtifactStore:
                     continue
                 if stage != "manifest" and not _KEY_RE.fullmatch(name[: -len(".parquet")]):
                     continue
-                problem = self._io(f"verify {path}", lambda p=path, s=stage: file_problem(
+                problem = self.retrying(f"verify {path}", lambda p=path, s=stage: file_problem(
                     self.fs, p, deep=True, expected_schema=s))
                 if problem is None:
                     continue
@@ -326,14 +211,14 @@ class ArtifactStore:
     def keys(self, stage: str) -> list[str]:
         """Published keys of ``stage``, sorted (in-flight ``.tmp-*`` files are not listed)."""
         get_schema(stage)
-        folder = self._join(stage)
+        folder = self.join(stage)
 
         def ls() -> list[str]:
             if not self.fs.exists(folder):
                 return []
             return [p.rsplit("/", 1)[-1] for p in self.fs.ls(folder, detail=False)]
 
-        names = self._io(f"list {folder}", ls)
+        names = self.retrying(f"list {folder}", ls)
         stems = (n[: -len(".parquet")] for n in names if n.endswith(".parquet"))
         return sorted(s for s in stems if _KEY_RE.fullmatch(s))
 
@@ -382,41 +267,8 @@ class ArtifactStore:
         meta[SCHEMA_KEY] = f"{stage}:{schema.version}".encode()
         table = table.replace_schema_metadata(meta)
         final = self.path(stage, key)
-        self._io(f"write {final}", lambda: self._publish(final, table))
+        self.retrying(f"write {final}", lambda: self.publish(final, table))
         return self.uri(stage, key)
-
-    def _publish(self, final: str, table: pa.Table) -> None:
-        """Write ``table`` to a temporary sibling of ``final``, then rename it into place."""
-        folder, name = final.rsplit("/", 1)
-        tmp = f"{folder}/{TMP_PREFIX}{name[: -len('.parquet')]}-{uuid.uuid4().hex[:12]}.parquet"
-        try:
-            if self.is_local:
-                os.makedirs(folder, exist_ok=True)
-                with open(tmp, "wb") as fh:
-                    pq.write_table(table, fh, compression=self.compression,
-                                   write_page_checksum=True)
-                    fh.flush()
-                    os.fsync(fh.fileno())
-                os.replace(tmp, final)  # atomic on POSIX within one file system
-            else:
-                self.fs.makedirs(folder, exist_ok=True)
-                with self.fs.open(tmp, "wb") as fh:
-                    pq.write_table(table, fh, compression=self.compression,
-                                   write_page_checksum=True)
-                self.fs.mv(tmp, final)
-        except BaseException as exc:
-            try:
-                if self.fs.exists(tmp):
-                    self.fs.rm(tmp)
-            except Exception:  # noqa: BLE001 - best effort; the tmp name is ignored anyway
-                log.warning("storage: could not remove partial file %s", tmp)
-            if isinstance(exc, OSError) and exc.errno in _FULL_ERRNOS and final not in str(exc):
-                # Arrow's own message for a full disk names no file
-                raise type(exc)(exc.errno, f"{exc.strerror or exc} while writing {final}: free "
-                                "space on that disk (or raise the quota), or choose another "
-                                "store folder; rerun and the finished work is kept",
-                                final) from exc
-            raise
 
     # -- read ---------------------------------------------------------------------------------
     def _open_checked(self, stage: str, key: str) -> tuple[str, pq.ParquetFile, Any]:
@@ -474,7 +326,7 @@ class ArtifactStore:
             raise CorruptArtifactError(f"{path}: {problem}; moved to the store's {QUARANTINE}/, "
                                        "the next run recomputes it")
 
-        return self._io(f"read {stage}/{key}", go)
+        return self.retrying(f"read {stage}/{key}", go)
 
     def read_provenance(self, stage: str, key: str) -> dict[str, Any]:
         """The provenance document stored with an artifact (see :mod:`sim2radar.storage.provenance`)."""
@@ -485,7 +337,7 @@ class ArtifactStore:
                 raw = (pf.schema_arrow.metadata or {}).get(PROVENANCE_KEY)
             return json.loads(raw) if raw else {}
 
-        return self._io(f"read provenance {stage}/{key}", go)
+        return self.retrying(f"read provenance {stage}/{key}", go)
 
     # -- maintenance --------------------------------------------------------------------------
     def delete(self, stage: str, key: str) -> bool:
@@ -493,7 +345,7 @@ class ArtifactStore:
         path = self.path(stage, key)
         if not self.exists(stage, key):
             return False
-        self._io(f"delete {path}", lambda: self.fs.rm(path))
+        self.retrying(f"delete {path}", lambda: self.fs.rm(path))
         return True
 
     def partial_files(self) -> list[str]:
@@ -521,27 +373,22 @@ class ArtifactStore:
         return removed
 
     # -- manifests ----------------------------------------------------------------------------
-    def manifest(self, dataset: str):
-        """The :class:`sim2radar.storage.manifest.Manifest` of ``dataset`` in this store."""
-        from sim2radar.storage.manifest import Manifest
+    def manifest(self, dataset: str) -> Manifest:
+        """The :class:`~sim2radar.storage.manifest.Manifest` of ``dataset`` in this store.
 
-        if not isinstance(dataset, str) or not _DATASET_RE.match(dataset):
-            raise ValueError(
-                f"dataset name must match {_DATASET_RE.pattern} (letters, digits, _ . -), got {dataset!r}"
-            )
+        Raises
+        ------
+        ValueError
+            If ``dataset`` is not a valid dataset name (letters, digits, ``_ . -``).
+        """
         return Manifest(self, dataset)
 
     def manifests(self) -> list[str]:
         """Names of the datasets that have a manifest in this store."""
-        folder = self._join("manifests")
+        folder = self.join(MANIFESTS)
         if not self.fs.exists(folder):
             return []
         return sorted(p.rstrip("/").rsplit("/", 1)[-1] for p in self.fs.ls(folder, detail=False))
-
-
-def _protocols(fs) -> tuple[str, ...]:
-    proto = fs.protocol
-    return (proto,) if isinstance(proto, str) else tuple(proto)
 
 
 def _check_stage_key(stage: str, key: str) -> None:

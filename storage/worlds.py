@@ -17,18 +17,15 @@ import json
 
 import numpy as np
 import pyarrow as pa
-from sim2radar.storage.codecs import ragged_arrays, ragged_column
 
 from sim2radar.camera import CameraIntrinsics
-from sim2radar.worlds.frame import World, WorldFrame
+from sim2radar.storage.codecs import ragged_arrays, ragged_column
+from sim2radar.worlds.frame import World, WorldFrame, world_id_for
 
+# world_id_for is the library's (sim2radar.worlds); named here too for the callers that take it
+# from the tables' module
 __all__ = ["world_spec_to_table", "frames_to_table", "frames_from_table", "encode_png",
            "decode_png", "world_id_for"]
-
-
-def world_id_for(seed: int) -> str:
-    """The world's id in tables and manifests: ``world_<seed, 6 digits>``."""
-    return f"world_{int(seed):06d}"
 
 
 def encode_png(image: np.ndarray) -> bytes:

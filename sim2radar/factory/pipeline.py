@@ -31,7 +31,7 @@ __all__ = ["frame_id_for", "with_material", "ground_truth_labels", "ground_truth
 
 def frame_id_for(seed: int, frame_index: int) -> str:
     """``world_<seed 6 digits>_f<index 3 digits>`` (OpenPCDet frame id and manifest row)."""
-    from sim2radar.storage.worlds import world_id_for
+    from sim2radar.worlds import world_id_for
 
     return f"{world_id_for(seed)}_f{int(frame_index):03d}"
 

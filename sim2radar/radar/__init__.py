@@ -13,6 +13,7 @@ Public API::
 from sim2radar.radar.binning import (
     Accumulator,
     ArrayGeometry,
+    TraceResult,
     accumulate,
     array_geometry,
     beamform,
@@ -34,15 +35,15 @@ from sim2radar.radar.detection import (
     direction_to_cartesian,
     spherical_to_cartesian,
 )
-from sim2radar.radar.frame import RadarFrame, simulate_frame, simulate_scene_frame
+from sim2radar.radar.frame import RadarFrame, TracedScene, simulate_scene_frame
 from sim2radar.radar.paths import PATH_KINDS, PathSet
 from sim2radar.radar.raytrace import (
     RadarScene,
-    TraceResult,
     check_pose,
     face_object_ids,
     merge_meshes,
 )
+from sim2radar.radar.simulate import simulate_frame
 
 __all__ = [
     "Accumulator",
@@ -56,6 +57,7 @@ __all__ = [
     "RadarScene",
     "ScatteringConfig",
     "TraceResult",
+    "TracedScene",
     "accumulate",
     "array_geometry",
     "beamform",

@@ -80,6 +80,7 @@ from sim2radar.radar.config import RadarConfig
 __all__ = [
     "Accumulator",
     "ArrayGeometry",
+    "TraceResult",
     "accumulate",
     "add_receiver_noise",
     "array_geometry",
@@ -280,6 +281,25 @@ class Accumulator:
                                                 geometry.x_half_wl + geometry.x_shift))
             s = np.einsum("zrg,gx->zrx", g, e, optimize=False)
         return np.transpose(s, (1, 0, 2))
+
+
+@dataclasses.dataclass(frozen=True)
+class TraceResult:
+    """Accumulated returns of one frame plus counters and timings (what
+    :meth:`sim2radar.radar.RadarScene.trace` returns).
+
+    Attributes
+    ----------
+    accumulator : Accumulator — the frame's sums.
+    n_rays : int — rays traced.
+    hits_per_bounce : tuple of int — rays that hit a surface, per bounce.
+    seconds : dict — wall time per tracing step [s] (``rays``, ``trace``, ``readback``).
+    """
+
+    accumulator: Accumulator
+    n_rays: int
+    hits_per_bounce: tuple[int, ...]
+    seconds: dict[str, float]
 
 
 def fine_grid_index(u_az: np.ndarray, geometry: ArrayGeometry) -> tuple[np.ndarray, np.ndarray]:

@@ -1,21 +1,26 @@
-"""``simulate_frame``: material meshes + radar config + pose -> radar point cloud (+ cube)."""
+"""One radar frame of a traced scene: the tracer's returns -> radar point cloud (+ cube).
+
+:func:`simulate_scene_frame` asks a :class:`TracedScene` (the ray tracer's
+:class:`~sim2radar.radar.raytrace.RadarScene`) for one pose's returns and turns them into a
+:class:`RadarFrame`: beamforming, receiver noise and detection at ``fidelity: raytrace``, the
+signal chain at ``fidelity: signal``. :func:`sim2radar.radar.simulate_frame` builds the scene
+from meshes first.
+"""
 
 from __future__ import annotations
 
 import dataclasses
 import time
-from collections.abc import Sequence
-from typing import Any
+from typing import Any, Protocol
 
 import numpy as np
 
-from sim2radar.mesh import MaterialMesh
-from sim2radar.radar.binning import add_receiver_noise, array_geometry, beamform
-from sim2radar.radar.config import RadarConfig, load_radar_config
+from sim2radar.radar.binning import TraceResult, add_receiver_noise, array_geometry, beamform
+from sim2radar.radar.config import RadarConfig
 from sim2radar.radar.detection import cell_noise_power, detect_points
-from sim2radar.radar.raytrace import RadarScene
+from sim2radar.radar.paths import PathSet
 
-__all__ = ["RadarFrame", "simulate_frame", "simulate_scene_frame"]
+__all__ = ["RadarFrame", "TracedScene", "simulate_scene_frame"]
 
 #: Second seed word of the receiver-noise random stream (distinct from the ray jitter's).
 NOISE_STREAM = 0x4E01
@@ -75,8 +80,33 @@ class RadarFrame:
         return self.points[:, 3]
 
 
+class TracedScene(Protocol):
+    """What :func:`simulate_scene_frame` needs of a scene: the ray tracer's two outputs and two
+    counters for the frame's stats (:class:`~sim2radar.radar.raytrace.RadarScene` has them)."""
+
+    n_triangles: int
+    variant: str  # the Mitsuba variant that traces it
+
+    def trace(
+        self, radar: RadarConfig, pose: np.ndarray | None = None, *, seed: int | None = None
+    ) -> TraceResult:
+        """The frame's binned returns (``fidelity: raytrace``)."""
+        ...
+
+    def trace_paths(
+        self,
+        radar: RadarConfig,
+        pose: np.ndarray | None = None,
+        *,
+        seed: int | None = None,
+        velocity_mps: np.ndarray | None = None,
+    ) -> PathSet:
+        """The frame's propagation paths (``fidelity: signal``)."""
+        ...
+
+
 def simulate_scene_frame(
-    scene: RadarScene,
+    scene: TracedScene,
     radar: RadarConfig,
     pose: np.ndarray | None = None,
     *,
@@ -84,7 +114,8 @@ def simulate_scene_frame(
     seed: int | None = None,
     velocity_mps: np.ndarray | None = None,
 ) -> RadarFrame:
-    """Simulate one frame of a pre-built :class:`RadarScene` (see :func:`simulate_frame`)."""
+    """Simulate one frame of a pre-built scene (a :class:`~sim2radar.radar.raytrace.RadarScene`;
+    parameters as for :func:`sim2radar.radar.simulate_frame`)."""
     if radar.fidelity == "signal":
         return _simulate_signal_scene_frame(scene, radar, pose, seed=seed,
                                             velocity_mps=velocity_mps)
@@ -133,7 +164,7 @@ def simulate_scene_frame(
 
 
 def _simulate_signal_scene_frame(
-    scene: RadarScene, radar: RadarConfig, pose: np.ndarray | None, *, seed: int | None,
+    scene: TracedScene, radar: RadarConfig, pose: np.ndarray | None, *, seed: int | None,
     velocity_mps: np.ndarray | None = None,
 ) -> RadarFrame:
     """``fidelity: signal``: trace propagation paths, synthesise IF samples, run the chain."""
@@ -166,49 +197,3 @@ def _simulate_signal_scene_frame(
         elevation_bins_rad=radar.elevation_bins_rad,
         stats=stats,
     )
-
-
-def simulate_frame(
-    meshes: Sequence[MaterialMesh] | RadarScene,
-    radar: RadarConfig | str,
-    pose: np.ndarray | None = None,
-    *,
-    return_cube: bool = False,
-    seed: int | None = None,
-    velocity_mps: np.ndarray | None = None,
-) -> RadarFrame:
-    """Simulate one radar frame of a material-labelled scene.
-
-    Parameters
-    ----------
-    meshes : list of MaterialMesh (or a pre-built RadarScene)
-        Scene in the world frame [m]. To simulate many poses of one scene, build
-        ``RadarScene(meshes)`` once and pass it (or call ``scene.simulate``).
-    radar : RadarConfig or str
-        A config, or a preset name / YAML path for :func:`load_radar_config`.
-    pose : (4, 4) array, optional
-        Radar-to-world rigid transform; ``None`` = identity (meshes given in the radar frame:
-        x forward, y left, z up).
-    return_cube : bool
-        Also return the complex (n_range, n_az, n_el) cube.
-    seed : int, optional
-        ``None``: deterministic regular ray grid, fixed speckle phases and no receiver noise
-        (detection thresholds still use the noise level). An integer jitters the rays within
-        their grid cells, re-draws the speckle phases and (``detection.add_noise``, default on)
-        adds complex Gaussian receiver noise to every virtual channel at the level of
-        :func:`sim2radar.radar.detection.cell_noise_power` (the hardware link budget unless
-        ``detection.noise_floor_db`` overrides it) — reproducibly.
-    velocity_mps : (3,), optional
-        The radar's velocity in its own frame [m/s] over a static scene (None: standing
-        still). The signal-level radar (``fidelity: signal``) turns it into each path's range
-        rate and so into Doppler; the ray tracer's binned cube has no Doppler axis and
-        ignores it.
-
-    Returns
-    -------
-    RadarFrame
-    """
-    radar = radar if isinstance(radar, RadarConfig) else load_radar_config(radar)
-    scene = meshes if isinstance(meshes, RadarScene) else RadarScene(meshes)
-    return simulate_scene_frame(scene, radar, pose, return_cube=return_cube, seed=seed,
-                                velocity_mps=velocity_mps)

@@ -29,8 +29,9 @@ import numpy as np
 from sim2radar.em import get_material
 from sim2radar.hardware import to_drjit
 from sim2radar.mesh import MaterialMesh
-from sim2radar.radar.binning import Accumulator, array_geometry
-from sim2radar.radar.config import RadarConfig
+from sim2radar.radar.binning import Accumulator, TraceResult, array_geometry
+from sim2radar.radar.config import RadarConfig, load_radar_config
+from sim2radar.radar.frame import RadarFrame, simulate_scene_frame
 from sim2radar.radar.paths import PATH_KINDS, PathSet
 from sim2radar.radar.returns import (
     DIRECTIVE_LUT_SIZE,
@@ -48,7 +49,7 @@ from sim2radar.radar.returns import (
     transmit_probability,
 )
 
-__all__ = ["RadarScene", "TraceResult", "face_object_ids", "merge_meshes", "check_pose"]
+__all__ = ["RadarScene", "face_object_ids", "merge_meshes", "check_pose"]
 
 #: Object index meaning "no object" (a ray that is not inside a transmitting slab).
 NO_OBJECT = 0xFFFFFFFF
@@ -144,16 +145,6 @@ def face_object_ids(meshes: Sequence[MaterialMesh]) -> np.ndarray:
     return np.concatenate(
         [np.full(len(m.faces), i, dtype=np.uint32) for i, m in enumerate(meshes)]
     )
-
-
-@dataclasses.dataclass(frozen=True)
-class TraceResult:
-    """Accumulated returns of one frame plus counters and timings."""
-
-    accumulator: Accumulator
-    n_rays: int
-    hits_per_bounce: tuple[int, ...]
-    seconds: dict[str, float]
 
 
 @dataclasses.dataclass
@@ -712,13 +703,12 @@ class RadarScene:
         *,
         return_cube: bool = False,
         seed: int | None = None,
-    ):
+        velocity_mps: np.ndarray | None = None,
+    ) -> RadarFrame:
         """Simulate one frame from ``pose``; see :func:`sim2radar.radar.simulate_frame`."""
-        from sim2radar.radar.config import load_radar_config
-        from sim2radar.radar.frame import simulate_scene_frame
-
         radar = radar if isinstance(radar, RadarConfig) else load_radar_config(radar)
-        return simulate_scene_frame(self, radar, pose, return_cube=return_cube, seed=seed)
+        return simulate_scene_frame(self, radar, pose, return_cube=return_cube, seed=seed,
+                                    velocity_mps=velocity_mps)
 
     def trace(
         self, radar: RadarConfig, pose: np.ndarray | None = None, *, seed: int | None = None

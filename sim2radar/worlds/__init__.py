@@ -27,6 +27,7 @@ from sim2radar.worlds.frame import (
     World,
     WorldFrame,
     WorldObject,
+    world_id_for,
 )
 from sim2radar.worlds.generate import STAGE_VERSION, generate_world
 from sim2radar.worlds.render import RENDER_VERSION, cast_rays, render_frame, rig_extrinsics
@@ -58,4 +59,5 @@ __all__ = [
     "rig_extrinsics",
     "rig_pose",
     "trajectory",
+    "world_id_for",
 ]

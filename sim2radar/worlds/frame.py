@@ -52,10 +52,17 @@ __all__ = [
     "RigPose",
     "WorldFrame",
     "NO_INSTANCE",
+    "world_id_for",
 ]
 
 #: Value of :attr:`WorldFrame.instance_id` where a pixel sees no surface.
 NO_INSTANCE = -1
+
+
+def world_id_for(seed: int) -> str:
+    """The id of the world of ``seed`` in tables, manifests and frame ids:
+    ``world_<seed, 6 digits>``."""
+    return f"world_{int(seed):06d}"
 
 
 @dataclasses.dataclass(frozen=True)
