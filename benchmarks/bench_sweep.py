@@ -121,7 +121,8 @@ def _paper_plan(root: Path) -> dict:
     from sim2radar.tasks.experiment import plan_cost
 
     sim, real = _paper_data(root)
-    return plan_cost(sim, real, profile="paper", store=root / "store", workers=(1, 8))
+    return plan_cost({"sim": sim, "real": real}, profile="paper", store=root / "store",
+                     workers=(1, 8))
 
 
 def _paper_slice(root: Path) -> dict:
@@ -130,7 +131,7 @@ def _paper_slice(root: Path) -> dict:
 
     sim, real = (root / "sim", root / "real") if (root / "real").is_dir() else _paper_data(root)
     overrides = {"fractions": [0.05], "trials": 1, "val_every": 0, "concurrent_runs": 1}
-    predicted = plan_cost(sim, real, profile="paper", store=root / "store",
+    predicted = plan_cost({"sim": sim, "real": real}, profile="paper", store=root / "store",
                           overrides=overrides, workers=(1,))
     t0 = time.perf_counter()
     summary = run_experiment(sim, real, profile="paper", name="slice", out=root / "sweeps",

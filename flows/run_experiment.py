@@ -32,13 +32,15 @@ from __future__ import annotations
 
 import importlib
 import os
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
 from prefect import flow, get_run_logger
 from prefect.futures import as_completed
+
+from sim2radar.experiment.plan import PlannedPretrain, PretrainResult
 from sim2radar.flows import _progress
 from sim2radar.tasks.experiment import (
     failed_row,
@@ -59,8 +61,8 @@ def progress_callback(fn: Callable[[dict], None]):
 
 @flow(name="run-experiment", log_prints=False)
 def run_experiment_flow(plan_path: str) -> dict[str, Any]:
-    """Run a prepared sweep — the ``plan.json`` :func:`sim2radar.tasks.experiment.prepare_sweep` wrote
-    (its ``plan_path``; a paper-sized plan is over Prefect's 512 KiB limit on a flow run's
+    """Run a prepared sweep — the ``plan.json`` :func:`sim2radar.tasks.experiment.prepare_sweep`
+    wrote (its ``plan_path``; a paper-sized plan is over Prefect's 512 KiB limit on a flow run's
     parameters, its path is not): every pre-training and fine-tuning task, the tables,
     statistics, artifacts and dashboard."""
     from prefect.artifacts import (
@@ -69,13 +71,14 @@ def run_experiment_flow(plan_path: str) -> dict[str, Any]:
         create_table_artifact,
         update_progress_artifact,
     )
-    from sim2radar.tasks.experiment import finish_sweep, read_plan
+
+    from sim2radar.experiment.sweep import finish_sweep
+    from sim2radar.tasks.experiment import read_plan
 
     plan = read_plan(plan_path)
     logger = get_run_logger()
-    ctx, sweep_dir, name = plan["context"], Path(plan["context"]["sweep_dir"]), plan["name"]
-    runs, pretrains = plan["runs"], plan["pretrains"]
-    total = len(runs)
+    ctx, name, sweep_dir = plan.context, plan.name, Path(plan.context.sweep_dir)
+    total = len(plan.runs)
     progress_id = create_progress_artifact(
         progress=0.0, key=_progress.artifact_key("sweep", name, "progress"),
         description=f"sweep {name}: finished training runs of {total}")
@@ -83,7 +86,7 @@ def run_experiment_flow(plan_path: str) -> dict[str, Any]:
 
     def record(row: dict) -> None:
         rows[row["run_key"]] = row
-        ordered = [rows[k] for k in sorted(rows, key=lambda k: _order(rows[k]))]
+        ordered = sorted(rows.values(), key=_order)
         write_runs_table(sweep_dir, ordered)
         failed = sum(r["status"] == "failed" for r in ordered)
         write_json(sweep_dir / "progress.json", {
@@ -99,37 +102,35 @@ def run_experiment_flow(plan_path: str) -> dict[str, Any]:
                         row["condition"], row["fraction"], row["trial"], row["status"],
                         row["ap_3d_r40_iou03"])
 
-    pending: dict[Any, tuple[str, Any]] = {}
-    for p in pretrains:
-        fut = pretrain_task.with_options(task_run_name=p['id']).submit(ctx, p)
-        pending[fut] = ("pretrain", p)
-    for r in runs:
-        if r["pretrain_id"] is None:
-            fut = finetune_task.with_options(task_run_name=_run_name(r)).submit(ctx, r, None)
-            pending[fut] = ("run", (r, None))
+    # a pre-training's runs start when it finishes; the runs from scratch start at once
+    pending: dict[Any, tuple[Any, PretrainResult | None]] = {}
+
+    def finetune(run, pretrain: PretrainResult | None) -> None:
+        fut = finetune_task.with_options(task_run_name=run.id).submit(ctx, run, pretrain)
+        pending[fut] = (run, pretrain)
+
+    for p in plan.pretrains:
+        pending[pretrain_task.with_options(task_run_name=p.id).submit(ctx, p)] = (p, None)
+    for r in plan.runs:
+        if r.pretrain_id is None:
+            finetune(r, None)
     while pending:
         fut = next(iter(as_completed(list(pending))))
-        kind, what = pending.pop(fut)
+        job, pretrain = pending.pop(fut)
         result = fut.result(raise_on_failure=False)
         error = result if isinstance(result, BaseException) else (
             None if fut.state.is_completed() else (fut.state.message or repr(result)))
-        if kind == "pretrain":
-            for r in runs:
-                if r["pretrain_id"] != what["id"]:
-                    continue
+        if isinstance(job, PlannedPretrain):
+            for r in plan.runs_after(job):
                 if error is None:
-                    f2 = finetune_task.with_options(task_run_name=_run_name(r)).submit(
-                        ctx, r, result)
-                    pending[f2] = ("run", (r, result))
+                    finetune(r, result)
                 else:
-                    record(failed_row(ctx, r, {"key": what["key"], "n_frames": 0},
-                                      f"pre-training {what['id']} failed: {_text(error)}"))
-            continue
-        spec, pre = what
-        record(result if error is None else failed_row(ctx, spec, pre, _text(error)))
+                    record(failed_row(ctx, r, PretrainResult(job.key, "", 0),
+                                      f"pre-training {job.id} failed: {_text(error)}"))
+        else:
+            record(result if error is None else failed_row(ctx, job, pretrain, _text(error)))
 
-    ordered = [rows[k] for k in sorted(rows, key=lambda k: _order(rows[k]))]
-    summary = finish_sweep(plan, ordered)
+    summary = finish_sweep(plan, sorted(rows.values(), key=_order))
     create_table_artifact(table=summary["table_rows"],
                           key=_progress.artifact_key("sweep", name, "results"),
                           description=f"sweep {name}: {summary['metric']} per cell")
@@ -145,10 +146,6 @@ def _text(error: Any) -> str:
     return f"{type(error).__name__}: {error}" if isinstance(error, BaseException) else str(error)
 
 
-def _run_name(r: dict) -> str:
-    return str(r["id"])
-
-
 def _order(row: dict) -> tuple:
     return (str(row["condition"]), float(row["fraction"]), int(row["trial"]))
 
@@ -161,8 +158,7 @@ def run_experiment(
     name: str = "sweep",
     out: str | os.PathLike = "out/sweeps",
     store: str | os.PathLike = "out/store",
-    sim_gt: str | os.PathLike | None = None,
-    sim_one_material: str | os.PathLike | None = None,
+    datasets: Mapping[str, str | os.PathLike | None] | None = None,
     ablations: bool = False,
     overrides: dict[str, Any] | None = None,
     workers: int | None = None,
@@ -178,7 +174,9 @@ def run_experiment(
     sim, real : dataset folders (OpenPCDet custom layout) or ``store:NAME[:geometry]`` names of
         factory datasets in ``store`` (exported into the sweep folder first).
     profile : ``paper``, ``demo``, ``smoke`` or a profile YAML.
-    sim_gt, sim_one_material : the ablations' simulated datasets (with ``ablations``).
+    datasets : the other conditions' datasets by role
+        (:data:`sim2radar.experiment.profiles.ROLES`), e.g. ``{"sim-gt": ...,
+        "sim-one-material": ...}`` for the ablations (with ``ablations``).
     overrides : profile fields to replace (e.g. ``{"trials": 3}``).
     workers : concurrent runs (default: the profile's ``concurrent_runs``); with
         ``dask_address`` (``"local"`` or ``tcp://...``) the runs go to Dask instead of threads.
@@ -187,12 +185,11 @@ def run_experiment(
     """
     from sim2radar.tasks.experiment import prepare_sweep
 
-    plan = prepare_sweep(sim, real, profile=profile, name=name, out=out, store=store,
-                         sim_gt=sim_gt, sim_one_material=sim_one_material, ablations=ablations,
+    plan = prepare_sweep({**(datasets or {}), "sim": sim, "real": real}, profile=profile,
+                         name=name, out=out, store=store, ablations=ablations,
                          overrides=overrides, device=device, force=force or ())
-    n = int(workers or plan["concurrent_runs"])
-    runner = task_runner(n, dask_address)
-    return run_experiment_flow.with_options(task_runner=runner)(plan_path=plan["plan_path"])
+    runner = task_runner(int(workers or plan.concurrent_runs), dask_address)
+    return run_experiment_flow.with_options(task_runner=runner)(plan_path=plan.plan_path)
 
 
 @flow(name="run-experiment-job", log_prints=False)
@@ -203,16 +200,15 @@ def run_experiment_job(
     name: str = "sweep",
     out: str = "out/sweeps",
     store: str = "out/store",
-    sim_gt: str | None = None,
-    sim_one_material: str | None = None,
+    datasets: dict[str, str] | None = None,
     ablations: bool = False,
     workers: int | None = None,
     dask_address: str | None = None,
 ) -> dict[str, Any]:
     """Deployment entry point (``deploy/prefect.yaml``): :func:`run_experiment` as a subflow
-    (the package's copy, so Dask workers can import it)."""
+    (the package's copy, so Dask workers can import it); ``datasets``: the ablations' datasets
+    by role (``{"sim-gt": ..., "sim-one-material": ...}``)."""
     package = importlib.import_module("sim2radar.flows.run_experiment")
     return package.run_experiment(sim, real, profile=profile, name=name, out=out, store=store,
-                                  sim_gt=sim_gt, sim_one_material=sim_one_material,
-                                  ablations=ablations, workers=workers,
+                                  datasets=datasets, ablations=ablations, workers=workers,
                                   dask_address=dask_address)

@@ -117,8 +117,9 @@ def run_demo(
     typer.secho(f"4/5 experiment sweep ({profile} profile)", bold=True)
     summary = run_sweep(str(data / "reconstructed"), str(data / "proxy_real"), profile=profile,
                         name="demo", out=str(out / "sweeps"), store=store,
-                        sim_gt=str(data / "ground_truth") if ablations else None,
-                        sim_one_material=str(data / "one_material") if ablations else None,
+                        datasets={"sim-gt": str(data / "ground_truth"),
+                                  "sim-one-material": str(data / "one_material")}
+                        if ablations else None,
                         ablations=ablations, verbose=verbose)
     typer.secho("5/5 preview and summary", bold=True)
     from sim2radar.worlds import (

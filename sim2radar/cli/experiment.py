@@ -19,7 +19,7 @@ import typer
 
 from sim2radar.cli._app import app, exit_unless_writable, exit_unless_writable_outputs
 
-__all__ = ["sweep", "run_sweep", "print_sweep_summary", "print_plan"]
+__all__ = ["sweep", "run_sweep", "sweep_datasets", "print_sweep_summary", "print_plan"]
 
 
 def _fractions(text: str | None) -> list[float] | None:
@@ -81,14 +81,28 @@ def print_plan(cost: dict[str, Any]) -> None:
         console.print(f"expected wall time on {n} worker(s), one run each: {hours:.2f} h")
 
 
+def sweep_datasets(sim: str, real: str, options: dict[str, str | None]) -> dict[str, str]:
+    """The sweep's datasets by role: SIM, REAL and each given dataset option (``--sim-gt``) of
+    the condition registry (:attr:`sim2radar.experiment.profiles.Condition.flag`)."""
+    from sim2radar.experiment.profiles import CONDITIONS
+
+    roles = {c.flag: c.sim_role for c in CONDITIONS.values() if c.flag}
+    unknown = sorted(set(options) - set(roles))
+    if unknown:
+        raise ValueError(f"no condition takes the dataset option(s) {unknown}")
+    return {"sim": sim, "real": real,
+            **{roles[flag]: path for flag, path in options.items() if path is not None}}
+
+
 def run_sweep(sim: str, real: str, *, profile: str, name: str, out: str, store: str,
-              sim_gt: str | None = None, sim_one_material: str | None = None,
+              datasets: dict[str, str] | None = None,
               ablations: bool = False, overrides: dict[str, Any] | None = None,
               workers: int | None = None, dask_address: str | None = None,
               device: str | None = None, show_progress: bool = True,
               verbose: bool = False, force: list[str] | None = None) -> dict[str, Any]:
     """Prepare (validating every input first) and run a sweep with a progress bar; returns
-    the flow's summary."""
+    the flow's summary. ``datasets``: the other conditions' datasets by role
+    (``{"sim-gt": ...}``)."""
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
     from sim2radar.cli.simulate import _prefect_env
@@ -98,15 +112,15 @@ def run_sweep(sim: str, real: str, *, profile: str, name: str, out: str, store: 
     from sim2radar.tasks.experiment import prepare_sweep
     from sim2radar.tasks.runners import task_runner
 
-    plan = prepare_sweep(sim, real, profile=profile, name=name, out=out, store=store,
-                         sim_gt=sim_gt, sim_one_material=sim_one_material, ablations=ablations,
+    plan = prepare_sweep({**(datasets or {}), "sim": sim, "real": real}, profile=profile,
+                         name=name, out=out, store=store, ablations=ablations,
                          overrides=overrides, device=device, force=force or ())
-    runner = task_runner(int(workers or plan["concurrent_runs"]), dask_address)
+    runner = task_runner(int(workers or plan.concurrent_runs), dask_address)
     columns = [TextColumn("[bold]sweep"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
                TextColumn("{task.description}")]
     with Progress(*columns, disable=not show_progress) as progress:
-        bar = progress.add_task(f"{len(plan['pretrains'])} pre-training(s), then runs",
-                                total=len(plan["runs"]))
+        bar = progress.add_task(f"{len(plan.pretrains)} pre-training(s), then runs",
+                                total=len(plan.runs))
 
         def on_run(row: dict) -> None:
             ap = row.get("ap_3d_r40_iou03")
@@ -117,7 +131,7 @@ def run_sweep(sim: str, real: str, *, profile: str, name: str, out: str, store: 
 
         with progress_callback(on_run):
             return run_experiment_flow.with_options(task_runner=runner)(
-                plan_path=plan["plan_path"])
+                plan_path=plan.plan_path)
 
 
 def print_sweep_summary(summary: dict[str, Any]) -> None:
@@ -208,11 +222,12 @@ def sweep(
         fr = _fractions(fractions)
         if fr is not None:
             overrides["fractions"] = fr
+        datasets = sweep_datasets(sim, real, {"--sim-gt": sim_gt,
+                                              "--sim-one-material": sim_one_material})
         if plan:
             from sim2radar.tasks.experiment import plan_cost
 
-            cost = plan_cost(sim, real, profile=profile, store=store, sim_gt=sim_gt,
-                             sim_one_material=sim_one_material, ablations=ablations,
+            cost = plan_cost(datasets, profile=profile, store=store, ablations=ablations,
                              overrides=overrides or None, device=device,
                              workers=_ints(plan_workers, "--plan-workers"),
                              step_seconds=_step_seconds(step_seconds))
@@ -222,10 +237,9 @@ def sweep(
                 json_out.write_text(json.dumps(cost, indent=1, default=str))
             return
         summary = run_sweep(sim, real, profile=profile, name=name, out=str(out), store=store,
-                            sim_gt=sim_gt, sim_one_material=sim_one_material,
-                            ablations=ablations, overrides=overrides or None, workers=workers,
-                            dask_address=dask, device=device, verbose=verbose,
-                            force=force_run)
+                            datasets=datasets, ablations=ablations,
+                            overrides=overrides or None, workers=workers, dask_address=dask,
+                            device=device, verbose=verbose, force=force_run)
     except (ValueError, FileNotFoundError, DatasetError, ImportError) as exc:
         typer.secho(f"error: {exc}", fg="red", err=True)
         raise typer.Exit(2) from None

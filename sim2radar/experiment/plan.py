@@ -11,6 +11,12 @@ every trial (its seed is trial 0's).
 identifies a run; the caller hashes it (``storage.content_key``) together with the datasets'
 content keys and the code version. Settings that do not change a run's result (device, threads,
 checkpoint cadence, progress bars, data paths) are left out, so changing them recomputes nothing.
+
+:class:`SweepPlan` is a prepared sweep as the flow runs it (:mod:`sim2radar.experiment.sweep`
+builds it): the :class:`SweepContext` every task needs, each :class:`PretrainSpec` and
+:class:`RunSpec` with its content key (:class:`PlannedPretrain`, :class:`PlannedRun`) and
+``sweep.json``'s document. It is frozen, pickles to Dask workers and round-trips through
+``plan.json`` (:meth:`SweepPlan.to_dict`, :meth:`SweepPlan.from_dict`).
 """
 
 from __future__ import annotations
@@ -26,8 +32,14 @@ from sim2radar.experiment.profiles import BASELINE, CONDITIONS, ExperimentProfil
 from sim2radar.experiment.subsets import real_subset, trial_seed
 
 __all__ = [
+    "DatasetRef",
+    "PlannedPretrain",
+    "PlannedRun",
+    "PretrainResult",
     "PretrainSpec",
     "RunSpec",
+    "SweepContext",
+    "SweepPlan",
     "epochs_for",
     "ids_digest",
     "plan_sweep",
@@ -38,6 +50,8 @@ __all__ = [
     "settings_changes",
 ]
 
+#: version of :meth:`SweepPlan.to_dict`'s layout (``plan.json``); 1 was the untyped dict plan
+PLAN_FORMAT = 2
 #: profile fields that only say how a sweep is executed or described, not what it measures
 EXECUTION_FIELDS = ("name", "description", "detector", "threads_per_run", "concurrent_runs")
 
@@ -209,8 +223,8 @@ def ids_digest(ids: Sequence[str]) -> str:
 def _detector_identity(detector: Mapping[str, Any]) -> dict[str, Any]:
     """The parts of a resolved DetectConfig dump that change a run's result: model,
     augmentation, optimisation (epochs left out: the spec carries the run's own), mixed
-    precision (as resolved for the sweep's device: true or false). Name, data paths, seed (the spec's), pretrained_encoder (the pretrain's key)
-    and the rest of runtime are left out."""
+    precision (as resolved for the sweep's device: true or false). Name, data paths, seed (the
+    spec's), pretrained_encoder (the pretrain's key) and the rest of runtime are left out."""
     det = dict(detector)
     missing = [k for k in ("model", "augmentation", "optimization") if k not in det]
     if missing:
@@ -307,3 +321,231 @@ def settings_changes(old: Mapping[str, Any], new: Mapping[str, Any],
         elif a != b:
             out.append(f"{path}: {json.dumps(a, default=str)} -> {json.dumps(b, default=str)}")
     return out
+
+
+# ---------------------------------------------------------------------------------------------
+# A prepared sweep: what the flow runs
+# ---------------------------------------------------------------------------------------------
+@dataclasses.dataclass(frozen=True)
+class DatasetRef:
+    """One dataset of a sweep as a task finds it again.
+
+    Attributes
+    ----------
+    root : str — the folder (OpenPCDet custom layout).
+    key : str — its content digest when the sweep was planned
+        (:func:`sim2radar.experiment.data.dataset_digest`); a task refuses the folder once its
+        digest differs.
+    splits : dict — split name -> frame ids, as planned.
+    """
+
+    root: str
+    key: str
+    splits: dict[str, tuple[str, ...]]
+
+    def ids(self, splits: Sequence[str] | None = None) -> list[str]:
+        """Frame ids of the given splits (all splits when None), in split order, once each."""
+        names = list(self.splits) if splits is None else list(splits)
+        return list(dict.fromkeys(i for name in names for i in self.splits.get(name, ())))
+
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any]) -> DatasetRef:
+        return cls(d["root"], d["key"], {k: tuple(v) for k, v in d["splits"].items()})
+
+
+@dataclasses.dataclass(frozen=True)
+class SweepContext:
+    """What every task of one sweep needs.
+
+    Attributes
+    ----------
+    name : str — the sweep's name.
+    sweep_dir : str — the sweep folder (checkpoints, runs.parquet, sweep.json, ...).
+    store : str — artifact store root (path or URI).
+    datasets : dict — role (:data:`~sim2radar.experiment.profiles.ROLES`) -> :class:`DatasetRef`.
+    pretrain_config, finetune_config : dict — the stages' resolved ``DetectConfig`` dumps
+        (``model_dump(mode="json")``).
+    eval_split, val_split : str — the real splits for the test and the learning curves.
+    val_every : int — epochs between validation APs (0: none).
+    max_val_points : int — at most this many validation APs per run.
+    device : str or None — torch device for every run (None: automatic).
+    """
+
+    name: str
+    sweep_dir: str
+    store: str
+    datasets: dict[str, DatasetRef]
+    pretrain_config: dict[str, Any]
+    finetune_config: dict[str, Any]
+    eval_split: str = "test"
+    val_split: str = "val"
+    val_every: int = 0
+    max_val_points: int = 12
+    device: str | None = None
+
+    def to_dict(self) -> dict[str, Any]:
+        return dataclasses.asdict(self)
+
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any]) -> SweepContext:
+        return cls(**{**d, "datasets": {r: DatasetRef.from_dict(v)
+                                        for r, v in d["datasets"].items()}})
+
+
+@dataclasses.dataclass(frozen=True)
+class PlannedPretrain:
+    """A pre-training of a prepared sweep.
+
+    Attributes
+    ----------
+    spec : PretrainSpec.
+    key : str — its content key (sim dataset, :func:`pretrain_key_inputs`, code version).
+    intensity_match : dict or None — the intensity mapping applied to its sim frames
+        (:meth:`~sim2radar.experiment.data.SubsetIntensityMatch.to_dict`), None without.
+    """
+
+    spec: PretrainSpec
+    key: str
+    intensity_match: dict[str, Any] | None = None
+
+    @property
+    def id(self) -> str:
+        return self.spec.name
+
+    def to_dict(self) -> dict[str, Any]:
+        return {**self.spec.to_dict(), "id": self.id, "key": self.key,
+                "intensity_match": self.intensity_match}
+
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any]) -> PlannedPretrain:
+        names = [f.name for f in dataclasses.fields(PretrainSpec)]
+        spec = PretrainSpec(**{**{k: d[k] for k in names}, "real_ids": tuple(d["real_ids"])})
+        return cls(spec, d["key"], d["intensity_match"])
+
+
+@dataclasses.dataclass(frozen=True)
+class PlannedRun:
+    """A fine-tuning run of a prepared sweep.
+
+    Attributes
+    ----------
+    spec : RunSpec.
+    key : str — its content key (real dataset, :func:`run_key_inputs`, code version): the
+        key of its ``experiment_runs`` row in the store.
+    pretrain_key : str or None — its pre-training's key (None: from scratch).
+    """
+
+    spec: RunSpec
+    key: str
+    pretrain_key: str | None = None
+
+    @property
+    def id(self) -> str:
+        return self.spec.name
+
+    @property
+    def pretrain_id(self) -> str | None:
+        return self.spec.pretrain.name if self.spec.pretrain else None
+
+    def to_dict(self) -> dict[str, Any]:
+        """The spec's fields with its pre-training named by ``pretrain_id`` and
+        ``pretrain_key``, ``id`` and ``key``."""
+        fields = {f.name: getattr(self.spec, f.name) for f in dataclasses.fields(RunSpec)
+                  if f.name != "pretrain"}
+        return {**fields, "train_ids": list(self.spec.train_ids), "id": self.id,
+                "key": self.key, "pretrain_id": self.pretrain_id,
+                "pretrain_key": self.pretrain_key}
+
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any],
+                  pretrains: Mapping[str, PretrainSpec]) -> PlannedRun:
+        names = [f.name for f in dataclasses.fields(RunSpec) if f.name != "pretrain"]
+        pre = pretrains[d["pretrain_id"]] if d["pretrain_id"] is not None else None
+        spec = RunSpec(**{**{k: d[k] for k in names}, "pretrain": pre,
+                          "train_ids": tuple(d["train_ids"])})
+        return cls(spec, d["key"], d["pretrain_key"])
+
+
+@dataclasses.dataclass(frozen=True)
+class PretrainResult:
+    """A finished pre-training, as the fine-tuning runs that load its encoder need it.
+
+    Attributes
+    ----------
+    key : str — the pre-training's content key.
+    checkpoint : str — the checkpoint whose encoder the runs load ('' when it failed).
+    n_frames : int — simulated frames it trained on (0 when it failed).
+    """
+
+    key: str
+    checkpoint: str
+    n_frames: int
+
+
+@dataclasses.dataclass(frozen=True)
+class SweepPlan:
+    """A prepared sweep: every pre-training and run with its key, and what they share.
+
+    Attributes
+    ----------
+    context : SweepContext — what every task needs.
+    pretrains : tuple of PlannedPretrain — in the order the flow submits them.
+    runs : tuple of PlannedRun — trial by trial (:func:`plan_sweep`'s order).
+    sweep : dict — ``sweep.json``'s document (profile, conditions, datasets, provenance,
+        settings; what the dashboard reads).
+    concurrent_runs : int — the profile's training runs in flight at once.
+    metric : str — the AP column the statistics compare.
+    plan_path : str or None — where the plan was written (``<sweep>/plan.json``), the flow's
+        parameter: a paper-sized plan exceeds Prefect's 512 KiB limit on flow parameters.
+    """
+
+    context: SweepContext
+    pretrains: tuple[PlannedPretrain, ...]
+    runs: tuple[PlannedRun, ...]
+    sweep: dict[str, Any]
+    concurrent_runs: int
+    metric: str
+    plan_path: str | None = None
+
+    @property
+    def name(self) -> str:
+        return self.context.name
+
+    def runs_after(self, pretrain: PlannedPretrain) -> list[PlannedRun]:
+        """The runs that load ``pretrain``'s encoder."""
+        return [r for r in self.runs if r.pretrain_id == pretrain.id]
+
+    def find_runs(self, wanted: Sequence[str]) -> list[PlannedRun]:
+        """The runs named in ``wanted`` (run ids such as ``sim-pretrain-f0.05-t2``, or keys),
+        once each in the order named.
+
+        Raises
+        ------
+        ValueError — for a name that is no run of this sweep, with an example of the ids.
+        """
+        by_name = {r.id: r for r in self.runs} | {r.key: r for r in self.runs}
+        unknown = [w for w in wanted if w not in by_name]
+        if unknown:
+            raise ValueError(f"--force-run {unknown[0]!r}: no run of this sweep has that id or "
+                             f"key; run ids look like {self.runs[0].id!r} (results.md, the "
+                             "dashboard, runs.parquet's run_key)")
+        return list({by_name[w].key: by_name[w] for w in wanted}.values())
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-able form (``plan.json``; :data:`PLAN_FORMAT`), without ``plan_path``."""
+        return {"format": PLAN_FORMAT, "context": self.context.to_dict(),
+                "pretrains": [p.to_dict() for p in self.pretrains],
+                "runs": [r.to_dict() for r in self.runs], "sweep": self.sweep,
+                "concurrent_runs": self.concurrent_runs, "metric": self.metric}
+
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any], plan_path: str | None = None) -> SweepPlan:
+        """Read :meth:`to_dict`'s form; raises ValueError for another format."""
+        if d.get("format") != PLAN_FORMAT:
+            raise ValueError(f"plan format {d.get('format', 1)}, expected {PLAN_FORMAT}: "
+                             "prepare the sweep again")
+        pretrains = tuple(PlannedPretrain.from_dict(p) for p in d["pretrains"])
+        specs = {p.id: p.spec for p in pretrains}
+        return cls(SweepContext.from_dict(d["context"]), pretrains,
+                   tuple(PlannedRun.from_dict(r, specs) for r in d["runs"]), dict(d["sweep"]),
+                   int(d["concurrent_runs"]), str(d["metric"]), plan_path)

@@ -14,9 +14,9 @@ from pathlib import Path
 import numpy as np
 import pyarrow.parquet as pq
 import pytest
-from sim2radar.storage import ArtifactStore, get_schema
 
 from sim2radar.datasets import make_door_frames, write_dataset, write_metadata
+from sim2radar.storage import ArtifactStore, get_schema
 
 REPO = Path(__file__).resolve().parents[2]
 PROXY = "proxy-real (reference radar simulation)"
@@ -109,9 +109,8 @@ def test_prefect_artifacts_are_published(first):
 
 
 def test_a_rerun_trains_nothing(first, data, monkeypatch):
-    from sim2radar.flows.run_experiment import run_experiment
-
     import sim2radar.detect.train as train_mod
+    from sim2radar.flows.run_experiment import run_experiment
 
     calls = []
     real_train = train_mod.train
@@ -126,20 +125,48 @@ def test_a_rerun_trains_nothing(first, data, monkeypatch):
 def test_a_sweep_refuses_changed_settings_but_not_changed_execution(first, data):
     """The settings are fixed when the sweep is created: a rerun with a changed protocol (lr)
     is refused with the field named, one with changed execution (concurrency) runs."""
-    from sim2radar.tasks.experiment import SweepSettingsChanged, prepare_sweep
+    from sim2radar.experiment.sweep import SweepSettingsChanged
+    from sim2radar.tasks.experiment import prepare_sweep
 
     sweep = json.loads((first["dir"] / "sweep.json").read_text())
     # amp "auto" is decided once, when the sweep is planned: every run trains the same way
     assert isinstance(sweep["settings"]["detector"]["finetune"]["amp"], bool)
     md = (first["dir"] / "results.md").read_text()
     assert f"digest `{sweep['settings_digest']}`" in md and sweep["settings_fixed_at"] in md
+    datasets = {"sim": data["sim"], "real": data["real"]}
     with pytest.raises(SweepSettingsChanged, match=r"(?s)profile\.lr: .*new sweep name"):
-        prepare_sweep(data["sim"], data["real"], profile="smoke", name="t", out=first["out"],
+        prepare_sweep(datasets, profile="smoke", name="t", out=first["out"],
                       store=first["store"], overrides={"lr": 0.5})
-    plan = prepare_sweep(data["sim"], data["real"], profile="smoke", name="t", out=first["out"],
+    plan = prepare_sweep(datasets, profile="smoke", name="t", out=first["out"],
                          store=first["store"], overrides={"concurrent_runs": 3})
-    assert plan["sweep"]["settings_fixed_at"] == sweep["settings_fixed_at"]
-    assert plan["sweep"]["settings_digest"] == sweep["settings_digest"]
+    assert plan.sweep["settings_fixed_at"] == sweep["settings_fixed_at"]
+    assert plan.sweep["settings_digest"] == sweep["settings_digest"]
+    assert plan.concurrent_runs == 3
+
+
+def test_content_keys_keep_their_recipe(monkeypatch):
+    """A rerun of an existing sweep finds its cached runs only while the keys' recipe (stage,
+    stage version, input names, key inputs, code version) stays what it was: these literals are
+    the keys sweeps have been written under since stage version 1. Change them only with
+    EXPERIMENT_STAGE_VERSION, when every run must be recomputed."""
+    from sim2radar.experiment.plan import (
+        PretrainSpec,
+        RunSpec,
+        pretrain_key_inputs,
+        run_key_inputs,
+    )
+    from sim2radar.experiment.profiles import ExperimentProfile
+    from sim2radar.tasks import experiment as tasks
+
+    monkeypatch.setattr(tasks, "package_versions", lambda: {"sim2radar": "0.0.0"})
+    det = {"model": {"voxel_size_m": [0.2, 0.2, 4.0]}, "augmentation": {"flip": True},
+           "optimization": {"lr": 0.003, "batch_size": 4, "epochs": 2}, "runtime": {"amp": False}}
+    pre = PretrainSpec("sim-pretrain", 0, 7, "sim", 20, 0.5, ("a", "b"))
+    run = RunSpec("sim-pretrain", 0.5, 0, 7, 2, pre, 200, ("a", "b"))
+    pkey = tasks._key_of("pretrain", {"sim": "s" * 20}, pretrain_key_inputs(pre, det, {"q": [1.0]}))
+    assert pkey == "41cade8d6c72e05919e1"
+    assert tasks._key_of("finetune", {"real": "r" * 20}, run_key_inputs(
+        run, ExperimentProfile(detector=Path("x.yaml")), det, pkey)) == "07a41ba87ad85e6e283b"
 
 
 def test_a_paper_sized_plan_reaches_the_flow_as_a_file(data, tmp_path):
@@ -149,21 +176,22 @@ def test_a_paper_sized_plan_reaches_the_flow_as_a_file(data, tmp_path):
     import inspect
 
     from prefect._internal.schemas.validators import validate_parameter_size
+
     from sim2radar.flows.run_experiment import run_experiment_flow
     from sim2radar.tasks.experiment import prepare_sweep, read_plan
 
     limit = 524_288  # Prefect 3's default server.flow_run max parameter size
-    plan = prepare_sweep(data["sim"], data["real"], profile="smoke", name="big",
-                         out=tmp_path / "sweeps", store=tmp_path / "store",
+    plan = prepare_sweep({"sim": data["sim"], "real": data["real"]}, profile="smoke",
+                         name="big", out=tmp_path / "sweeps", store=tmp_path / "store",
                          overrides={"trials": 24, "pretrain_per_trial": True})
-    path = Path(plan["plan_path"])
+    path = Path(plan.plan_path)
     assert path == (tmp_path / "sweeps" / "big" / "plan.json").resolve()
-    assert path.stat().st_size > limit and len(plan["pretrains"]) >= 24
+    assert path.stat().st_size > limit and len(plan.pretrains) >= 24
     with pytest.raises(ValueError, match="less than 524,288 bytes"):
-        validate_parameter_size({"plan": read_plan(path)}, limit)  # what was sent before
+        validate_parameter_size({"plan": plan.to_dict()}, limit)  # what was sent before
     assert list(inspect.signature(run_experiment_flow.fn).parameters) == ["plan_path"]
     validate_parameter_size({"plan_path": str(path)}, limit)  # what is sent now
-    assert read_plan(path) == json.loads(json.dumps(plan, default=str))
+    assert read_plan(path) == plan                            # typed, as prepared
 
 
 def test_a_frame_broken_before_or_during_a_sweep_trains_nothing_on_it(data, prefect_server,
@@ -172,27 +200,27 @@ def test_a_frame_broken_before_or_during_a_sweep_trains_nothing_on_it(data, pref
     every split is loaded first); one broken while the sweep is planned or running fails the
     runs with "changed while the sweep ran" instead of training on altered data, and the
     rerun after the fix finishes them."""
+    from sim2radar.datasets import DatasetError
     from sim2radar.flows.run_experiment import run_experiment_flow
     from sim2radar.tasks.experiment import prepare_sweep
-
-    from sim2radar.datasets import DatasetError
 
     real = _write(tmp_path / "real", 2, {"train": 8, "val": 4, "test": 4}, 100_000, proxy=True)
     victim = real / "points" / f"{(real / 'ImageSets' / 'train.txt').read_text().split()[-1]}.npy"
     good = victim.read_bytes()
     kw = dict(profile="smoke", name="broken", out=tmp_path / "o", store=tmp_path / "store",
               overrides={"intensity_matching": False, "trials": 1})
-    plan = prepare_sweep(data["sim"], real, **kw)
+    plan = prepare_sweep({"sim": data["sim"], "real": real}, **kw)
     victim.write_bytes(b"not a numpy file")
     with pytest.raises(DatasetError, match=f"{victim.name}: not a NumPy .npy array"):
-        prepare_sweep(data["sim"], real, **kw)
-    s = run_experiment_flow(plan_path=plan["plan_path"])
+        prepare_sweep({"sim": data["sim"], "real": real}, **kw)
+    s = run_experiment_flow(plan_path=plan.plan_path)
     rows = pq.read_table(tmp_path / "o" / "broken" / "runs.parquet").to_pylist()
     assert s["counts"]["failed"] == len(rows) == 4 and s["counts"]["ok"] == 0
     assert all("changed while the sweep ran" in r["error"] and r["ap_3d_r40_iou03"] is None
                for r in rows)
     victim.write_bytes(good)
-    again = run_experiment_flow(plan_path=prepare_sweep(data["sim"], real, **kw)["plan_path"])
+    again = run_experiment_flow(
+        plan_path=prepare_sweep({"sim": data["sim"], "real": real}, **kw).plan_path)
     assert again["counts"] == {"ok": 4, "skipped": 0, "failed": 0}
 
 
@@ -307,10 +335,9 @@ def test_a_dask_worker_killed_mid_run_loses_nothing(data, prefect_server, tmp_pa
     distributed = pytest.importorskip("distributed")
     import threading
 
+    from sim2radar.experiment.claims import read_events
     from sim2radar.flows.run_experiment import run_experiment
     from sim2radar.tasks.runners import local_cluster_kwargs
-
-    from sim2radar.experiment.claims import read_events
 
     sweep = tmp_path / "sweeps" / "kill"
     killed: dict = {}

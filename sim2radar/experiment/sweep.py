@@ -1,0 +1,396 @@
+"""A sweep outside its training runs: preparing it — from a profile and its opened datasets to
+the :class:`~sim2radar.experiment.plan.SweepPlan` the flow runs, or what it would cost — and
+finishing it: statistics, report and dashboard of its runs' rows.
+
+    setup = setup_sweep("demo", {"sim": "data/sim", "real": "data/real"}, overrides={"trials": 3})
+    domains = {role: open_domain(datasets[role], role) for role in setup.roles}
+    plan = build_plan(setup, domains, name="demo", key_of=..., ...)     # or sweep_cost(...)
+    ...                                                                 # the flow runs it
+    summary = finish_sweep(plan, rows)
+
+The conditions, their dataset roles and the command-line flags that name those datasets come
+from the condition registry (:data:`~sim2radar.experiment.profiles.CONDITIONS`): a new condition
+is one registry entry. Every frame a sweep will read is loaded and checked (and a simulated
+dataset holding a real evaluation frame refused) before the plan exists.
+
+What stays with the caller (``tasks/experiment.py``): exporting ``store:NAME`` datasets, reading
+and writing the sweep folder's files, and hashing key inputs into content keys — the
+``key_of(kind, inputs, key_inputs)`` function :func:`build_plan` is given, which adds the code
+version (``storage.content_key``).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+from collections.abc import Callable, Collection, Mapping, Sequence
+from datetime import UTC, datetime
+from pathlib import Path
+from typing import Any
+
+from sim2radar.experiment.plan import (
+    DatasetRef,
+    PlannedPretrain,
+    PlannedRun,
+    SweepContext,
+    SweepPlan,
+    plan_sweep,
+    pretrain_key_inputs,
+    protocol_digest,
+    protocol_settings,
+    run_key_inputs,
+    settings_changes,
+)
+from sim2radar.experiment.profiles import ABLATIONS, CONDITIONS, ROLES, ExperimentProfile
+
+__all__ = [
+    "KeyFn",
+    "SweepSettingsChanged",
+    "SweepSetup",
+    "build_plan",
+    "check_sweep_name",
+    "finish_sweep",
+    "resolve_profile",
+    "role_flag",
+    "settings_fixed_at",
+    "setup_sweep",
+    "stage_configs",
+    "sweep_conditions",
+    "sweep_cost",
+]
+
+#: ``key_of(kind, inputs, key_inputs) -> content key``: ``kind`` is ``"pretrain"`` or
+#: ``"finetune"``, ``inputs`` the dataset digests by name, ``key_inputs`` what
+#: :func:`~.plan.pretrain_key_inputs` / :func:`~.plan.run_key_inputs` give
+KeyFn = Callable[[str, Mapping[str, str], Mapping[str, Any]], str]
+
+
+def _now() -> str:
+    return datetime.now(UTC).isoformat(timespec="seconds")
+
+
+def check_sweep_name(name: str) -> None:
+    """A sweep name is one safe path component (its folder is ``<out>/<name>``): letters,
+    digits, '-', '_' and '.', not starting with '.' (so never ``.`` or ``..``)."""
+    if not name or name.startswith(".") or not all(c.isalnum() or c in "-_." for c in name):
+        raise ValueError(f"--name {name!r}: a sweep name is one folder name under --out — use "
+                         "letters, digits, '-', '_' or '.', not starting with '.'")
+
+
+def resolve_profile(profile: str | os.PathLike | ExperimentProfile,
+                    overrides: Mapping[str, Any] | None = None) -> ExperimentProfile:
+    """A profile (bundled name, YAML path or object) with ``overrides`` applied and validated;
+    raises ValueError naming the field."""
+    from sim2radar.experiment.profiles import load_profile
+
+    prof = profile if isinstance(profile, ExperimentProfile) else load_profile(profile)
+    if overrides:
+        try:
+            prof = ExperimentProfile.model_validate({**prof.model_dump(), **overrides})
+        except Exception as exc:  # pydantic's message names the field
+            raise ValueError(f"profile {prof.name!r} overrides: {exc}") from None
+    return prof
+
+
+def _resolve_precision(cfg, device: str | None):
+    """``runtime.amp: auto`` decided once, for the sweep's device, on the machine that plans
+    it: every run of the sweep trains in the same precision wherever it executes, and the
+    choice is part of the runs' keys and the sweep's settings."""
+    from sim2radar.hardware import autocast_dtype, torch_device
+
+    if cfg.runtime.amp != "auto":
+        return cfg
+    dev = torch_device(device or cfg.runtime.device)
+    return cfg.with_updates(runtime={"amp": autocast_dtype(dev, "auto") is not None})
+
+
+def stage_configs(profile: ExperimentProfile, device: str | None) -> tuple[Any, Any]:
+    """The pre-training and fine-tuning ``DetectConfig`` of the profile, mixed precision
+    resolved for ``device`` (the device itself is not set: :func:`build_plan` does)."""
+    return (_resolve_precision(profile.detector_config("pretrain"), device),
+            _resolve_precision(profile.detector_config("finetune"), device))
+
+
+def role_flag(role: str) -> str:
+    """The ``sim2radar sweep`` option naming a dataset role (the registry's
+    :attr:`~sim2radar.experiment.profiles.Condition.flag`); the role itself for ``real``."""
+    return next((c.flag for c in CONDITIONS.values() if c.sim_role == role), role)
+
+
+def sweep_conditions(profile: ExperimentProfile, ablations: bool,
+                     datasets: Mapping[str, Any]) -> tuple[tuple[str, ...], tuple[str, ...]]:
+    """The sweep's conditions (the profile's, plus every ablation with ``ablations``) and the
+    dataset roles they need, in :data:`~.profiles.ROLES` order.
+
+    ``datasets`` : role -> source (None or absent: not given).
+
+    Raises
+    ------
+    ValueError — a role that is not one of ROLES; conditions whose datasets were not given,
+    naming their options (``--sim-gt``).
+    """
+    unknown = sorted(set(datasets) - set(ROLES))
+    if unknown:
+        raise ValueError(f"unknown dataset role(s) {unknown}; known: {list(ROLES)}")
+    conditions = list(profile.all_conditions)
+    if ablations:
+        conditions += [c for c in ABLATIONS if c not in conditions]
+    needed = {"real"} | {CONDITIONS[c].sim_role for c in conditions if CONDITIONS[c].sim_role}
+    missing = [r for r in ROLES if r in needed and datasets.get(r) is None]
+    if missing:
+        raise ValueError("conditions " + ", ".join(c for c in conditions
+                                                     if CONDITIONS[c].sim_role in missing)
+                         + " need the dataset(s) " + ", ".join(map(role_flag, missing)))
+    return tuple(conditions), tuple(r for r in ROLES if r in needed)
+
+
+@dataclasses.dataclass(frozen=True)
+class SweepSetup:
+    """A sweep's protocol, before its datasets are opened.
+
+    Attributes
+    ----------
+    profile : ExperimentProfile — after overrides.
+    conditions : tuple of str — the conditions to run (:func:`sweep_conditions`).
+    roles : tuple of str — the dataset roles they need, in ROLES order.
+    configs : (DetectConfig, DetectConfig) — pre-training and fine-tuning
+        (:func:`stage_configs`).
+    settings : dict — :func:`~.plan.protocol_settings`: what fixes what the sweep measures.
+    device : str or None — torch device of every run (None: automatic).
+    """
+
+    profile: ExperimentProfile
+    conditions: tuple[str, ...]
+    roles: tuple[str, ...]
+    configs: tuple[Any, Any]
+    settings: dict[str, Any]
+    device: str | None = None
+
+
+def setup_sweep(profile: str | os.PathLike | ExperimentProfile, datasets: Mapping[str, Any], *,
+                ablations: bool = False, overrides: Mapping[str, Any] | None = None,
+                device: str | None = None) -> SweepSetup:
+    """:func:`resolve_profile`, :func:`sweep_conditions` (``datasets``: role -> source),
+    :func:`stage_configs` and the protocol settings; raises ValueError / FileNotFoundError
+    naming the profile, field or missing dataset."""
+    prof = resolve_profile(profile, overrides)
+    conditions, roles = sweep_conditions(prof, ablations, datasets)
+    configs = stage_configs(prof, device)
+    settings = protocol_settings(prof, *(c.model_dump(mode="json") for c in configs))
+    return SweepSetup(prof, conditions, roles, configs, settings, device)
+
+
+class SweepSettingsChanged(ValueError):
+    """A sweep folder's settings were fixed by its first preparation and now differ."""
+
+
+def settings_fixed_at(old: Mapping[str, Any] | None, settings: Mapping[str, Any], *,
+                      name: str, sweep_dir: str | os.PathLike) -> str:
+    """When the settings of sweep ``name`` were fixed: now for a new sweep (``old``, its
+    earlier ``sweep.json``, None), the first preparation's time otherwise.
+
+    A sweep's results must come from one set of settings, fixed before its first run: a
+    profile edited after some runs finished would mix two protocols in one table (and invites
+    tuning the protocol toward the answer). A folder written before settings were recorded
+    adopts the current ones.
+
+    Raises
+    ------
+    SweepSettingsChanged — the settings differ from ``old``'s, listing what changed.
+    """
+    if old is None:
+        return _now()
+    if "settings" not in old:
+        return str(old.get("created_at") or _now())
+    if protocol_digest(old["settings"]) == protocol_digest(settings):
+        return str(old.get("settings_fixed_at") or old.get("created_at") or _now())
+    changes = settings_changes(old["settings"], settings)
+    shown = "\n  ".join(changes[:12]) + (f"\n  ... and {len(changes) - 12} more"
+                                          if len(changes) > 12 else "")
+    raise SweepSettingsChanged(
+        f"sweep {name!r} ({sweep_dir}) was created with other settings (fixed at "
+        f"{old.get('settings_fixed_at') or old.get('created_at')}, digest "
+        f"{protocol_digest(old['settings'])}); what changed:\n  {shown}\n"
+        "One sweep's runs all use the settings fixed before its first run: start a new sweep "
+        "name (--name) for the new settings, or delete the folder to discard the old sweep.")
+
+
+def _check_datasets(profile: ExperimentProfile, domains: Mapping[str, Any]) -> None:
+    from sim2radar.experiment.data import check_disjoint_worlds, check_not_the_same
+
+    real = domains["real"]
+    for role, ds in domains.items():
+        if role != "real":
+            check_not_the_same(ds, real)
+            check_disjoint_worlds(ds, real)
+    for split in (profile.train_split, profile.eval_split):
+        if not real.splits.get(split):
+            raise ValueError(f"{real.root}/ImageSets/{split}.txt lists no frame: the real "
+                             f"dataset needs a {split!r} split")
+
+
+def _intensity_matches(profile: ExperimentProfile, domains: Mapping[str, Any], pretrains,
+                       nfeat: int, classes: Sequence[str]) -> dict[str, dict[str, Any]]:
+    """Load (so check: shape, dtype, finite values, labels; the file named) every frame the
+    sweep will read, refuse a simulated dataset holding a real validation or test frame, and
+    fit each pre-training's intensity match: its sim frames onto the intensities of its runs'
+    own real fine-tuning subset (:attr:`~.plan.PretrainSpec.real_ids`)."""
+    from sim2radar.experiment.data import check_no_shared_frames, fit_subset_intensity_match
+
+    real = domains["real"]
+    held_out_splits = [s for s in dict.fromkeys((profile.val_split, profile.eval_split))
+                       if real.splits.get(s)]
+    real_train = real.frames(real.splits[profile.train_split], nfeat, classes)
+    held_out = real.frames(real.ids(held_out_splits), nfeat, classes)
+    sims = {role: ds.frames(ds.ids(), nfeat, classes) for role, ds in domains.items()
+            if role != "real"}
+    for role, frames in sims.items():
+        check_no_shared_frames(domains[role], real, frames, held_out)
+    del held_out
+    if not (profile.intensity_matching and nfeat > 3):
+        return {}
+    return {p.name: fit_subset_intensity_match(sims[p.sim_role], real_train,
+                                               p.real_ids).to_dict() for p in pretrains}
+
+
+def build_plan(setup: SweepSetup, domains: Mapping[str, Any], *, name: str, sweep_dir: str,
+               store: str, fixed_at: str, key_of: KeyFn,
+               provenance: Mapping[str, Any]) -> SweepPlan:
+    """Check the datasets and plan the sweep: every pre-training and run with its key.
+
+    Parameters
+    ----------
+    setup : :func:`setup_sweep`.
+    domains : role -> opened :class:`~sim2radar.experiment.data.DomainDataset`, for each of
+        ``setup.roles``.
+    name, sweep_dir, store : the sweep's name, folder and artifact store root.
+    fixed_at : when its settings were fixed (:func:`settings_fixed_at`).
+    key_of : :data:`KeyFn`, turning key inputs into content keys.
+    provenance : ``versions`` and ``code`` for sweep.json (the configs are added).
+
+    Raises
+    ------
+    ValueError, DatasetError — naming the dataset, split, file or frame at fault.
+    """
+    from sim2radar.experiment.stats import DEFAULT_METRIC
+
+    profile, device, settings = setup.profile, setup.device, setup.settings
+    _check_datasets(profile, domains)
+    real = domains["real"]
+    pre_cfg, ft_cfg = setup.configs
+    if device is not None:
+        pre_cfg = pre_cfg.with_updates(runtime={"device": device})
+        ft_cfg = ft_cfg.with_updates(runtime={"device": device})
+    pre_dump, ft_dump = pre_cfg.model_dump(mode="json"), ft_cfg.model_dump(mode="json")
+    specs, run_specs = plan_sweep(profile, real.splits[profile.train_split], setup.conditions)
+    matches = _intensity_matches(profile, domains, specs, ft_cfg.model.num_point_features,
+                                 ft_cfg.model.class_names)
+    pretrains = tuple(PlannedPretrain(p, key_of(
+        "pretrain", {"sim": domains[p.sim_role].key},
+        pretrain_key_inputs(p, pre_dump, matches.get(p.name))), matches.get(p.name))
+        for p in specs)
+    pre_key = {p.id: p.key for p in pretrains}
+    runs = []
+    for r in run_specs:
+        pkey = pre_key[r.pretrain.name] if r.pretrain else None
+        runs.append(PlannedRun(r, key_of("finetune", {"real": real.key},
+                                         run_key_inputs(r, profile, ft_dump, pkey)), pkey))
+    context = SweepContext(
+        name=name, sweep_dir=sweep_dir, store=store,
+        datasets={role: DatasetRef(str(ds.root), ds.key, {k: tuple(v) for k, v in
+                                                           ds.splits.items()})
+                  for role, ds in domains.items()},
+        pretrain_config=pre_dump, finetune_config=ft_dump, eval_split=profile.eval_split,
+        val_split=profile.val_split, val_every=profile.val_every,
+        max_val_points=profile.max_val_points, device=device)
+    sweep = {
+        "name": name, "profile": profile.model_dump(mode="json"),
+        "conditions": list(dict.fromkeys(["baseline", *setup.conditions])),
+        "fractions": list(profile.fractions), "trials": profile.trials, "metric": DEFAULT_METRIC,
+        "datasets": {role: ds.describe() for role, ds in domains.items()},
+        "real_domain": real.domain, "real_is_proxy": real.is_proxy, "intensity_match": matches,
+        "n_pretrains": len(pretrains), "n_runs": len(runs),
+        "provenance": {**provenance, "configs": {"pretrain": pre_dump, "finetune": ft_dump}},
+        "settings": dict(settings), "settings_digest": protocol_digest(settings),
+        "settings_fixed_at": fixed_at, "created_at": _now(),
+    }
+    return SweepPlan(context, pretrains, tuple(runs), sweep, profile.concurrent_runs,
+                     DEFAULT_METRIC)
+
+
+def sweep_cost(setup: SweepSetup, domains: Mapping[str, Any], *,
+               workers: Collection[int] = (1, 8),
+               step_seconds: Mapping[str, float] | None = None) -> dict[str, Any]:
+    """What a sweep would cost: its jobs, their optimiser steps, seconds per step measured here
+    on the sweep's own frames with its resolved configs (or ``step_seconds`` =
+    ``{"pretrain": s, "finetune": s}``, e.g. a GPU's figures), and the expected wall time on
+    each of ``workers`` worker counts (:func:`sim2radar.experiment.cost.wall_time`).
+
+    Returns ``profile``, ``device``, ``precision`` (amp per stage), ``threads_per_run``,
+    ``jobs`` (kind -> count, steps), ``step_seconds``, ``measured`` (whether timed here),
+    ``compute_hours`` and ``wall_hours`` (workers -> hours).
+    """
+    from sim2radar.experiment.cost import measure_step_seconds, sweep_jobs, wall_time
+
+    profile, device, (pre_cfg, ft_cfg) = setup.profile, setup.device, setup.configs
+    real = domains["real"]
+    train_ids = real.splits.get(profile.train_split) or []
+    if not train_ids:
+        raise ValueError(f"{real.root}/ImageSets/{profile.train_split}.txt lists no frame")
+    pretrains, runs = plan_sweep(profile, train_ids, setup.conditions)
+    n_sim = {role: len(ds.ids()) for role, ds in domains.items() if role != "real"}
+    jobs = sweep_jobs(pretrains, runs, n_sim, profile.batch_size)
+    measured = step_seconds is None
+    if measured:
+        n = 3 * profile.batch_size
+        nfeat, classes = ft_cfg.model.num_point_features, ft_cfg.model.class_names
+        sec = {"finetune": measure_step_seconds(
+            ft_cfg, real.frames(train_ids[:n], nfeat, classes), device=device)}
+        if pretrains:
+            sim = domains[pretrains[0].sim_role]
+            sec["pretrain"] = measure_step_seconds(
+                pre_cfg, sim.frames(sim.ids()[:n], nfeat, classes), device=device)
+    else:
+        sec = {k: float(v) for k, v in step_seconds.items()}
+        missing = {j.kind for j in jobs} - set(sec)
+        if missing:
+            raise ValueError(f"step_seconds lacks {sorted(missing)} (give pretrain and "
+                             "finetune seconds per step)")
+    by_kind = {k: {"jobs": sum(j.kind == k for j in jobs),
+                   "steps": sum(j.steps for j in jobs if j.kind == k)}
+               for k in ("pretrain", "finetune")}
+    compute_s = sum(j.steps * sec[j.kind] for j in jobs)
+    return {"profile": profile.name, "device": device or str(ft_cfg.runtime.device or "auto"),
+            "precision": {"pretrain": pre_cfg.runtime.amp, "finetune": ft_cfg.runtime.amp},
+            "threads_per_run": profile.threads_per_run, "jobs": by_kind, "step_seconds": sec,
+            "measured": measured, "compute_hours": compute_s / 3600,
+            "wall_hours": {int(n): wall_time(jobs, sec, int(n)) / 3600 for n in workers}}
+
+
+def finish_sweep(plan: SweepPlan, rows: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
+    """Statistics, report and dashboard of a sweep's ``experiment_runs`` rows; writes
+    ``stats.json``, ``results.md`` and ``dashboard.html`` into the sweep folder.
+
+    Returns ``counts`` (runs by status), ``metric``, ``stats``, ``markdown``, ``table_rows``
+    (for a Prefect table artifact) and the paths ``sweep_dir``, ``results_md``, ``dashboard``.
+    """
+    from sim2radar.experiment.dashboard import write_dashboard
+    from sim2radar.experiment.report import results_markdown, results_table_rows
+    from sim2radar.experiment.stats import sweep_stats
+    from sim2radar.fileio import jsonable, write_json
+
+    sweep_dir, doc, rows = Path(plan.context.sweep_dir), plan.sweep, list(rows)
+    stats = sweep_stats(rows, plan.metric, conditions=doc["conditions"])
+    md = results_markdown(stats, rows, title=f"Sweep {plan.name}",
+                          real_domain_label=doc["real_domain"], proxy=doc["real_is_proxy"],
+                          settings={"profile": doc["profile"].get("name"),
+                                    "digest": doc.get("settings_digest"),
+                                    "fixed_at": doc.get("settings_fixed_at")})
+    write_json(sweep_dir / "stats.json", jsonable(stats))
+    (sweep_dir / "results.md").write_text(md)
+    dashboard = write_dashboard(sweep_dir, sweep_dir / "dashboard.html")
+    counts = {k: sum(r["status"] == k for r in rows) for k in ("ok", "skipped", "failed")}
+    return {"name": plan.name, "sweep_dir": str(sweep_dir), "counts": counts,
+            "metric": plan.metric, "stats": stats, "markdown": md,
+            "table_rows": results_table_rows(stats),
+            "results_md": str(sweep_dir / "results.md"), "dashboard": str(dashboard)}

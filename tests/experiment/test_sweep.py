@@ -1,0 +1,165 @@
+"""Preparing a sweep without the store or Prefect (sim2radar/experiment/sweep.py): conditions and
+dataset roles from the condition registry, the settings a sweep is fixed to, the plan with its
+keys, context and sweep.json document, and the plan's round trip through plan.json."""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import pickle
+
+import pytest
+
+from sim2radar.datasets import make_door_frames, write_dataset, write_metadata
+from sim2radar.experiment.data import open_domain
+from sim2radar.experiment.plan import SweepPlan, pretrain_key_inputs, run_key_inputs
+from sim2radar.experiment.profiles import CONDITIONS, ROLES
+from sim2radar.experiment.sweep import (
+    SweepSettingsChanged,
+    build_plan,
+    resolve_profile,
+    role_flag,
+    settings_fixed_at,
+    setup_sweep,
+    sweep_conditions,
+    sweep_cost,
+)
+
+
+def _write(root, seed, n, first_world, proxy=False):
+    frames = make_door_frames(sum(n.values()), seed=seed, points_per_frame=200)
+    named, splits, i = [], {}, 0
+    for split, count in n.items():
+        splits[split] = []
+        for _ in range(count):
+            fid = f"world_{first_world + i // 2:06d}_f{i % 2:03d}"
+            named.append(type(frames[i])(fid, frames[i].points, frames[i].boxes, frames[i].names))
+            splits[split].append(fid)
+            i += 1
+    write_dataset(root, named, splits)
+    if proxy:
+        write_metadata(root, {"domain": "proxy-real (reference radar simulation)"})
+    return root
+
+
+@pytest.fixture(scope="module")
+def domains(tmp_path_factory):
+    root = tmp_path_factory.mktemp("sweep-data")
+    return {"real": open_domain(_write(root / "real", 2, {"train": 8, "val": 2, "test": 2},
+                                       100_000, proxy=True), "real"),
+            "sim": open_domain(_write(root / "sim", 1, {"train": 8}, 0), "sim")}
+
+
+def _key_of(kind, inputs, key_inputs):
+    """A stand-in for storage.content_key: readable kind and inputs, hashed key inputs."""
+    digest = hashlib.sha256(json.dumps(key_inputs, sort_keys=True).encode()).hexdigest()[:8]
+    return f"{kind}:{','.join(f'{k}={v}' for k, v in inputs.items())}:{digest}"
+
+
+def _plan(setup, domains, tmp_path):
+    return build_plan(setup, domains, name="t", sweep_dir=str(tmp_path), store="mem://",
+                      fixed_at="2026-01-01T00:00:00+00:00", key_of=_key_of,
+                      provenance={"versions": {"sim2radar": "x"}, "code": {"stage_version": 1}})
+
+
+def test_conditions_and_dataset_roles_come_from_the_registry():
+    prof = resolve_profile("smoke")
+    assert sweep_conditions(prof, False, {"sim": "s", "real": "r"}) == (
+        ("baseline", "sim-pretrain"), ("real", "sim"))
+    # every dataset role is a condition's (or real), named on the command line by its flag
+    for cond in CONDITIONS.values():
+        if cond.sim_role:
+            assert cond.sim_role in ROLES and role_flag(cond.sim_role) == cond.flag
+    with pytest.raises(ValueError, match="sim-gt-pretrain.*need the dataset.*--sim-gt, "
+                                         "--sim-one-material"):
+        sweep_conditions(prof, True, {"sim": "s", "real": "r", "sim-gt": None})
+    conds, roles = sweep_conditions(prof, True, {r: r for r in ROLES})
+    assert set(conds) == set(CONDITIONS) and roles == ROLES
+    with pytest.raises(ValueError, match="unknown dataset role.*'sim-noisy'.*known"):
+        sweep_conditions(prof, False, {"sim": "s", "real": "r", "sim-noisy": "n"})
+    with pytest.raises(ValueError, match="overrides"):
+        resolve_profile("smoke", {"trials": 0})
+
+
+def test_a_sweeps_settings_are_fixed_by_its_first_preparation(tmp_path):
+    settings = setup_sweep("smoke", {"sim": "s", "real": "r"}).settings
+    first = settings_fixed_at(None, settings, name="t", sweep_dir=tmp_path)
+    old = {"settings": settings, "settings_fixed_at": first, "created_at": "earlier"}
+    assert settings_fixed_at(old, settings, name="t", sweep_dir=tmp_path) == first
+    # a folder from before settings were recorded adopts the current ones
+    assert settings_fixed_at({"created_at": "c"}, settings, name="t", sweep_dir=tmp_path) == "c"
+    changed = setup_sweep("smoke", {"sim": "s", "real": "r"}, overrides={"lr": 0.5}).settings
+    with pytest.raises(SweepSettingsChanged, match=r"(?s)profile\.lr: 0\.003 -> 0\.5.*--name"):
+        settings_fixed_at(old, changed, name="t", sweep_dir=tmp_path)
+    # execution-only fields do not count
+    same = setup_sweep("smoke", {"sim": "s", "real": "r"}, overrides={"concurrent_runs": 4})
+    assert settings_fixed_at(old, same.settings, name="t", sweep_dir=tmp_path) == first
+
+
+def test_the_plan_keys_every_job_from_its_key_inputs(domains, tmp_path):
+    setup = setup_sweep("smoke", {"sim": "s", "real": "r"}, device="cpu")
+    plan = _plan(setup, domains, tmp_path)
+    assert (len(plan.pretrains), len(plan.runs)) == (4, 8)     # 2 trials x 2 fractions
+    ctx = plan.context
+    assert ctx.datasets["real"].key == domains["real"].key and ctx.device == "cpu"
+    assert ctx.datasets["real"].ids(["test"]) == domains["real"].splits["test"]
+    assert ctx.datasets["sim"].ids() == domains["sim"].ids()
+    for p in plan.pretrains:
+        assert p.intensity_match["n_real_frames"] == len(p.spec.real_ids)   # its runs' subset
+        assert p.key == _key_of("pretrain", {"sim": domains["sim"].key}, pretrain_key_inputs(
+            p.spec, ctx.pretrain_config, p.intensity_match))
+    by_id = {p.id: p for p in plan.pretrains}
+    for r in plan.runs:
+        pre = by_id.get(r.pretrain_id)
+        assert r.pretrain_key == (pre.key if pre else None)
+        assert r.key == _key_of("finetune", {"real": domains["real"].key}, run_key_inputs(
+            r.spec, setup.profile, ctx.finetune_config, r.pretrain_key))
+        if pre:
+            assert r in plan.runs_after(pre)
+    assert len({r.key for r in plan.runs}) == 8
+    # sweep.json: what the dashboard and the report read
+    doc = plan.sweep
+    assert doc["conditions"] == ["baseline", "sim-pretrain"] and doc["n_runs"] == 8
+    assert doc["real_is_proxy"] and doc["datasets"]["real"]["key"] == domains["real"].key
+    assert sorted(doc["intensity_match"]) == sorted(by_id)
+    assert doc["settings"] == setup.settings and doc["provenance"]["configs"]["finetune"] == \
+        ctx.finetune_config
+    assert doc["settings_fixed_at"] == "2026-01-01T00:00:00+00:00"
+    # the device is no part of a run's identity
+    other = _plan(setup_sweep("smoke", {"sim": "s", "real": "r"}), domains, tmp_path)
+    assert [r.key for r in other.runs] == [r.key for r in plan.runs]
+
+
+def test_the_plan_travels_as_json_and_pickles(domains, tmp_path):
+    plan = _plan(setup_sweep("smoke", {"sim": "s", "real": "r"}), domains, tmp_path)
+    doc = json.loads(json.dumps(plan.to_dict()))
+    again = SweepPlan.from_dict(doc, plan_path="p.json")
+    assert again.plan_path == "p.json" and again == SweepPlan.from_dict(doc, "p.json")
+    assert again.runs == plan.runs and again.pretrains == plan.pretrains
+    assert again.context == plan.context and again.sweep == plan.sweep
+    assert pickle.loads(pickle.dumps(plan)) == plan                 # to Dask workers
+    with pytest.raises(ValueError, match="plan format 1.*prepare the sweep again"):
+        SweepPlan.from_dict({k: v for k, v in doc.items() if k != "format"})
+    # --force-run names runs by id or key
+    run = plan.runs[3]
+    assert plan.find_runs([run.id, run.key, plan.runs[0].id]) == [run, plan.runs[0]]
+    with pytest.raises(ValueError, match=r"no run of this sweep.*look like 'baseline-f0\.5-t0'"):
+        plan.find_runs(["baseline-f0.33-t9"])
+
+
+def test_a_plan_refuses_a_real_dataset_without_its_splits(domains, tmp_path):
+    setup = setup_sweep("smoke", {"sim": "s", "real": "r"}, overrides={"eval_split": "none"})
+    with pytest.raises(ValueError, match="none.txt lists no frame"):
+        _plan(setup, domains, tmp_path)
+
+
+def test_cost_with_given_seconds_per_step(domains):
+    setup = setup_sweep("smoke", {"sim": "s", "real": "r"})
+    cost = sweep_cost(setup, domains, workers=(1, 2),
+                      step_seconds={"pretrain": 2.0, "finetune": 1.0})
+    # 4 pre-trainings of 1 epoch x ceil(8 / 4) steps; 8 runs of 2 epochs x ceil(4 or 8 / 4)
+    assert cost["jobs"] == {"pretrain": {"jobs": 4, "steps": 8},
+                            "finetune": {"jobs": 8, "steps": 24}}
+    assert cost["compute_hours"] == pytest.approx((8 * 2 + 24) / 3600)
+    assert cost["wall_hours"][1] == pytest.approx(cost["compute_hours"])
+    assert cost["wall_hours"][2] < cost["wall_hours"][1] and not cost["measured"]
