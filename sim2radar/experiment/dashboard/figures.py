@@ -1,0 +1,273 @@
+"""The dashboard's Plotly figures, as plain JSON (``{"data": [...], "layout": {...}}``) for the
+page's ``Plotly.react``; pure functions of the statistics
+(:func:`~sim2radar.experiment.stats.sweep_stats`) and the ``experiment_runs`` rows.
+
+    ap_figure(stats, conds, metric, folders)   AP vs real-data fraction (paper Figure 4)
+    delta_figure(stats, conds, metric)         paired difference to the baseline, with the MDE
+    curves_figure(runs, conds)                 learning curves (loss, validation AP) per run
+
+Every trace carries ``meta = {"role": ..., "condition": ...}``: ``mean``/``trials`` (AP),
+``delta``/``delta-trials``/``mde``/``paper-delta`` (difference), ``loss``/``val_ap`` (curves);
+the page and its tests find traces by it.
+"""
+
+from __future__ import annotations
+
+import html
+import json
+import math
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+from sim2radar.experiment.dashboard.labels import colour, metric_label, num, pct
+from sim2radar.experiment.profiles import BASELINE
+from sim2radar.experiment.report import condition_label
+from sim2radar.experiment.stats import paper_delta
+
+__all__ = ["ap_figure", "curves_figure", "delta_figure"]
+
+#: multiplicative x offset between conditions on the log fraction axis (keeps error bars apart)
+DODGE = 0.035
+#: Plotly's layout template of every figure
+PLOTLY_TEMPLATE = "plotly_white"
+
+
+def _fig_json(fig) -> dict[str, Any]:
+    """A Plotly figure as plain JSON (``{"data": [...], "layout": {...}}``)."""
+    return json.loads(fig.to_json())
+
+
+def _empty_note(fig, text: str) -> None:
+    fig.add_annotation(text=text, xref="paper", yref="paper", x=0.5, y=0.5, showarrow=False,
+                       font={"size": 14, "color": "#777"})
+
+
+def _fraction_axis(fractions: Sequence[float]) -> dict[str, Any]:
+    ticks = [100 * f for f in fractions] or [5, 10, 25, 50, 100]
+    return {"type": "log", "title": {"text": "real data [% of the train split]"},
+            "tickvals": ticks, "ticktext": [f"{t:g} %" for t in ticks],
+            "range": [math.log10(min(ticks)) - 0.12, math.log10(max(ticks)) + 0.12]}
+
+
+def _dodge(i: int, k: int) -> float:
+    return 1.0 + DODGE * (i - (k - 1) / 2)
+
+
+def ap_figure(stats: Mapping[str, Any], conds: Sequence[str], metric: str,
+               folders: Mapping[tuple[str, float, int], str] | None = None) -> dict[str, Any]:
+    """AP vs real-data fraction (paper Figure 4): per condition a ``mean`` trace (mean ± std
+    error bars) and a ``trials`` trace (every trial's value; its hover names the run folder,
+    ``folders``: (condition, fraction, trial) -> folder relative to the sweep)."""
+    import plotly.graph_objects as go
+
+    cells = {(c["condition"], float(c["fraction"])): c for c in stats.get("cells", [])}
+    fractions = [float(f) for f in stats.get("fractions", [])]
+    fig = go.Figure()
+    for i, cond in enumerate(conds):
+        color, label, dx = colour(cond, conds), condition_label(cond), _dodge(i, len(conds))
+        xs, ys, es, info = [], [], [], []
+        tx, ty, tinfo = [], [], []
+        for f in fractions:
+            cell = cells.get((cond, f))
+            if cell is None:
+                continue
+            for t, v in zip(cell.get("trials", []), cell.get("values", []), strict=False):
+                tx.append(100 * f * dx)
+                ty.append(v)
+                tinfo.append([pct(f), t, (folders or {}).get((cond, f, int(t)), "—")])
+            if cell.get("mean") is None:
+                continue
+            xs.append(100 * f * dx)
+            ys.append(cell["mean"])
+            es.append(cell.get("std") or 0.0)
+            info.append([pct(f), cell.get("std"), cell.get("n"), cell.get("n_failed"),
+                         cell.get("n_real_frames")])
+        fig.add_trace(go.Scatter(
+            x=xs, y=ys, error_y={"type": "data", "array": es, "visible": True, "thickness": 1.5,
+                                 "width": 5},
+            mode="lines+markers", name=label, legendgroup=cond,
+            line={"color": color, "width": 2.5}, marker={"color": color, "size": 9},
+            customdata=info, meta={"role": "mean", "condition": cond},
+            hovertemplate=(f"<b>{html.escape(label)}</b> %{{customdata[0]}}<br>"
+                           "mean %{y:.2f} ± %{customdata[1]:.2f} (std)<br>"
+                           "%{customdata[2]} trial(s), %{customdata[3]} failed<br>"
+                           "%{customdata[4]} real frames<extra></extra>")))
+        fig.add_trace(_trial_markers(tx, ty, tinfo, cond, label, color, name=f"{label}: trials",
+                                     role="trials", value="%{y:.2f}<br>run folder "
+                                                          "%{customdata[2]}"))
+    fig.update_layout(
+        template=PLOTLY_TEMPLATE, height=440, margin={"l": 60, "r": 20, "t": 50, "b": 55},
+        title={"text": f"{metric_label(metric)} vs real data (mean ± std, every trial)"},
+        xaxis=_fraction_axis(fractions), yaxis={"title": {"text": f"{metric_label(metric)} [%]"},
+                                                "rangemode": "tozero"},
+        legend={"orientation": "h", "y": -0.2}, uirevision="keep")
+    if not any(c.get("mean") is not None for c in stats.get("cells", [])):
+        _empty_note(fig, "no finished run yet")
+    return _fig_json(fig)
+
+
+def delta_figure(stats: Mapping[str, Any], conds: Sequence[str], metric: str,
+                  ) -> dict[str, Any]:
+    """Paired difference to the baseline per fraction: per non-baseline condition a ``delta``
+    trace (mean difference with its Student-t interval), a ``delta-trials`` trace and an
+    ``mde`` trace (the minimum detectable effect at 80 % power: a true Δ below it is more
+    likely than not to be missed); one ``paper-delta`` trace (the paper's Table 1 Δ)."""
+    import plotly.graph_objects as go
+
+    level = f"{100 * (1 - float(stats.get('alpha', 0.05))):g} %"
+    power = float((stats.get("power") or {}).get("power", 0.8))
+    fractions = [float(f) for f in stats.get("fractions", [])]
+    others = [c for c in conds if c != BASELINE]
+    fig = go.Figure()
+    fig.add_hline(y=0, line={"color": "#444", "width": 1, "dash": "dot"})
+    for i, cond in enumerate(others):
+        color, label, dx = colour(cond, conds), condition_label(cond), _dodge(i, len(others))
+        comps = [c for c in stats.get("comparisons", []) if c["condition"] == cond]
+        xs, ys, up, down, info = [], [], [], [], []
+        tx, ty, tinfo = [], [], []
+        mx, my, minfo = [], [], []
+        for comp in comps:
+            f = float(comp["fraction"])
+            for t, d in zip(comp.get("trials", []), comp.get("differences", []), strict=False):
+                tx.append(100 * f * dx)
+                ty.append(d)
+                tinfo.append([pct(f), t])
+            mde = num(comp.get("mde"))
+            if mde is not None:
+                mx.append(100 * f)
+                my.append(mde)
+                minfo.append([pct(f), comp.get("n_pairs"), comp.get("mde_alpha")])
+            m = comp.get("mean_diff")
+            if m is None:
+                continue
+            lo, hi = (comp.get("t_ci") or [None, None])[:2]
+            b_lo, b_hi = (comp.get("bootstrap_ci") or [None, None])[:2]
+            xs.append(100 * f * dx)
+            ys.append(m)
+            up.append(hi - m if hi is not None else 0.0)
+            down.append(m - lo if lo is not None else 0.0)
+            ci = "n/a" if lo is None else f"[{lo:+.2f}, {hi:+.2f}]"
+            boot = "n/a" if b_lo is None else f"[{b_lo:+.2f}, {b_hi:+.2f}]"
+            p = comp.get("p_holm")
+            share = comp.get("p_improved")
+            s_lo, s_hi = (comp.get("p_improved_ci") or [None, None])[:2]
+            info.append([pct(f), ci, boot, "n/a" if p is None else f"{p:.3g}",
+                         f"{comp.get('k_improved', 0)}/{comp.get('n_pairs', 0)}",
+                         comp.get("verdict", ""),
+                         "n/a" if mde is None else f"{mde:.2f}",
+                         "n/a" if share is None else
+                         f"{100 * share:.0f} % [{100 * s_lo:.0f}, {100 * s_hi:.0f}]"])
+        fig.add_trace(go.Scatter(
+            x=xs, y=ys, mode="lines+markers", name=f"{label} − {condition_label(BASELINE)}",
+            legendgroup=cond, line={"color": color, "width": 2.5},
+            marker={"color": color, "size": 9},
+            error_y={"type": "data", "symmetric": False, "array": up, "arrayminus": down,
+                     "visible": True, "thickness": 1.5, "width": 5},
+            customdata=info, meta={"role": "delta", "condition": cond},
+            hovertemplate=(f"<b>{html.escape(label)}</b> %{{customdata[0]}}<br>"
+                           f"Δ %{{y:+.2f}}, {level} t-interval %{{customdata[1]}}<br>"
+                           f"MDE ({100 * power:g} % power) %{{customdata[6]}}<br>"
+                           "bootstrap (reference) %{customdata[2]}<br>"
+                           "p (Holm) %{customdata[3]}, improved in %{customdata[4]} "
+                           "(P %{customdata[7]})<br>"
+                           "%{customdata[5]}<extra></extra>")))
+        fig.add_trace(_trial_markers(tx, ty, tinfo, cond, label, color,
+                                     name=f"{label}: per-trial Δ", role="delta-trials",
+                                     value="Δ %{y:+.2f}"))
+        fig.add_trace(go.Scatter(
+            x=mx, y=my, mode="lines+markers", name=f"{label}: MDE ({100 * power:g} % power)",
+            legendgroup=cond, line={"color": color, "width": 1.2, "dash": "dash"},
+            marker={"color": color, "size": 6, "symbol": "triangle-up-open"},
+            customdata=minfo, meta={"role": "mde", "condition": cond},
+            hovertemplate=(f"{html.escape(label)} %{{customdata[0]}}: smallest Δ detectable "
+                           f"with {100 * power:g} % power %{{y:.2f}}<br>(%{{customdata[1]}} "
+                           "pairs, level %{customdata[2]:.3g})<extra></extra>")))
+    if others:
+        px = [100 * f for f in fractions if paper_delta(f) is not None]
+        py = [paper_delta(f) for f in fractions if paper_delta(f) is not None]
+        fig.add_trace(go.Scatter(
+            x=px, y=py, mode="markers", name="paper Table 1 Δ (Sim Pretrain)",
+            marker={"color": "#222", "size": 10, "symbol": "x-thin-open",
+                    "line": {"width": 2, "color": "#222"}},
+            meta={"role": "paper-delta", "condition": None},
+            hovertemplate="paper Table 1: Δ %{y:+.1f} at %{x:g} %<extra></extra>"))
+    fig.update_layout(
+        template=PLOTLY_TEMPLATE, height=420, margin={"l": 60, "r": 20, "t": 50, "b": 55},
+        title={"text": f"Δ {metric_label(metric)} vs baseline, paired by trial "
+                       f"(mean with its {level} t-interval; dashed: MDE at "
+                       f"{100 * power:g} % power)"},
+        xaxis=_fraction_axis(fractions), yaxis={"title": {"text": "Δ AP [points]"}},
+        legend={"orientation": "h", "y": -0.2}, uirevision="keep")
+    if not others:
+        _empty_note(fig, "no condition besides the baseline in this sweep")
+    elif not any(c.get("n_pairs") for c in stats.get("comparisons", [])):
+        _empty_note(fig, "no paired runs yet (a pair needs the baseline and the condition "
+                         "of the same trial)")
+    return _fig_json(fig)
+
+
+def _trial_markers(tx, ty, tinfo, cond: str, label: str, color: str, *, name: str, role: str,
+                   value: str):
+    """One open marker per trial (``tinfo``: [fraction label, trial]) beside a cell's mean."""
+    import plotly.graph_objects as go
+
+    return go.Scatter(
+        x=tx, y=ty, mode="markers", name=name, legendgroup=cond, showlegend=False,
+        marker={"color": color, "size": 6, "opacity": 0.45, "symbol": "circle-open",
+                "line": {"width": 1.5}},
+        customdata=tinfo, meta={"role": role, "condition": cond},
+        hovertemplate=(f"{html.escape(label)} %{{customdata[0]}}, trial %{{customdata[1]}}"
+                       f"<br>{value}<extra></extra>"))
+
+
+def curves_figure(runs: Sequence[Mapping[str, Any]], conds: Sequence[str]) -> dict[str, Any]:
+    """Learning curves: per run a ``loss`` trace (training loss per epoch) and a ``val_ap``
+    trace (validation AP), coloured by condition, against the optimiser step at the end of
+    each epoch (``epoch x steps / epochs``): runs of different fractions have different
+    epoch lengths, so steps put them on one axis."""
+    import plotly.graph_objects as go
+    from plotly.subplots import make_subplots
+
+    fig = make_subplots(rows=1, cols=2, horizontal_spacing=0.08,
+                        subplot_titles=("training loss (mean per epoch)",
+                                        "validation 3D AP R40 @ IoU 0.3 [%]"))
+    shown: set[str] = set()
+    n_curves = 0
+    ordered = sorted(runs, key=lambda r: (conds.index(r["condition"]) if r.get("condition")
+                                          in conds else len(conds), r.get("fraction") or 0,
+                                          r.get("trial") or 0))
+    for r in ordered:
+        cond = str(r.get("condition"))
+        epochs, loss = r.get("history_epoch") or [], r.get("history_loss") or []
+        v_ep, v_ap = r.get("history_val_epoch") or [], r.get("history_val_ap") or []
+        if not (epochs and loss) and not (v_ep and v_ap):
+            continue
+        color, label = colour(cond, conds), condition_label(cond)
+        run = (f"{html.escape(label)} {pct(float(r.get('fraction') or 0))}, "
+               f"trial {r.get('trial')} (seed {r.get('seed')})")
+        n_ep, n_steps = int(r.get("epochs") or 0), int(r.get("steps") or 0)
+        per_epoch = n_steps / n_ep if n_ep > 0 and n_steps > 0 else 1.0
+        epochs = [round(e * per_epoch) for e in epochs]
+        v_ep = [round(e * per_epoch) for e in v_ep]
+        for col, (x, y, role, fmt) in enumerate(((epochs, loss, "loss", ".4f"),
+                                                 (v_ep, v_ap, "val_ap", ".2f")), start=1):
+            if not (x and y):
+                continue
+            legend = cond not in shown  # one legend entry per condition
+            shown.add(cond)
+            fig.add_trace(go.Scatter(
+                x=list(x), y=[num(v) for v in y], mode="lines+markers" if len(x) < 3 else "lines",
+                name=label, legendgroup=cond, showlegend=legend,
+                line={"color": color, "width": 1.3}, marker={"size": 4}, opacity=0.75,
+                meta={"role": role, "condition": cond, "run_key": r.get("run_key")},
+                hovertemplate=f"{run}<br>step %{{x}}: %{{y:{fmt}}}<extra></extra>"),
+                row=1, col=col)
+            n_curves += 1
+    for col in (1, 2):
+        fig.update_xaxes(title_text="optimiser step", rangemode="tozero", row=1, col=col)
+    fig.update_layout(template=PLOTLY_TEMPLATE, height=380,
+                      margin={"l": 60, "r": 20, "t": 50, "b": 55},
+                      legend={"orientation": "h", "y": -0.25}, uirevision="keep")
+    if not n_curves:
+        _empty_note(fig, "no learning curve yet")
+    return _fig_json(fig)

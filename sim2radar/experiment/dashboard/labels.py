@@ -1,0 +1,50 @@
+"""Names, colours and numbers as the dashboard shows them (shared by :mod:`.data` and
+:mod:`.figures`)."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from typing import Any
+
+from sim2radar.experiment.profiles import CONDITIONS
+
+__all__ = ["colour", "metric_label", "num", "pct"]
+
+#: colours of conditions outside the registry (profiles.CONDITIONS holds the known ones')
+MORE_COLOURS = ("#ff7f0e", "#8c564b", "#e377c2", "#7f7f7f", "#bcbd22", "#17becf")
+
+
+def num(v: Any) -> float | None:
+    """``v`` as a finite float; None for None, a bool, a non-number, NaN or ±inf."""
+    if v is None or isinstance(v, bool):
+        return None
+    try:
+        f = float(v)
+    except (TypeError, ValueError):
+        return None
+    return f if math.isfinite(f) else None
+
+
+def pct(fraction: float) -> str:
+    """``0.25`` -> ``25 %``."""
+    return f"{100 * fraction:g} %"
+
+
+def metric_label(metric: str) -> str:
+    """``ap_3d_r40_iou03`` -> ``3D AP R40 @ IoU 0.3``."""
+    try:
+        _, kind, rp, iou = metric.split("_")
+        return f"{kind.upper()} AP {rp.upper()} @ IoU {iou[3]}.{iou[4:]}"
+    except ValueError:
+        return metric
+
+
+def colour(condition: str, conditions: Sequence[str]) -> str:
+    """The condition's registered colour (:data:`~sim2radar.experiment.profiles.CONDITIONS`);
+    a condition outside the registry takes the next of :data:`MORE_COLOURS` in the order of
+    ``conditions``."""
+    if condition in CONDITIONS:
+        return CONDITIONS[condition].colour
+    others = [c for c in conditions if c not in CONDITIONS]
+    return MORE_COLOURS[others.index(condition) % len(MORE_COLOURS)]

@@ -1,0 +1,301 @@
+// The sweep dashboard's script, inlined into the page by
+// sim2radar.experiment.dashboard.page.render_html. render(data) fills every section from
+// the JSON document in #dashboard-data; the live page (#dashboard-live: poll_ms > 0) polls
+// data.json and calls render again when it changed. Table sort, filter and grouping state
+// survive re-renders. window.dashboard (state) and window.dashboardExport are read by the
+// browser tests (tests/experiment/test_dashboard_browser.py).
+(function () {
+"use strict";
+const CONFIG = {responsive: true, displaylogo: false};
+const state = {data: null, text: null, sortCol: null, sortDir: 1, renders: 0,
+  filter: {}, groupBy: "", shown: []};
+window.dashboard = state;
+const $ = (id) => document.getElementById(id);
+function esc(v) {
+  return String(v).replace(/[&<>"']/g, (c) => ({"&": "&amp;", "<": "&lt;", ">": "&gt;",
+    '"': "&quot;", "'": "&#39;"}[c]));
+}
+function fmt(v, type) {
+  if (v === null || v === undefined || v === "") return type === "text" ? "" : "—";
+  switch (type) {
+    case "pct": return (100 * v).toLocaleString("en", {maximumFractionDigits: 2}) + " %";
+    case "ap": return Number(v).toFixed(2);
+    case "ratio": return Number(v).toFixed(1) + ":1";
+    case "int": return String(v);
+    case "seconds": return v >= 3600 ? (v / 3600).toFixed(2) + " h" :
+      v >= 60 ? (v / 60).toFixed(1) + " min" : Number(v).toFixed(1) + " s";
+    case "key": return String(v).slice(0, 12);
+    case "condition": return label(v);
+    default: return String(v);
+  }
+}
+function label(name) {
+  const c = (state.data.conditions || []).find((x) => x.name === name);
+  return c ? c.label : String(name);
+}
+function table(columns, rows, numeric) {  // numeric: (column index) -> right-align
+  const head = "<tr>" + columns.map((c) => "<th>" + esc(c) + "</th>").join("") + "</tr>";
+  const body = rows.map((r) => "<tr>" + r.map((v, i) =>
+    "<td" + (numeric && numeric(i) ? " class=num" : "") + ">" + esc(v === null ||
+      v === undefined ? "—" : v) + "</td>").join("") + "</tr>").join("");
+  return "<table><thead>" + head + "</thead><tbody>" + body + "</tbody></table>";
+}
+function plot(id, fig) {
+  if (!fig) { $(id).innerHTML = ""; return; }
+  Plotly.react($(id), fig.data, fig.layout, CONFIG);
+}
+function compare(a, b, type) {
+  const na = a === null || a === undefined || a === "", nb = b === null || b === undefined ||
+    b === "";
+  if (na || nb) return na && nb ? 0 : na ? 1 : -1;   // empty cells last, either direction
+  if (type === "text" || type === "key" || type === "condition")
+    return state.sortDir * String(a).localeCompare(String(b));
+  return state.sortDir * (a - b);
+}
+// the rows the filters let through, sorted, in group order when grouped
+function visibleRuns() {
+  const runs = state.data.runs, cols = runs.columns;
+  let rows = runs.rows.filter((r) => runs.group_columns.every((i) => {
+    const want = state.filter[cols[i].key];
+    return want === undefined || want === "" || String(r[i]) === want;
+  }));
+  if (state.sortCol !== null && state.sortCol < cols.length) {
+    const i = state.sortCol, t = cols[i].type;
+    rows = rows.slice().sort((a, b) => compare(a[i], b[i], t));
+  }
+  const g = cols.findIndex((c) => c.key === state.groupBy);
+  if (g >= 0) {  // stable: keeps the sort order within each group
+    const keys = [...new Set(rows.map((r) => String(r[g])))].sort((a, b) =>
+      cols[g].type === "condition" || cols[g].type === "text" ? a.localeCompare(b) : a - b);
+    rows = keys.flatMap((k) => rows.filter((r) => String(r[g]) === k));
+  }
+  return {rows: rows, group: g};
+}
+function renderControls() {
+  const runs = state.data.runs, cols = runs.columns;
+  let out = "";
+  for (const i of runs.group_columns) {
+    const c = cols[i], cur = state.filter[c.key] || "";
+    const values = [...new Set(runs.rows.map((r) => r[i]).filter((v) => v !== null))]
+      .sort((a, b) => (typeof a === "number" ? a - b : String(a).localeCompare(String(b))));
+    out += "<label>" + esc(c.label) + " <select id='filter-" + esc(c.key) + "' data-key='" +
+      esc(c.key) + "'><option value=''>all</option>" + values.map((v) => "<option value='" +
+      esc(v) + "'" + (String(v) === cur ? " selected" : "") + ">" + esc(fmt(v, c.type)) +
+      "</option>").join("") + "</select></label>";
+  }
+  out += "<label>group by <select id='group-by'><option value=''>none</option>" +
+    runs.group_columns.map((i) => "<option value='" + esc(cols[i].key) + "'" +
+    (cols[i].key === state.groupBy ? " selected" : "") + ">" + esc(cols[i].label) +
+    "</option>").join("") + "</select></label>" +
+    "<button type=button id='download-csv'>download CSV</button>" +
+    "<button type=button id='download-json'>download JSON</button>" +
+    "<span class=muted id='runs-shown'></span>";
+  $("runs-controls").innerHTML = out;
+}
+function renderRuns() {
+  const runs = state.data.runs, cols = runs.columns;
+  const head = cols.map((c, i) => "<th data-col=" + i + " title='sort by " + esc(c.label) +
+    "' aria-sort=" + (state.sortCol === i ? (state.sortDir > 0 ? "ascending" : "descending") :
+    "none") + ">" + esc(c.label) + "</th>").join("");
+  const vis = visibleRuns(), rows = vis.rows;
+  state.shown = rows;
+  const statusCol = runs.status_column, metricCol = runs.metric_column;
+  let body = "", last = null;
+  for (const r of rows) {
+    if (vis.group >= 0 && String(r[vis.group]) !== last) {
+      last = String(r[vis.group]);
+      const members = rows.filter((x) => String(x[vis.group]) === last);
+      const vals = members.map((x) => x[metricCol]).filter((v) => v !== null);
+      const mean = vals.length ? vals.reduce((a, b) => a + b, 0) / vals.length : null;
+      body += "<tr class=group><td colspan=" + cols.length + ">" +
+        esc(cols[vis.group].label) + " " + esc(fmt(r[vis.group], cols[vis.group].type)) +
+        " · " + members.length + " run(s) · mean " + esc(cols[metricCol].label) + " " +
+        (mean === null ? "—" : mean.toFixed(2)) + "</td></tr>";
+    }
+    body += "<tr class='run" + (r[statusCol] === "failed" ? " failed" : "") + "'>" +
+      r.map((v, i) => {
+        const t = cols[i].type, title = t === "key" && v ? " title='" + esc(v) + "'" : "";
+        const cls = cols[i].key === "error" ? " class=err" : (t !== "text" && t !== "key" &&
+          t !== "condition" ? " class=num" : "");
+        return "<td" + cls + title + ">" + esc(fmt(v, t)) + "</td>";
+      }).join("") + "</tr>";
+  }
+  $("runs-table").innerHTML = "<thead><tr>" + head + "</tr></thead><tbody>" + body +
+    "</tbody>";
+  $("runs-empty").style.display = rows.length ? "none" : "block";
+  const shown = $("runs-shown");
+  if (shown) shown.textContent = rows.length + " of " + runs.rows.length + " runs shown";
+}
+// downloads of the rows shown (raw values, every column), built here: the page fetches nothing
+function csvCell(v, type) {
+  if (v === null || v === undefined) return "";
+  let s = typeof v === "object" ? JSON.stringify(v) : String(v);
+  if (type === "text" && /^[=+\-@\t\r]/.test(s)) s = "'" + s;  // no formulas in spreadsheets
+  return /[",\r\n]/.test(s) ? '"' + s.replace(/"/g, '""') + '"' : s;
+}
+function runsCsv(rows) {
+  const cols = state.data.runs.columns;
+  return [cols.map((c) => csvCell(c.key, "key")).join(",")].concat(rows.map((r) =>
+    r.map((v, i) => csvCell(v, cols[i].type)).join(","))).join("\r\n") + "\r\n";
+}
+function runsJson(rows) {
+  const cols = state.data.runs.columns;
+  return JSON.stringify(rows.map((r) => Object.fromEntries(cols.map((c, i) => [c.key, r[i]]))),
+    null, 1);
+}
+function download(text, type, ext) {
+  const url = URL.createObjectURL(new Blob([text], {type: type}));
+  const a = document.createElement("a");
+  a.href = url; a.download = "sweep-" + state.data.name + "-runs." + ext;
+  document.body.appendChild(a); a.click(); a.remove();
+  setTimeout(() => URL.revokeObjectURL(url), 1000);
+}
+window.dashboardExport = {csv: () => runsCsv(state.shown), json: () => runsJson(state.shown)};
+function renderProgress(p) {
+  $("run-count").textContent = p.finished;
+  $("run-total").textContent = p.total;
+  $("run-state").textContent = p.state;
+  const bar = $("run-progress");
+  bar.max = Math.max(p.total, 1); bar.value = p.finished;
+  $("run-counts").innerHTML = "<span>computed: <b id=count-ok>" + p.ok + "</b></span>" +
+    "<span>cached: <b id=count-skipped>" + p.skipped + "</b></span>" +
+    "<span>failed: <b id=count-failed" + (p.failed ? " style='color:#c0392b'" : "") + ">" +
+    p.failed + "</b></span>" + (p.updated_at ? "<span class=muted>progress.json " +
+    esc(p.updated_at) + "</span>" : "");
+  $("run-running").innerHTML = p.running.length ? "running: " + p.running.map(esc).join(", ")
+    : "";
+}
+function renderDatasets(d) {
+  let out = "";
+  if (d.datasets.length) {
+    out += "<h3>Datasets of the sweep</h3>" + table(["role", "domain", "frames", "splits",
+      "path", "content key"], d.datasets.map((x) => [x.role, x.domain, x.frames, x.splits,
+      x.path, x.key]), (i) => i === 2);
+  }
+  if (d.generation) {
+    out += "<h3>Dataset generation</h3>" + table(["dataset", "role", "scenes ok",
+      "scenes failed", "scenes skipped", "frames", "points / frame", "labels / frame"],
+      d.generation.map((x) => [x.name, x.role, x.scenes_ok, x.scenes_failed, x.scenes_skipped,
+      x.frames, x.points_per_frame, x.labels_per_frame]), (i) => i >= 2);
+  } else {
+    out += "<p class=muted>No generation.json in the sweep folder: dataset generation status " +
+      "not recorded.</p>";
+  }
+  $("datasets").innerHTML = out;
+}
+function renderGap(g) {
+  if (!g) {
+    $("gap").innerHTML = "<p class=muted>No sim–real gap report in this sweep folder " +
+      "(gap/gap.json): <code>sim2radar gap SIM REAL --out &lt;sweep&gt;/gap</code> writes one.</p>";
+    return;
+  }
+  let out = table(["", "sim", "real"], g.rows, (i) => i > 0) + "<br>" +
+    table(["", ""], g.facts, null);
+  out += "<div class=gap-figs>" + g.figures.map((f) => "<figure><img alt='" + esc(f.name) +
+    "' src='" + esc(f.uri) + "'><figcaption>" + esc(f.name) + "</figcaption></figure>").join("")
+    + "</div>";
+  $("gap").innerHTML = out;
+}
+function renderProvenance(p) {
+  if (!p) {
+    $("provenance").innerHTML = "<p class=muted>sweep.json not found: no provenance.</p>";
+    return;
+  }
+  let out = "<p>created " + esc(p.created_at || "—") + (p.git ? " · git " + esc(p.git) : "") +
+    "</p>";
+  if (p.settings_digest) out += "<p>settings (digest " + esc(p.settings_digest) +
+    ") fixed at " + esc(p.settings_fixed_at || "—") +
+    ", before any run; a rerun with changed settings is refused</p>";
+  const code = Object.entries(p.code || {});
+  if (code.length) out += "<h3>Code</h3>" + table(["", ""], code, null);
+  out += "<h3>Package versions</h3>" + table(["package", "version"],
+    Object.entries(p.versions || {}), null);
+  for (const [name, text] of Object.entries(p.configs || {})) {
+    out += "<details><summary>detector config: " + esc(name) + "</summary><pre>" + esc(text) +
+      "</pre></details>";
+  }
+  out += "<details><summary>experiment profile</summary><pre>" + esc(p.profile) +
+    "</pre></details>";
+  if (p.intensity_match) out += "<details><summary>intensity matching</summary><pre>" +
+    esc(p.intensity_match) + "</pre></details>";
+  $("provenance").innerHTML = out;
+}
+function render(d) {
+  state.data = d;
+  document.title = "sim2radar sweep " + d.name;
+  $("title").textContent = "Sweep " + d.name;
+  $("subtitle").textContent = [d.profile ? "profile " + d.profile : null, "metric " +
+    d.metric_label, d.created_at ? "created " + d.created_at : null, d.folder]
+    .filter(Boolean).join(" · ");
+  const b = $("banner");
+  b.className = d.banner.kind; b.textContent = d.banner.text;
+  const err = $("error");
+  err.style.display = d.error ? "block" : "none"; err.textContent = d.error || "";
+  renderProgress(d.progress);
+  plot("plot-ap", d.figures.ap);
+  plot("plot-delta", d.figures.delta);
+  plot("plot-curves", d.figures.curves);
+  $("summary").innerHTML = d.summary.rows.length ? table(d.summary.columns, d.summary.rows,
+    (i) => (d.summary.numeric || [])[i]) : "<p class=muted>No comparison yet.</p>";
+  const sentences = d.summary.sentences || [];
+  $("power-summary").innerHTML = sentences.map((x) => "<p>" + esc(x) + "</p>").join("");
+  $("power-summary").style.display = sentences.length ? "block" : "none";
+  $("notes").innerHTML = d.notes.map((n) => "<li>" + esc(n) + "</li>").join("");
+  $("stats-source").textContent = "statistics: " + d.stats_source;
+  renderControls();
+  renderRuns();
+  renderDatasets(d);
+  renderGap(d.gap);
+  renderProvenance(d.provenance);
+  $("warnings").innerHTML = d.warnings.map((w) => "<li>" + esc(w) + "</li>").join("");
+  $("warnings-section").style.display = d.warnings.length ? "block" : "none";
+  state.renders += 1;
+}
+$("runs-controls").addEventListener("change", (e) => {
+  const el = e.target;
+  if (el.id === "group-by") state.groupBy = el.value;
+  else if (el.dataset && el.dataset.key) state.filter[el.dataset.key] = el.value;
+  renderRuns();
+});
+$("runs-controls").addEventListener("click", (e) => {
+  if (e.target.id === "download-csv") download(runsCsv(state.shown), "text/csv", "csv");
+  if (e.target.id === "download-json") download(runsJson(state.shown), "application/json",
+    "json");
+});
+$("runs-table").addEventListener("click", (e) => {
+  const th = e.target.closest("th[data-col]");
+  if (!th) return;
+  const i = Number(th.dataset.col);
+  state.sortDir = state.sortCol === i ? -state.sortDir : 1;
+  state.sortCol = i;
+  renderRuns();
+});
+const initial = $("dashboard-data").textContent;
+state.text = initial;
+render(JSON.parse(initial));
+const live = JSON.parse($("dashboard-live").textContent);
+if (live.poll_ms > 0) {
+  const status = $("live-status");
+  async function poll() {
+    try {
+      const r = await fetch("data.json", {cache: "no-store"});
+      const text = await r.text();
+      if (!r.ok) {
+        let msg = text;
+        try { msg = JSON.parse(text).error; } catch (e) { /* plain text */ }
+        $("error").style.display = "block"; $("error").textContent = msg;
+      } else {
+        if (text !== state.text) { state.text = text; render(JSON.parse(text)); }
+        else { $("error").style.display = state.data.error ? "block" : "none"; }
+        status.textContent = "live · checked " + new Date().toLocaleTimeString() +
+          " · every " + live.poll_ms / 1000 + " s";
+      }
+    } catch (e) {
+      status.textContent = "live · server unreachable at " + new Date().toLocaleTimeString() +
+        "; retrying";
+    }
+    setTimeout(poll, live.poll_ms);
+  }
+  setTimeout(poll, live.poll_ms);
+}
+})();
