@@ -101,28 +101,13 @@ def _load(ctx: SweepContext, role: str, ids: Sequence[str], cfg) -> list:
 
 
 # --- Preparing a sweep: its datasets from the store or folders, the plan and the sweep folder
-def _open_datasets(sources: Mapping[str, Any], setup: sweep.SweepSetup, store: str,
-                   folder: Path) -> dict[str, Any]:
-    """Each role's dataset: a folder, or ``store:NAME[:geometry]`` exported from the store
-    into ``folder`` (split by world with the sweep's seed)."""
-    from sim2radar.experiment.data import open_domain
+def _export(store: str, folder: Path, seed: int, role: str, name: str, geometry: str) -> Path:
+    """Export a store dataset for a sweep (:func:`sim2radar.experiment.sweep.open_datasets`)."""
     from sim2radar.tasks.dataset import export_store_dataset
 
-    out = {}
-    for role in setup.roles:
-        text = os.fspath(sources[role])
-        if text.startswith("store:"):
-            name, _, geometry = text.removeprefix("store:").partition(":")
-            geometry = geometry or ("ground_truth" if role in ("real", "sim-gt")
-                                    else "reconstructed")
-            text = str(folder / "data" / f"{role}-{name}-{geometry}")
-            export_store_dataset(store, name, geometry, text, seed=setup.profile.sweep_seed)
-        elif not Path(text).is_dir():
-            raise FileNotFoundError(f"{role} dataset {text!r}: no such folder (give an "
-                                    "OpenPCDet dataset folder, or store:NAME for a dataset in "
-                                    "the store)")
-        out[role] = open_domain(text, role)
-    return out
+    dest = folder / "data" / f"{role}-{name}-{geometry}"
+    export_store_dataset(store, name, geometry, dest, seed=seed)
+    return dest
 
 
 def _read_sweep_json(path: Path) -> dict[str, Any] | None:
@@ -157,7 +142,8 @@ def prepare_sweep(datasets: Mapping[str, str | os.PathLike | None], *, profile: 
                                        setup.settings, name=name, sweep_dir=sweep_dir)
     sweep_dir.mkdir(parents=True, exist_ok=True)
     st = open_store(store)
-    domains = _open_datasets(datasets, setup, st.root_uri, sweep_dir)
+    domains = sweep.open_datasets(datasets, setup.roles, functools.partial(
+        _export, st.root_uri, sweep_dir, setup.profile.sweep_seed))
     plan = sweep.build_plan(
         setup, domains, name=name, sweep_dir=str(sweep_dir.resolve()), store=st.root_uri,
         fixed_at=fixed_at, key_of=_key_of,
@@ -193,7 +179,8 @@ def plan_cost(datasets: Mapping[str, str | os.PathLike | None], *, profile: Any 
     setup = sweep.setup_sweep(profile, datasets, ablations=ablations, overrides=overrides,
                               device=device)
     with tempfile.TemporaryDirectory(prefix="sim2radar-plan-") as tmp:
-        domains = _open_datasets(datasets, setup, open_store(store).root_uri, Path(tmp))
+        domains = sweep.open_datasets(datasets, setup.roles, functools.partial(
+            _export, open_store(store).root_uri, Path(tmp), setup.profile.sweep_seed))
         return sweep.sweep_cost(setup, domains, workers=workers, step_seconds=step_seconds)
 
 
@@ -223,13 +210,11 @@ def _claim(ctx: SweepContext, key: str, done, out: Path, what: str):
     live process trains it; None once it is finished (by anyone)."""
     from sim2radar.experiment.claims import wait_and_claim
 
-    def waiting(holder: dict) -> None:
-        log.info("%s is being trained by pid %s on %s; waiting for it", what,
-                 holder.get("pid"), holder.get("host"))
-
-    return wait_and_claim(Path(ctx.sweep_dir) / "claims", key, done,
-                          note=lambda: {"resume": (out / "last.pt").is_file()},
-                          on_wait=waiting)
+    return wait_and_claim(
+        Path(ctx.sweep_dir) / "claims", key, done,
+        note=lambda: {"resume": (out / "last.pt").is_file()},
+        on_wait=lambda holder: log.info("%s is being trained by pid %s on %s; waiting for it",
+                                        what, holder.get("pid"), holder.get("host")))
 
 
 def run_pretraining(ctx: SweepContext, job: PlannedPretrain) -> PretrainResult:

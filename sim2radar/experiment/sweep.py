@@ -2,10 +2,11 @@
 the :class:`~sim2radar.experiment.plan.SweepPlan` the flow runs, or what it would cost — and
 finishing it: statistics, report and dashboard of its runs' rows.
 
-    setup = setup_sweep("demo", {"sim": "data/sim", "real": "data/real"}, overrides={"trials": 3})
-    domains = {role: open_domain(datasets[role], role) for role in setup.roles}
-    plan = build_plan(setup, domains, name="demo", key_of=..., ...)     # or sweep_cost(...)
-    ...                                                                 # the flow runs it
+    datasets = {"sim": "data/sim", "real": "store:reference"}
+    setup = setup_sweep("demo", datasets, overrides={"trials": 3})
+    domains = open_datasets(datasets, setup.roles, export)   # export: store:NAME -> a folder
+    plan = build_plan(setup, domains, name="demo", key_of=..., ...)   # or sweep_cost(...)
+    ...                                                               # the flow runs its jobs
     summary = finish_sweep(plan, rows)
 
 The conditions, their dataset roles and the command-line flags that name those datasets come
@@ -50,6 +51,7 @@ __all__ = [
     "build_plan",
     "check_sweep_name",
     "finish_sweep",
+    "open_datasets",
     "resolve_profile",
     "role_flag",
     "settings_fixed_at",
@@ -142,6 +144,41 @@ def sweep_conditions(profile: ExperimentProfile, ablations: bool,
                                                      if CONDITIONS[c].sim_role in missing)
                          + " need the dataset(s) " + ", ".join(map(role_flag, missing)))
     return tuple(conditions), tuple(r for r in ROLES if r in needed)
+
+
+#: roles whose ``store:NAME`` dataset is exported with the worlds' true geometry by default
+#: (measured-like data, and the ablation without reconstruction errors); the others with the
+#: reconstructed geometry
+GROUND_TRUTH_ROLES = ("real", "sim-gt")
+
+
+def open_datasets(sources: Mapping[str, Any], roles: Sequence[str],
+                  export: Callable[[str, str, str], str | os.PathLike]) -> dict[str, Any]:
+    """Open each role's dataset (:func:`~sim2radar.experiment.data.open_domain`): a folder, or
+    ``store:NAME[:geometry]``, which ``export(role, name, geometry)`` writes to a folder first
+    (geometry by default ``ground_truth`` for :data:`GROUND_TRUTH_ROLES`, else
+    ``reconstructed``).
+
+    Raises
+    ------
+    FileNotFoundError — a folder that does not exist; DatasetError — one that is no dataset.
+    """
+    from sim2radar.experiment.data import open_domain
+
+    out = {}
+    for role in roles:
+        text = os.fspath(sources[role])
+        if text.startswith("store:"):
+            name, _, geometry = text.removeprefix("store:").partition(":")
+            geometry = geometry or ("ground_truth" if role in GROUND_TRUTH_ROLES
+                                    else "reconstructed")
+            text = os.fspath(export(role, name, geometry))
+        elif not os.path.isdir(text):
+            raise FileNotFoundError(f"{role} dataset {text!r}: no such folder (give an "
+                                    "OpenPCDet dataset folder, or store:NAME for a dataset in "
+                                    "the store)")
+        out[role] = open_domain(text, role)
+    return out
 
 
 @dataclasses.dataclass(frozen=True)
@@ -261,8 +298,8 @@ def build_plan(setup: SweepSetup, domains: Mapping[str, Any], *, name: str, swee
     Parameters
     ----------
     setup : :func:`setup_sweep`.
-    domains : role -> opened :class:`~sim2radar.experiment.data.DomainDataset`, for each of
-        ``setup.roles``.
+    domains : role -> opened :class:`~sim2radar.experiment.data.DomainDataset`, for (at least)
+        each of ``setup.roles``.
     name, sweep_dir, store : the sweep's name, folder and artifact store root.
     fixed_at : when its settings were fixed (:func:`settings_fixed_at`).
     key_of : :data:`KeyFn`, turning key inputs into content keys.
@@ -275,6 +312,7 @@ def build_plan(setup: SweepSetup, domains: Mapping[str, Any], *, name: str, swee
     from sim2radar.experiment.stats import DEFAULT_METRIC
 
     profile, device, settings = setup.profile, setup.device, setup.settings
+    domains = {role: domains[role] for role in setup.roles}
     _check_datasets(profile, domains)
     real = domains["real"]
     pre_cfg, ft_cfg = setup.configs
@@ -333,6 +371,7 @@ def sweep_cost(setup: SweepSetup, domains: Mapping[str, Any], *,
     from sim2radar.experiment.cost import measure_step_seconds, sweep_jobs, wall_time
 
     profile, device, (pre_cfg, ft_cfg) = setup.profile, setup.device, setup.configs
+    domains = {role: domains[role] for role in setup.roles}
     real = domains["real"]
     train_ids = real.splits.get(profile.train_split) or []
     if not train_ids:

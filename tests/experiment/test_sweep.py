@@ -17,6 +17,7 @@ from sim2radar.experiment.profiles import CONDITIONS, ROLES
 from sim2radar.experiment.sweep import (
     SweepSettingsChanged,
     build_plan,
+    open_datasets,
     resolve_profile,
     role_flag,
     settings_fixed_at,
@@ -47,7 +48,8 @@ def domains(tmp_path_factory):
     root = tmp_path_factory.mktemp("sweep-data")
     return {"real": open_domain(_write(root / "real", 2, {"train": 8, "val": 2, "test": 2},
                                        100_000, proxy=True), "real"),
-            "sim": open_domain(_write(root / "sim", 1, {"train": 8}, 0), "sim")}
+            "sim": open_domain(_write(root / "sim", 1, {"train": 8}, 0), "sim"),
+            "sim-gt": open_domain(_write(root / "gt", 3, {"train": 4}, 50_000), "sim-gt")}
 
 
 def _key_of(kind, inputs, key_inputs):
@@ -101,6 +103,7 @@ def test_the_plan_keys_every_job_from_its_key_inputs(domains, tmp_path):
     plan = _plan(setup, domains, tmp_path)
     assert (len(plan.pretrains), len(plan.runs)) == (4, 8)     # 2 trials x 2 fractions
     ctx = plan.context
+    assert sorted(ctx.datasets) == sorted(plan.sweep["datasets"]) == ["real", "sim"]
     assert ctx.datasets["real"].key == domains["real"].key and ctx.device == "cpu"
     assert ctx.datasets["real"].ids(["test"]) == domains["real"].splits["test"]
     assert ctx.datasets["sim"].ids() == domains["sim"].ids()
@@ -163,3 +166,20 @@ def test_cost_with_given_seconds_per_step(domains):
     assert cost["compute_hours"] == pytest.approx((8 * 2 + 24) / 3600)
     assert cost["wall_hours"][1] == pytest.approx(cost["compute_hours"])
     assert cost["wall_hours"][2] < cost["wall_hours"][1] and not cost["measured"]
+
+
+def test_datasets_are_folders_or_exported_from_the_store(domains, tmp_path):
+    calls = []
+
+    def export(role, name, geometry):
+        calls.append((role, name, geometry))
+        return domains[role].root
+
+    sources = {"real": "store:reference", "sim": "store:demo", "sim-gt": "store:demo:mine"}
+    opened = open_datasets(sources, ("real", "sim", "sim-gt"), export)
+    assert calls == [("real", "reference", "ground_truth"), ("sim", "demo", "reconstructed"),
+                     ("sim-gt", "demo", "mine")]
+    assert opened["real"].key == domains["real"].key and opened["sim-gt"].role == "sim-gt"
+    assert open_datasets({"sim": domains["sim"].root}, ("sim",), export)["sim"].role == "sim"
+    with pytest.raises(FileNotFoundError, match="sim dataset .*no such folder"):
+        open_datasets({"sim": str(tmp_path / "nope")}, ("sim",), export)
