@@ -21,9 +21,8 @@ import statistics
 import tempfile
 import time
 
+from sim2radar.factory.spec import DatasetSpec
 from sim2radar.tasks.dataset import generate_dataset_plain
-
-from sim2radar.factory.spec import resolve_spec
 
 N_FRAMES = int(os.environ.get("SIM2RADAR_BENCH_GENERATE_FRAMES", "3"))
 WORLD_SEED = 0
@@ -35,7 +34,7 @@ def _median(values) -> float:
 
 
 def main() -> dict:
-    spec = resolve_spec(frames_per_world=N_FRAMES, geometry="both")
+    spec = DatasetSpec(frames_per_world=N_FRAMES, geometry="both")
     with tempfile.TemporaryDirectory(prefix="bench-generate-") as tmp:
         t0 = time.perf_counter()
         summary = generate_dataset_plain([WORLD_SEED], spec, os.path.join(tmp, "store"), "bench")
@@ -43,8 +42,8 @@ def main() -> dict:
         t0 = time.perf_counter()
         again = generate_dataset_plain([WORLD_SEED], spec, os.path.join(tmp, "store"), "bench")
         cached_s = time.perf_counter() - t0
-    frames = summary["worlds"][0]["frames"]
-    failed = [f["frame_id"] for f in frames if f["status"] == "failed"]
+    frames = summary["outcomes"][0]["parts"]
+    failed = [f["id"] for f in frames if f["status"] == "failed"]
     stages = ("render", "reconstruct", "simulate_ground_truth", "simulate_reconstructed")
     med = {s: _median(f["timings_s"][s] for f in frames if s in f["timings_s"]) for s in stages}
     mean = {s: statistics.fmean(f["timings_s"][s] for f in frames if s in f["timings_s"])

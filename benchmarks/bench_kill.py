@@ -6,7 +6,7 @@ export) on the managed Prefect server of one ``PREFECT_HOME``, waits until the w
 process, as a scheduler or ``kill PID`` does, and times how long the process takes to go. It
 reports the exit codes (-15 expected; -11 is a segmentation fault), the seconds from SIGTERM to
 exit and the frames the run had published. Prefect's own thread pool made a SIGTERM'd run
-finish its world first; :class:`sim2radar.tasks.runners.ThreadRunner` does not wait.
+finish its world first; :class:`sim2radar.flows.runners.ThreadRunner` does not wait.
 
     SIM2RADAR_BENCH_KILL_ROUNDS=100 python -m benchmarks kill      # default 20 rounds
 """

@@ -71,9 +71,9 @@ def paired_ab(real: Path, out: Path) -> dict:
     """The demo profile's baseline in float32 and in bfloat16 on ``real``; paired statistics."""
     import numpy as np
     from scipy import stats
-    from sim2radar.flows.run_experiment import run_experiment
 
     from sim2radar.experiment import load_profile
+    from sim2radar.flows.run_experiment import run_experiment
 
     demo = load_profile("demo")
     aps: dict[bool, dict[tuple[float, int], float]] = {}

@@ -38,8 +38,8 @@ def _run(store: str, *, first_seed: int = 0, n_worlds: int = N_WORLDS, **runner)
     from sim2radar.flows.generate_dataset import generate_dataset
 
     t0 = time.perf_counter()
-    summary = generate_dataset(n_worlds=n_worlds, frames_per_world=FRAMES, store=store,
-                               dataset="bench", geometry=GEOMETRY, world=WORLD, rig=RIG,
+    spec = {"frames_per_world": FRAMES, "geometry": GEOMETRY, "world": WORLD, "rig": RIG}
+    summary = generate_dataset(spec, n_worlds=n_worlds, store=store, dataset="bench",
                                first_seed=first_seed, **runner)
     wall_s = time.perf_counter() - t0
     if summary["counts"]["failed"]:
@@ -50,7 +50,8 @@ def _run(store: str, *, first_seed: int = 0, n_worlds: int = N_WORLDS, **runner)
 def main() -> dict:
     import distributed
     from prefect.testing.utilities import prefect_test_harness
-    from sim2radar.tasks.runners import local_cluster_kwargs
+
+    from sim2radar.flows.runners import local_cluster_kwargs
 
     n_frames = N_WORLDS * FRAMES
     print(f"{N_WORLDS} worlds x {FRAMES} frames ({n_frames} frames), rig {RIG['width']}x"

@@ -105,10 +105,10 @@ def corridor_frames(seeds=(100_000, 100_001, 100_002), n_frames: int = 3) -> dic
     """The reference radar on procedural corridors, as ``sim2radar reference`` runs it: the rig
     walking along its heading at a speed drawn per frame, a new seed per frame."""
     import drjit as dr
-    from sim2radar.flows.reference_dataset import REFERENCE_SPEED_MPS
 
     from sim2radar.factory import LabelConfig, frame_seed, radar_visibility, scene_ray_caster
     from sim2radar.factory.seeds import frame_speed
+    from sim2radar.flows.reference_dataset import REFERENCE_SPEED_MPS
     from sim2radar.radar import RadarScene
     from sim2radar.radar.frame import simulate_scene_frame
     from sim2radar.worlds import RigConfig, generate_world, render_frame, rig_velocity, trajectory

@@ -33,6 +33,7 @@ def main() -> dict:
     os.environ.setdefault("PREFECT_LOGGING_LEVEL", "WARNING")
     os.environ.setdefault("PREFECT_SERVER_ANALYTICS_ENABLED", "false")
 
+    from sim2radar.scenes import demo_scene_paths
     from sim2radar.storage import (
         ArtifactStore,
         content_key,
@@ -40,8 +41,6 @@ def main() -> dict:
         radar_frames_to_table,
     )
     from sim2radar.tasks.radar import scene_keys, simulate_scenes_plain
-
-    from sim2radar.scenes import demo_scene_paths
 
     out: dict = {}
     # -- store throughput ------------------------------------------------------------------
@@ -85,7 +84,7 @@ def main() -> dict:
     second = simulate_scenes_plain(scenes, "ti-mmwcas", demo_store, "bench")
     out["demo_plain_cached_s"] = time.perf_counter() - t0
     out["scene_keys_s"] = skip_s
-    n_pts = first["scenes"][0]["n_points"]
+    n_pts = first["outcomes"][0]["measured"]["n_points"]
     out["demo_points_per_frame"] = n_pts
     assert second["counts"]["skipped"] == len(scenes)
     print(

@@ -1,8 +1,8 @@
 """The factory's steps as Prefect tasks: one task per step of a scene (render, depth,
 segments, materials, scene, poses, simulate), each ending **Cached** when its artifact already
 existed, so the UI shows per scene which step ran, was cached, retried or failed; and what the
-two factory flows (procedural worlds, capture folders) do with their scene tasks alike:
-gather them as they finish, record each in the manifest, move the progress artifact.
+flows do with their work tasks alike (:func:`gather`): gather them as they finish, record each
+outcome in the manifest, move the progress artifact.
 
 The step functions themselves (:mod:`sim2radar.tasks.steps`, :mod:`sim2radar.tasks.capture`, :mod:`sim2radar.tasks.dataset`)
 take a ``run(stage, fn, *args)`` callable: plain calls without Prefect, :func:`run_as_tasks` in
@@ -20,11 +20,11 @@ from prefect import get_run_logger, task
 from prefect.cache_policies import NO_CACHE
 from prefect.futures import as_completed
 from prefect.states import Completed, State
-from sim2radar.flows import _progress
-from sim2radar.tasks.common import REMOTE_IO_RETRIES, REMOTE_IO_RETRY_DELAYS_S, retry_transient_io
-from sim2radar.tasks.dataset import WorldDatasetOutcome, record_world_dataset
 
-__all__ = ["STEP_NAMES", "run_as_tasks", "record_scene_task", "gather_scenes"]
+from sim2radar.flows import _progress
+from sim2radar.tasks.common import Outcome, record_task
+
+__all__ = ["STEP_NAMES", "run_as_tasks", "gather"]
 
 #: Every step's task name (the Prefect UI's task names).
 STEP_NAMES = ("render", "depth", "segments", "materials", "scene", "poses", "simulate")
@@ -80,21 +80,14 @@ def run_as_tasks(prefix: str, name_of: Callable[[str, tuple], str] | None = None
     return run
 
 
-@task(name="record-dataset-manifest", cache_policy=NO_CACHE, retries=REMOTE_IO_RETRIES,
-      retry_delay_seconds=REMOTE_IO_RETRY_DELAYS_S, retry_condition_fn=retry_transient_io,
-      persist_result=False)
-def record_scene_task(store: str, dataset: str, outcome: WorldDatasetOutcome) -> list:
-    """Manifest rows of one world or capture scene and its frames (retried only on transient
-    storage errors; the steps themselves are deterministic and never retried)."""
-    return record_world_dataset(store, dataset, outcome)
-
-
-def gather_scenes(futures: dict, failed: Callable[[Any, BaseException | str], Any], *,
-                  store: str, dataset: str, progress_id, channel: str) -> dict:
-    """Scene tasks' outcomes as they finish (``futures``: future -> scene identity): a task that
-    did not return an outcome becomes ``failed(identity, error)``; each outcome is recorded in
-    the ``dataset`` manifest, logged, counted on the progress artifact ``progress_id`` and
-    reported on the progress ``channel``. Returns identity -> outcome."""
+def gather(futures: dict, failed: Callable[[Any, BaseException | str], Outcome], *,
+           store: str, dataset: str, progress_id=None, channel: str | None = None,
+           what: str = "") -> dict:
+    """Work tasks' outcomes as they finish (``futures``: future -> the work's identity): a task
+    that did not return an :class:`Outcome` becomes ``failed(identity, error)``; each outcome is
+    recorded in the ``dataset`` manifest (:func:`~sim2radar.tasks.common.record_task`), logged,
+    counted on the progress artifact ``progress_id`` and reported on the progress ``channel``
+    (each when given). Returns identity -> outcome."""
     from prefect.artifacts import update_progress_artifact
 
     logger = get_run_logger()
@@ -102,16 +95,21 @@ def gather_scenes(futures: dict, failed: Callable[[Any, BaseException | str], An
     for fut in as_completed(list(futures)):
         ident = futures[fut]
         result = fut.result(raise_on_failure=False)
-        if not isinstance(result, WorldDatasetOutcome):
+        if not isinstance(result, Outcome):
             error = result if isinstance(result, BaseException) else (
                 fut.state.message or repr(result))
             result = failed(ident, error)
-        record_scene_task(store, dataset, result)
+        record_task(store, dataset, result)
+        name = f"{what} {result.id}".strip()
         if result.status == "failed":
-            logger.error("%s FAILED: %s", result.world_id, result.error)
+            logger.error("%s FAILED: %s", name, result.error)
+        elif result.parts:
+            logger.info("%s: %s, %d frames", name, result.status, len(result.parts))
         else:
-            logger.info("%s: %s, %d frames", result.world_id, result.status, len(result.frames))
+            logger.info("%s: %s", name, result.status)
         outcomes[ident] = result
-        update_progress_artifact(progress_id, 100.0 * len(outcomes) / max(len(futures), 1))
-        _progress.notify(channel, result)
+        if progress_id is not None:
+            update_progress_artifact(progress_id, 100.0 * len(outcomes) / max(len(futures), 1))
+        if channel is not None:
+            _progress.notify(channel, result)
     return outcomes

@@ -16,7 +16,7 @@ seconds per stage).
 
 A failing scene is recorded ``failed`` with its stage and error and the others finish; a
 second run recomputes nothing. Scenes run one at a time by default (Mitsuba uses every core);
-``workers > 1`` uses threads, ``dask_address`` a Dask cluster (:func:`sim2radar.tasks.runners.task_runner`).
+``workers > 1`` uses threads, ``dask_address`` a Dask cluster (:func:`sim2radar.flows.runners.task_runner`).
 """
 
 from __future__ import annotations
@@ -27,20 +27,15 @@ from typing import Any
 
 from prefect import flow, task
 from prefect.cache_policies import NO_CACHE
-from sim2radar.flows import _progress
-from sim2radar.flows._steps import gather_scenes, run_as_tasks
-from sim2radar.storage import ArtifactStore
-from sim2radar.tasks import capture as steps
-from sim2radar.tasks.dataset import (
-    WorldDatasetOutcome,
-    export_all,
-    failed_scene_outcome,
-    record_world_dataset,
-    summarize_dataset,
-)
-from sim2radar.tasks.runners import ThreadRunner
 
 from sim2radar.factory.captures import CaptureScene, CaptureSpec, find_captures
+from sim2radar.flows import _progress
+from sim2radar.flows._steps import gather, run_as_tasks
+from sim2radar.flows.runners import ThreadRunner
+from sim2radar.storage import ArtifactStore
+from sim2radar.tasks import capture as steps
+from sim2radar.tasks.common import Outcome, run_plain
+from sim2radar.tasks.dataset import export_all, failed_scene_outcome, summarize_dataset
 
 __all__ = ["capture_dataset_flow", "capture_dataset", "capture_dataset_job", "progress_callback",
            "CAPTURE_DOMAIN", "stage_table"]
@@ -55,7 +50,7 @@ def _simulate_batch_name(stage: str, args: tuple) -> str:
 
 @task(name="capture-scene", cache_policy=NO_CACHE, retries=0, persist_result=False)
 def capture_scene_task(scene: CaptureScene, spec: CaptureSpec, store: str,
-                       force: bool = False) -> WorldDatasetOutcome:
+                       force: bool = False) -> Outcome:
     """One scene, every step a Prefect task (:func:`sim2radar.tasks.capture.process_capture_scene`)."""
     return steps.process_capture_scene(scene, spec, store, force=force,
                                        run=run_as_tasks(scene.scene_id, _simulate_batch_name))
@@ -66,14 +61,14 @@ def progress_callback(fn):
     return _progress.listen("capture_dataset", fn)
 
 
-def stage_table(outcomes: list[WorldDatasetOutcome]) -> list[dict[str, Any]]:
+def stage_table(outcomes: list[Outcome]) -> list[dict[str, Any]]:
     """One row per scene: status, frames, points per frame, wall seconds per step."""
     rows = []
     for o in outcomes:
-        pts = [f.n_points.get("reconstructed", 0) for f in o.frames
-               if "reconstructed" in f.n_points]
-        row = {"scene": o.world_id, "status": o.status,
-               "frames": sum(f.status != "failed" for f in o.frames),
+        counts = [f.measured.get("n_points", {}) for f in o.parts]
+        pts = [c["reconstructed"] for c in counts if "reconstructed" in c]
+        row = {"scene": o.id, "status": o.status,
+               "frames": sum(f.status != "failed" for f in o.parts),
                "points_per_frame": round(sum(pts) / len(pts), 1) if pts else None}
         for stage in steps.CAPTURE_STAGES + ("total",):
             row[f"{stage}_s"] = round(o.timings_s[stage], 3) if stage in o.timings_s else None
@@ -107,7 +102,7 @@ def capture_dataset_flow(
         description=f"capture dataset {dataset}: scenes finished of {len(scenes)}")
     futures = {capture_scene_task.with_options(task_run_name=f"scene-{s.scene_id}").submit(
         s, spec, store, force): i for i, s in enumerate(scenes)}
-    outcomes = gather_scenes(
+    outcomes = gather(
         futures, lambda i, error: failed_scene_outcome(scenes[i].scene_id, error,
                                                        source=scenes[i].folder),
         store=store, dataset=dataset, progress_id=progress_id, channel="capture_dataset")
@@ -119,7 +114,7 @@ def capture_dataset_flow(
     return summary
 
 
-def _finish(st, dataset: str, spec: CaptureSpec, outcomes: list[WorldDatasetOutcome],
+def _finish(st, dataset: str, spec: CaptureSpec, outcomes: list[Outcome],
             export_dir: str | None) -> dict[str, Any]:
     summary = summarize_dataset(st, dataset, spec, outcomes)
     summary["unit"], summary["ground_truth"] = "scenes", False
@@ -135,14 +130,12 @@ def capture_dataset_plain(scenes: list[CaptureScene], spec: CaptureSpec, store: 
     """The flow's semantics without the Prefect engine (``--no-prefect``, notebooks): the same
     :func:`sim2radar.tasks.capture.process_capture_scene` per scene, with plain calls."""
     st = ArtifactStore(store)
-    st.manifest(dataset)
-    outcomes = []
-    for s in scenes:
-        outcome = steps.process_capture_scene(s, spec, store, force=force)
-        record_world_dataset(st, dataset, outcome)
-        outcomes.append(outcome)
-        if on_scene is not None:
-            on_scene(outcome)
+    # process_capture_scene records a broken scene in its outcome and never raises
+    outcomes = run_plain(scenes, lambda s: steps.process_capture_scene(s, spec, store,
+                                                                       force=force),
+                         lambda s, error: failed_scene_outcome(s.scene_id, error,
+                                                               source=s.folder),
+                         st, dataset, on_scene)
     return _finish(st, dataset, spec, outcomes, export_dir)
 
 
@@ -167,8 +160,8 @@ def capture_dataset(
     ``retry_failed``: only the scenes the ``dataset`` manifest records as failed run; the
     export then holds every frame the manifest lists.
     """
+    from sim2radar.flows.runners import task_runner
     from sim2radar.tasks.common import failed_scene_ids
-    from sim2radar.tasks.runners import task_runner
 
     t0 = time.perf_counter()
     spec = CaptureSpec(**spec_fields)

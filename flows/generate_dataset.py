@@ -3,8 +3,9 @@ boxes (on reconstructed and/or ground-truth geometry) in the store, optionally e
 OpenPCDet's custom layout.
 
     from sim2radar.flows.generate_dataset import generate_dataset
-    summary = generate_dataset(n_worlds=4, frames_per_world=8, store="out/store",
-                               dataset="nightly", geometry="both", export_dir="out/openpcdet")
+    spec = DatasetSpec(frames_per_world=8, geometry="both")   # + radar, reconstruction, ...
+    summary = generate_dataset(spec, n_worlds=4, store="out/store", dataset="nightly",
+                               export_dir="out/openpcdet")
 
 One task per world seed (``generate_world_dataset_task``), its steps (render, reconstruction
 steps per frame, one simulate per geometry) as nested tasks that end **Cached** when
@@ -14,11 +15,12 @@ with the same inputs recomputes nothing (every frame ``skipped`` by content key)
 world or frame is recorded as ``failed`` with its error and the others finish; ``strict=True``
 raises :class:`DatasetFailures` at the end (after everything is recorded and exported).
 
-Task runner (:func:`sim2radar.tasks.runners.task_runner`): worlds run one at a time by default (Mitsuba
+Task runner (:func:`sim2radar.flows.runners.task_runner`): worlds run one at a time by default (Mitsuba
 already uses every core for one frame); ``workers > 1`` uses a thread pool; ``dask_address`` =
 a Dask scheduler address (``tcp://host:8786``) or ``"local"`` (a LocalCluster of ``workers``
 single-threaded processes) fans worlds out over Dask (``pip install 'sim2radar[dask]'``). A
-world task receives only its seed, the spec as a dict and the store path/URI; the frames it
+world task receives only its seed, the :class:`~sim2radar.factory.spec.DatasetSpec` and the
+store path/URI; the frames it
 makes go to the store and only a small outcome comes back, so everything pickles and each
 worker process selects its own Mitsuba variant.
 """
@@ -32,19 +34,19 @@ from typing import Any
 
 from prefect import flow, get_run_logger, task
 from prefect.cache_policies import NO_CACHE
+
+from sim2radar.factory.spec import DatasetSpec, as_spec
 from sim2radar.flows import _progress
-from sim2radar.flows._steps import gather_scenes, run_as_tasks
+from sim2radar.flows._steps import gather, run_as_tasks
+from sim2radar.flows.runners import ThreadRunner, task_runner
 from sim2radar.storage import ArtifactStore
+from sim2radar.tasks.common import Outcome
 from sim2radar.tasks.dataset import (
-    WorldDatasetOutcome,
     export_all,
     failed_world_outcome,
     generate_world_dataset,
     summarize_dataset,
 )
-from sim2radar.tasks.runners import ThreadRunner, task_runner
-
-from sim2radar.factory.spec import resolve_spec
 
 __all__ = ["generate_dataset_flow", "generate_dataset", "generate_dataset_job", "DatasetFailures",
            "progress_callback"]
@@ -55,34 +57,35 @@ class DatasetFailures(RuntimeError):
 
     def __init__(self, summary: dict[str, Any]) -> None:
         lines = []
-        for w in summary["worlds"]:
+        for w in summary["outcomes"]:
             if w["status"] != "failed":
                 continue
-            lines.append(f"{w['world_id']}: {w['error']}")
-            lines += [f"  {f['frame_id']}: {f['error']}" for f in w["frames"]
+            lines.append(f"{w['id']}: {w['error']}")
+            lines += [f"  {f['id']}: {f['error']}" for f in w["parts"]
                       if f["status"] == "failed"]
         super().__init__(f"{summary['counts']['failed']} world(s) failed:\n" + "\n".join(lines))
         self.summary = summary
 
 
-def progress_callback(fn: Callable[[WorldDatasetOutcome], None]):
+def progress_callback(fn: Callable[[Outcome], None]):
     """Context manager: call ``fn(outcome)`` in this process after each world finishes."""
     return _progress.listen("generate_dataset", fn)
 
 
-def world_table(outcomes: list[WorldDatasetOutcome]) -> list[dict[str, Any]]:
+def world_table(outcomes: list[Outcome]) -> list[dict[str, Any]]:
     """One row per world: status, frames, radar points per frame (each geometry), seconds per
     step summed over the world's frames (render, reconstruct, simulate per geometry) and the
     world's total, the error."""
     rows = []
     for o in outcomes:
-        row: dict[str, Any] = {"world": o.world_id, "status": o.status,
-                               "frames": sum(f.status != "failed" for f in o.frames)}
-        for g in sorted({g for f in o.frames for g in f.n_points}):
-            pts = [f.n_points[g] for f in o.frames if g in f.n_points]
+        row: dict[str, Any] = {"world": o.id, "status": o.status,
+                               "frames": sum(f.status != "failed" for f in o.parts)}
+        counts = [f.measured.get("n_points", {}) for f in o.parts]
+        for g in sorted({g for c in counts for g in c}):
+            pts = [c[g] for c in counts if g in c]
             row[f"points_per_frame_{g}"] = round(sum(pts) / len(pts), 1)
-        for stage in sorted({s for f in o.frames for s in f.timings_s}):
-            row[f"{stage}_s"] = round(sum(f.timings_s.get(stage, 0.0) for f in o.frames), 3)
+        for stage in sorted({s for f in o.parts for s in f.timings_s}):
+            row[f"{stage}_s"] = round(sum(f.timings_s.get(stage, 0.0) for f in o.parts), 3)
         row["total_s"] = round(o.timings_s.get("total", 0.0), 3)
         row["error"] = o.error
         rows.append(row)
@@ -99,8 +102,8 @@ def _step_name(stage: str, args: tuple) -> str:
 
 
 @task(name="generate-world-dataset", cache_policy=NO_CACHE, retries=0, persist_result=False)
-def generate_world_dataset_task(seed: int, spec: dict, store: str, force: bool = False,
-                                n_frames: int | None = None) -> WorldDatasetOutcome:
+def generate_world_dataset_task(seed: int, spec: DatasetSpec, store: str, force: bool = False,
+                                n_frames: int | None = None) -> Outcome:
     """One world, every step a Prefect task (:func:`sim2radar.tasks.dataset.generate_world_dataset`):
     ``render``, per frame ``depth``/``segments``/``materials``/``scene`` (reconstructed, when
     not cached) and one ``simulate`` per geometry. No retries: the steps are deterministic."""
@@ -113,7 +116,7 @@ def generate_world_dataset_task(seed: int, spec: dict, store: str, force: bool =
 @flow(name="generate-dataset", task_runner=ThreadRunner(max_workers=1), log_prints=False)
 def generate_dataset_flow(
     seeds: list[int],
-    spec: dict,
+    spec: DatasetSpec,
     store: str = "out/store",
     dataset: str = "generated",
     export_dir: str | None = None,
@@ -129,8 +132,8 @@ def generate_dataset_flow(
     Parameters
     ----------
     seeds : world seeds (one seed -> one world)
-    spec : :meth:`sim2radar.tasks.dataset.DatasetSpec.to_dict` (frames per world, geometry, radar,
-        reconstruction, world, rig, seed, class name)
+    spec : :class:`~sim2radar.factory.spec.DatasetSpec` (frames per world, geometries, radar,
+        reconstruction, world, rig, seed, class name, ...)
     store : artifact store root (local path or fsspec URI)
     dataset : manifest name
     export_dir : OpenPCDet export folder, or None
@@ -159,8 +162,8 @@ def generate_dataset_flow(
             int(s), spec, store, force, frames_by_seed.get(int(s))): int(s)
         for s in seeds
     }
-    outcomes = gather_scenes(futures, failed_world_outcome, store=store, dataset=dataset,
-                             progress_id=progress_id, channel="generate_dataset")
+    outcomes = gather(futures, failed_world_outcome, store=store, dataset=dataset,
+                      progress_id=progress_id, channel="generate_dataset", what="world")
     ordered = [outcomes[int(s)] for s in seeds]
     summary = summarize_dataset(st, dataset, spec, ordered)
     summary["stage_table"] = world_table(ordered)
@@ -180,53 +183,38 @@ def generate_dataset_flow(
 
 
 def generate_dataset(
+    spec: DatasetSpec | dict | None = None,
     n_worlds: int = 4,
-    frames_per_world: int = 4,
     store: str | os.PathLike = "out/store",
     dataset: str = "generated",
-    radar: Any = "ti-mmwcas",
-    geometry: str | Sequence[str] = "reconstructed",
-    reconstruction: Any = None,
-    world: Any = None,
-    rig: Any = None,
-    seed: int = 0,
     export_dir: str | os.PathLike | None = None,
     *,
     first_seed: int = 0,
     seeds: Sequence[int] | None = None,
-    class_name: str = "door",
     force: bool = False,
     strict: bool = False,
     workers: int = 1,
     dask_address: str | None = None,
-    labels: Any = None,
-    material_override: str | None = None,
 ) -> dict[str, Any]:
     """Run :func:`generate_dataset_flow` on worlds ``first_seed .. first_seed + n_worlds - 1``
     (or explicit ``seeds``).
 
     Parameters
     ----------
-    radar : preset name, YAML path or RadarConfig
-    geometry : ``reconstructed`` (paper pipeline), ``ground_truth`` or ``both``
-    reconstruction : ReconstructionConfig / dict / YAML path / preset; None = lidar, builtin,
-        prior (built-in backends, no weights)
-    world, rig : WorldConfig / RigConfig or dicts (None = defaults)
-    seed : run seed (trajectories, radar noise, splits)
+    spec : :class:`~sim2radar.factory.spec.DatasetSpec`, or its settings as a dict
+        (``{"frames_per_world": 4, "geometry": "both", "radar": "ti-mmwcas", ...}``), validated
+        here before the flow starts so a bad field fails fast with its name; None: defaults
     workers : worlds in parallel (threads, or LocalCluster processes with ``dask_address="local"``)
     dask_address : None (threads), ``"local"`` or a Dask scheduler address ``tcp://host:8786``
-
-    Configs are validated here, before the flow starts, so a bad field fails fast with its name.
     """
-    spec = resolve_spec(frames_per_world, geometry, radar, reconstruction, world, rig, seed,
-                        class_name, labels, material_override)
+    spec = as_spec(spec if spec is not None else {})
     seed_list = [int(s) for s in (seeds if seeds is not None
                                   else range(int(first_seed), int(first_seed) + int(n_worlds)))]
     if not seed_list:
         raise ValueError("no worlds to generate: n_worlds must be >= 1")
     runner = task_runner(workers, dask_address)
     return generate_dataset_flow.with_options(task_runner=runner)(
-        seeds=seed_list, spec=spec.to_dict(), store=os.fspath(store), dataset=dataset,
+        seeds=seed_list, spec=spec, store=os.fspath(store), dataset=dataset,
         export_dir=None if export_dir is None else os.fspath(export_dir), force=force,
         strict=strict,
     )
@@ -234,42 +222,32 @@ def generate_dataset(
 
 @flow(name="generate-dataset-job", log_prints=False)
 def generate_dataset_job(
+    spec: DatasetSpec,
     n_worlds: int = 4,
-    frames_per_world: int = 4,
+    first_seed: int = 0,
     store: str = "out/store",
     dataset: str = "generated",
-    radar: str | dict = "ti-mmwcas",
-    geometry: str | list[str] = "reconstructed",
-    reconstruction: str | dict | None = None,
-    world: dict | None = None,
-    rig: dict | None = None,
-    seed: int = 0,
     export_dir: str | None = None,
-    first_seed: int = 0,
-    class_name: str = "door",
     force: bool = False,
     strict: bool = False,
     workers: int = 1,
     dask_address: str | None = None,
-    material_override: str | None = None,
 ) -> dict[str, Any]:
     """Deployment entry point (see ``deploy/prefect.yaml``): worlds ``first_seed ..
     first_seed + n_worlds - 1`` through :func:`generate_dataset` as a subflow on the chosen
     task runner (threads, or Dask with ``dask_address`` = scheduler address or ``"local"``).
 
-    Parameters are JSON values (Prefect validates them): ``radar`` a preset name, YAML path or
-    RadarConfig fields; ``reconstruction`` a preset name, YAML path, fields or None (built-in
-    backends); ``world`` / ``rig`` dicts of WorldConfig / RigConfig fields. Relative paths
-    resolve against the worker's working directory.
+    ``spec`` is the run's :class:`~sim2radar.factory.spec.DatasetSpec` as one parameter: its
+    settings as JSON (``frames_per_world``, ``geometry``, ``radar`` a preset name, YAML path or
+    RadarConfig fields, ``reconstruction`` a preset name, YAML path, fields or null for the
+    built-in backends, ``world`` / ``rig`` WorldConfig / RigConfig fields, ...), validated by
+    Prefect into the spec. Relative paths resolve against the worker's working directory.
     """
     # Prefect loads a deployment's entrypoint file as a top-level module ("generate_dataset");
     # objects from that copy would pickle by reference to a module Dask's scheduler and workers
     # cannot import. Run the package's copy of the flow instead (the same code).
     package = importlib.import_module("sim2radar.flows.generate_dataset")
     return package.generate_dataset(
-        n_worlds=n_worlds, frames_per_world=frames_per_world, store=store, dataset=dataset,
-        radar=radar, geometry=geometry, reconstruction=reconstruction, world=world, rig=rig,
-        seed=seed, export_dir=export_dir, first_seed=first_seed, class_name=class_name,
-        force=force, strict=strict, workers=workers, dask_address=dask_address,
-        material_override=material_override,
-    )
+        spec, n_worlds=n_worlds, store=store, dataset=dataset, export_dir=export_dir,
+        first_seed=first_seed, force=force, strict=strict, workers=workers,
+        dask_address=dask_address)

@@ -17,17 +17,12 @@ from collections.abc import Sequence
 from typing import Any
 
 from prefect import flow, get_run_logger
-from prefect.futures import as_completed
+
+from sim2radar.flows._steps import gather
+from sim2radar.flows.runners import ThreadRunner
 from sim2radar.storage import ArtifactStore
-from sim2radar.tasks.reconstruct import (
-    ImageJob,
-    ReconOutcome,
-    failed_outcome,
-    reconstruct_image_task,
-    record_recon_outcome_task,
-    summarize_recon,
-)
-from sim2radar.tasks.runners import ThreadRunner
+from sim2radar.tasks.common import summarize
+from sim2radar.tasks.reconstruct import ImageJob, failed_outcome, reconstruct_image_task
 
 __all__ = ["reconstruct_flow", "run_reconstruction"]
 
@@ -45,7 +40,7 @@ def reconstruct_flow(
 
     Returns
     -------
-    dict — ``{"store", "dataset", "counts": {ok, skipped, failed}, "frames": [...]}``
+    dict — :func:`sim2radar.tasks.common.summarize`'s
     """
     logger = get_run_logger()
     ArtifactStore(store).manifest(dataset)
@@ -54,20 +49,9 @@ def reconstruct_flow(
             job, store, config, out_dir, force): i
         for i, job in enumerate(jobs)
     }
-    outcomes: dict[int, ReconOutcome] = {}
-    for fut in as_completed(list(futures)):
-        i = futures[fut]
-        result = fut.result(raise_on_failure=False)
-        if isinstance(result, ReconOutcome):
-            outcome = result
-        else:
-            error = result if isinstance(result, BaseException) else (
-                fut.state.message or repr(result))
-            outcome = failed_outcome(jobs[i], error)
-        record_recon_outcome_task(store, dataset, outcome)
-        logger.info("frame %s: %s %s", outcome.name, outcome.status, outcome.error)
-        outcomes[i] = outcome
-    summary = summarize_recon([outcomes[i] for i in range(len(jobs))], store, dataset)
+    done = gather(futures, lambda i, error: failed_outcome(jobs[i], error), store=store,
+                  dataset=dataset, what="frame")
+    summary = summarize(store, dataset, [done[i] for i in range(len(jobs))])
     logger.info("reconstruct-frames: %s into %s (dataset %s)", summary["counts"], store, dataset)
     return summary
 

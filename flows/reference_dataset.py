@@ -39,11 +39,11 @@ def reference_spec(frames_per_world: int = 10, radar: Any = REFERENCE_RADAR, wor
     """The :class:`sim2radar.tasks.dataset.DatasetSpec` of a reference dataset: ground-truth geometry,
     the reference radar on a rig walking at ``speed_mps`` (min, max) [m/s] along its heading
     (a speed drawn per frame), no RGB / LiDAR rendering."""
-    from sim2radar.factory.spec import resolve_spec
+    from sim2radar.factory.spec import DatasetSpec
 
-    return resolve_spec(frames_per_world, "ground_truth", radar, None, world, rig, seed,
-                        labels=labels, render_rgb=False,
-                        motion={"speed_mps": list(speed_mps)})
+    return DatasetSpec(frames_per_world=frames_per_world, geometry="ground_truth", radar=radar,
+                       world=world, rig=rig, seed=seed, labels=labels, render_rgb=False,
+                       motion={"speed_mps": list(speed_mps)})
 
 
 def reference_run(first_seed: int = REFERENCE_FIRST_SEED, worlds: int | None = None,
@@ -91,7 +91,7 @@ def reference_dataset(
     Other parameters as :func:`sim2radar.flows.generate_dataset.generate_dataset`.
     """
     from sim2radar.flows.generate_dataset import generate_dataset_flow
-    from sim2radar.tasks.runners import task_runner
+    from sim2radar.flows.runners import task_runner
 
     args = reference_run(first_seed, worlds, frames_per_world, seed)
     plan = args.pop("plan")

@@ -14,7 +14,7 @@ batch job that should keep what succeeded — unless ``strict=True``, which rais
 :class:`SceneFailures` after every scene has been recorded (Prefect marks the run failed). The
 CLI maps this to its exit code: 0 by default, 1 with ``--strict`` when any scene failed.
 
-Task runner (:func:`sim2radar.tasks.runners.task_runner`): scenes run one at a time by default
+Task runner (:func:`sim2radar.flows.runners.task_runner`): scenes run one at a time by default
 (``workers=1``: Mitsuba/Dr.Jit already uses every core for one frame). ``workers>1`` uses a
 thread pool; ``dask_address`` = a scheduler address (``tcp://host:8786``) or ``"local"`` (a
 LocalCluster of ``workers`` processes) uses ``prefect_dask.DaskTaskRunner`` (``pip install
@@ -30,18 +30,14 @@ from pathlib import Path
 from typing import Any
 
 from prefect import flow, get_run_logger
-from prefect.futures import as_completed
+
 from sim2radar.flows import _progress
+from sim2radar.flows._steps import gather
+from sim2radar.flows.runners import ThreadRunner, task_runner
+from sim2radar.scenes import expand_scenes
 from sim2radar.storage import ArtifactStore
-from sim2radar.tasks.common import expand_scenes
-from sim2radar.tasks.radar import (
-    SceneOutcome,
-    failed_outcome,
-    record_outcome_task,
-    simulate_scene_task,
-    summarize,
-)
-from sim2radar.tasks.runners import ThreadRunner, task_runner
+from sim2radar.tasks.common import Outcome, summarize
+from sim2radar.tasks.radar import failed_outcome, simulate_scene_task
 
 __all__ = [
     "simulate_flow",
@@ -57,23 +53,19 @@ class SceneFailures(RuntimeError):
     """Raised by a ``strict`` run when at least one scene failed; ``.summary`` has the details."""
 
     def __init__(self, summary: dict[str, Any]) -> None:
-        failed = [s for s in summary["scenes"] if s["status"] == "failed"]
-        lines = [f"{s['scene_id']}: {s['error']}" for s in failed]
+        failed = [s for s in summary["outcomes"] if s["status"] == "failed"]
+        lines = [f"{s['id']}: {s['error']}" for s in failed]
         super().__init__(f"{len(failed)} scene(s) failed:\n" + "\n".join(lines))
         self.summary = summary
 
 
-def progress_callback(fn: Callable[[SceneOutcome], None]):
+def progress_callback(fn: Callable[[Outcome], None]):
     """Context manager: call ``fn(outcome)`` in this process after each scene finishes."""
     return _progress.listen("simulate", fn)
 
 
-def _notify_progress(outcome: SceneOutcome) -> None:
-    _progress.notify("simulate", outcome)
-
-
 def _check_unique_ids(scenes: Sequence[str]) -> None:
-    from sim2radar.tasks.common import scene_id_for
+    from sim2radar.scenes import scene_id_for
 
     seen: dict[str, str] = {}
     for s in scenes:
@@ -113,8 +105,7 @@ def simulate_flow(
     Returns
     -------
     dict
-        ``{"store", "dataset", "radar", "counts": {ok, skipped, failed}, "scenes": [outcome
-        dicts], "manifest": path}``
+        :func:`sim2radar.tasks.common.summarize`'s (``outcomes``: the scenes) + ``radar``
     """
     logger = get_run_logger()
     scenes = [str(s) for s in scenes]
@@ -127,26 +118,9 @@ def simulate_flow(
         ): s
         for s in scenes
     }
-    outcomes: dict[str, SceneOutcome] = {}
-    for fut in as_completed(list(futures)):
-        path = futures[fut]
-        result = fut.result(raise_on_failure=False)  # waits; the exception if the task failed
-        if isinstance(result, SceneOutcome):
-            outcome = result
-        else:
-            state = fut.state
-            error = result if isinstance(result, BaseException) else (state.message or repr(result))
-            outcome = failed_outcome(path, error)
-        record_outcome_task(store, dataset, outcome)
-        if outcome.status == "failed":
-            logger.error("scene %s FAILED: %s", outcome.scene_id, outcome.error)
-        elif outcome.status == "skipped":
-            logger.info("scene %s: skipped (cached %s)", outcome.scene_id, outcome.artifacts)
-        else:
-            logger.info("scene %s: ok, points per frame %s", outcome.scene_id, outcome.n_points)
-        outcomes[path] = outcome
-        _notify_progress(outcome)
-    summary = summarize(st, dataset, radar, [outcomes[s] for s in scenes])
+    done = gather(futures, failed_outcome, store=store, dataset=dataset, channel="simulate",
+                  what="scene")
+    summary = summarize(st, dataset, [done[s] for s in scenes], radar=str(radar))
     counts = summary["counts"]
     logger.info("simulate-radar: %s into %s (dataset %s)", counts, st.root, dataset)
     if strict and counts["failed"]:

@@ -15,16 +15,12 @@ from collections.abc import Iterable
 from typing import Any
 
 from prefect import flow, get_run_logger
-from prefect.futures import as_completed
+
+from sim2radar.flows._steps import gather
+from sim2radar.flows.runners import ThreadRunner
 from sim2radar.storage import ArtifactStore
-from sim2radar.tasks.runners import ThreadRunner
-from sim2radar.tasks.worlds import (
-    WorldOutcome,
-    failed_world,
-    generate_world_task,
-    record_world_outcome_task,
-    summarize_worlds,
-)
+from sim2radar.tasks.common import summarize
+from sim2radar.tasks.worlds import failed_world, generate_world_task
 
 __all__ = ["worlds_flow", "run_worlds"]
 
@@ -46,7 +42,7 @@ def worlds_flow(
 
     Returns
     -------
-    dict — ``{"store", "dataset", "counts": {ok, skipped, failed}, "worlds": [...]}``
+    dict — :func:`sim2radar.tasks.common.summarize`'s (``outcomes``: the worlds)
     """
     logger = get_run_logger()
     st = ArtifactStore(store)
@@ -57,20 +53,8 @@ def worlds_flow(
             radar): int(s)
         for s in seeds
     }
-    outcomes: dict[int, WorldOutcome] = {}
-    for fut in as_completed(list(futures)):
-        seed = futures[fut]
-        result = fut.result(raise_on_failure=False)
-        if isinstance(result, WorldOutcome):
-            outcome = result
-        else:
-            error = result if isinstance(result, BaseException) else (
-                fut.state.message or repr(result))
-            outcome = failed_world(seed, error)
-        record_world_outcome_task(store, dataset, outcome)
-        logger.info("world %s: %s %s", outcome.world_id, outcome.status, outcome.error)
-        outcomes[seed] = outcome
-    summary = summarize_worlds(st, dataset, [outcomes[int(s)] for s in seeds])
+    done = gather(futures, failed_world, store=store, dataset=dataset, what="world")
+    summary = summarize(st, dataset, [done[int(s)] for s in seeds])
     logger.info("generate-worlds: %s into %s (dataset %s)", summary["counts"], st.root, dataset)
     return summary
 

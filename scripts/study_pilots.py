@@ -49,10 +49,10 @@ def main() -> None:
     args = ap.parse_args()
 
     import pyarrow.parquet as pq
-    from sim2radar.flows.run_experiment import run_experiment
 
     from sim2radar.experiment import load_profile
     from sim2radar.experiment.stats import minimum_detectable_effect
+    from sim2radar.flows.run_experiment import run_experiment
 
     base = load_profile(args.profile)
     out = Path(args.out)

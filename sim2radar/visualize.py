@@ -2,7 +2,9 @@
 
 Pure functions over arrays: they return PNG bytes (and write them if given a path). Matplotlib
 runs on its Agg backend through an explicit ``Figure`` — no pyplot global state, safe in worker
-threads.
+threads. A written PNG carries a digest of what it was drawn from (:data:`INPUTS_KEY`); asked to
+draw the same picture to the same path again (a cached rerun of a dataset), :func:`bev_png`
+returns that file and never imports Matplotlib (issue #23).
 
 View convention: the radar frame is x forward, y left, z up. The picture looks down on it with
 forward (+x) pointing up the page and left (+y) pointing left, as a driver would draw it.
@@ -10,7 +12,10 @@ forward (+x) pointing up the page and left (+y) pointing left, as a driver would
 
 from __future__ import annotations
 
+import hashlib
 import io
+import json
+import struct
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -18,7 +23,13 @@ import numpy as np
 
 from sim2radar.boxes import box_corners
 
-__all__ = ["bev_png", "box_corners_xy", "frames_bev_png", "scene_extent"]
+__all__ = ["INPUTS_KEY", "bev_png", "box_corners_xy", "frames_bev_png", "scene_extent"]
+
+#: PNG text chunk holding the digest of a picture's inputs (and of :data:`_DRAWING_VERSION`).
+INPUTS_KEY = "sim2radar-inputs"
+#: Bump when :func:`bev_png` draws differently: pictures written before are then redrawn.
+_DRAWING_VERSION = "1"
+_PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 
 
 def box_corners_xy(boxes: np.ndarray) -> np.ndarray:
@@ -60,16 +71,21 @@ def bev_png(
     bytes
         The PNG file content.
     """
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-    from matplotlib.figure import Figure
-    from matplotlib.patches import Polygon, Wedge
-
     pts = np.asarray(points, dtype=np.float64)
     if pts.ndim != 2 or pts.shape[1] < 3:
         raise ValueError(f"points must have shape (N, 3) or (N, 4), got {pts.shape}")
     bxs = np.zeros((0, 7)) if boxes is None else np.asarray(boxes, dtype=np.float64).reshape(-1, 7)
     if box_labels is not None and len(box_labels) != len(bxs):
         raise ValueError(f"{len(box_labels)} box labels for {len(bxs)} boxes")
+    digest = _inputs_digest(pts, bxs, box_labels, fov_deg, max_range_m, title, extent_m, size_px)
+    if path is not None:
+        drawn = _png_if_drawn_from(Path(path), digest)
+        if drawn is not None:
+            return drawn
+
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+    from matplotlib.patches import Polygon, Wedge
 
     if extent_m is None:
         xs = [0.0, *pts[:, 0], *box_corners_xy(bxs)[..., 0].ravel()]
@@ -118,13 +134,46 @@ def bev_png(
     ax.grid(True, lw=0.3, alpha=0.5)
     ax.set_title(title or f"{len(pts)} radar points", fontsize=10)
     buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=dpi)
+    fig.savefig(buf, format="png", dpi=dpi, metadata={INPUTS_KEY: digest})
     data = buf.getvalue()
     if path is not None:
         path = Path(path)
         path.parent.mkdir(parents=True, exist_ok=True)
         path.write_bytes(data)
     return data
+
+
+def _inputs_digest(pts: np.ndarray, bxs: np.ndarray, *settings) -> str:
+    """SHA-256 (hex) of a picture's arrays, its other arguments and :data:`_DRAWING_VERSION`."""
+    h = hashlib.sha256(f"bev_png {_DRAWING_VERSION}".encode())
+    for a in (pts, bxs):
+        h.update(f"{a.shape}".encode())
+        h.update(np.ascontiguousarray(a).tobytes())
+    labels, *rest = settings
+    h.update(json.dumps([None if labels is None else [str(x) for x in labels], *rest],
+                        default=lambda v: np.asarray(v).tolist()).encode())
+    return h.hexdigest()
+
+
+def _png_if_drawn_from(path: Path, digest: str) -> bytes | None:
+    """The PNG at ``path`` if its :data:`INPUTS_KEY` text chunk is ``digest``, else None (no
+    file, another picture, not a PNG)."""
+    try:
+        data = path.read_bytes()
+    except OSError:
+        return None
+    if not data.startswith(_PNG_SIGNATURE):
+        return None
+    pos, key = len(_PNG_SIGNATURE), INPUTS_KEY.encode("latin-1") + b"\0"
+    while pos + 8 <= len(data):
+        length, kind = struct.unpack(">I4s", data[pos:pos + 8])
+        body = data[pos + 8:pos + 8 + length]
+        if kind == b"tEXt" and body.startswith(key):
+            return data if body[len(key):] == digest.encode("latin-1") else None
+        if kind in (b"IDAT", b"IEND"):  # the text chunks come first
+            return None
+        pos += 12 + length
+    return None
 
 
 def frames_bev_png(frames: Sequence, path: str | Path, *, class_name: str = "door",

@@ -7,10 +7,10 @@ import json
 
 import numpy as np
 import pyarrow as pa
-from sim2radar.storage.codecs import ragged_arrays, ragged_column
 
 from sim2radar.factory.frames import DatasetFrame
 from sim2radar.fileio import jsonable
+from sim2radar.storage.codecs import ragged_arrays, ragged_column
 
 __all__ = ["dataset_frame_to_table", "dataset_frame_from_table"]
 

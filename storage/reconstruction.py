@@ -18,12 +18,12 @@ import json
 
 import numpy as np
 import pyarrow as pa
-from sim2radar.storage.codecs import meshes_to_table
-from sim2radar.storage.keys import bytes_digest, content_key
-from sim2radar.storage.schemas import RECONSTRUCTION as RECONSTRUCTION_SCHEMA
 
 from sim2radar.camera import CameraIntrinsics
 from sim2radar.fileio import jsonable
+from sim2radar.storage.codecs import meshes_to_table
+from sim2radar.storage.keys import bytes_digest, content_key
+from sim2radar.storage.schemas import RECONSTRUCTION as RECONSTRUCTION_SCHEMA
 
 __all__ = ["RECONSTRUCTION_SCHEMA", "scene_to_tables", "write_scene_artifacts",
            "read_reconstruction", "frame_digest", "reconstruction_keys", "depth_to_table",

@@ -141,8 +141,6 @@ class ArtifactStore(FileRoot):
         return f"ArtifactStore({self.root_uri!r})"
 
     # -- paths --------------------------------------------------------------------------------
-    #: The former private name of :meth:`join`, still called by ``sim2radar.tasks``.
-    _join = FileRoot.join
 
     def path(self, stage: str, key: str) -> str:
         """Path of an artifact inside the store's file system."""

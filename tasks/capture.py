@@ -21,17 +21,6 @@ from collections.abc import Callable
 from typing import Any
 
 import numpy as np
-from sim2radar.storage import content_key, meshes_from_table
-from sim2radar.storage.frames import dataset_frame_to_table
-from sim2radar.tasks.common import open_store
-from sim2radar.tasks.dataset import (
-    DATASET_STAGE_VERSION,
-    FrameOutcome,
-    WorldDatasetOutcome,
-    _fill_frame_outcome,
-    read_dataset_frame,
-)
-from sim2radar.tasks.steps import FrameSource, call_step, reconstruction_steps
 
 from sim2radar.factory.captures import (
     CaptureScene,
@@ -43,6 +32,11 @@ from sim2radar.factory.captures import (
     sample_radar_poses,
 )
 from sim2radar.factory.seeds import frame_seed, pose_seed, scene_seed
+from sim2radar.storage import content_key, meshes_from_table
+from sim2radar.storage.frames import dataset_frame_to_table
+from sim2radar.tasks.common import Outcome, open_store
+from sim2radar.tasks.dataset import DATASET_STAGE_VERSION, _fill_frame_outcome, read_dataset_frame
+from sim2radar.tasks.steps import FrameSource, call_step, reconstruction_steps
 
 __all__ = [
     "CAPTURE_STAGES",
@@ -67,9 +61,8 @@ def _source(scene: CaptureScene, spec: CaptureSpec) -> tuple[FrameSource, dict[s
     ValueError naming the file, field and fix: an unreadable image or intrinsics, a
     ``radar.yaml`` that does not validate (checked here, before any reconstruction step).
     """
-    from sim2radar.storage.reconstruction import frame_input_digests, stage_keys
-
     from sim2radar.reconstruct.pipeline import STAGE_VERSION
+    from sim2radar.storage.reconstruction import frame_input_digests, stage_keys
 
     frame, _ = load_capture_frame(scene)
     read_radar_yaml(scene.radar)  # a bad radar.yaml fails the scene before reconstruction
@@ -91,9 +84,8 @@ def poses_stage(scene: CaptureScene, spec: CaptureSpec, store: str, keys: dict) 
     (:func:`sim2radar.factory.captures.sample_radar_poses`); returns ``{"poses": (F, 4, 4)
     list, "candidates", "rejected", "wanted", "seconds"}`` (deterministic, so not stored: every
     pose is kept in its frame's ``radar_to_world``)."""
-    from sim2radar.storage.reconstruction import read_reconstruction
-
     from sim2radar.factory.labels import scene_ray_caster
+    from sim2radar.storage.reconstruction import read_reconstruction
 
     t0, st = time.perf_counter(), open_store(store)
     rec = read_reconstruction(st, keys["reconstruction"])
@@ -143,7 +135,7 @@ def _radar_yaml_digest(scene: CaptureScene) -> str:
 
 
 def simulate_stage(scene: CaptureScene, spec: CaptureSpec, store: str, keys: dict,
-                   poses: list, indices: list[int], force: bool = False) -> list[FrameOutcome]:
+                   poses: list, indices: list[int], force: bool = False) -> list[Outcome]:
     """Radar frames at ``poses`` (frame numbers ``indices``) -> ``dataset_frames``; a cached
     frame is read back (``skipped``), a failing frame is recorded ``failed`` and the others
     go on."""
@@ -155,8 +147,8 @@ def simulate_stage(scene: CaptureScene, spec: CaptureSpec, store: str, keys: dic
     radar_scene = rec = None
     out = []
     for k, pose in zip(indices, poses, strict=True):
-        fo = FrameOutcome(f"{scene.scene_id}_f{int(k):03d}", scene.scene_id, -1, int(k),
-                          "skipped")
+        fo = Outcome(f"{scene.scene_id}_f{int(k):03d}", "skipped", index=int(k),
+                     source=f"{scene.folder} frame={int(k)}")
         key = capture_frame_key(keys, scene.scene_id, k, spec, yaml_digest)
         fo.artifacts.update({"dataset_frames/reconstructed": key,
                              "reconstruction/scene_meshes": keys["scene_meshes"],
@@ -184,16 +176,16 @@ def simulate_stage(scene: CaptureScene, spec: CaptureSpec, store: str, keys: dic
                 fo.status = "ok"
             _fill_frame_outcome(fo, df)
             fo.timings_s.pop("render", None)  # nothing rendered: a captured image
-            fo.label_match.clear()  # no ground truth to match labels against
+            fo.measured.pop("label_match", None)  # no ground truth to match labels against
         except Exception as exc:  # noqa: BLE001 - one broken frame must not stop the rest
-            log.error("%s failed: %s: %s", fo.frame_id, type(exc).__name__, exc)
+            log.error("%s failed: %s: %s", fo.id, type(exc).__name__, exc)
             fo.status, fo.error = "failed", f"[simulate] {type(exc).__name__}: {exc}"
         out.append(fo)
     return out
 
 
 def _cached_frames(scene: CaptureScene, spec: CaptureSpec, store: str,
-                   keys: dict) -> list[FrameOutcome] | None:
+                   keys: dict) -> list[Outcome] | None:
     """Every frame of a finished scene read back, or None when one is missing."""
     st = open_store(store)
     yaml_digest = _radar_yaml_digest(scene)
@@ -211,7 +203,7 @@ def _cached_frames(scene: CaptureScene, spec: CaptureSpec, store: str,
 # ---------------------------------------------------------------------------------------------
 def process_capture_scene(scene: CaptureScene, spec: CaptureSpec, store: str, *,
                           force: bool = False,
-                          run: Callable[..., Any] = call_step) -> WorldDatasetOutcome:
+                          run: Callable[..., Any] = call_step) -> Outcome:
     """Make (or find cached) every artifact of one capture scene, step by step.
 
     ``run(stage, fn, *args)`` calls each step: the plain call by default, a Prefect task in
@@ -221,11 +213,11 @@ def process_capture_scene(scene: CaptureScene, spec: CaptureSpec, store: str, *,
 
     Returns
     -------
-    WorldDatasetOutcome — ``world_id`` is the scene id, ``timings_s`` the wall seconds of each
-    step in this run, ``artifacts`` the scene's reconstruction keys.
+    Outcome — ``id`` is the scene id, ``timings_s`` the wall seconds of each step in this
+    run, ``artifacts`` the scene's reconstruction keys, ``parts`` its frames.
     """
     t0 = time.perf_counter()
-    out = WorldDatasetOutcome(scene.scene_id, -1, "skipped", source=scene.folder)
+    out = Outcome(scene.scene_id, "skipped", source=scene.folder)
     current = ["inputs"]  # the step running, for the error
 
     def step(stage: str, fn: Callable, *args) -> Any:
@@ -242,7 +234,7 @@ def process_capture_scene(scene: CaptureScene, spec: CaptureSpec, store: str, *,
         current[0] = "simulate"
         cached = None if force else _cached_frames(scene, spec, store, keys)
         if cached is not None:
-            out.frames = cached
+            out.parts = cached
         else:
             p = step("poses", poses_stage, scene, spec, store, keys)
             out.timings_s["poses"] = p["seconds"]
@@ -250,7 +242,7 @@ def process_capture_scene(scene: CaptureScene, spec: CaptureSpec, store: str, *,
             poses, b = p["poses"], spec.frames_per_task
             for i in range(0, len(poses), b):
                 idx = list(range(i, min(i + b, len(poses))))
-                out.frames += step("simulate", simulate_stage, scene, spec, store, keys,
+                out.parts += step("simulate", simulate_stage, scene, spec, store, keys,
                                    poses[i:i + b], idx, force)
             out.timings_s["simulate"] = time.perf_counter() - t1
     except Exception as exc:  # noqa: BLE001 - one broken scene must not stop the others
@@ -258,11 +250,11 @@ def process_capture_scene(scene: CaptureScene, spec: CaptureSpec, store: str, *,
         out.status, out.error = "failed", f"[{current[0]}] {type(exc).__name__}: {exc}"
     out.timings_s["total"] = time.perf_counter() - t0
     if out.status != "failed":
-        computed |= any(f.status == "ok" for f in out.frames)
-        n_failed = sum(f.status == "failed" for f in out.frames)
+        computed |= any(f.status == "ok" for f in out.parts)
+        n_failed = sum(f.status == "failed" for f in out.parts)
         if n_failed:
             out.status = "failed"
-            out.error = f"{n_failed} of {len(out.frames)} frame(s) failed"
+            out.error = f"{n_failed} of {len(out.parts)} frame(s) failed"
         else:
             out.status = "ok" if computed else "skipped"
     return out

@@ -1,32 +1,39 @@
-"""Task helpers shared by every stage: store handles, retry policy, scene ids and scene-file
-expansion, JSON-safe stats.
+"""Task helpers shared by every stage: the one :class:`Outcome` record with its manifest
+:func:`record` and run :func:`summarize`, the plain loop :func:`run_plain`, store handles, the
+retry policy.
 
 Plain functions (no Prefect engine needed) so tests call them directly.
 """
 
 from __future__ import annotations
 
-import glob
+import dataclasses
 import logging
 import os
 import re
-from collections.abc import Sequence
-from pathlib import Path
+from collections.abc import Callable, Iterable, Sequence
+from typing import Any
 
-import yaml
-from sim2radar.storage import ArtifactStore, is_transient_io_error
+from prefect import task
+from prefect.cache_policies import NO_CACHE
 
 from sim2radar.fileio import jsonable
+from sim2radar.storage import ArtifactStore, is_transient_io_error
+from sim2radar.storage.manifest import MANIFESTS, STATUSES
 
 __all__ = [
     "FRAME_ROW",
+    "Outcome",
+    "count_statuses",
+    "record",
+    "record_task",
+    "run_plain",
+    "summarize",
     "failed_scene_ids",
-    "expand_scenes",
     "open_store",
     "REMOTE_IO_RETRIES",
     "REMOTE_IO_RETRY_DELAYS_S",
     "retry_transient_io",
-    "scene_id_for",
     "jsonable",
 ]
 
@@ -53,6 +60,130 @@ def retry_transient_io(task, task_run, state) -> bool:
     return isinstance(exc, BaseException) and is_transient_io_error(exc)
 
 
+@dataclasses.dataclass
+class Outcome:
+    """What happened to one unit of work of any stage — a scene, an image, a world, a capture
+    scene or one of their frames — as its manifest row records it.
+
+    Attributes
+    ----------
+    id : str — the manifest row's ``scene_id`` (``world_000007``, ``world_000007_f002``,
+        a scene's name, an image's stem)
+    status : str — ``ok`` (computed), ``skipped`` (all cached) or ``failed``
+        (:data:`~sim2radar.storage.manifest.STATUSES`)
+    error : str — ``"ExceptionType: message"`` when failed (a world: or a count of failed frames)
+    artifacts : dict — stage -> content key
+    timings_s : dict — step -> seconds (compute time; cached artifacts report theirs)
+    source : str — where the work came from (a scene's YAML, an image, ``sim2radar.worlds seed=7``)
+    seed : int — world seed (-1: none)
+    index : int — a frame's index in its world or scene (-1: not a frame)
+    measured : dict — what the stage measured, by name: ``n_points`` (a frame: geometry ->
+        points; a radar scene: points per frame), ``n_labels``, ``n_gt_doors``,
+        ``gt_points_near``, ``comparison``, ``label_match`` (a dataset frame: see
+        :func:`sim2radar.evaluate.dataset.geometry_metrics`), ``n_frames`` and
+        ``doors_visible`` (a world render), ``locations`` and ``pngs`` (files written),
+        ``summary`` (a reconstruction)
+    parts : list[Outcome] — a world's or capture scene's frames, each a manifest row of its own
+    """
+
+    id: str
+    status: str
+    error: str = ""
+    artifacts: dict[str, str] = dataclasses.field(default_factory=dict)
+    timings_s: dict[str, float] = dataclasses.field(default_factory=dict)
+    source: str = ""
+    seed: int = -1
+    index: int = -1
+    measured: dict[str, Any] = dataclasses.field(default_factory=dict)
+    parts: list[Outcome] = dataclasses.field(default_factory=list)
+
+    @classmethod
+    def failed(cls, id: str, error: BaseException | str, **fields: Any) -> Outcome:
+        """A ``failed`` outcome; an exception becomes ``"Type: message"``."""
+        text = error if isinstance(error, str) else f"{type(error).__name__}: {error}"
+        return cls(id, "failed", error=text, **fields)
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-able dict (what a flow returns and a summary lists)."""
+        d = jsonable({f.name: getattr(self, f.name) for f in dataclasses.fields(self)
+                      if f.name != "parts"})
+        d["parts"] = [p.to_dict() for p in self.parts]
+        return d
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> Outcome:
+        """The outcome of :meth:`to_dict`'s dict (e.g. from a flow's returned summary)."""
+        return cls(**{**d, "parts": [cls.from_dict(p) for p in d.get("parts", ())]})
+
+
+def count_statuses(outcomes: Iterable[Outcome]) -> dict[str, int]:
+    """``{ok: n, skipped: n, failed: n}``."""
+    statuses = [o.status for o in outcomes]
+    return {s: statuses.count(s) for s in STATUSES}
+
+
+def record(store: str | os.PathLike | ArtifactStore, dataset: str, outcome: Outcome) -> list[dict]:
+    """Upsert the outcome's manifest row and one row per part (frame); returns the rows."""
+    m = open_store(store).manifest(dataset)
+    rows = [m.upsert(outcome.id, outcome.status, error=outcome.error,
+                     artifacts=outcome.artifacts, timings_s=outcome.timings_s,
+                     source=outcome.source)]
+    for p in outcome.parts:
+        rows.append(m.upsert(p.id, p.status, error=p.error, artifacts=p.artifacts,
+                             timings_s=p.timings_s, source=p.source or
+                             f"{outcome.source} frame={p.index}"))
+    return rows
+
+
+@task(name="record-manifest", cache_policy=NO_CACHE, retries=REMOTE_IO_RETRIES,
+      retry_delay_seconds=REMOTE_IO_RETRY_DELAYS_S, retry_condition_fn=retry_transient_io,
+      persist_result=False)
+def record_task(store: str, dataset: str, outcome: Outcome) -> list[dict]:
+    """Prefect task around :func:`record` (retried, but only on transient storage errors: the
+    work itself is deterministic and never retried)."""
+    return record(store, dataset, outcome)
+
+
+def summarize(store: str | os.PathLike | ArtifactStore, dataset: str,
+              outcomes: Sequence[Outcome], **extra: Any) -> dict[str, Any]:
+    """The run summary a flow returns and the CLI prints.
+
+    ``{"store", "dataset", "counts": {ok, skipped, failed}, "frame_counts"`` (when the outcomes
+    have frames), ``"outcomes": [Outcome.to_dict()], "manifest"`` (where its rows are)``}``
+    plus ``extra``.
+    """
+    st = open_store(store)
+    summary: dict[str, Any] = {"store": st.root, "dataset": dataset,
+                               "counts": count_statuses(outcomes)}
+    if any(o.parts for o in outcomes):
+        summary["frame_counts"] = count_statuses(p for o in outcomes for p in o.parts)
+    summary["outcomes"] = [o.to_dict() for o in outcomes]
+    summary["manifest"] = st.join(MANIFESTS, dataset)
+    summary.update(extra)
+    return summary
+
+
+def run_plain(items: Iterable[Any], work: Callable[[Any], Outcome],
+              failed: Callable[[Any, Exception], Outcome], store: ArtifactStore, dataset: str,
+              on_outcome: Callable[[Outcome], None] | None = None) -> list[Outcome]:
+    """A flow's semantics without the Prefect engine (notebooks, tests, ``--no-prefect``):
+    ``work(item)`` for each item one after another, recorded in the manifest as it finishes;
+    an item that raises is recorded as ``failed(item, error)`` and the others go on."""
+    open_store(store).manifest(dataset)  # validates the name before any work
+    outcomes = []
+    for item in items:
+        try:
+            outcome = work(item)
+        except Exception as exc:  # noqa: BLE001 - one broken item must not stop the others
+            log.error("%s failed: %s: %s", item, type(exc).__name__, exc)
+            outcome = failed(item, exc)
+        record(store, dataset, outcome)
+        outcomes.append(outcome)
+        if on_outcome is not None:
+            on_outcome(outcome)
+    return outcomes
+
+
 #: A frame's manifest row id: ``<scene or world id>_f<frame index, 3+ digits>``.
 FRAME_ROW = re.compile(r"^(.+)_f(\d{3,})$")
 
@@ -77,44 +208,3 @@ def failed_scene_ids(store, dataset: str) -> list[str]:
 def open_store(store: str | os.PathLike | ArtifactStore) -> ArtifactStore:
     """An :class:`~storage.ArtifactStore` from a path/URI (or the store itself)."""
     return store if isinstance(store, ArtifactStore) else ArtifactStore(store)
-
-
-def scene_id_for(scene_path: str | os.PathLike) -> str:
-    """The scene's id: the YAML ``name`` field if the file parses, else the file stem.
-
-    Never raises, so a broken scene still gets a manifest row under a stable id.
-    """
-    path = Path(scene_path)
-    try:
-        doc = yaml.safe_load(path.read_text())
-        if isinstance(doc, dict) and isinstance(doc.get("name"), str) and doc["name"].strip():
-            return doc["name"].strip()
-    except (OSError, yaml.YAMLError, UnicodeDecodeError):
-        pass
-    return path.stem
-
-
-def expand_scenes(scenes: Sequence[str | os.PathLike]) -> list[str]:
-    """Scene paths from files, folders (every ``*.yaml`` inside, recursively) and globs.
-
-    A glob that matches nothing is logged and ignored (e.g. an empty ``scenes/`` folder on a
-    nightly schedule); nothing found at all is an error.
-    """
-    out: list[str] = []
-    for item in scenes:
-        text = os.fspath(item)
-        if any(c in text for c in "*?["):
-            matches = sorted(glob.glob(text, recursive=True))
-            if not matches:
-                log.warning("scene pattern %r matches no file", text)
-            out.extend(matches)
-        elif Path(text).is_dir():
-            found = sorted(str(p) for p in Path(text).rglob("*.yaml"))
-            if not found:
-                raise FileNotFoundError(f"scene folder {text!r} holds no *.yaml scene file")
-            out.extend(found)
-        else:
-            out.append(text)  # a missing file is recorded as a failed scene by the flow
-    if not out:
-        raise FileNotFoundError(f"no scene files found in {[os.fspath(s) for s in scenes]}")
-    return list(dict.fromkeys(out))  # de-duplicated, order kept

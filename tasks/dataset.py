@@ -1,45 +1,22 @@
-"""The factory's main job, per world: procedural world -> (reconstructed | ground-truth)
-geometry -> radar frames with door boxes -> the artifact store. Keys, caching, store I/O and
-outcome records only: the science is in :mod:`sim2radar.factory` (spec, per-frame pipeline),
-:mod:`sim2radar.tasks.steps` runs the reconstruction's steps, :mod:`sim2radar.flows.generate_dataset` makes every
-step a Prefect task (the plain loop calls the same functions).
+"""The factory's main job, per world: keys, caching, store I/O and outcome records around
+:mod:`sim2radar.factory` (the per-frame science: :mod:`sim2radar.factory.pipeline`).
 
-Per world seed, :func:`generate_world_dataset`:
-
-1. makes sure the world's artifacts exist (``scene_meshes``, ``world_specs``, ``world_frames``
-   through :func:`sim2radar.tasks.worlds.generate_world_artifacts`: the same content keys as
-   ``sim2radar worlds generate``, so worlds rendered before are reused, not re-rendered);
-2. per frame and geometry computes a ``dataset_frames`` content key from (world_frames key,
-   world scene_meshes key, frame index, geometry, resolved radar config, resolved
-   reconstruction config for ``reconstructed``, run seed, :data:`DATASET_STAGE_VERSION`); an
-   existing artifact is read back (status ``skipped``), a missing one is computed:
-
-   * ``ground_truth``: the radar is simulated on the world's own meshes at the frame's
-     ``radar_to_world`` (one :class:`~sim2radar.radar.RadarScene` per world); labels are the
-     ground-truth door boxes in the radar frame that the radar sees (at least
-     ``labels.min_visibility`` of the doorway unoccluded, in FOV and range:
-     :func:`sim2radar.factory.labels.radar_visibility` on the world's meshes);
-   * ``reconstructed`` (the paper's pipeline): :func:`sim2radar.reconstruct.reconstruct` on the
-     frame's RGB + LiDAR, meshes moved into the rig's radar frame
-     (``inv(radar_to_world) @ camera_to_world``), radar simulated on them; labels are the
-     reconstructed door boxes in the radar frame that the radar sees on the reconstructed
-     geometry (the same visibility rule), the paper's pre-training pseudo-labels. The
-     ground-truth doors the radar sees are stored alongside for scoring. The reconstruction
-     itself is cached as its own ``scene_meshes`` + ``reconstruction`` artifacts
-     (:func:`sim2radar.storage.reconstruction.write_scene_artifacts`), so changing only the
-     radar re-simulates without re-reconstructing;
-
-3. one failing frame is recorded as ``failed`` (with its error) and the other frames finish; a
-   failing world (bad config, generator error) is recorded as ``failed`` and the other worlds
-   finish. Manifest rows: one per world (``world_000007``) and one per frame
-   (``world_000007_f002``).
-
-The ``dataset_frames`` schema is declared here (registered on import).
+Per world seed, :func:`generate_world_dataset` makes sure the world's artifacts exist
+(:func:`sim2radar.tasks.worlds.generate_world_artifacts`, the keys of ``sim2radar worlds
+generate``); per frame and geometry it keys a ``dataset_frames`` artifact on (world keys,
+frame index, geometry, resolved radar / reconstruction configs, run seed,
+:data:`DATASET_STAGE_VERSION`) and reads it back when it exists (``skipped``, after checking
+the reconstruction it was made from) or makes it: the reconstruction's steps
+(:mod:`sim2radar.tasks.steps`, cached as their own artifacts, so changing only the radar
+re-simulates without re-reconstructing), then one ``simulate`` step per geometry. A failing
+frame is recorded ``failed`` and the others finish; a failing world raises for its caller to
+record. Manifest rows: one per world (``world_000007``), one per frame
+(``world_000007_f002``). :mod:`sim2radar.flows.generate_dataset` runs every step as a Prefect
+task; :func:`generate_dataset_plain` calls the same functions.
 """
 
 from __future__ import annotations
 
-import dataclasses
 import logging
 import os
 import time
@@ -48,24 +25,11 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from sim2radar.storage import ArtifactStore, content_key, meshes_from_table
-from sim2radar.storage.frames import dataset_frame_from_table, dataset_frame_to_table
-from sim2radar.storage.schemas import DATASET_FRAMES as DATASET_FRAMES_SCHEMA
-from sim2radar.tasks.common import (
-    FRAME_ROW,
-    failed_scene_ids,
-    jsonable,
-    open_store,
-)
-from sim2radar.tasks.steps import call_step, reconstruction_steps
 
 from sim2radar.datasets.splits import split_groups as split_worlds
 from sim2radar.evaluate.dataset import LABEL_IOU_THRESHOLD
+from sim2radar.factory.export import export_frames
 from sim2radar.factory.frames import NEAR_BOX_MARGIN_M, DatasetFrame, points_near_boxes
-from sim2radar.factory.labels import (
-    DEFAULT_POINT_CLOUD_RANGE_M,
-    boxes_in_point_cloud_range,
-)
 from sim2radar.factory.pipeline import frame_id_for, with_material
 from sim2radar.factory.seeds import frame_seed
 from sim2radar.factory.spec import (
@@ -73,25 +37,33 @@ from sim2radar.factory.spec import (
     DatasetSpec,
     as_spec,
     dataset_metadata,
-    resolve_spec,
 )
+from sim2radar.storage import ArtifactStore, content_key, meshes_from_table
+from sim2radar.storage.frames import dataset_frame_from_table, dataset_frame_to_table
+from sim2radar.storage.schemas import DATASET_FRAMES as DATASET_FRAMES_SCHEMA
+from sim2radar.tasks.common import (
+    FRAME_ROW,
+    Outcome,
+    count_statuses,
+    failed_scene_ids,
+    open_store,
+    run_plain,
+    summarize,
+)
+from sim2radar.tasks.steps import call_step, reconstruction_steps
 
 __all__ = [
     "DATASET_STAGE_VERSION",
     "DATASET_FRAMES_SCHEMA",
     "GEOMETRIES",
     "DatasetSpec",
-    "FrameOutcome",
-    "WorldDatasetOutcome",
     "DatasetFrame",
-    "resolve_spec",
     "frame_key",
     "frame_id_for",
     "generate_world_dataset",
     "failed_world_outcome",
     "failed_scene_outcome",
     "outcomes_from_summary",
-    "record_world_dataset",
     "read_dataset_frame",
     "export_openpcdet",
     "split_worlds",
@@ -149,110 +121,30 @@ def frame_key(world_keys: dict[str, str], frame_index: int, geometry: str,
 def _reconstruction_keys(frame, camera_to_target: np.ndarray, config) -> dict[str, str]:
     """Keys of this frame's reconstruction artifacts (computed up front so a cached
     reconstruction is read instead of recomputed)."""
-    from sim2radar.storage.reconstruction import reconstruction_keys
-
     from sim2radar.reconstruct.pipeline import STAGE_VERSION
+    from sim2radar.storage.reconstruction import reconstruction_keys
 
     return reconstruction_keys({"image": _digest(frame)}, config.to_dict(), camera_to_target,
                                stage_version=STAGE_VERSION)
 
 
-# ---------------------------------------------------------------------------------------------
-# Outcomes
-# ---------------------------------------------------------------------------------------------
-@dataclasses.dataclass
-class FrameOutcome:
-    """What happened to one world frame (one manifest row ``<world>_f<k>``).
-
-    Attributes
-    ----------
-    frame_id, world_id : str
-    seed, frame_index : int
-    status : ``ok`` | ``skipped`` | ``failed``
-    error : str — ``"[geometry] ExceptionType: message"`` of each failed geometry
-    artifacts : dict — ``dataset_frames/<geometry>`` (and reconstruction stages) -> key
-    timings_s : dict — ``render``, ``reconstruct``, ``simulate_<geometry>`` [s] (compute time,
-        also for cached frames: read from the artifacts)
-    n_points, n_labels : dict — geometry -> points / labelled boxes
-    n_gt_doors : int — ground-truth doors the radar sees
-    gt_points_near : dict — geometry -> (G,) radar points near each GT door
-    comparison : dict — ``both`` geometries: ``points_ratio`` (rec / gt), ``chamfer_m``
-    label_match : dict — geometry -> ``tp``, ``n_pred``, ``n_gt``: labels matched one-to-one
-        to ground-truth doors in view at 3D IoU >= :data:`LABEL_IOU_THRESHOLD`
-    """
-
-    frame_id: str
-    world_id: str
-    seed: int
-    frame_index: int
-    status: str
-    error: str = ""
-    artifacts: dict[str, str] = dataclasses.field(default_factory=dict)
-    timings_s: dict[str, float] = dataclasses.field(default_factory=dict)
-    n_points: dict[str, int] = dataclasses.field(default_factory=dict)
-    n_labels: dict[str, int] = dataclasses.field(default_factory=dict)
-    n_gt_doors: int = 0
-    gt_points_near: dict[str, list[int]] = dataclasses.field(default_factory=dict)
-    comparison: dict[str, float] = dataclasses.field(default_factory=dict)
-    label_match: dict[str, dict[str, int]] = dataclasses.field(default_factory=dict)
-
-    def to_dict(self) -> dict[str, Any]:
-        return jsonable(dataclasses.asdict(self))
-
-
-@dataclasses.dataclass
-class WorldDatasetOutcome:
-    """What happened to one world (manifest row ``world_<seed>``) and its frames.
-
-    Attributes
-    ----------
-    world_id : str; seed : int
-    status : ``ok`` (something computed), ``skipped`` (all cached) or ``failed`` (the world
-        itself or any of its frames failed)
-    error : str — world-level error, or a count of failed frames
-    artifacts : dict — world stage -> key (``scene_meshes``, ``world_specs``, ``world_frames``)
-    timings_s : dict — ``world`` (generate/render or cache check), ``frames``, ``total`` [s]
-        (a capture scene: wall seconds per stage)
-    frames : list[FrameOutcome]
-    source : str — where the scene came from (manifest ``source``; default: the world seed)
-    """
-
-    world_id: str
-    seed: int
-    status: str
-    error: str = ""
-    artifacts: dict[str, str] = dataclasses.field(default_factory=dict)
-    timings_s: dict[str, float] = dataclasses.field(default_factory=dict)
-    frames: list[FrameOutcome] = dataclasses.field(default_factory=list)
-    source: str = ""
-
-    def to_dict(self) -> dict[str, Any]:
-        d = jsonable(dataclasses.asdict(self))
-        d["frames"] = [f.to_dict() for f in self.frames]
-        return d
-
-
-def outcomes_from_summary(summary: dict[str, Any]) -> list[WorldDatasetOutcome]:
+def outcomes_from_summary(summary: dict[str, Any]) -> list[Outcome]:
     """The world outcomes of a summary dict (e.g. returned by the Prefect flow)."""
-    out = []
-    for w in summary["worlds"]:
-        frames = [FrameOutcome(**f) for f in w["frames"]]
-        out.append(WorldDatasetOutcome(**{**w, "frames": frames}))
-    return out
+    return [Outcome.from_dict(d) for d in summary["outcomes"]]
 
 
 def failed_scene_outcome(scene_id: str, error: BaseException | str, *, seed: int = -1,
-                         source: str = "") -> WorldDatasetOutcome:
+                         source: str = "") -> Outcome:
     """A ``failed`` outcome for a world or capture scene (``"Type: message"`` error text)."""
-    text = error if isinstance(error, str) else f"{type(error).__name__}: {error}"
-    return WorldDatasetOutcome(scene_id, int(seed), "failed", error=text, source=source)
+    return Outcome.failed(scene_id, error, seed=int(seed), source=source)
 
 
-def failed_world_outcome(seed: int, error: BaseException | str) -> WorldDatasetOutcome:
+def failed_world_outcome(seed: int, error: BaseException | str) -> Outcome:
     """A ``failed`` outcome for world ``seed``."""
     from sim2radar.storage.worlds import world_id_for
 
-    return failed_scene_outcome(world_id_for(seed), error, seed=seed)
+    return failed_scene_outcome(world_id_for(seed), error, seed=seed,
+                                source=f"sim2radar.worlds seed={int(seed)}")
 
 
 # ---------------------------------------------------------------------------------------------
@@ -267,11 +159,10 @@ def _world_frame_source(frame, world_id: str, spec: DatasetSpec):
     """A world frame as a :class:`~sim2radar.tasks.steps.FrameSource`: its reconstruction goes into the
     rig's radar frame (``inv(radar_to_world) @ camera_to_world``); ``oracle`` backends get the
     frame as ground truth."""
-    from sim2radar.storage.reconstruction import stage_keys
-    from sim2radar.tasks.steps import FrameSource
-
     from sim2radar.factory.pipeline import world_frame_input
     from sim2radar.reconstruct.pipeline import STAGE_VERSION
+    from sim2radar.storage.reconstruction import stage_keys
+    from sim2radar.tasks.steps import FrameSource
 
     cam_to_radar = np.linalg.inv(frame.radar_to_world) @ frame.camera_to_world
     inputs = {"image": _digest(frame)}
@@ -287,9 +178,8 @@ def _reconstructed_frame(frame, world_id, world_scene, store, spec, radar_seed,
                          fresh: bool = False) -> tuple[DatasetFrame, dict[str, str]]:
     """The paper's pipeline on one world frame, from its reconstruction in the store (made by
     the reconstruction steps before; ``fresh``: in this run)."""
-    from sim2radar.storage.reconstruction import read_reconstruction
-
     from sim2radar.factory.pipeline import reconstructed_frame
+    from sim2radar.storage.reconstruction import read_reconstruction
 
     cam_to_radar = np.linalg.inv(frame.radar_to_world) @ frame.camera_to_world
     rkeys = _reconstruction_keys(frame, cam_to_radar, spec.reconstruction)
@@ -319,9 +209,8 @@ def _upstream_verifies(st: ArtifactStore, rkeys: dict[str, str], spec) -> bool:
     depth / segment / material steps it was built from) all verify. ``exists`` moves one that
     does not into quarantine, so the frame is recomputed and the store healed by this run. The
     steps' keys come from the reconstruction's recorded image digest: no frame is loaded."""
-    from sim2radar.storage.reconstruction import stage_keys
-
     from sim2radar.reconstruct.pipeline import STAGE_VERSION
+    from sim2radar.storage.reconstruction import stage_keys
 
     if not st.all_exist(rkeys):
         return False
@@ -369,21 +258,19 @@ class _WorldInputs:
         self._radar_scene = None
 
 
-def _fill_frame_outcome(fo: FrameOutcome, df: DatasetFrame) -> None:
-    fo.n_points[df.geometry] = int(len(df.points))
-    fo.n_labels[df.geometry] = int(len(df.boxes))
-    fo.n_gt_doors = int(len(df.gt_boxes))
-    fo.gt_points_near[df.geometry] = [int(v) for v in df.gt_points_near]
+def _fill_frame_outcome(fo: Outcome, df: DatasetFrame) -> None:
+    from sim2radar.evaluate.dataset import frame_measures
+
+    for name, value in frame_measures(df, LABEL_IOU_THRESHOLD).items():
+        if isinstance(value, dict):
+            fo.measured.setdefault(name, {}).update(value)
+        else:
+            fo.measured[name] = value
     t = df.timings_s
     fo.timings_s["render"] = float(t.get("render", 0.0))
     if "reconstruct" in t:
         fo.timings_s["reconstruct"] = float(t["reconstruct"])
     fo.timings_s[f"simulate_{df.geometry}"] = float(t.get("simulate", 0.0))
-    from sim2radar.evaluate.reconstruction import match_boxes
-
-    m = match_boxes(df.boxes, df.gt_boxes, LABEL_IOU_THRESHOLD)
-    fo.label_match[df.geometry] = {"tp": int(m["tp"]), "n_pred": int(m["n_pred"]),
-                                   "n_gt": int(m["n_gt"])}
 
 
 def _compare(gt: DatasetFrame, rec: DatasetFrame) -> dict[str, float]:
@@ -401,7 +288,7 @@ def generate_world_dataset(
     keep_frames: bool = False,
     n_frames: int | None = None,
     run: Callable[..., Any] = call_step,
-) -> WorldDatasetOutcome:
+) -> Outcome:
     """Make (or find cached) every dataset frame of world ``seed``, step by step: ``render``
     (the world's artifacts), per frame the reconstruction's steps (``reconstructed``, when its
     reconstruction is not cached: :func:`sim2radar.tasks.steps.reconstruction_steps`) and one
@@ -415,13 +302,15 @@ def generate_world_dataset(
     store : store root (path / URI) or ArtifactStore
     force : bool — recompute the dataset frames (world renders and reconstructions stay cached)
     keep_frames : bool — attach the decoded :class:`DatasetFrame` objects as
-        ``outcome.frames[i].data`` (tests, notebooks)
+        ``outcome.parts[i].data`` (tests, notebooks)
     n_frames : int, optional — frames of this world (default ``spec.frames_per_world``)
 
     Returns
     -------
-    WorldDatasetOutcome — a world that cannot be generated raises (the caller records it);
-    a failing frame is recorded in its FrameOutcome and does not raise.
+    Outcome — the world's, its frames as ``parts`` (``measured``: see
+    :func:`sim2radar.evaluate.dataset.frame_measures`); a world that cannot be generated
+    raises (the caller records it); a failing frame is recorded in its outcome and does not
+    raise.
     """
     from sim2radar.storage.worlds import world_id_for
 
@@ -435,13 +324,14 @@ def generate_world_dataset(
     inputs = _WorldInputs(st, keys, spec.material_override)
     timings = {"world": time.perf_counter() - t_start}
     computed_any = wo.status == "ok"
-    frames_out = [FrameOutcome(frame_id_for(seed, k), world_id, int(seed), k, "skipped")
-                  for k in range(n_frames)]
+    source = f"sim2radar.worlds seed={int(seed)}"
+    frames_out = [Outcome(frame_id_for(seed, k), "skipped", seed=int(seed), index=k,
+                          source=f"{source} frame={k}") for k in range(n_frames)]
     decoded: list[dict[str, DatasetFrame]] = [{} for _ in range(n_frames)]
     errors: list[list[str]] = [[] for _ in range(n_frames)]
 
     def fail(k: int, geometry: str, error: str) -> None:
-        log.error("%s [%s] failed: %s", frames_out[k].frame_id, geometry, error)
+        log.error("%s [%s] failed: %s", frames_out[k].id, geometry, error)
         errors[k].append(f"[{geometry}] {error}")
 
     def done(k: int, df: DatasetFrame, rkeys: dict) -> None:
@@ -494,7 +384,8 @@ def generate_world_dataset(
         if errors[k]:
             fo.status, fo.error = "failed", "; ".join(errors[k])
         if len(decoded[k]) == 2:
-            fo.comparison = _compare(decoded[k]["ground_truth"], decoded[k]["reconstructed"])
+            fo.measured["comparison"] = _compare(decoded[k]["ground_truth"],
+                                                 decoded[k]["reconstructed"])
         if keep_frames:
             fo.data = decoded[k]  # type: ignore[attr-defined]
     timings["frames"] = time.perf_counter() - t_frames
@@ -502,7 +393,7 @@ def generate_world_dataset(
     n_failed = sum(f.status == "failed" for f in frames_out)
     status = "failed" if n_failed else ("ok" if computed_any else "skipped")
     error = f"{n_failed} of {len(frames_out)} frame(s) failed" if n_failed else ""
-    return WorldDatasetOutcome(world_id, int(seed), status, error, keys, timings, frames_out)
+    return Outcome(world_id, status, error, keys, timings, source, int(seed), parts=frames_out)
 
 
 def render_world(seed: int, n_frames: int, store, spec: DatasetSpec):
@@ -568,141 +459,55 @@ def _provenance(spec, keys, df: DatasetFrame, geometry, rkeys) -> dict:
 # ---------------------------------------------------------------------------------------------
 # Manifest, summary
 # ---------------------------------------------------------------------------------------------
-def record_world_dataset(store, dataset: str, outcome: WorldDatasetOutcome) -> list[dict]:
-    """Upsert the world's manifest row and one row per frame; returns the rows."""
-    m = open_store(store).manifest(dataset)
-    source = outcome.source or f"sim2radar.worlds seed={outcome.seed}"
-    rows = [m.upsert(outcome.world_id, outcome.status, error=outcome.error,
-                     artifacts=outcome.artifacts, timings_s=outcome.timings_s, source=source)]
-    for f in outcome.frames:
-        rows.append(m.upsert(f.frame_id, f.status, error=f.error, artifacts=f.artifacts,
-                             timings_s=f.timings_s, source=f"{source} frame={f.frame_index}"))
-    return rows
-
-
 def summarize_dataset(store, dataset: str, spec: DatasetSpec | dict,
-                      outcomes: list[WorldDatasetOutcome]) -> dict[str, Any]:
+                      outcomes: list[Outcome]) -> dict[str, Any]:
     """The run summary: counts, per-geometry table and per-stage seconds.
 
     Returns
     -------
-    dict — ``store``, ``dataset``, ``counts`` (worlds by status), ``frame_counts`` (frames by
-    status), ``geometry`` -> {``frames``, ``points_per_frame``, ``labels_per_frame``,
+    dict — :func:`~sim2radar.tasks.common.summarize`'s (``counts``: worlds by status,
+    ``frame_counts``: frames by status, ``outcomes``: the worlds) and ``geometry`` -> {``frames``, ``points_per_frame``, ``labels_per_frame``,
     ``gt_doors_per_frame``, ``frac_frames_with_label``, ``frac_gt_doors_with_points``,
     ``label_recall`` / ``label_precision`` (labels vs ground-truth doors in the radar's view at
     3D IoU >= 0.3; 1 for ground_truth by construction; GT doors outside the camera's narrower
     view count as misses for ``reconstructed``)},
     ``seconds_per_frame`` -> {stage: mean [s]}, ``comparison`` (both geometries:
-    ``points_ratio``, ``chamfer_m`` means and per frame), ``worlds`` (outcome dicts).
+    ``points_ratio``, ``chamfer_m`` means and per frame).
     """
-    from sim2radar.evaluate.dataset import geometry_metrics, stage_seconds
+    from sim2radar.evaluate.dataset import finite_mean, geometry_metrics, stage_seconds
 
     spec = as_spec(spec)
-    st = open_store(store)
-    frames = [f for o in outcomes for f in o.frames]
-    per_geometry = geometry_metrics(frames, spec.geometries)
-    seconds = stage_seconds(frames)
-    comp = [f for f in frames if f.comparison]
-    summary: dict[str, Any] = {
-        "store": st.root,
-        "dataset": dataset,
-        "counts": {k: sum(o.status == k for o in outcomes) for k in ("ok", "skipped", "failed")},
-        "frame_counts": {k: sum(f.status == k for f in frames)
-                         for k in ("ok", "skipped", "failed")},
-        "geometry": per_geometry,
-        "seconds_per_frame": seconds,
-        "worlds": [o.to_dict() for o in outcomes],
-        "manifest": st._join("manifests", dataset),
-    }
+    frames = [f for o in outcomes for f in o.parts]
+    extra: dict[str, Any] = {"frame_counts": count_statuses(frames),
+                             "geometry": geometry_metrics(frames, spec.geometries),
+                             "seconds_per_frame": stage_seconds(frames)}
+    comp = {f.id: f.measured["comparison"] for f in frames if f.measured.get("comparison")}
     if comp:
-        from sim2radar.evaluate.dataset import finite_mean
-
-        summary["comparison"] = {
-            "points_ratio": finite_mean(f.comparison["points_ratio"] for f in comp),
-            "chamfer_m": finite_mean(f.comparison["chamfer_m"] for f in comp),
-            "frames": {f.frame_id: f.comparison for f in comp},
+        extra["comparison"] = {
+            "points_ratio": finite_mean(c["points_ratio"] for c in comp.values()),
+            "chamfer_m": finite_mean(c["chamfer_m"] for c in comp.values()),
+            "frames": comp,
         }
-    return summary
+    return summarize(store, dataset, outcomes, **extra)
 
 
 # ---------------------------------------------------------------------------------------------
 # OpenPCDet export
 # ---------------------------------------------------------------------------------------------
-def export_openpcdet(store, outcomes: list[WorldDatasetOutcome], export_dir: str | os.PathLike,
-                     geometry: str, *, seed: int = 0,
-                     label_range_m: Sequence[float] | None = DEFAULT_POINT_CLOUD_RANGE_M,
-                     with_doppler: bool = False,
-                     splits: dict[str, list[str]] | None = None,
-                     metadata: dict[str, Any] | None = None) -> dict[str, Any]:
-    """Write the frames of one geometry in OpenPCDet's custom layout with
-    :func:`sim2radar.datasets.write_dataset`.
-
-    ``points/<frame_id>.npy`` (N, 4) float32 x, y, z [m], intensity [dB] (+ doppler [m/s] as a
-    5th column with ``with_doppler``); ``labels/<frame_id>.txt`` ``x y z dx dy dz heading
-    <class>``, only labels whose centre lies in ``label_range_m`` (the detector's point-cloud
-    range; None keeps all); ``ImageSets/{train,val,test}.txt`` split by world (seeded,
-    :func:`split_worlds`, or the given ``splits``: split name -> world ids); ``dataset.json``
-    (:func:`sim2radar.datasets.write_metadata`): ``metadata`` plus the counts, the label rule
-    and the worlds of each split. Only frames whose geometry artifact exists are exported.
-
-    Returns ``{"root", "frames", "labels", "labels_dropped_out_of_range", "splits": {name:
-    n_frames}}``.
-    """
-    from sim2radar.datasets import Frame, write_dataset
-
+def export_openpcdet(store, outcomes: list[Outcome], export_dir: str | os.PathLike,
+                     geometry: str, **options: Any) -> dict[str, Any]:
+    """Write the frames of one geometry that the outcomes made (those whose artifact exists)
+    in OpenPCDet's custom layout: :func:`sim2radar.factory.export.export_frames` (its
+    ``options``: ``seed``, ``label_range_m``, ``with_doppler``, ``splits``, ``metadata``)."""
     st = open_store(store)
-    frames, world_of = [], {}
-    n_labels = n_dropped = 0
-    for o in outcomes:
-        for f in o.frames:
-            key = f.artifacts.get(f"dataset_frames/{geometry}")
-            if key is None or geometry not in f.n_points:
-                continue
-            df = read_dataset_frame(st, key)
-            keep = boxes_in_point_cloud_range(df.boxes, label_range_m)
-            n_labels += int(keep.sum())
-            n_dropped += int((~keep).sum())
-            points = df.points_with_doppler if with_doppler else df.points
-            frames.append(Frame(df.frame_id, points, df.boxes[keep],
-                                tuple(n for n, k in zip(df.box_labels, keep, strict=True) if k)))
-            world_of[df.frame_id] = df.world_id
-    worlds = splits or split_worlds(sorted(set(world_of.values())), seed)
-    by_split = {name: [fid for fid in sorted(world_of) if world_of[fid] in set(ws)]
-                for name, ws in worlds.items()}
-    root = Path(export_dir)
-    write_dataset(root, frames, by_split)
-    out = {"root": str(root), "frames": len(frames), "labels": n_labels,
-           "labels_dropped_out_of_range": n_dropped,
-           "splits": {k: len(v) for k, v in by_split.items()}, "warnings": []}
-    empty = [k for k, v in by_split.items() if not v]
-    if not frames:
-        out["warnings"].append(
-            "no frame to export: every world/scene failed or was skipped (the manifest's error "
-            "column says why); the folder holds an empty dataset")
-    elif empty:
-        n_groups = len(set(world_of.values()))
-        out["warnings"].append(
-            f"split(s) {empty} are empty: {n_groups} world(s)/scene(s) cannot fill train, val "
-            "and test (the split is by world); generate more worlds or scenes, or train with "
-            "another split")
-    for w in out["warnings"]:
-        log.warning("%s: %s", root, w)
-    from datetime import UTC, datetime
-
-    from sim2radar.datasets import write_metadata
-
-    write_metadata(root, {
-        **(metadata or {}), **out, "geometry": geometry,
-        "point_columns": ["x_m", "y_m", "z_m", "intensity_db"] + (
-            ["doppler_mps"] if with_doppler else []),
-        "label_range_m": None if label_range_m is None else list(label_range_m),
-        "worlds": {k: sorted(set(v)) for k, v in worlds.items()},
-        "exported_at": datetime.now(UTC).isoformat(timespec="seconds"),
-    })
-    return out
+    frames = (read_dataset_frame(st, f.artifacts[f"dataset_frames/{geometry}"])
+              for o in outcomes for f in o.parts
+              if f"dataset_frames/{geometry}" in f.artifacts
+              and geometry in f.measured.get("n_points", {}))
+    return export_frames(frames, export_dir, geometry, **options)
 
 
-def outcomes_from_manifest(store, dataset: str) -> list[WorldDatasetOutcome]:
+def outcomes_from_manifest(store, dataset: str) -> list[Outcome]:
     """The world outcomes of a finished dataset, rebuilt from its manifest (frame rows
     ``world_<seed>_f<k>`` with ``dataset_frames/<geometry>`` artifacts): what
     :func:`export_openpcdet` needs to export a dataset of an earlier run. Geometries whose
@@ -712,19 +517,18 @@ def outcomes_from_manifest(store, dataset: str) -> list[WorldDatasetOutcome]:
     if not rows:
         raise ValueError(f"store {st.root}: dataset {dataset!r} has no manifest rows; "
                          f"known datasets: {st.manifests()}")
-    worlds: dict[str, WorldDatasetOutcome] = {}
+    worlds: dict[str, Outcome] = {}
     for r in rows:
         m = FRAME_ROW.match(r["scene_id"])
         if m is None or r["status"] == "failed":
             continue
-        world_id, k = m.group(1), m.group(2)
-        o = worlds.setdefault(world_id, WorldDatasetOutcome(world_id, -1, "skipped"))
-        fo = FrameOutcome(r["scene_id"], world_id, -1, int(k), r["status"],
-                          artifacts=dict(r["artifacts"]))
+        o = worlds.setdefault(m.group(1), Outcome(m.group(1), "skipped"))
+        fo = Outcome(r["scene_id"], r["status"], index=int(m.group(2)),
+                     artifacts=dict(r["artifacts"]), measured={"n_points": {}})
         for name, key in r["artifacts"].items():
             if name.startswith("dataset_frames/") and st.exists("dataset_frames", key):
-                fo.n_points[name.split("/", 1)[1]] = -1  # present; the count is in the frame
-        o.frames.append(fo)
+                fo.measured["n_points"][name.split("/", 1)[1]] = -1  # present; count in frame
+        o.parts.append(fo)
     return [worlds[w] for w in sorted(worlds)]
 
 
@@ -742,7 +546,7 @@ def export_store_dataset(store, dataset: str, geometry: str, export_dir: str | o
     OpenPCDet's layout, split by world with ``seed``; Doppler is exported when the frames came
     from the signal-level radar."""
     outcomes = outcomes_from_manifest(store, dataset)
-    frames = [f for o in outcomes for f in o.frames if geometry in f.n_points]
+    frames = [f for o in outcomes for f in o.parts if geometry in f.measured["n_points"]]
     if not frames:
         raise ValueError(f"store dataset {dataset!r} has no {geometry!r} frames; choose the "
                          f"geometry with {dataset}:ground_truth or {dataset}:reconstructed")
@@ -756,7 +560,7 @@ def export_store_dataset(store, dataset: str, geometry: str, export_dir: str | o
                             metadata={"domain": domain, "source": f"store dataset {dataset!r}"})
 
 
-def world_bev_pngs(store, outcomes: list[WorldDatasetOutcome], png_dir: str | os.PathLike,
+def world_bev_pngs(store, outcomes: list[Outcome], png_dir: str | os.PathLike,
                    spec: DatasetSpec | dict) -> list[str]:
     """One bird's-eye-view PNG per world (or capture scene) and geometry
     (:func:`sim2radar.visualize.frames_bev_png`): every frame's radar points and labels in the
@@ -769,11 +573,11 @@ def world_bev_pngs(store, outcomes: list[WorldDatasetOutcome], png_dir: str | os
     for o in outcomes:
         for g in spec.geometries:
             dfs = [read_dataset_frame(st, f.artifacts[f"dataset_frames/{g}"])
-                   for f in o.frames if g in f.n_points]
+                   for f in o.parts if g in f.measured.get("n_points", {})]
             if dfs:
-                path = Path(png_dir) / f"{o.world_id}_{_TAG[g]}.png"
+                path = Path(png_dir) / f"{o.id}_{_TAG[g]}.png"
                 out.append(str(frames_bev_png(dfs, path, class_name=spec.class_name,
-                                              title=f"{o.world_id} [{g}]")))
+                                              title=f"{o.id} [{g}]")))
     return out
 
 
@@ -788,7 +592,7 @@ def generate_dataset_plain(
     *,
     export_dir: str | os.PathLike | None = None,
     force: bool = False,
-    on_world: Callable[[WorldDatasetOutcome], None] | None = None,
+    on_world: Callable[[Outcome], None] | None = None,
     frames_by_seed: dict[int, int] | None = None,
     splits: dict[str, list[str]] | None = None,
     export_doppler: bool = False,
@@ -801,19 +605,12 @@ def generate_dataset_plain(
     given)."""
     spec = as_spec(spec)
     st = open_store(store)
-    st.manifest(dataset)  # validates the name before any work
-    outcomes = []
-    for seed in seeds:
-        try:
-            outcome = generate_world_dataset(int(seed), spec, st, force=force,
-                                             n_frames=(frames_by_seed or {}).get(int(seed)))
-        except Exception as exc:  # noqa: BLE001 - one broken world must not stop the others
-            log.error("world %s failed: %s: %s", seed, type(exc).__name__, exc)
-            outcome = failed_world_outcome(seed, exc)
-        record_world_dataset(st, dataset, outcome)
-        outcomes.append(outcome)
-        if on_world is not None:
-            on_world(outcome)
+
+    def work(seed: int) -> Outcome:
+        return generate_world_dataset(int(seed), spec, st, force=force,
+                                      n_frames=(frames_by_seed or {}).get(int(seed)))
+
+    outcomes = run_plain(seeds, work, failed_world_outcome, st, dataset, on_world)
     summary = summarize_dataset(st, dataset, spec, outcomes)
     if export_dir is not None:
         summary["export"] = export_all(st, outcomes, export_dir, spec, splits=splits,

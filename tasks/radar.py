@@ -17,7 +17,6 @@ Errors propagate (the Prefect task fails; the flow records it in the manifest).
 
 from __future__ import annotations
 
-import dataclasses
 import logging
 import os
 import time
@@ -28,6 +27,9 @@ from typing import Any
 import numpy as np
 from prefect import task
 from prefect.cache_policies import NO_CACHE
+
+from sim2radar.factory.seeds import scene_file_frame_seed
+from sim2radar.scenes import scene_id_for
 from sim2radar.storage import (
     ArtifactStore,
     content_key,
@@ -35,30 +37,17 @@ from sim2radar.storage import (
     radar_frames_from_table,
     radar_frames_to_table,
 )
-from sim2radar.tasks.common import (
-    REMOTE_IO_RETRIES,
-    REMOTE_IO_RETRY_DELAYS_S,
-    jsonable,
-    open_store,
-    retry_transient_io,
-    scene_id_for,
-)
-
-from sim2radar.factory.seeds import scene_file_frame_seed
+from sim2radar.tasks.common import Outcome, jsonable, open_store, run_plain, summarize
 
 __all__ = [
     "RADAR_POINTS_STAGE_VERSION",
     "SCENE_MESHES_STAGE_VERSION",
-    "SceneOutcome",
     "scene_keys",
     "simulate_scene",
     "render_scene_pngs",
-    "record_outcome",
     "failed_outcome",
-    "summarize",
     "simulate_scenes_plain",
     "simulate_scene_task",
-    "record_outcome_task",
 ]
 
 log = logging.getLogger(__name__)
@@ -67,36 +56,6 @@ log = logging.getLogger(__name__)
 RADAR_POINTS_STAGE_VERSION = 1
 #: Bump when scene_meshes output changes for the same files.
 SCENE_MESHES_STAGE_VERSION = 1
-
-
-@dataclasses.dataclass
-class SceneOutcome:
-    """What happened to one scene (one manifest row).
-
-    Attributes
-    ----------
-    scene_id, source : str — scene name and its YAML path
-    status : str — ``ok`` (computed), ``skipped`` (cached) or ``failed``
-    error : str — ``"ExceptionType: message"`` when failed
-    artifacts : dict — stage -> content key
-    timings_s : dict — step -> wall time [s]
-    n_points : list[int] — points per frame
-    locations : dict — stage -> where the artifact is (path / URI)
-    pngs : list[str] — bird's-eye-view pictures written
-    """
-
-    scene_id: str
-    source: str
-    status: str
-    error: str = ""
-    artifacts: dict[str, str] = dataclasses.field(default_factory=dict)
-    timings_s: dict[str, float] = dataclasses.field(default_factory=dict)
-    n_points: list[int] = dataclasses.field(default_factory=list)
-    locations: dict[str, str] = dataclasses.field(default_factory=dict)
-    pngs: list[str] = dataclasses.field(default_factory=list)
-
-    def to_dict(self) -> dict[str, Any]:
-        return dataclasses.asdict(self)
 
 
 def _load_radar(radar):
@@ -138,7 +97,7 @@ def simulate_scene(
     png_dir: str | os.PathLike | None = None,
     force: bool = False,
     simulate_fn: Callable | None = None,
-) -> SceneOutcome:
+) -> Outcome:
     """Simulate every radar pose of one scene file into the store (skip if cached).
 
     Parameters
@@ -154,7 +113,8 @@ def simulate_scene(
 
     Returns
     -------
-    SceneOutcome with status ``ok`` or ``skipped``.
+    Outcome with status ``ok`` or ``skipped``; ``measured``: ``n_points`` (points per frame),
+    ``locations`` (stage -> where the artifact is), ``pngs`` (bird's-eye views written).
 
     Raises
     ------
@@ -182,18 +142,14 @@ def simulate_scene(
         status = "ok"
         n_points = _compute(scene_path, scene_id, cfg, store, keys, seed, timings, simulate_fn)
 
-    outcome = SceneOutcome(
-        scene_id=scene_id,
-        source=str(scene_path),
-        status=status,
-        artifacts=artifacts,
-        timings_s=timings,
-        n_points=n_points,
-        locations={stage: store.uri(stage, key) for stage, key in artifacts.items()},
-    )
+    outcome = Outcome(scene_id, status, artifacts=artifacts, timings_s=timings,
+                      source=str(scene_path), measured={
+                          "n_points": n_points, "pngs": [],
+                          "locations": {s: store.uri(s, key) for s, key in artifacts.items()}})
     if png_dir is not None:
         t0 = time.perf_counter()
-        outcome.pngs = render_scene_pngs(store, keys["radar_points"], png_dir, cfg, scene_id)
+        outcome.measured["pngs"] = render_scene_pngs(store, keys["radar_points"], png_dir, cfg,
+                                                     scene_id)
         timings["png"] = time.perf_counter() - t0
     timings["total"] = time.perf_counter() - t_start
     return outcome
@@ -307,41 +263,9 @@ def render_scene_pngs(
     return out
 
 
-def failed_outcome(scene_path: str | os.PathLike, error: BaseException | str) -> SceneOutcome:
+def failed_outcome(scene_path: str | os.PathLike, error: BaseException | str) -> Outcome:
     """A ``failed`` outcome for a scene whose simulation raised ``error``."""
-    text = error if isinstance(error, str) else f"{type(error).__name__}: {error}"
-    return SceneOutcome(scene_id=scene_id_for(scene_path), source=str(scene_path), status="failed", error=text)
-
-
-def record_outcome(store: str | os.PathLike | ArtifactStore, dataset: str, outcome: SceneOutcome) -> dict:
-    """Upsert the outcome as the scene's manifest row; returns the row."""
-    return open_store(store).manifest(dataset).upsert(
-        outcome.scene_id,
-        outcome.status,
-        error=outcome.error,
-        artifacts=outcome.artifacts,
-        timings_s=outcome.timings_s,
-        source=outcome.source,
-    )
-
-
-def summarize(
-    store: str | os.PathLike | ArtifactStore, dataset: str, radar: Any, outcomes: list[SceneOutcome]
-) -> dict[str, Any]:
-    """The run summary returned by the flow and printed by the CLI.
-
-    ``{"store", "dataset", "radar", "counts": {ok, skipped, failed}, "scenes": [outcome dicts],
-    "manifest": where the manifest rows are}``
-    """
-    st = open_store(store)
-    return {
-        "store": st.root,
-        "dataset": dataset,
-        "radar": str(radar),
-        "counts": {k: sum(o.status == k for o in outcomes) for k in ("ok", "skipped", "failed")},
-        "scenes": [o.to_dict() for o in outcomes],
-        "manifest": st._join("manifests", dataset),
-    }
+    return Outcome.failed(scene_id_for(scene_path), error, source=str(scene_path))
 
 
 def simulate_scenes_plain(
@@ -353,28 +277,20 @@ def simulate_scenes_plain(
     seed: int = 0,
     png_dir: str | os.PathLike | None = None,
     force: bool = False,
-    on_scene: Callable[[SceneOutcome], None] | None = None,
+    on_scene: Callable[[Outcome], None] | None = None,
     simulate_fn: Callable | None = None,
 ) -> dict[str, Any]:
     """The simulate flow's semantics without the Prefect engine (notebooks, debugging,
     ``sim2radar simulate --no-prefect``): scenes one after another, failures recorded and
-    not raised. Returns :func:`summarize`'s dict."""
+    not raised. Returns :func:`~sim2radar.tasks.common.summarize`'s dict (+ ``radar``)."""
     st = open_store(store)
-    st.manifest(dataset)  # validates the name before any work
-    outcomes = []
-    for path in scenes:
-        try:
-            outcome = simulate_scene(
-                path, radar, st, seed=seed, png_dir=png_dir, force=force, simulate_fn=simulate_fn
-            )
-        except Exception as exc:  # noqa: BLE001 - a broken scene must not stop the others
-            log.error("scene %s failed: %s: %s", path, type(exc).__name__, exc)
-            outcome = failed_outcome(path, exc)
-        record_outcome(st, dataset, outcome)
-        outcomes.append(outcome)
-        if on_scene is not None:
-            on_scene(outcome)
-    return summarize(st, dataset, radar, outcomes)
+
+    def work(path) -> Outcome:
+        return simulate_scene(path, radar, st, seed=seed, png_dir=png_dir, force=force,
+                              simulate_fn=simulate_fn)
+
+    outcomes = run_plain(scenes, work, failed_outcome, st, dataset, on_scene)
+    return summarize(st, dataset, outcomes, radar=str(radar))
 
 
 # ---------------------------------------------------------------------------------------------
@@ -385,19 +301,6 @@ def simulate_scenes_plain(
 @task(name="simulate-scene", cache_policy=NO_CACHE, retries=0, persist_result=False)
 def simulate_scene_task(
     scene_path: str, radar: str, store: str, seed: int = 0, png_dir: str | None = None, force: bool = False
-) -> SceneOutcome:
+) -> Outcome:
     """Prefect task around :func:`simulate_scene`."""
     return simulate_scene(scene_path, radar, store, seed=seed, png_dir=png_dir, force=force)
-
-
-@task(
-    name="record-manifest",
-    cache_policy=NO_CACHE,
-    retries=REMOTE_IO_RETRIES,
-    retry_delay_seconds=REMOTE_IO_RETRY_DELAYS_S,
-    retry_condition_fn=retry_transient_io,
-    persist_result=False,
-)
-def record_outcome_task(store: str, dataset: str, outcome: SceneOutcome) -> dict:
-    """Prefect task around :func:`record_outcome` (retried: storage I/O)."""
-    return record_outcome(store, dataset, outcome)

@@ -25,27 +25,17 @@ from typing import Any
 
 from prefect import task
 from prefect.cache_policies import NO_CACHE
-from sim2radar.tasks.common import (
-    REMOTE_IO_RETRIES,
-    REMOTE_IO_RETRY_DELAYS_S,
-    jsonable,
-    open_store,
-    retry_transient_io,
-)
 
 from sim2radar.reconstruct.pipeline import STAGE_VERSION
+from sim2radar.tasks.common import Outcome, jsonable, open_store, run_plain, summarize
 
 __all__ = [
     "RECONSTRUCTION_STAGE_VERSION",
     "ImageJob",
-    "ReconOutcome",
     "reconstruct_image",
     "reconstruct_images_plain",
-    "record_recon_outcome",
     "reconstruct_image_task",
-    "record_recon_outcome_task",
     "failed_outcome",
-    "summarize_recon",
 ]
 
 log = logging.getLogger(__name__)
@@ -68,25 +58,11 @@ class ImageJob:
         return Path(self.image).stem
 
 
-@dataclasses.dataclass
-class ReconOutcome:
-    """What happened to one frame (one manifest row)."""
-
-    name: str
-    source: str
-    status: str
-    error: str = ""
-    artifacts: dict = dataclasses.field(default_factory=dict)
-    timings_s: dict = dataclasses.field(default_factory=dict)
-    summary: dict = dataclasses.field(default_factory=dict)
-
-
 def _inputs(job: ImageJob):
-    from sim2radar.storage.reconstruction import frame_input_digests
-
     from sim2radar.camera import CameraIntrinsics
     from sim2radar.reconstruct import FrameInput
     from sim2radar.reconstruct.inputs import load_image, load_lidar, load_rig_calibration
+    from sim2radar.storage.reconstruction import frame_input_digests
 
     rgb = load_image(Path(job.image))
     k = CameraIntrinsics.from_yaml(job.intrinsics)
@@ -105,7 +81,7 @@ def reconstruct_image(
     force: bool = False,
     sheet_dir: str | os.PathLike | None = None,
     backends: tuple | None = None,
-) -> ReconOutcome:
+) -> Outcome:
     """Reconstruct one frame into ``store`` (skips if its artifacts exist, unless ``force``).
 
     Parameters
@@ -118,9 +94,8 @@ def reconstruct_image(
     backends : the config's backends, built once for many frames
         (:func:`sim2radar.reconstruct.build_backends`; default: built here).
     """
-    from sim2radar.storage.reconstruction import reconstruction_keys, write_scene_artifacts
-
     from sim2radar.reconstruct import FrameInput, ReconstructionConfig, reconstruct
+    from sim2radar.storage.reconstruction import reconstruction_keys, write_scene_artifacts
 
     t0 = time.perf_counter()
     st = open_store(store)
@@ -129,8 +104,8 @@ def reconstruct_image(
     rgb, k, pts, rig, note, inputs = _inputs(job)
     keys = reconstruction_keys(inputs, cfg_dict, stage_version=RECONSTRUCTION_STAGE_VERSION)
     if not force and st.all_exist(keys):
-        return ReconOutcome(job.name, job.image, "skipped", artifacts=keys,
-                            timings_s={"total": time.perf_counter() - t0})
+        return Outcome(job.name, "skipped", artifacts=keys, source=job.image,
+                       timings_s={"total": time.perf_counter() - t0})
     if force:
         for s, key in keys.items():
             st.delete(s, key)
@@ -146,13 +121,13 @@ def reconstruct_image(
 
         sheets = Path(sheet_dir) if sheet_dir else Path(out_dir) / "sheets"
         stage_sheet(scene, sheets / f"{job.name}.png", lidar_points=pts)
-    timings = dict(scene.timings_s)
+    timings = {k: float(v) for k, v in scene.timings_s.items()}
     timings["task_total"] = time.perf_counter() - t0
     labels = {lbl: scene.segment_labels.count(lbl) for lbl in sorted(set(scene.segment_labels))}
-    return ReconOutcome(job.name, job.image, "ok", artifacts=written, timings_s=timings,
-                        summary=jsonable({"segments": labels, "meshes": len(scene.meshes),
+    return Outcome(job.name, "ok", artifacts=written, timings_s=timings, source=job.image,
+                   measured={"summary": jsonable({"segments": labels, "meshes": len(scene.meshes),
                                           "door_boxes": len(scene.door_boxes),
-                                          "fallbacks": scene.info["fallbacks"]}))
+                                          "fallbacks": scene.info["fallbacks"]})})
 
 
 def reconstruct_images_plain(
@@ -165,61 +140,29 @@ def reconstruct_images_plain(
     sheet_dir: str | os.PathLike | None = None,
     force: bool = False,
     backends: tuple | None = None,
-    on_frame: Callable[[ReconOutcome], None] | None = None,
+    on_frame: Callable[[Outcome], None] | None = None,
 ) -> dict[str, Any]:
     """The ``reconstruct-frames`` flow's semantics without the Prefect engine (``sim2radar
     reconstruct``, notebooks): frames one after another, each recorded in the ``dataset``
     manifest as ``ok``, ``skipped`` (cached) or ``failed`` (with its error) while the others
-    finish; ``on_frame(outcome)`` after each. Returns :func:`summarize_recon`'s dict."""
+    finish; ``on_frame(outcome)`` after each. Returns :func:`~sim2radar.tasks.common.summarize`'s
+    dict."""
     st = open_store(store)
-    st.manifest(dataset)  # validates the name before any work
-    outcomes = []
-    for job in jobs:
-        try:
-            outcome = reconstruct_image(job, st, config, out_dir=out_dir, force=force,
-                                        sheet_dir=sheet_dir, backends=backends)
-        except Exception as exc:  # noqa: BLE001 - a broken frame must not stop the others
-            # info: the outcome carries the error, and the caller reports it (once)
-            log.info("frame %s failed: %s: %s", job.name, type(exc).__name__, exc)
-            outcome = failed_outcome(job, exc)
-        record_recon_outcome(st, dataset, outcome)
-        outcomes.append(outcome)
-        if on_frame is not None:
-            on_frame(outcome)
-    return summarize_recon(outcomes, st, dataset)
 
+    def work(job: ImageJob) -> Outcome:
+        return reconstruct_image(job, st, config, out_dir=out_dir, force=force,
+                                 sheet_dir=sheet_dir, backends=backends)
 
-def record_recon_outcome(store, dataset: str, outcome: ReconOutcome) -> dict:
-    """Upsert the frame's manifest row."""
-    return open_store(store).manifest(dataset).upsert(
-        outcome.name, outcome.status, error=outcome.error, artifacts=outcome.artifacts,
-        timings_s={k: float(v) for k, v in outcome.timings_s.items()}, source=outcome.source)
+    return summarize(st, dataset, run_plain(jobs, work, failed_outcome, st, dataset, on_frame))
 
 
 @task(name="reconstruct-image", cache_policy=NO_CACHE, retries=0, persist_result=False)
 def reconstruct_image_task(job: ImageJob, store: str, config: dict | None = None,
-                           out_dir: str | None = None, force: bool = False) -> ReconOutcome:
+                           out_dir: str | None = None, force: bool = False) -> Outcome:
     """Prefect wrapper of :func:`reconstruct_image` (no retries: deterministic)."""
     return reconstruct_image(job, store, config, out_dir=out_dir, force=force)
 
 
-@task(name="record-reconstruction", cache_policy=NO_CACHE, retries=REMOTE_IO_RETRIES,
-      retry_delay_seconds=REMOTE_IO_RETRY_DELAYS_S, retry_condition_fn=retry_transient_io,
-      persist_result=False)
-def record_recon_outcome_task(store: str, dataset: str, outcome: ReconOutcome) -> dict:
-    """Prefect wrapper of :func:`record_recon_outcome` (retried: storage I/O)."""
-    return record_recon_outcome(store, dataset, outcome)
-
-
-def failed_outcome(job: ImageJob, error: BaseException | str) -> ReconOutcome:
-    """A ``failed`` outcome with ``"Type: message"`` error text."""
-    text = f"{type(error).__name__}: {error}" if isinstance(error, BaseException) else str(error)
-    return ReconOutcome(job.name, job.image, "failed", error=text)
-
-
-def summarize_recon(outcomes: list[ReconOutcome], store, dataset: str) -> dict[str, Any]:
-    counts = {s: sum(o.status == s for o in outcomes) for s in ("ok", "skipped", "failed")}
-    st = open_store(store)
-    return {"store": os.fspath(st.root), "dataset": dataset, "counts": counts,
-            "frames": [dataclasses.asdict(o) for o in outcomes],
-            "manifest": st._join("manifests", dataset)}
+def failed_outcome(job: ImageJob, error: BaseException | str) -> Outcome:
+    """A ``failed`` outcome of ``job`` with ``"Type: message"`` error text."""
+    return Outcome.failed(job.name, error, source=job.image)

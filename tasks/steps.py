@@ -16,6 +16,7 @@ from collections.abc import Callable
 from typing import Any
 
 import numpy as np
+
 from sim2radar.tasks.common import open_store
 
 __all__ = ["RECONSTRUCTION_STEPS", "FrameSource", "StageResult", "depth_stage",
@@ -104,9 +105,8 @@ def _write(st, stage: str, table, src: FrameSource, config, inputs: dict,
 
 def depth_stage(src: FrameSource, config, store: str) -> StageResult:
     """Stage 1, metric depth -> ``depth_maps``."""
-    from sim2radar.storage.reconstruction import depth_from_table, depth_to_table
-
     from sim2radar.reconstruct.pipeline import estimate_depth
+    from sim2radar.storage.reconstruction import depth_from_table, depth_to_table
 
     t0, st, key = time.perf_counter(), open_store(store), src.keys["depth_maps"]
     if st.exists("depth_maps", key):
@@ -122,13 +122,12 @@ def depth_stage(src: FrameSource, config, store: str) -> StageResult:
 
 def segments_stage(src: FrameSource, config, store: str) -> StageResult:
     """Stage 2, segments with semantic labels -> ``segmentations``."""
+    from sim2radar.reconstruct.pipeline import segment_image
     from sim2radar.storage.reconstruction import (
         depth_from_table,
         segments_from_table,
         segments_to_table,
     )
-
-    from sim2radar.reconstruct.pipeline import segment_image
 
     t0, st, key = time.perf_counter(), open_store(store), src.keys["segmentations"]
     if st.exists("segmentations", key):
@@ -146,14 +145,13 @@ def segments_stage(src: FrameSource, config, store: str) -> StageResult:
 
 def materials_stage(src: FrameSource, config, store: str) -> StageResult:
     """Stage 3, a material per segment (the VLM's or the prior's) -> ``material_labels``."""
+    from sim2radar.reconstruct.pipeline import label_materials
     from sim2radar.storage.reconstruction import (
         depth_from_table,
         materials_from_table,
         materials_to_table,
         segments_from_table,
     )
-
-    from sim2radar.reconstruct.pipeline import label_materials
 
     t0, st, key = time.perf_counter(), open_store(store), src.keys["material_labels"]
     if st.exists("material_labels", key):
@@ -174,6 +172,7 @@ def materials_stage(src: FrameSource, config, store: str) -> StageResult:
 def scene_stage(src: FrameSource, config, store: str) -> StageResult:
     """Stage 4, meshes + door boxes in ``src.camera_to_target`` -> ``scene_meshes`` +
     ``reconstruction`` (the keys :func:`sim2radar.storage.reconstruction.reconstruction_keys` gives)."""
+    from sim2radar.reconstruct.pipeline import STAGE_VERSION, build_scene
     from sim2radar.storage.reconstruction import (
         depth_from_table,
         materials_from_table,
@@ -181,8 +180,6 @@ def scene_stage(src: FrameSource, config, store: str) -> StageResult:
         segments_from_table,
         write_scene_artifacts,
     )
-
-    from sim2radar.reconstruct.pipeline import STAGE_VERSION, build_scene
 
     t0, st = time.perf_counter(), open_store(store)
     key = src.keys["reconstruction"]

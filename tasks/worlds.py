@@ -20,7 +20,6 @@ centre lies in the radar's field of view and range — a ready pre-training set.
 
 from __future__ import annotations
 
-import dataclasses
 import logging
 import os
 import time
@@ -28,59 +27,22 @@ from typing import Any
 
 from prefect import task
 from prefect.cache_policies import NO_CACHE
+
 from sim2radar.storage import ArtifactStore, content_key, meshes_to_table
-from sim2radar.tasks.common import (
-    REMOTE_IO_RETRIES,
-    REMOTE_IO_RETRY_DELAYS_S,
-    jsonable,
-    open_store,
-    retry_transient_io,
-)
+from sim2radar.tasks.common import Outcome, jsonable, open_store, run_plain, summarize
 
 __all__ = [
-    "WorldOutcome",
     "world_keys",
     "generate_world_artifacts",
     "generate_worlds_plain",
-    "record_world_outcome",
-    "summarize_worlds",
+    "failed_world",
     "generate_world_task",
-    "record_world_outcome_task",
 ]
 
 log = logging.getLogger(__name__)
 
 #: Version of the radar_points produced here (bump with changes to the labelling below).
 RADAR_POINTS_STAGE_VERSION = 2  # 2: labels are the doors the radar sees (visibility rule)
-
-
-@dataclasses.dataclass
-class WorldOutcome:
-    """What happened to one world (one manifest row).
-
-    Attributes
-    ----------
-    world_id : str — ``world_<seed>``
-    seed : int
-    status : str — ``ok`` (computed), ``skipped`` (cached) or ``failed``
-    error : str — ``"ExceptionType: message"`` when failed
-    artifacts : dict — stage -> content key
-    timings_s : dict — step -> wall time [s]
-    n_frames : int
-    doors_visible : list[int] — visible doors per frame
-    """
-
-    world_id: str
-    seed: int
-    status: str
-    error: str = ""
-    artifacts: dict[str, str] = dataclasses.field(default_factory=dict)
-    timings_s: dict[str, float] = dataclasses.field(default_factory=dict)
-    n_frames: int = 0
-    doors_visible: list[int] = dataclasses.field(default_factory=list)
-
-    def to_dict(self) -> dict[str, Any]:
-        return dataclasses.asdict(self)
 
 
 def _configs(world_cfg, rig):
@@ -134,7 +96,7 @@ def generate_world_artifacts(
     force: bool = False,
     radar=None,
     rgb: bool = True,
-) -> WorldOutcome:
+) -> Outcome:
     """Generate, render and store one world (skip if its artifacts exist).
 
     Parameters
@@ -147,9 +109,12 @@ def generate_world_artifacts(
     force : bool — recompute even if cached
     radar : str or RadarConfig, optional — also simulate radar point clouds per frame
     rgb : bool — path trace RGB and cast the LiDAR (False: exact maps, poses, boxes only)
+
+    Returns
+    -------
+    Outcome — ``measured``: ``n_frames``, ``doors_visible`` (visible doors per frame).
     """
     from sim2radar.storage.worlds import frames_to_table, world_id_for, world_spec_to_table
-
     from sim2radar.worlds import generate_world, render_frame, trajectory
 
     t_start = time.perf_counter()
@@ -162,8 +127,7 @@ def generate_world_artifacts(
         table = store.read("world_frames", keys["world_frames"], columns=["door_visible"])
         visible = [int(sum(v)) for v in table.column("door_visible").to_pylist()]
         timings["total"] = time.perf_counter() - t_start
-        return WorldOutcome(world_id, int(seed), "skipped", artifacts=keys, timings_s=timings,
-                            n_frames=len(visible), doors_visible=visible)
+        return _outcome(world_id, seed, "skipped", keys, timings, visible)
 
     t0 = time.perf_counter()
     world = generate_world(seed, world_cfg)
@@ -198,18 +162,23 @@ def generate_world_artifacts(
         timings["radar"] = time.perf_counter() - t0
     timings["total"] = time.perf_counter() - t_start
     log.info("world %s: %d frames rendered in %.1f s", world_id, n_frames, timings["render"])
-    return WorldOutcome(world_id, int(seed), "ok", artifacts=keys, timings_s=timings,
-                        n_frames=len(frames),
-                        doors_visible=[int(f.door_visible.sum()) for f in frames])
+    return _outcome(world_id, seed, "ok", keys, timings,
+                    [int(f.door_visible.sum()) for f in frames])
+
+
+def _outcome(world_id: str, seed: int, status: str, keys: dict, timings: dict,
+             visible: list[int]) -> Outcome:
+    return Outcome(world_id, status, artifacts=keys, timings_s=timings, seed=int(seed),
+                   source=f"sim2radar.worlds seed={int(seed)}",
+                   measured={"n_frames": len(visible), "doors_visible": visible})
 
 
 def _simulate_radar(world, frames, radar, store, keys, seed, world_id) -> None:
     """Radar point clouds of every frame on the world's ground-truth geometry."""
-    from sim2radar.storage import radar_frames_to_table
-
     from sim2radar.factory import LabelConfig
     from sim2radar.factory.pipeline import world_radar_frames
     from sim2radar.radar import RadarConfig, load_radar_config
+    from sim2radar.storage import radar_frames_to_table
 
     radar_cfg = radar if isinstance(radar, RadarConfig) else load_radar_config(radar)
     labels = LabelConfig()
@@ -241,31 +210,12 @@ def _render_version() -> int:
     return RENDER_VERSION
 
 
-def failed_world(seed: int, error: BaseException | str) -> WorldOutcome:
+def failed_world(seed: int, error: BaseException | str) -> Outcome:
     """A ``failed`` outcome for world ``seed``."""
     from sim2radar.storage.worlds import world_id_for
 
-    text = error if isinstance(error, str) else f"{type(error).__name__}: {error}"
-    return WorldOutcome(world_id_for(seed), int(seed), "failed", error=text)
-
-
-def record_world_outcome(store, dataset: str, outcome: WorldOutcome) -> dict:
-    """Upsert the outcome as the world's manifest row; returns the row."""
-    return open_store(store).manifest(dataset).upsert(
-        outcome.world_id, outcome.status, error=outcome.error, artifacts=outcome.artifacts,
-        timings_s=outcome.timings_s, source=f"sim2radar.worlds seed={outcome.seed}",
-    )
-
-
-def summarize_worlds(store, dataset: str, outcomes: list[WorldOutcome]) -> dict[str, Any]:
-    """``{"store", "dataset", "counts": {ok, skipped, failed}, "worlds": [outcome dicts]}``."""
-    st = open_store(store)
-    return {
-        "store": st.root,
-        "dataset": dataset,
-        "counts": {k: sum(o.status == k for o in outcomes) for k in ("ok", "skipped", "failed")},
-        "worlds": [o.to_dict() for o in outcomes],
-    }
+    return Outcome.failed(world_id_for(seed), error, seed=int(seed),
+                          source=f"sim2radar.worlds seed={int(seed)}")
 
 
 def generate_worlds_plain(seeds, n_frames: int, store="out/store", dataset: str = "worlds",
@@ -274,19 +224,13 @@ def generate_worlds_plain(seeds, n_frames: int, store="out/store", dataset: str 
     """The worlds flow without the Prefect engine: worlds one after another; failures are
     recorded in the manifest, not raised."""
     st = open_store(store)
-    st.manifest(dataset)
-    outcomes = []
-    for seed in seeds:
-        try:
-            outcome = generate_world_artifacts(seed, n_frames, st, world_cfg, rig,
-                                               trajectory_seed=trajectory_seed, force=force,
-                                               radar=radar)
-        except Exception as exc:  # noqa: BLE001 - one broken world must not stop the others
-            log.error("world %s failed: %s: %s", seed, type(exc).__name__, exc)
-            outcome = failed_world(seed, exc)
-        record_world_outcome(st, dataset, outcome)
-        outcomes.append(outcome)
-    return summarize_worlds(st, dataset, outcomes)
+
+    def work(seed: int) -> Outcome:
+        return generate_world_artifacts(seed, n_frames, st, world_cfg, rig,
+                                        trajectory_seed=trajectory_seed, force=force,
+                                        radar=radar)
+
+    return summarize(st, dataset, run_plain(seeds, work, failed_world, st, dataset))
 
 
 # ---------------------------------------------------------------------------------------------
@@ -296,15 +240,7 @@ def generate_worlds_plain(seeds, n_frames: int, store="out/store", dataset: str 
 @task(name="generate-world", cache_policy=NO_CACHE, retries=0, persist_result=False)
 def generate_world_task(seed: int, n_frames: int, store: str, world_cfg: dict, rig: dict,
                         trajectory_seed: int = 0, force: bool = False,
-                        radar: str | None = None) -> WorldOutcome:
+                        radar: str | None = None) -> Outcome:
     """Prefect task around :func:`generate_world_artifacts`."""
     return generate_world_artifacts(seed, n_frames, store, world_cfg, rig,
                                     trajectory_seed=trajectory_seed, force=force, radar=radar)
-
-
-@task(name="record-world-manifest", cache_policy=NO_CACHE, retries=REMOTE_IO_RETRIES,
-      retry_delay_seconds=REMOTE_IO_RETRY_DELAYS_S, retry_condition_fn=retry_transient_io,
-      persist_result=False)
-def record_world_outcome_task(store: str, dataset: str, outcome: WorldOutcome) -> dict:
-    """Prefect task around :func:`record_world_outcome` (retried: storage I/O)."""
-    return record_world_outcome(store, dataset, outcome)

@@ -66,3 +66,27 @@ def test_scene_extent_frames_points_boxes_and_the_radar():
     boxes = np.array([[7.0, 0.0, 1, 1, 0.2, 2, 0]], np.float32)
     assert scene_extent(pts, boxes) == (-1.0, 8.0, -2.0, 4.0)  # x from the radar at 0 to 7 + 1
     assert scene_extent(np.zeros((0, 4)), np.zeros((0, 7)), margin_m=0.5) == (-0.5, 0.5, -0.5, 0.5)
+
+
+def test_the_same_picture_is_not_drawn_twice(tmp_path):
+    """A cached rerun asks for the pictures it already wrote: the file is returned as it is
+    (not rewritten, no Matplotlib); other inputs, or a PNG without the digest, are drawn."""
+    import os
+
+    pts = np.array([[3.0, 0.0, 0.0, 20.0], [4.0, 1.0, 0.5, 10.0]], np.float32)
+    out = tmp_path / "bev.png"
+    first = bev_png(pts, boxes=[[3, 0, 1, 0.1, 1, 2, 0]], box_labels=["door"], path=out,
+                    size_px=200)
+    os.utime(out, ns=(0, 0))
+    again = bev_png(pts, boxes=[[3, 0, 1, 0.1, 1, 2, 0]], box_labels=["door"], path=out,
+                    size_px=200)
+    assert again == first and out.stat().st_mtime_ns == 0
+    moved = bev_png(pts + 0.5, boxes=[[3, 0, 1, 0.1, 1, 2, 0]], box_labels=["door"], path=out,
+                    size_px=200)
+    assert moved != first and out.read_bytes() == moved
+    relabelled = bev_png(pts + 0.5, boxes=[[3, 0, 1, 0.1, 1, 2, 0]], box_labels=["gt"],
+                         path=out, size_px=200)
+    assert relabelled != moved and out.read_bytes() == relabelled
+    out.write_bytes(bev_png(pts, size_px=200)[:40])  # a truncated PNG without its text chunks
+    redrawn = bev_png(pts, path=out, size_px=200)
+    assert out.read_bytes() == redrawn and mpimg.imread(io.BytesIO(redrawn)).shape[0] == 200

@@ -28,18 +28,19 @@ def run_captures(captures: Path, *, store: str, dataset: str, settings: dict[str
         _prefect_env(verbose)
     from rich.progress import Progress
 
-    from sim2radar.cli.generate import _progress_columns
+    from sim2radar.cli._datasets import progress_columns
     from sim2radar.factory.captures import find_captures
     from sim2radar.flows.capture_dataset import capture_dataset
 
     n_scenes = len(find_captures(captures, warn=False))  # the flow warns once
-    with Progress(*_progress_columns(), disable=not show_progress, transient=False) as progress:
+    with Progress(*progress_columns(), disable=not show_progress, transient=False) as progress:
         bar = progress.add_task("starting" + (" Prefect" if use_prefect else ""), total=n_scenes)
 
         def on_scene(outcome) -> None:
-            pts = ",".join(str(f.n_points.get("reconstructed", "-")) for f in outcome.frames)
+            pts = ",".join(str(f.measured.get("n_points", {}).get("reconstructed", "-"))
+                           for f in outcome.parts)
             progress.update(bar, advance=1,
-                            description=f"{outcome.world_id}: {outcome.status} ({pts} pts)")
+                            description=f"{outcome.id}: {outcome.status} ({pts} pts)")
 
         from contextlib import nullcontext
 
@@ -114,8 +115,9 @@ def generate_from_captures(captures: Path, *, config: Path | None, out: str,
     """The ``generate --captures`` branch: validate everything (exit 2 naming the file and
     field), run, print the summary and the seconds per step, exit 1 under ``--strict`` when a
     scene failed."""
-    from sim2radar.cli.generate import finish_generate, load_generate_config
+    from sim2radar.cli._datasets import finish_generate
     from sim2radar.cli.simulate import _default_png_dir
+    from sim2radar.factory.spec import load_generate_config
 
     try:
         given = [name for name, v in procedural.items() if v is not None]
@@ -133,12 +135,12 @@ def generate_from_captures(captures: Path, *, config: Path | None, out: str,
 
         capture_spec = CaptureSpec(**settings)  # every field checked before any work
         find_captures(captures, warn=False)  # the flow lists it again and warns once
-        from sim2radar.cli.generate import _preflight
+        from sim2radar.cli._datasets import preflight
 
-        _preflight(capture_spec.reconstruction)
+        preflight(capture_spec.reconstruction)
         if dask:
             from sim2radar.cli.simulate import _prefect_env
-            from sim2radar.tasks.runners import task_runner
+            from sim2radar.flows.runners import task_runner
 
             _prefect_env(verbose)  # before Prefect is imported
 

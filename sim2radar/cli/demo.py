@@ -51,19 +51,13 @@ def _reference_dataset(store: str, dataset: str, export_dir: Path, png_dir: Path
     """The reference radar's dataset of a plan (:func:`sim2radar.flows.reference_dataset.reference_run`
     arguments) through the generate flow, exported to ``export_dir``."""
     from sim2radar.cli.generate import run_generate
-    from sim2radar.flows.reference_dataset import (
-        REFERENCE_RADAR,
-        REFERENCE_SPEED_MPS,
-        reference_run,
-    )
+    from sim2radar.flows.reference_dataset import reference_run, reference_spec
 
     args = reference_run(**plan)
     args.pop("plan")
-    return run_generate(args.pop("seeds"), frames=plan["frames_per_world"], store=store,
-                        dataset=dataset, geometry="ground_truth", radar=REFERENCE_RADAR,
-                        export_dir=str(export_dir), png_dir=png_dir, verbose=verbose,
-                        render_rgb=False, flow_name="reference-dataset",
-                        motion={"speed_mps": list(REFERENCE_SPEED_MPS)}, **args)
+    return run_generate(args.pop("seeds"), reference_spec(plan["frames_per_world"]),
+                        store=store, dataset=dataset, export_dir=str(export_dir),
+                        png_dir=png_dir, verbose=verbose, flow_name="reference-dataset", **args)
 
 
 def run_demo(
@@ -91,15 +85,16 @@ def run_demo(
     sweep_dir = out / "sweeps" / "demo"
     typer.secho("1/5 simulated domain (ray tracer on reconstructed and ground-truth geometry)",
                 bold=True)
-    sim = run_generate(list(range(worlds)), frames=frames, store=store, dataset="demo",
-                       geometry="both", rig=rig or {}, export_dir=str(data), png_dir=out / "bev",
+    spec = {"frames_per_world": frames, "rig": rig or {}}
+    sim = run_generate(list(range(worlds)), {**spec, "geometry": "both"}, store=store,
+                       dataset="demo", export_dir=str(data), png_dir=out / "bev",
                        verbose=verbose)
     one_material = None
     if ablations:
         one_material = run_generate(
-            list(range(worlds)), frames=frames, store=store, dataset="demo-one-material",
-            geometry="reconstructed", rig=rig or {}, material_override=ablation_material,
-            export_dir=str(data / "one_material"), png_dir=None, verbose=verbose)
+            list(range(worlds)), {**spec, "material_override": ablation_material},
+            store=store, dataset="demo-one-material", export_dir=str(data / "one_material"),
+            png_dir=None, verbose=verbose)
     typer.secho("2/5 proxy-real domain (reference radar on other worlds)", bold=True)
     real = _reference_dataset(store, "reference", data / "proxy_real", out / "bev", verbose,
                               worlds=reference_worlds, frames_per_world=reference_frames)

@@ -73,10 +73,10 @@ def reconstruct_cmd(
             param_hint="--lidar",
         )
     cfg = ReconstructionConfig.from_yaml(config) if config else ReconstructionConfig.preset(preset)
-    from sim2radar.cli.generate import _preflight
+    from sim2radar.cli._datasets import preflight
 
     try:
-        _preflight(cfg)   # a misconfigured VLM server stops here, before any image
+        preflight(cfg)   # a misconfigured VLM server stops here, before any image
     except ValueError as exc:
         typer.secho(f"error: {exc}", fg="red", err=True)
         raise typer.Exit(2) from None

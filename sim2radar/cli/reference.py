@@ -65,7 +65,7 @@ def reference(
 
         args = reference_run(first_seed, worlds, frames, seed)
         plan = args.pop("plan")
-        reference_spec(frames, radar, seed=seed, speed_mps=speed)  # validates radar and speed
+        spec = reference_spec(frames, radar, seed=seed, speed_mps=speed)  # validated here
         if workers < 1:
             raise ValueError(f"--workers must be >= 1, got {workers}")
     except (ValueError, FileNotFoundError, ImportError) as exc:
@@ -76,12 +76,11 @@ def reference(
     typer.echo(f"reference dataset: {len(plan.seeds)} worlds from seed {plan.seeds[0]}, "
                f"{plan.n_frames} frames, splits {plan.split_frames()} — {DOMAIN_LABEL}")
     summary = run_generate(
-        args.pop("seeds"), frames=frames, store=out, dataset=dataset, geometry="ground_truth",
-        radar=radar, seed=seed, export_dir=None if export_openpcdet is None
-        else str(export_openpcdet), png_dir=None if no_png else png_dir, force=force,
-        strict=strict, workers=workers, dask_address=dask, use_prefect=not no_prefect,
-        verbose=verbose, render_rgb=False, flow_name="reference-dataset",
-        motion={"speed_mps": list(speed)}, **args,
+        args.pop("seeds"), spec, store=out, dataset=dataset,
+        export_dir=None if export_openpcdet is None else str(export_openpcdet),
+        png_dir=None if no_png else png_dir, force=force, strict=strict, workers=workers,
+        dask_address=dask, use_prefect=not no_prefect, verbose=verbose,
+        flow_name="reference-dataset", **args,
     )
     summary["plan"] = plan.split_frames()
     finish_generate(summary, json_out, strict)

@@ -62,8 +62,8 @@ def run_scenes(
         bar = progress.add_task("starting" + (" Prefect" if use_prefect else ""), total=len(scenes))
 
         def on_scene(outcome) -> None:
-            pts = "/".join(str(n) for n in outcome.n_points) or "-"
-            progress.update(bar, advance=1, description=f"{outcome.scene_id}: {outcome.status} ({pts} pts)")
+            pts = "/".join(str(n) for n in outcome.measured.get("n_points", [])) or "-"
+            progress.update(bar, advance=1, description=f"{outcome.id}: {outcome.status} ({pts} pts)")
 
         if use_prefect:
             _prefect_env(verbose)
@@ -99,18 +99,18 @@ def print_summary(summary: dict[str, Any], png_dir: Path | None) -> None:
         f"[bold]{counts['ok']} computed, {counts['skipped']} cached (skipped), "
         f"{counts['failed']} failed[/bold] — radar {summary['radar']}, dataset {summary['dataset']!r}"
     )
-    for s in summary["scenes"]:
+    for s in summary["outcomes"]:
         if s["status"] == "failed":
-            console.print(f"  [red]✗ {s['scene_id']}[/red] ({s['source']}): {s['error']}")
+            console.print(f"  [red]✗ {s['id']}[/red] ({s['source']}): {s['error']}")
             continue
-        pts = s["n_points"]
+        pts = s["measured"]["n_points"]
         mean = sum(pts) / len(pts) if pts else 0.0
         mark = "✓" if s["status"] == "ok" else "↺"
         console.print(
-            f"  {mark} {s['scene_id']}: {len(pts)} frame(s), points per frame {pts} "
+            f"  {mark} {s['id']}: {len(pts)} frame(s), points per frame {pts} "
             f"(mean {mean:.0f}) {'[dim](cached)[/dim]' if s['status'] == 'skipped' else ''}"
         )
-        console.print(f"      points:   {s['locations'].get('radar_points', '')}")
+        console.print(f"      points:   {s['measured']['locations'].get('radar_points', '')}")
     console.print(f"store:    {summary['store']}")
     console.print(f"manifest: {summary['manifest']}")
     if png_dir is not None:
@@ -152,7 +152,7 @@ def simulate(
         raise typer.Exit(2) from None
     if png_dir is None and not no_png:
         png_dir = _default_png_dir(out)
-    from sim2radar.tasks.common import expand_scenes
+    from sim2radar.scenes import expand_scenes
 
     try:
         scene_files = expand_scenes(scenes)

@@ -102,7 +102,7 @@ def generate(
                              radar=radar)
     typer.echo(json.dumps({k: summary[k] for k in ("store", "dataset", "counts")}, indent=1))
     if summary["counts"].get("failed"):
-        for w in summary["worlds"]:
+        for w in summary["outcomes"]:
             if w["status"] == "failed":
-                typer.echo(f"world {w['world_id']} failed: {w['error']}", err=True)
+                typer.echo(f"world {w['id']} failed: {w['error']}", err=True)
         raise typer.Exit(1)

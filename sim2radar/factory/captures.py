@@ -149,27 +149,13 @@ class CaptureSpec(BaseModel):
     @model_validator(mode="before")
     @classmethod
     def _resolve(cls, data: Any) -> Any:
-        from sim2radar.radar import RadarConfig, load_radar_config
-        from sim2radar.reconstruct import ReconstructionConfig
+        from sim2radar.factory.spec import DEFAULT_RADAR, resolve_radar, resolve_reconstruction
 
         if not isinstance(data, dict):
             return data
         data = dict(data)
-        radar = data.get("radar", "ti-mmwcas")
-        if not isinstance(radar, RadarConfig):
-            radar = (RadarConfig.model_validate(radar) if isinstance(radar, dict)
-                     else load_radar_config(radar))
-        data["radar"] = radar
-        rec = data.get("reconstruction")
-        if rec is None:
-            rec = ReconstructionConfig()
-        elif isinstance(rec, dict):
-            rec = ReconstructionConfig.model_validate(rec)
-        elif not isinstance(rec, ReconstructionConfig):
-            text = os.fspath(rec)
-            rec = (ReconstructionConfig.from_yaml(text)
-                   if Path(text).suffix in (".yaml", ".yml") or Path(text).is_file()
-                   else ReconstructionConfig.preset(text))
+        data["radar"] = resolve_radar(data.get("radar", DEFAULT_RADAR))
+        rec = resolve_reconstruction(data.get("reconstruction"))
         if any(s.name == "oracle" for s in (rec.depth, rec.segments, rec.materials)):
             raise ValueError("reconstruction: 'oracle' backends need procedural-world ground "
                              "truth; a capture folder has none (use builtin, moge, sam2-gdino, "

@@ -1,11 +1,11 @@
 """The run specification of the procedural-world factory: :class:`DatasetSpec` (frames per world,
-geometries, radar, reconstruction, world, rig, seed, label rule, ...), its validation and
-resolution (:func:`resolve_spec`), and what an export says about itself
-(:func:`dataset_metadata`). Pure configuration: no store, no Prefect."""
+geometries, radar, reconstruction, world, rig, seed, label rule, ...), a pydantic model that
+validates and resolves itself and travels whole from the command line to the flow, its tasks
+and deployments; and what an export says about itself (:func:`dataset_metadata`). Pure
+configuration: no store, no Prefect."""
 
 from __future__ import annotations
 
-import dataclasses
 import os
 from collections.abc import Sequence
 from pathlib import Path
@@ -13,6 +13,14 @@ from typing import Any
 
 import numpy as np
 import yaml
+from pydantic import (
+    BaseModel,
+    ConfigDict,
+    Field,
+    field_validator,
+    model_serializer,
+    model_validator,
+)
 
 from sim2radar.configio import config_path, whole_number
 from sim2radar.factory.labels import (
@@ -21,23 +29,33 @@ from sim2radar.factory.labels import (
     boxes_in_point_cloud_range,
 )
 
-__all__ = ["GEOMETRIES", "DatasetSpec", "resolve_spec", "as_spec", "dataset_metadata",
+__all__ = ["GEOMETRIES", "DEFAULT_RADAR", "DatasetSpec", "as_spec", "resolve_radar",
+           "resolve_reconstruction", "dataset_metadata",
            "GENERATE_CONFIG_KEYS", "load_generate_config", "label_range"]
 
 #: Geometry modes: radar simulated on the world's meshes, or on meshes reconstructed from RGB.
 GEOMETRIES = ("ground_truth", "reconstructed")
+#: The radar preset every command uses unless told otherwise (TI's 4-chip cascade board).
+DEFAULT_RADAR = "ti-mmwcas"
 
 
-@dataclasses.dataclass(frozen=True)
-class DatasetSpec:
+class DatasetSpec(BaseModel):
     """Resolved configuration of a dataset run (everything but the world seeds and the store).
+
+    Built from settings (``DatasetSpec.model_validate({"radar": "ti-mmwcas", "geometry":
+    "both", ...})``, or keyword arguments): names, paths and dicts are resolved into configs and
+    every field is checked here, so a bad one fails before any work, named. The resolved spec
+    is what the CLI hands the flow, the flow its tasks and a deployment takes as one parameter;
+    its JSON form (:meth:`to_dict`) validates back into the same spec.
 
     Attributes
     ----------
     frames_per_world : int — frames along each world's trajectory.
-    geometries : tuple[str, ...] — subset of :data:`GEOMETRIES`.
-    radar : RadarConfig
-    reconstruction : ReconstructionConfig
+    geometries : tuple[str, ...] — subset of :data:`GEOMETRIES` (input key ``geometry`` also
+        takes ``"both"`` or one mode).
+    radar : RadarConfig — from a preset name, YAML path or fields (:func:`resolve_radar`).
+    reconstruction : ReconstructionConfig — from a preset name, YAML path, fields or None (the
+        built-in backends with LiDAR: lidar / builtin / prior).
     world : WorldConfig
     rig : RigConfig — its radar FOV/range (for the door flags) match ``radar``.
     seed : int — run seed: trajectories and radar noise derive from it.
@@ -46,20 +64,22 @@ class DatasetSpec:
     material_override : str or None — simulate every mesh as this material (the
         "one material" ablation: what the material step contributes); None keeps each mesh's.
     export_label_range_m : (6,) or None — OpenPCDet exports keep only labels whose centre lies
-        in this point-cloud range [m] (the detector's; None keeps every label).
+        in this point-cloud range [m] (``"detector"``: the detector's; None keeps every label).
     render_rgb : bool — path trace RGB and cast LiDAR for the world frames (needed by
         ``reconstructed``; a ground-truth-only run such as the reference radar can skip it).
-    motion : RigMotion — the rig's speed range while frames are taken (the signal-level
-        radar's Doppler; :func:`sim2radar.worlds.trajectory.rig_velocity`); standing still by
-        default.
+    motion : RigMotion or None — the rig's speed range while frames are taken (the
+        signal-level radar's Doppler; :func:`sim2radar.worlds.trajectory.rig_velocity`); None:
+        standing still.
     """
 
-    frames_per_world: int
-    geometries: tuple[str, ...]
-    radar: Any
-    reconstruction: Any
-    world: Any
-    rig: Any
+    model_config = ConfigDict(frozen=True, extra="forbid", arbitrary_types_allowed=True)
+
+    frames_per_world: int = Field(4, ge=1)
+    geometries: tuple[str, ...] = ("reconstructed",)
+    radar: Any = DEFAULT_RADAR
+    reconstruction: Any = None
+    world: Any = None
+    rig: Any = None
     seed: int = 0
     class_name: str = "door"
     labels: LabelConfig = LabelConfig()
@@ -68,8 +88,61 @@ class DatasetSpec:
     render_rgb: bool = True
     motion: Any = None
 
+    @model_validator(mode="before")
+    @classmethod
+    def _resolve(cls, data: Any) -> Any:
+        if not isinstance(data, dict):
+            return data
+        from sim2radar.worlds.config import RigMotion, resolve_world_configs
+
+        data = dict(data)
+        if "geometry" in data:
+            data["geometries"] = data.pop("geometry")
+        data["geometries"] = _geometries(data.get("geometries", "reconstructed"))
+        data["radar"] = radar = resolve_radar(data.get("radar", DEFAULT_RADAR))
+        data["reconstruction"] = resolve_reconstruction(data.get("reconstruction"))
+        world, rig = resolve_world_configs(data.get("world"), data.get("rig"))
+        data["world"], data["rig"] = world, _rig_for_radar(rig, radar)
+        if data.get("material_override") is not None:
+            from sim2radar.em import get_material
+
+            try:
+                data["material_override"] = get_material(data["material_override"]).name
+            except KeyError as exc:
+                raise ValueError(f"material_override: {exc}") from None
+        if data.get("labels") is None:
+            data.pop("labels", None)
+        rng = label_range(data.get("export_label_range_m", DEFAULT_POINT_CLOUD_RANGE_M))
+        if rng is not None:
+            boxes_in_point_cloud_range(np.zeros((0, 7)), rng)  # validates
+            rng = tuple(float(v) for v in rng)
+        data["export_label_range_m"] = rng
+        motion = data.get("motion")
+        if motion is not None and not isinstance(motion, RigMotion):
+            try:
+                motion = RigMotion.model_validate(motion)
+            except Exception as exc:  # pydantic's ValidationError names the field
+                raise ValueError(f"motion: {exc}") from None
+        data["motion"] = motion if motion is not None and motion.moving else None
+        return data
+
+    @field_validator("class_name")
+    @classmethod
+    def _word(cls, v: str) -> str:
+        if not v or any(c.isspace() for c in v):
+            raise ValueError(f"class_name must be a non-empty word, got {v!r}")
+        return v
+
+    @model_validator(mode="after")
+    def _rgb_for_reconstruction(self) -> DatasetSpec:
+        if not self.render_rgb and "reconstructed" in self.geometries:
+            raise ValueError("render_rgb: the reconstructed geometry needs RGB and LiDAR frames")
+        return self
+
+    @model_serializer(mode="plain")
     def to_dict(self) -> dict[str, Any]:
-        """JSON-able form (what the Prefect flow passes to its tasks)."""
+        """JSON-able form (what Prefect stores as a flow's parameter); validates back into the
+        same spec."""
         return {
             "frames_per_world": self.frames_per_world,
             "geometry": list(self.geometries),
@@ -106,7 +179,9 @@ def _geometries(geometry: str | Sequence[str]) -> tuple[str, ...]:
     return out
 
 
-def _reconstruction_config(value):
+def resolve_reconstruction(value):
+    """A :class:`~sim2radar.reconstruct.ReconstructionConfig` from itself, its dict, a YAML
+    path or a bundled preset name; None: the built-in backends with LiDAR."""
     from sim2radar.reconstruct import ReconstructionConfig
 
     if value is None:
@@ -124,7 +199,9 @@ def _reconstruction_config(value):
     return ReconstructionConfig.preset(text)
 
 
-def _radar_config(value):
+def resolve_radar(value):
+    """A :class:`~sim2radar.radar.RadarConfig` from itself, its dict, a YAML path or a preset
+    name."""
     from sim2radar.radar import RadarConfig, load_radar_config
 
     if isinstance(value, RadarConfig):
@@ -146,102 +223,11 @@ def _rig_for_radar(rig, radar):
                                   "radar_max_range_m": want[2]})
 
 
-def resolve_spec(
-    frames_per_world: int = 4,
-    geometry: str | Sequence[str] = "reconstructed",
-    radar: Any = "ti-mmwcas",
-    reconstruction: Any = None,
-    world: Any = None,
-    rig: Any = None,
-    seed: int = 0,
-    class_name: str = "door",
-    labels: Any = None,
-    material_override: str | None = None,
-    export_label_range_m: Any = DEFAULT_POINT_CLOUD_RANGE_M,
-    render_rgb: bool = True,
-    motion: Any = None,
-) -> DatasetSpec:
-    """Validate and resolve a run's configuration.
-
-    Parameters
-    ----------
-    frames_per_world : int >= 1
-    geometry : ``ground_truth``, ``reconstructed``, ``both`` or a list of modes
-    radar : preset name, YAML path, :class:`~sim2radar.radar.RadarConfig` or its dict
-    reconstruction : :class:`~sim2radar.reconstruct.ReconstructionConfig`, its dict, a YAML path
-        or a preset name (``builtin``, ``oracle``, ``builtin-oracle-depth``); None = built-in
-        backends with LiDAR (lidar / builtin / prior)
-    world, rig : WorldConfig / RigConfig or dicts of their fields (None = defaults)
-    seed : int — run seed
-    class_name : str — class of the door labels
-    labels : LabelConfig or its dict (None = defaults: visibility >= 0.2)
-    material_override : a material name for every mesh (one-material ablation) or None
-    export_label_range_m : (6,) point-cloud range of the exported labels, or None
-    render_rgb : bool — False only for ground-truth-only runs (no RGB, no LiDAR rendered)
-    motion : RigMotion, its dict (``{"speed_mps": [min, max]}``) or None (standing still)
-
-    Raises
-    ------
-    ValueError (incl. WorldConfigError, RadarConfigError) naming the bad field.
-    """
-    from sim2radar.worlds.config import resolve_world_configs
-
-    if int(frames_per_world) < 1:
-        raise ValueError(f"frames_per_world must be >= 1, got {frames_per_world}")
-    if not class_name or any(c.isspace() for c in class_name):
-        raise ValueError(f"class_name must be a non-empty word, got {class_name!r}")
-    radar_cfg = _radar_config(radar)
-    world_cfg, rig_cfg = resolve_world_configs(world, rig)
-    if material_override is not None:
-        from sim2radar.em import get_material
-
-        try:
-            material_override = get_material(material_override).name
-        except KeyError as exc:
-            raise ValueError(f"material_override: {exc}") from None
-    label_cfg = labels if isinstance(labels, LabelConfig) else LabelConfig.model_validate(
-        labels or {})
-    if not render_rgb and "reconstructed" in _geometries(geometry):
-        raise ValueError("render_rgb: the reconstructed geometry needs RGB and LiDAR frames")
-    if export_label_range_m is not None:
-        boxes_in_point_cloud_range(np.zeros((0, 7)), export_label_range_m)  # validates
-        export_label_range_m = tuple(float(v) for v in export_label_range_m)
-    from sim2radar.worlds.config import RigMotion
-
-    if motion is not None and not isinstance(motion, RigMotion):
-        try:
-            motion = RigMotion.model_validate(motion)
-        except Exception as exc:  # pydantic's ValidationError names the field
-            raise ValueError(f"motion: {exc}") from None
-    return DatasetSpec(
-        frames_per_world=int(frames_per_world),
-        geometries=_geometries(geometry),
-        radar=radar_cfg,
-        reconstruction=_reconstruction_config(reconstruction),
-        world=world_cfg,
-        rig=_rig_for_radar(rig_cfg, radar_cfg),
-        seed=int(seed),
-        class_name=class_name,
-        labels=label_cfg,
-        material_override=material_override,
-        export_label_range_m=export_label_range_m,
-        render_rgb=bool(render_rgb),
-        motion=motion if motion is not None and motion.moving else None,
-    )
-
-
 def as_spec(spec: DatasetSpec | dict) -> DatasetSpec:
-    """``spec`` as a :class:`DatasetSpec` (from its :meth:`~DatasetSpec.to_dict`, the form
-    Prefect passes between tasks); a spec object (DatasetSpec, or a capture run's
-    ``CaptureSpec``, which has the same export fields) is returned as it is."""
-    if not isinstance(spec, dict):
-        return spec
-    return resolve_spec(spec["frames_per_world"], spec["geometry"], spec["radar"],
-                        spec["reconstruction"], spec["world"], spec["rig"], spec["seed"],
-                        spec.get("class_name", "door"), spec.get("labels"),
-                        spec.get("material_override"),
-                        spec.get("export_label_range_m", DEFAULT_POINT_CLOUD_RANGE_M),
-                        spec.get("render_rgb", True), spec.get("motion"))
+    """``spec`` as a :class:`DatasetSpec` (from its :meth:`~DatasetSpec.to_dict` or settings);
+    a spec object (DatasetSpec, or a capture run's ``CaptureSpec``, which has the same export
+    fields) is returned as it is."""
+    return DatasetSpec.model_validate(spec) if isinstance(spec, dict) else spec
 
 
 def dataset_metadata(spec: DatasetSpec, geometry: str, domain: str | None = None) -> dict:

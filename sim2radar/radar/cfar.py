@@ -58,7 +58,9 @@ import functools
 import math
 
 import numpy as np
-from scipy import integrate, ndimage, optimize, special, stats
+
+# scipy's integrate/ndimage/optimize/special/stats are imported where used (~0.5 s together):
+# importing sim2radar.radar (a radar config, a cached rerun) does not pay for them (issue #23).
 
 __all__ = [
     "CFAR_KINDS",
@@ -129,6 +131,8 @@ def effective_training_cells_os(offsets: np.ndarray, corr0: np.ndarray, corr1: n
     Two square-law cells with power correlation ``rho`` follow Kibble's bivariate exponential
     (Kibble, Sankhya 5(2), 1941), whose Laguerre series gives ``Cov = sum_{k>=1} rho^k I_k^2``,
     ``I_k = q e^{-q} L^{(1)}_{k-1}(q) / k``, ``q = -ln(1 - p)`` (single look)."""
+    from scipy import special
+
     p = float(rank)
     q = -math.log(max(1.0 - p, 1e-12))
     k = np.arange(1, 161)
@@ -158,6 +162,8 @@ def caso_false_alarm_rate(alpha: float, n_side: float, looks: int = 1) -> float:
     means' central ``1 - 2e-15`` probability, so a smaller rate is reported as a value below
     ~1e-14 (TI's ``K0 = 5`` on 192 looks: effectively zero).
     """
+    from scipy import integrate, special, stats
+
     k, shape = float(looks), float(n_side) * float(looks)
 
     def f(m: float) -> float:  # density of min(A, B) times the CUT's survival function
@@ -191,6 +197,8 @@ def cfar_threshold_factor(kind: str, n_train: float, pfa: float, *, looks: int =
     -------
     alpha : float — detect when ``P > alpha * Z`` (module doc).
     """
+    from scipy import integrate, optimize, special, stats
+
     n, k_looks = float(n_train), int(looks)
     if kind == "ca":
         # P(X > alpha/N S) with X ~ Gamma(K), S ~ Gamma(N K): X / (X + S) ~ Beta(K, N K)
@@ -323,6 +331,8 @@ def cfar_detect(power: np.ndarray, *, kind: str, guard: tuple[int, int],
     -------
     (..., n0, n1) bool
     """
+    from scipy import ndimage
+
     p = np.asarray(power, dtype=np.float64)
     n0, n1 = p.shape[-2:]
     (g0, g1), (t0, t1) = guard, train
@@ -406,6 +416,8 @@ def ca_cfar_mask(power: np.ndarray, *, guard: int, train: int, threshold_db: flo
     noise_power : float — ``N`` per cell [sim. |a|^2].
     peak_grouping : bool
     """
+    from scipy import ndimage
+
     p = np.asarray(power, dtype=np.float64)
     n_full, n_guard = 2 * (guard + train) + 1, 2 * guard + 1
 

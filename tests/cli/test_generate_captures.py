@@ -124,7 +124,7 @@ def test_bad_radar_yaml_fails_its_scene_in_one_line_while_the_others_finish(one_
     summary = json.loads((tmp_path / "summary.json").read_text())
     assert summary["counts"] == {"ok": 1, "skipped": 0, "failed": 2}
     assert summary["frame_counts"]["ok"] == 1
-    failed = {w["world_id"]: w for w in summary["worlds"] if w["status"] == "failed"}
+    failed = {w["id"]: w for w in summary["outcomes"] if w["status"] == "failed"}
     assert sorted(failed) == ["scaled", "singular"]
     for name, why in (("singular", "its rotation part is singular (det 0)"),
                       ("scaled", "its rotation part is not orthonormal")):
@@ -133,7 +133,7 @@ def test_bad_radar_yaml_fails_its_scene_in_one_line_while_the_others_finish(one_
         assert f"[inputs] ValueError: {path}: radar_from_camera is not a rigid transform: " \
                f"{why}" in line, line
         assert "give radar_from_camera as a 4x4 rigid transform" in line
-        assert failed[name]["frames"] == []  # refused before any reconstruction or frame
+        assert failed[name]["parts"] == []  # refused before any reconstruction or frame
     lines = output.splitlines()
     hidden = [ln for ln in lines if "skipped folder '...'" in ln]
     assert len(hidden) == 1 and "rename it without the leading dot" in hidden[0], output

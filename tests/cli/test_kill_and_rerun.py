@@ -28,6 +28,7 @@ from pathlib import Path
 import numpy as np
 import pyarrow.parquet as pq
 import pytest
+
 from sim2radar.storage import ArtifactStore
 from sim2radar.tasks.dataset import read_dataset_frame
 

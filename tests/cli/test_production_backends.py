@@ -16,11 +16,11 @@ import cv2
 import numpy as np
 import pytest
 import yaml
-from sim2radar.storage import ArtifactStore
 from typer.testing import CliRunner
 
 from sim2radar.camera import CameraIntrinsics
 from sim2radar.cli import app
+from sim2radar.storage import ArtifactStore
 from tests.reconstruct._models import (
     SAM_INPUT,
     TINY_VOCAB,

@@ -7,11 +7,11 @@ import cv2
 import numpy as np
 import pytest
 import yaml
-from sim2radar.storage import ArtifactStore
 from typer.testing import CliRunner
 
 from sim2radar.cli import app
 from sim2radar.reconstruct.synthetic import corridor_frame
+from sim2radar.storage import ArtifactStore
 
 runner = CliRunner()
 

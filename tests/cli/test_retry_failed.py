@@ -7,10 +7,10 @@ import json
 import shutil
 
 import pytest
-from sim2radar.storage import ArtifactStore
 from typer.testing import CliRunner
 
 from sim2radar.cli import app
+from sim2radar.storage import ArtifactStore
 
 
 def _invoke(args):
@@ -81,6 +81,6 @@ def test_retry_failed_capture_scene(tmp_path, with_prefect):
     again = _invoke(args + ["--retry-failed", "--json", str(tmp_path / "again.json")])
     assert again.exit_code == 0, again.output
     summary = json.loads((tmp_path / "again.json").read_text())
-    assert [w["world_id"] for w in summary["worlds"]] == ["scene_late"]
-    assert summary["counts"]["ok"] == 1, summary["worlds"][0]["error"]
+    assert [w["id"] for w in summary["outcomes"]] == ["scene_late"]
+    assert summary["counts"]["ok"] == 1, summary["outcomes"][0]["error"]
     assert len(list((tmp_path / "opcd" / "points").glob("*.npy"))) == 4  # both scenes

@@ -18,8 +18,8 @@ import sys
 from pathlib import Path
 
 import pytest
-from sim2radar.storage import ArtifactStore
 
+from sim2radar.storage import ArtifactStore
 from tests.cli.test_kill_and_rerun import _export_files
 
 REPO = Path(__file__).resolve().parents[2]

@@ -36,6 +36,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+
 from sim2radar.storage import ArtifactStore
 
 REPO = Path(__file__).resolve().parents[2]

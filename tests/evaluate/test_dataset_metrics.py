@@ -6,20 +6,18 @@ import math
 
 import numpy as np
 import pytest
-from sim2radar.tasks.dataset import FrameOutcome
 
 from sim2radar.evaluate.dataset import compare_frames, finite_mean, geometry_metrics, stage_seconds
+from sim2radar.tasks.common import Outcome
 
 
 def _frame(n_points, n_labels, tp, n_gt, near, timings):
-    f = FrameOutcome("w_f000", "w", 0, 0, "ok")
-    f.n_points["reconstructed"] = n_points
-    f.n_labels["reconstructed"] = n_labels
-    f.n_gt_doors = n_gt
-    f.gt_points_near["reconstructed"] = near
+    f = Outcome("w_f000", "ok", seed=0, index=0, timings_s=dict(timings), measured={
+        "n_points": {"reconstructed": n_points}, "n_labels": {"reconstructed": n_labels},
+        "n_gt_doors": n_gt, "gt_points_near": {"reconstructed": near}})
     if n_gt or n_labels:
-        f.label_match["reconstructed"] = {"tp": tp, "n_pred": n_labels, "n_gt": n_gt}
-    f.timings_s.update(timings)
+        f.measured["label_match"] = {"reconstructed": {"tp": tp, "n_pred": n_labels,
+                                                       "n_gt": n_gt}}
     return f
 
 
@@ -35,7 +33,7 @@ def test_recall_and_precision_pool_matches_over_frames():
 
 def test_without_ground_truth_recall_and_precision_are_undefined_not_zero():
     frames = [_frame(80, 3, 0, 0, [], {})]
-    frames[0].label_match.clear()
+    frames[0].measured.pop("label_match", None)
     m = geometry_metrics(frames, ["reconstructed"])["reconstructed"]
     assert math.isnan(m["label_recall"]) and math.isnan(m["label_precision"])
     assert math.isnan(finite_mean([None, float("nan")]))

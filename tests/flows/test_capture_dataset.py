@@ -8,6 +8,7 @@ import shutil
 
 import numpy as np
 import pytest
+
 from sim2radar.storage import ArtifactStore
 
 FRAMES = 3
@@ -93,16 +94,15 @@ def test_capture_folder_to_radar_dataset_stage_by_stage(prefect_server, capture_
     plain = capture_dataset(capture_folder, tmp_path / "plain", "lab", use_prefect=False,
                             poses={"frames": FRAMES}, frames_per_task=2)
     keys = lambda s: sorted(f["artifacts"]["dataset_frames/reconstructed"]  # noqa: E731
-                            for w in s["worlds"] for f in w["frames"])
+                            for w in s["outcomes"] for f in w["parts"])
     assert keys(plain) == keys(first)
 
 
 def test_staged_reconstruction_equals_the_one_call_pipeline(capture_folder, tmp_path):
-    from sim2radar.storage.reconstruction import read_reconstruction
-    from sim2radar.tasks.capture import process_capture_scene
-
     from sim2radar.factory.captures import CaptureSpec, find_captures, load_capture_frame
     from sim2radar.reconstruct import reconstruct
+    from sim2radar.storage.reconstruction import read_reconstruction
+    from sim2radar.tasks.capture import process_capture_scene
 
     scene = find_captures(capture_folder)[0]
     spec = CaptureSpec(radar="ti-mmwcas", reconstruction=None, poses={"frames": 1})

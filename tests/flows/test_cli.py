@@ -8,10 +8,10 @@ import subprocess
 import sys
 from pathlib import Path
 
-from sim2radar.storage import ArtifactStore
 from typer.testing import CliRunner
 
 from sim2radar.cli import app
+from sim2radar.storage import ArtifactStore
 
 runner = CliRunner()
 

@@ -37,7 +37,7 @@ def cluster():
     """A 2-process LocalCluster on loopback (no dashboard), closed after the module."""
     pytest.importorskip("prefect_dask")
     distributed = pytest.importorskip("distributed")
-    from sim2radar.tasks.runners import local_cluster_kwargs
+    from sim2radar.flows.runners import local_cluster_kwargs
 
     with distributed.LocalCluster(**local_cluster_kwargs(2)) as lc:
         assert lc.scheduler_address.startswith("tcp://127.0.0.1:")
@@ -80,7 +80,8 @@ def _parquet_mtimes(root):
 def test_task_runner_choice_and_errors(monkeypatch):
     from prefect.task_runners import ThreadPoolTaskRunner
     from prefect_dask import DaskTaskRunner
-    from sim2radar.tasks.runners import task_runner
+
+    from sim2radar.flows.runners import task_runner
 
     threads = task_runner(3)
     assert isinstance(threads, ThreadPoolTaskRunner) and threads._max_workers == 3
@@ -102,21 +103,19 @@ def test_task_runner_choice_and_errors(monkeypatch):
 
 
 def test_workers_are_probed_before_use(cluster):
-    from sim2radar.tasks.runners import _worker_problems, check_dask_workers, task_runner
+    from sim2radar.flows.runners import _worker_problems, check_dask_workers, task_runner
 
     probes = check_dask_workers(cluster.scheduler_address)
     assert len(probes) == 2
-    for found in probes.values():  # the real packages, not Dask's spill folder "storage"
-        assert found["storage"] == str(REPO / "storage" / "__init__.py")
-        assert found["tasks"] == str(REPO / "tasks" / "__init__.py")
+    for found in probes.values():  # the installed package, from the checkout's folders
+        assert found["sim2radar.storage"] == str(REPO / "storage" / "__init__.py")
+        assert found["sim2radar.tasks"] == str(REPO / "tasks" / "__init__.py")
     assert task_runner(1, cluster.scheduler_address).address == cluster.scheduler_address
-    spill = {"w1": {"sim2radar": "/x/sim2radar/__init__.py", "tasks": "/x/tasks/__init__.py",
-                    "storage": "namespace ['/tmp/dask-scratch-space/worker-1/storage']"}}
-    (problem,) = _worker_problems("tcp://h:8786", spill)
-    assert "spill folder" in problem and "PYTHONPATH=$PWD dask worker tcp://h:8786" in problem
     missing = {"w2": {"sim2radar": "ImportError: ModuleNotFoundError: No module named 'sim2radar'",
-                      "tasks": "/x/tasks/__init__.py", "storage": "/x/storage/__init__.py"}}
-    assert "cannot import sim2radar" in _worker_problems("tcp://h:8786", missing)[0]
+                      "sim2radar.tasks": "/x/tasks/__init__.py",
+                      "sim2radar.storage": "/x/storage/__init__.py"}}
+    (problem,) = _worker_problems("tcp://h:8786", missing)
+    assert "cannot import sim2radar " in problem and "dask worker tcp://h:8786" in problem
     with pytest.raises(ConnectionError, match="no Dask scheduler at tcp://127.0.0.1:9"):
         check_dask_workers("tcp://127.0.0.1:9", timeout_s=1)
 
@@ -169,17 +168,17 @@ def test_simulate_flow_on_dask_matches_threads(cluster, prefect_server, tmp_path
 
 
 def test_generate_flow_on_dask_matches_threads(cluster, prefect_server, tmp_path):
+    from sim2radar.datasets import OpenPCDetDataset
+    from sim2radar.evaluate.reconstruction import chamfer_distance
     from sim2radar.flows.generate_dataset import generate_dataset
+    from sim2radar.radar import load_radar_config
     from sim2radar.storage import ArtifactStore
     from sim2radar.tasks import dataset as td
 
-    from sim2radar.datasets import OpenPCDetDataset
-    from sim2radar.evaluate.reconstruction import chamfer_distance
-    from sim2radar.radar import load_radar_config
-
     radar = load_radar_config("ti-mmwcas", ray_spacing_deg=0.5)
-    args = dict(seeds=[5, 6, BROKEN_SEED], frames_per_world=1, dataset="g", radar=radar,
-                geometry="both", world=WORLD, rig=RIG)
+    spec = {"frames_per_world": 1, "radar": radar, "geometry": "both", "world": WORLD,
+            "rig": RIG}
+    args = dict(spec=spec, seeds=[5, 6, BROKEN_SEED], dataset="g")
     dask_root, thread_root = tmp_path / "dask", tmp_path / "threads"
     on_dask = generate_dataset(store=dask_root / "store", export_dir=dask_root / "opd",
                                dask_address=cluster.scheduler_address, **args)
@@ -191,7 +190,7 @@ def test_generate_flow_on_dask_matches_threads(cluster, prefect_server, tmp_path
                for st, s in (("dask", on_dask), ("threads", on_threads))}
     assert "seed" in by_seed["dask"][BROKEN_SEED].error
     for seed in (5, 6):
-        fd, ft = by_seed["dask"][seed].frames, by_seed["threads"][seed].frames
+        fd, ft = by_seed["dask"][seed].parts, by_seed["threads"][seed].parts
         assert [f.artifacts for f in fd] == [f.artifacts for f in ft]
         for g in ("ground_truth", "reconstructed"):
             a = td.read_dataset_frame(dask_root / "store", fd[0].artifacts[f"dataset_frames/{g}"])

@@ -41,22 +41,18 @@ def test_generate_deployments_resolve_to_the_factory_job(monkeypatch):
     from prefect.client.schemas.schedules import CronSchedule
     from prefect.flows import load_flow_from_entrypoint
 
-    from sim2radar.factory.spec import resolve_spec
-
     monkeypatch.chdir(REPO)
     nightly = _deployment("nightly-generate")
     flow = load_flow_from_entrypoint(nightly["entrypoint"])
     assert flow.name == "generate-dataset-job"
     params = flow.validate_parameters(nightly["parameters"])
-    assert params["n_worlds"] == 8 and params["frames_per_world"] == 8
-    assert params["geometry"] == "reconstructed" and params["export_dir"]
+    # the spec travels whole: Prefect validates the parameter into a DatasetSpec, which
+    # resolves the configs it names (preset names, radar preset, world/rig)
+    spec = params["spec"]
+    assert params["n_worlds"] == 8 and params["export_dir"]
     assert params["dask_address"] is None and params["workers"] == 1
     sched = CronSchedule(cron=nightly["schedules"][0]["cron"], timezone="UTC")
     assert sched.cron == "0 3 * * *"  # after nightly-radar (02:00)
-    # the configs named in the parameters resolve (preset names, radar preset, world/rig)
-    spec = resolve_spec(params["frames_per_world"], params["geometry"], params["radar"],
-                        params["reconstruction"], params["world"], params["rig"],
-                        params["seed"])
     assert spec.geometries == ("reconstructed",) and spec.frames_per_world == 8
     assert spec.reconstruction.depth.name == "lidar"  # built-in backends, no weights
     on_demand = _deployment("generate-on-demand")

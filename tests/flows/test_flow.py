@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import pytest
+
 from sim2radar.storage import ArtifactStore
 
 
@@ -14,7 +15,7 @@ def test_flow_runs_twice_second_computes_nothing_and_failures_are_recorded(
     root = tmp_path / "store"
     scenes = [plate_scene, broken_scenes["unknown"]]
     seen = []
-    with progress_callback(lambda o: seen.append((o.scene_id, o.status))):
+    with progress_callback(lambda o: seen.append((o.id, o.status))):
         first = run_simulation(scenes, radar="ti-mmwcas", store=root, dataset="t", png_dir=tmp_path / "png")
     assert first["counts"] == {"ok": 1, "skipped": 0, "failed": 1}
     assert sorted(seen) == [("plate", "ok"), ("unknown_material", "failed")]

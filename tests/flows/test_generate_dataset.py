@@ -12,11 +12,12 @@ import os
 import numpy as np
 import pytest
 import yaml
-from sim2radar.storage import ArtifactStore
-from sim2radar.tasks import dataset as td
 
 from sim2radar.datasets import OpenPCDetDataset
 from sim2radar.radar import load_radar_config
+from sim2radar.storage import ArtifactStore
+from sim2radar.tasks import dataset as td
+from sim2radar.tasks.common import record
 from sim2radar.worlds import (
     generate_world,
     make_rig_config,
@@ -36,7 +37,7 @@ def _spec(**changes):
     args = dict(frames_per_world=2, geometry="both", radar=RADAR, reconstruction=None,
                 world=WORLD, rig=RIG, seed=0)
     args.update(changes)
-    return td.resolve_spec(**args)
+    return td.DatasetSpec(**args)
 
 
 @pytest.fixture(scope="module")
@@ -53,7 +54,7 @@ def run(tmp_path_factory):
 def _frames(run, geometry):
     world = next(o for o in run["outcomes"] if o.seed == SEED)
     return [td.read_dataset_frame(run["store"], f.artifacts[f"dataset_frames/{geometry}"])
-            for f in world.frames]
+            for f in world.parts]
 
 
 def test_ground_truth_frames_have_points_and_door_labels_in_radar_frame(run):
@@ -143,14 +144,14 @@ def test_radar_change_resimulates_without_reconstructing(run, monkeypatch):
         monkeypatch.setattr(f"sim2radar.reconstruct.pipeline.{stage}", boom)
     spec = _spec(radar=RADAR.with_updates(ray_spacing_deg=0.6), geometry="reconstructed")
     out = td.generate_world_dataset(SEED, spec, run["store"])
-    assert out.status == "ok" and all(f.status == "ok" for f in out.frames)
+    assert out.status == "ok" and all(f.status == "ok" for f in out.parts)
     first = next(o for o in run["outcomes"] if o.seed == SEED)
-    new_keys = [f.artifacts["dataset_frames/reconstructed"] for f in out.frames]
-    old_keys = [f.artifacts["dataset_frames/reconstructed"] for f in first.frames]
+    new_keys = [f.artifacts["dataset_frames/reconstructed"] for f in out.parts]
+    old_keys = [f.artifacts["dataset_frames/reconstructed"] for f in first.parts]
     assert set(new_keys).isdisjoint(old_keys)  # new radar -> new dataset frames
-    for f, o in zip(out.frames, first.frames, strict=True):  # ... from the same reconstruction
+    for f, o in zip(out.parts, first.parts, strict=True):  # ... from the same reconstruction
         assert f.artifacts["reconstruction/scene_meshes"] == o.artifacts["reconstruction/scene_meshes"]
-        assert f.n_points["reconstructed"] > 0
+        assert f.measured["n_points"]["reconstructed"] > 0
 
 
 def test_failed_frame_recorded_others_kept(run, monkeypatch):
@@ -166,10 +167,10 @@ def test_failed_frame_recorded_others_kept(run, monkeypatch):
     monkeypatch.setattr(rec, "segment_image", flaky)
     spec = _spec(reconstruction={"max_depth_m": 25.0}, geometry="reconstructed")
     out = td.generate_world_dataset(SEED, spec, run["store"])
-    td.record_world_dataset(run["store"], "flaky", out)
+    record(run["store"], "flaky", out)
     assert out.status == "failed" and "1 of 2" in out.error
-    assert [f.status for f in out.frames] == ["ok", "failed"]
-    assert "no segments" in out.frames[1].error
+    assert [f.status for f in out.parts] == ["ok", "failed"]
+    assert "no segments" in out.parts[1].error
     rows = {r["scene_id"]: r for r in run["store"].manifest("flaky").rows()}
     assert rows["world_000005_f001"]["status"] == "failed"
     assert "ReconstructionInputError" in rows["world_000005_f001"]["error"]
@@ -241,9 +242,8 @@ def test_prefect_flow_run_strict(run, prefect_server):
     from sim2radar.flows.generate_dataset import DatasetFailures, generate_dataset
 
     with pytest.raises(DatasetFailures) as info:
-        generate_dataset(seeds=[SEED, BROKEN_SEED], frames_per_world=2,
-                         store=run["root"] / "store", dataset="flow", radar=RADAR,
-                         geometry="both", world=WORLD, rig=RIG, strict=True)
+        generate_dataset(_spec(), seeds=[SEED, BROKEN_SEED], store=run["root"] / "store",
+                         dataset="flow", strict=True)
     summary = info.value.summary
     assert summary["counts"] == {"ok": 0, "skipped": 1, "failed": 1}
     assert summary["frame_counts"]["skipped"] == 2

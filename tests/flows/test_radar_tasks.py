@@ -8,6 +8,8 @@ import os
 import numpy as np
 import pytest
 import yaml
+
+from sim2radar.radar import load_radar_config
 from sim2radar.storage import (
     ArtifactStore,
     canonical_json,
@@ -15,8 +17,6 @@ from sim2radar.storage import (
     radar_frames_from_table,
 )
 from sim2radar.tasks.radar import scene_keys, simulate_scene, simulate_scenes_plain
-
-from sim2radar.radar import load_radar_config
 from tests.flows._scenes import PLATE_RANGE_M, write_scene
 
 
@@ -24,7 +24,8 @@ def test_plate_lands_3m_ahead_in_the_radar_frame_and_round_trips(plate_scene, tm
     store = ArtifactStore(tmp_path / "store")
     out = simulate_scene(plate_scene, "ti-mmwcas", store, seed=0, png_dir=tmp_path / "png")
     assert out.status == "ok" and count_sim["n"] == 2  # two radar poses
-    assert out.scene_id == "plate" and len(out.n_points) == 2 and min(out.n_points) > 0
+    n_points = out.measured["n_points"]
+    assert out.id == "plate" and len(n_points) == 2 and min(n_points) > 0
     frames = radar_frames_from_table(store.read("radar_points", out.artifacts["radar_points"]))
     radar = load_radar_config("ti-mmwcas")
     for f in frames:
@@ -38,7 +39,8 @@ def test_plate_lands_3m_ahead_in_the_radar_frame_and_round_trips(plate_scene, tm
     np.testing.assert_allclose(frames[0].radar_to_world, frames[1].radar_to_world, atol=1e-12)
     meshes = meshes_from_table(store.read("scene_meshes", out.artifacts["scene_meshes"]))
     assert [m.material for m in meshes] == ["metal"]
-    assert len(out.pngs) == 2 and all(open(p, "rb").read(4) == b"\x89PNG" for p in out.pngs)
+    pngs = out.measured["pngs"]
+    assert len(pngs) == 2 and all(open(p, "rb").read(4) == b"\x89PNG" for p in pngs)
     prov = store.read_provenance("radar_points", out.artifacts["radar_points"])
     assert prov["config"]["radar"] == json.loads(canonical_json(radar.to_dict()))
     assert prov["seed"] == 0 and prov["inputs"] == {"scene": out.artifacts["scene_meshes"]}
@@ -53,7 +55,7 @@ def test_second_run_computes_nothing(plate_scene, tmp_path, count_sim):
     n_calls = count_sim["n"]
     second = simulate_scene(plate_scene, "ti-mmwcas", store)
     assert second.status == "skipped" and count_sim["n"] == n_calls
-    assert second.artifacts == first.artifacts and second.n_points == first.n_points
+    assert second.artifacts == first.artifacts and second.measured["n_points"] == first.measured["n_points"]
     assert os.stat(path).st_mtime_ns == mtime
     assert simulate_scene(plate_scene, "ti-mmwcas", store, force=True).status == "ok"
     assert count_sim["n"] == n_calls + 2
@@ -112,4 +114,4 @@ def test_scene_without_poses_uses_the_identity(tmp_path):
     (frame,) = radar_frames_from_table(store.read("radar_points", out.artifacts["radar_points"]))
     np.testing.assert_array_equal(frame.radar_to_world, np.eye(4))
     assert frame.boxes.shape == (0, 7) and len(frame.points) > 0
-    assert out.locations["radar_points"].startswith("memory://")
+    assert out.measured["locations"]["radar_points"].startswith("memory://")

@@ -6,20 +6,18 @@ from __future__ import annotations
 import errno
 
 import pytest
-from sim2radar.flows._steps import record_scene_task
-from sim2radar.storage.manifest import Manifest
-from sim2radar.tasks.common import REMOTE_IO_RETRIES
-from sim2radar.tasks.dataset import WorldDatasetOutcome
-from sim2radar.tasks.radar import SceneOutcome, record_outcome_task
-from sim2radar.tasks.reconstruct import ReconOutcome, record_recon_outcome_task
-from sim2radar.tasks.worlds import WorldOutcome, record_world_outcome_task
 
-#: every task retried with REMOTE_IO_RETRIES that this file covers, with an outcome to record
+from sim2radar.storage.manifest import Manifest
+from sim2radar.tasks.common import REMOTE_IO_RETRIES, Outcome, record_task
+
+#: the one manifest task every flow uses, with outcomes of each kind to record: a scene, a
+#: reconstructed image, a world render, a dataset world with a frame (generate, captures)
 RECORD_TASKS = [
-    (record_outcome_task, SceneOutcome(scene_id="s", source="s.yaml", status="ok")),
-    (record_recon_outcome_task, ReconOutcome("f", "f.png", "ok")),
-    (record_world_outcome_task, WorldOutcome(world_id="world_000001", seed=1, status="ok")),
-    (record_scene_task, WorldDatasetOutcome("world_000002", 2, "ok")),  # generate, captures
+    (record_task, Outcome("s", "ok", source="s.yaml", measured={"n_points": [3, 4]})),
+    (record_task, Outcome("f", "ok", source="f.png")),
+    (record_task, Outcome("world_000001", "ok", seed=1)),
+    (record_task, Outcome("world_000002", "ok", seed=2,
+                          parts=[Outcome("world_000002_f000", "ok", index=0)])),
 ]
 
 
@@ -50,5 +48,6 @@ def test_manifest_tasks_retry_only_transient_io(prefect_server, tmp_path, monkey
         calls.clear()
         failures[:] = [ConnectionError("reset by peer"), TimeoutError("slow")]
         record(task, outcome)
-        assert len(calls) == 3, (task.name, calls)  # two flakes, then it went through
+        # two flakes, then it went through (and each frame's row after it)
+        assert calls == [outcome.id] * 3 + [p.id for p in outcome.parts], (task.name, calls)
         assert task.retries == REMOTE_IO_RETRIES

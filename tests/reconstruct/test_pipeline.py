@@ -230,6 +230,7 @@ def test_shipped_configs_parse():
 def _write_job(tmp_path, frame, name="f0"):
     import cv2
     import yaml
+
     from sim2radar.tasks.reconstruct import ImageJob
 
     cv2.imwrite(str(tmp_path / f"{name}.png"), frame.rgb[..., ::-1])
@@ -240,7 +241,8 @@ def _write_job(tmp_path, frame, name="f0"):
 
 
 def test_task_function_caches_by_content_key(tmp_path, frame):
-    from sim2radar.tasks.reconstruct import reconstruct_image, record_recon_outcome
+    from sim2radar.tasks.common import record
+    from sim2radar.tasks.reconstruct import reconstruct_image
 
     job = _write_job(tmp_path, frame)
     store = tmp_path / "store"
@@ -250,7 +252,7 @@ def test_task_function_caches_by_content_key(tmp_path, frame):
     assert again.status == "skipped" and again.artifacts == first.artifacts
     other = reconstruct_image(job, store, {"meshing": {"stride_px": 3}})
     assert other.status == "ok" and other.artifacts != first.artifacts
-    row = record_recon_outcome(store, "demo", first)
+    (row,) = record(store, "demo", first)
     assert row["status"] == "ok" and row["artifacts"] == first.artifacts
 
 
@@ -265,7 +267,7 @@ def test_flow_records_ok_skipped_and_failed(tmp_path, frame, monkeypatch):
     lidar = [job.lidar, job.lidar]
     s1 = run_reconstruction(images, job.intrinsics, lidar, store=tmp_path / "store", dataset="d")
     assert s1["counts"] == {"ok": 1, "skipped": 0, "failed": 1}
-    assert "broken.png" in s1["frames"][1]["error"]
+    assert "broken.png" in s1["outcomes"][1]["error"]
     s2 = run_reconstruction(images, job.intrinsics, lidar, store=tmp_path / "store", dataset="d")
     assert s2["counts"] == {"ok": 0, "skipped": 1, "failed": 1}
 

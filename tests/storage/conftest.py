@@ -6,6 +6,7 @@ import uuid
 
 import numpy as np
 import pytest
+
 from sim2radar.storage import radar_frames_to_table
 
 

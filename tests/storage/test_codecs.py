@@ -5,6 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pyarrow as pa
 import pytest
+
+from sim2radar.mesh import box_mesh
 from sim2radar.storage import (
     fixed_rows,
     fixed_rows_column,
@@ -15,8 +17,6 @@ from sim2radar.storage import (
     ragged_arrays,
     ragged_column,
 )
-
-from sim2radar.mesh import box_mesh
 
 
 def test_ragged_round_trip_1d_and_2d_with_empty_rows():

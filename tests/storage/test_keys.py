@@ -6,6 +6,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+
 from sim2radar.storage import KEY_LENGTH, canonical_json, content_key
 
 BASE = dict(

@@ -9,9 +9,10 @@ from pathlib import Path
 
 import pyarrow.parquet as pq
 import pytest
+from typer.testing import CliRunner
+
 from sim2radar.storage import ArtifactStore, content_key
 from sim2radar.storage.store import CorruptArtifactError
-from typer.testing import CliRunner
 
 KEY = content_key(stage="radar_points", stage_version=1, inputs={"scene": "s"}, config={"a": 1})
 

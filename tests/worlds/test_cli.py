@@ -5,10 +5,10 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
-from sim2radar.storage import ArtifactStore
 from typer.testing import CliRunner
 
 from sim2radar.cli import app
+from sim2radar.storage import ArtifactStore
 
 CONFIGS = Path(__file__).resolve().parents[2] / "configs" / "worlds"
 

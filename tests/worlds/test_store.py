@@ -7,10 +7,10 @@ import tempfile
 
 import numpy as np
 import pytest
+
 from sim2radar.storage import ArtifactStore, meshes_from_table
 from sim2radar.storage.worlds import decode_png, encode_png, frames_from_table
 from sim2radar.tasks.worlds import generate_world_artifacts, generate_worlds_plain, world_keys
-
 from sim2radar.worlds import generate_world, make_world_config
 from tests.worlds._helpers import SMALL_RIG
 
@@ -37,7 +37,7 @@ def test_keys_change_with_config_and_seed():
 def test_world_artifacts_round_trip_and_skip(tmp_path):
     store = ArtifactStore(tmp_path / "store")
     out = generate_world_artifacts(5, 2, store, SHORT, SMALL_RIG)
-    assert out.status == "ok" and out.n_frames == 2
+    assert out.status == "ok" and out.measured["n_frames"] == 2
     for stage, key in out.artifacts.items():
         assert store.exists(stage, key), stage
     world = generate_world(5, SHORT)
@@ -67,7 +67,7 @@ def test_world_artifacts_round_trip_and_skip(tmp_path):
     assert dots.min() > 0.999
 
     again = generate_world_artifacts(5, 2, store, SHORT, SMALL_RIG)
-    assert again.status == "skipped" and again.doors_visible == out.doors_visible
+    assert again.status == "skipped" and again.measured["doors_visible"] == out.measured["doors_visible"]
 
 
 def test_plain_run_records_manifest_and_failures(tmp_path, monkeypatch):

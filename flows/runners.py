@@ -1,6 +1,6 @@
 """Task runners for the factory's flows: one thread pool, or a Dask cluster.
 
-    from sim2radar.tasks.runners import task_runner
+    from sim2radar.flows.runners import task_runner
     runner = task_runner(workers=2, dask_address="local")      # LocalCluster, 2 processes
     runner = task_runner(workers=1, dask_address="tcp://10.0.0.5:8786")   # existing scheduler
     runner = task_runner(workers=1)                              # thread pool (default)
@@ -18,21 +18,17 @@ Choice of runner
   (:func:`sim2radar.hardware.mitsuba_variant` runs lazily inside the radar/world/reconstruction
   code), so no Dr.Jit state crosses a process boundary.
 * ``dask_address="tcp://host:8786"`` (any Dask scheduler address) -> ``DaskTaskRunner``
-  connected to that scheduler; the cluster's workers must run the same checkout/venv (they
-  import ``tasks``, ``storage`` and ``sim2radar``) and reach the artifact store (a shared folder
-  or an object-store URI).
+  connected to that scheduler; the cluster's workers must run in an environment where the same
+  sim2radar is installed (they import ``sim2radar.tasks`` and ``sim2radar.storage``) and reach
+  the artifact store (a shared folder or an object-store URI).
 
-What crosses to a Dask worker is pickled: the tasks receive plain values only (scene paths,
-store paths/URIs, specs as dicts, seeds) and return small dataclasses; arrays travel through
-the artifact store, never through Dask.
+What crosses to a Dask worker is pickled: the tasks receive plain values and specs only (scene
+paths, store paths/URIs, a DatasetSpec, seeds) and return small :class:`Outcome` records;
+arrays travel through the artifact store, never through Dask.
 
-Dask's own spill folder on each worker is called ``storage`` and sits in the worker's local
-directory, which Dask puts first on the worker's ``sys.path``: on a worker that cannot see a
-regular ``storage`` package earlier (the repository root on ``sys.path``), ``import storage``
-would find that folder instead of sim2radar's :mod:`storage`. The local cluster therefore runs
-without a memory limit (no spill folder; tasks return small outcomes), and for an external
-scheduler :func:`check_dask_workers` probes every worker first and says how to start them
-(``PYTHONPATH=$PWD dask worker ...`` from the repository root, or ``--memory-limit 0``).
+For an external scheduler :func:`check_dask_workers` probes every worker first and says how to
+start them. (Dask's spill folder on a worker is called ``storage``; when the store package was
+the top-level ``storage`` that folder could hide it. As ``sim2radar.storage`` it cannot.)
 
 ``prefect-dask`` and ``distributed`` are optional (``pip install 'sim2radar[dask]'``); asking
 for Dask without them raises :class:`ImportError` saying what to install.
@@ -98,8 +94,8 @@ def local_cluster_kwargs(workers: int) -> dict[str, Any]:
 
     ``workers`` processes with one thread each (a Mitsuba frame is already multi-threaded,
     and one task per process keeps each Dr.Jit/pymeshlab state private), on loopback only,
-    without the Bokeh dashboard, and without a memory limit: no spill folder named
-    ``storage`` that could shadow sim2radar's :mod:`storage` package (module docstring).
+    without the Bokeh dashboard, and without a memory limit: a worker's memory is Mitsuba's,
+    Dr.Jit's and PyTorch's, which Dask cannot spill, and its tasks return small records.
     """
     return {
         "n_workers": max(1, int(workers)),
@@ -111,7 +107,7 @@ def local_cluster_kwargs(workers: int) -> dict[str, Any]:
     }
 
 
-_PACKAGES = ("sim2radar", "tasks", "storage")
+_PACKAGES = ("sim2radar", "sim2radar.tasks", "sim2radar.storage")
 
 
 def _probe_packages() -> dict[str, str]:
@@ -120,7 +116,7 @@ def _probe_packages() -> dict[str, str]:
     import importlib
 
     out = {}
-    for name in ("sim2radar", "tasks", "storage"):
+    for name in _PACKAGES:
         try:
             mod = importlib.import_module(name)
             out[name] = getattr(mod, "__file__", None) or "namespace " + str(list(mod.__path__))
@@ -135,14 +131,11 @@ def _worker_problems(address: str, probes: dict[str, dict[str, str]]) -> list[st
     for worker, found in sorted(probes.items()):
         for name in _PACKAGES:
             where = found.get(name, "missing")
-            if where.startswith("namespace") and name == "storage":
-                problems.append(
-                    f"{worker}: `import storage` finds Dask's spill folder ({where}), not "
-                    "sim2radar's storage package: start the workers from the repository root "
-                    f"with `PYTHONPATH=$PWD dask worker {address} ...` (or `--memory-limit 0`)")
-            elif not where.endswith("__init__.py"):
-                problems.append(f"{worker}: cannot import {name} ({where}): the workers need "
-                                "the same sim2radar checkout/venv as the flow")
+            if not where.endswith("__init__.py"):
+                problems.append(f"{worker}: cannot import {name} ({where}): start the workers "
+                                f"in an environment with sim2radar installed (`pip install "
+                                f"-e .` or the wheel), e.g. `dask worker {address}` from the "
+                                "flow's virtual environment")
     return problems
 
 
@@ -158,8 +151,8 @@ def check_dask_workers(address: str, timeout_s: float = 10.0) -> dict[str, dict[
     ConnectionError
         No scheduler answers at ``address`` within ``timeout_s`` [s].
     RuntimeError
-        A worker imports ``storage`` from Dask's spill folder or lacks a package (the message
-        says how to start the workers).
+        A worker cannot import a package of the project (the message says how to start the
+        workers).
     """
     import distributed
 
@@ -168,17 +161,17 @@ def check_dask_workers(address: str, timeout_s: float = 10.0) -> dict[str, dict[
     except (OSError, TimeoutError) as exc:
         raise ConnectionError(
             f"no Dask scheduler at {address} ({exc}); start one with `dask scheduler --host "
-            "127.0.0.1` and workers with `PYTHONPATH=$PWD dask worker ADDRESS` from the "
-            "repository root"
+            "127.0.0.1` and workers with `dask worker ADDRESS` from the virtual environment "
+            "sim2radar is installed in"
         ) from exc
     with client:
         try:
             probes = client.run(_probe_packages) if client.scheduler_info()["workers"] else {}
-        except Exception as exc:  # noqa: BLE001 - e.g. the workers cannot import `tasks`
+        except Exception as exc:  # noqa: BLE001 - e.g. the workers cannot import sim2radar
             raise RuntimeError(
                 f"Dask workers at {address} cannot run sim2radar code ({type(exc).__name__}: "
-                f"{exc}); start them with the same checkout/venv: `PYTHONPATH=$PWD dask worker "
-                f"{address}` from the repository root") from exc
+                f"{exc}); start them from the virtual environment sim2radar is installed in: "
+                f"`dask worker {address}`") from exc
     problems = _worker_problems(address, probes)
     if problems:
         raise RuntimeError("Dask workers cannot run sim2radar tasks:\n" + "\n".join(problems))

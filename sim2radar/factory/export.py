@@ -1,0 +1,83 @@
+"""A dataset's frames in OpenPCDet's custom layout, split by world (or capture scene), with a
+``dataset.json`` that says what the export is: :func:`export_frames`. The factory's tasks read
+the frames from the store and call it."""
+
+from __future__ import annotations
+
+import logging
+import os
+from collections.abc import Iterable, Sequence
+from datetime import UTC, datetime
+from pathlib import Path
+from typing import Any
+
+from sim2radar.datasets import Frame, write_dataset, write_metadata
+from sim2radar.datasets.splits import split_groups
+from sim2radar.factory.frames import DatasetFrame
+from sim2radar.factory.labels import DEFAULT_POINT_CLOUD_RANGE_M, boxes_in_point_cloud_range
+
+__all__ = ["export_frames"]
+
+log = logging.getLogger(__name__)
+
+
+def export_frames(frames: Iterable[DatasetFrame], export_dir: str | os.PathLike,
+                  geometry: str, *, seed: int = 0,
+                     label_range_m: Sequence[float] | None = DEFAULT_POINT_CLOUD_RANGE_M,
+                     with_doppler: bool = False,
+                     splits: dict[str, list[str]] | None = None,
+                     metadata: dict[str, Any] | None = None) -> dict[str, Any]:
+    """Write the frames of one geometry in OpenPCDet's custom layout with
+    :func:`sim2radar.datasets.write_dataset`.
+
+    ``points/<frame_id>.npy`` (N, 4) float32 x, y, z [m], intensity [dB] (+ doppler [m/s] as a
+    5th column with ``with_doppler``); ``labels/<frame_id>.txt`` ``x y z dx dy dz heading
+    <class>``, only labels whose centre lies in ``label_range_m`` (the detector's point-cloud
+    range; None keeps all); ``ImageSets/{train,val,test}.txt`` split by world (seeded,
+    :func:`~sim2radar.datasets.splits.split_groups`, or the given ``splits``: split name -> world ids); ``dataset.json``
+    (:func:`sim2radar.datasets.write_metadata`): ``metadata`` plus the counts, the label rule
+    and the worlds of each split.
+
+    Returns ``{"root", "frames", "labels", "labels_dropped_out_of_range", "splits": {name:
+    n_frames}}``.
+    """
+    out_frames, world_of = [], {}
+    n_labels = n_dropped = 0
+    for df in frames:
+        keep = boxes_in_point_cloud_range(df.boxes, label_range_m)
+        n_labels += int(keep.sum())
+        n_dropped += int((~keep).sum())
+        points = df.points_with_doppler if with_doppler else df.points
+        out_frames.append(Frame(df.frame_id, points, df.boxes[keep],
+                                tuple(n for n, k in zip(df.box_labels, keep, strict=True) if k)))
+        world_of[df.frame_id] = df.world_id
+    worlds = splits or split_groups(sorted(set(world_of.values())), seed)
+    by_split = {name: [fid for fid in sorted(world_of) if world_of[fid] in set(ws)]
+                for name, ws in worlds.items()}
+    root = Path(export_dir)
+    write_dataset(root, out_frames, by_split)
+    out = {"root": str(root), "frames": len(out_frames), "labels": n_labels,
+           "labels_dropped_out_of_range": n_dropped,
+           "splits": {k: len(v) for k, v in by_split.items()}, "warnings": []}
+    empty = [k for k, v in by_split.items() if not v]
+    if not out_frames:
+        out["warnings"].append(
+            "no frame to export: every world/scene failed or was skipped (the manifest's error "
+            "column says why); the folder holds an empty dataset")
+    elif empty:
+        n_groups = len(set(world_of.values()))
+        out["warnings"].append(
+            f"split(s) {empty} are empty: {n_groups} world(s)/scene(s) cannot fill train, val "
+            "and test (the split is by world); generate more worlds or scenes, or train with "
+            "another split")
+    for w in out["warnings"]:
+        log.warning("%s: %s", root, w)
+    write_metadata(root, {
+        **(metadata or {}), **out, "geometry": geometry,
+        "point_columns": ["x_m", "y_m", "z_m", "intensity_db"] + (
+            ["doppler_mps"] if with_doppler else []),
+        "label_range_m": None if label_range_m is None else list(label_range_m),
+        "worlds": {k: sorted(set(v)) for k, v in worlds.items()},
+        "exported_at": datetime.now(UTC).isoformat(timespec="seconds"),
+    })
+    return out
