@@ -28,6 +28,7 @@ from typing import Any
 from prefect import flow, task
 from prefect.cache_policies import NO_CACHE
 
+from sim2radar.configio import DEFAULT_RADAR
 from sim2radar.factory.captures import CaptureScene, CaptureSpec, find_captures
 from sim2radar.flows import _progress
 from sim2radar.flows._steps import gather, run_as_tasks
@@ -201,7 +202,7 @@ def capture_dataset_job(
     store: str = "out/store",
     dataset: str = "captures",
     export_dir: str | None = None,
-    radar: str | dict = "ti-mmwcas",
+    radar: str | dict = DEFAULT_RADAR,
     reconstruction: str | dict | None = None,
     poses: dict | None = None,
     labels: dict | None = None,

@@ -31,6 +31,7 @@ from typing import Any
 
 from prefect import flow, get_run_logger
 
+from sim2radar.configio import DEFAULT_RADAR
 from sim2radar.flows import _progress
 from sim2radar.flows._steps import gather
 from sim2radar.flows.runners import ThreadRunner, task_runner
@@ -81,7 +82,7 @@ def _check_unique_ids(scenes: Sequence[str]) -> None:
 @flow(name="simulate-radar", task_runner=ThreadRunner(max_workers=1), log_prints=False)
 def simulate_flow(
     scenes: list[str],
-    radar: str = "ti-mmwcas",
+    radar: str = DEFAULT_RADAR,
     store: str = "out/store",
     dataset: str = "default",
     seed: int = 0,
@@ -130,7 +131,7 @@ def simulate_flow(
 
 def run_simulation(
     scenes: Sequence[str | os.PathLike],
-    radar: str = "ti-mmwcas",
+    radar: str = DEFAULT_RADAR,
     store: str | os.PathLike = "out/store",
     dataset: str = "default",
     *,
@@ -158,7 +159,7 @@ def run_simulation(
 @flow(name="simulate-dataset", log_prints=False)
 def simulate_dataset(
     scenes: list[str],
-    radar: str = "ti-mmwcas",
+    radar: str = DEFAULT_RADAR,
     store: str = "out/store",
     dataset: str = "default",
     seed: int = 0,

@@ -22,9 +22,12 @@ from typing import Any
 
 import yaml
 
-__all__ = ["CONFIG_KINDS", "bundled_configs", "config_path", "read_yaml_mapping", "real_number",
+__all__ = ["CONFIG_KINDS", "DEFAULT_RADAR", "bundled_configs", "config_path", "read_yaml_mapping", "real_number",
            "whole_number"]
 
+#: The radar preset (``sim2radar/radar/presets/<name>.yaml``) every command and function uses
+#: when no radar is named: TI's 4-chip cascade imaging radar (MMWCAS-RF-EVM), the paper's sensor.
+DEFAULT_RADAR = "ti-mmwcas"
 #: folders of ``sim2radar.configs``: the kinds of config a command loads by name
 CONFIG_KINDS = ("detect", "experiment", "generate", "reconstruct", "worlds")
 

@@ -28,6 +28,7 @@ import numpy as np
 from prefect import task
 from prefect.cache_policies import NO_CACHE
 
+from sim2radar.configio import DEFAULT_RADAR
 from sim2radar.factory.seeds import scene_file_frame_seed
 from sim2radar.scenes import scene_id_for
 from sim2radar.storage import (
@@ -90,7 +91,7 @@ def scene_keys(scene_path: str | os.PathLike, radar, seed: int = 0) -> dict[str,
 
 def simulate_scene(
     scene_path: str | os.PathLike,
-    radar: Any = "ti-mmwcas",
+    radar: Any = DEFAULT_RADAR,
     store: str | os.PathLike | ArtifactStore = "out/store",
     *,
     seed: int = 0,
@@ -270,7 +271,7 @@ def failed_outcome(scene_path: str | os.PathLike, error: BaseException | str) ->
 
 def simulate_scenes_plain(
     scenes: list[str | os.PathLike],
-    radar: Any = "ti-mmwcas",
+    radar: Any = DEFAULT_RADAR,
     store: str | os.PathLike | ArtifactStore = "out/store",
     dataset: str = "default",
     *,

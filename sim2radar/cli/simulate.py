@@ -16,6 +16,7 @@ from typing import Any
 import typer
 
 from sim2radar.cli._app import app, exit_unless_writable, quiet_recorded_failures
+from sim2radar.configio import DEFAULT_RADAR
 
 
 def _prefect_env(verbose: bool) -> None:
@@ -122,7 +123,7 @@ def simulate(
     scenes: list[str] = typer.Argument(
         ..., help="Scene YAML files, folders (all *.yaml inside) or globs: meshes + materials (+ radar_poses, boxes)."
     ),
-    radar: str = typer.Option("ti-mmwcas", "--radar", "-r", help="Radar preset name or YAML path."),
+    radar: str = typer.Option(DEFAULT_RADAR, "--radar", "-r", help="Radar preset name or YAML path."),
     out: str = typer.Option("out/store", "--out", "-o", help="Artifact store: folder or fsspec URI (s3://…)."),
     dataset: str = typer.Option("default", help="Manifest (dataset) name."),
     png_dir: Path | None = typer.Option(None, "--png-dir", help="Where to write BEV PNGs [default: OUT/../bev for local stores]."),

@@ -45,6 +45,7 @@ from typing import Any
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
+from sim2radar.configio import DEFAULT_RADAR
 from sim2radar.factory.labels import (
     DEFAULT_POINT_CLOUD_RANGE_M,
     LabelConfig,
@@ -204,7 +205,7 @@ def capture_settings(cfg: dict[str, Any], config_path: str | os.PathLike | None,
     if n is not None:
         poses["frames"] = n
     out: dict[str, Any] = {
-        "radar": radar or cfg.get("radar", "ti-mmwcas"),
+        "radar": radar or cfg.get("radar", DEFAULT_RADAR),
         "reconstruction": reconstruction or cfg.get("reconstruction"),
         "poses": poses,
         "seed": seed if seed is not None else cfg.get("seed", 0),

@@ -22,7 +22,7 @@ from pydantic import (
     model_validator,
 )
 
-from sim2radar.configio import config_path, whole_number
+from sim2radar.configio import DEFAULT_RADAR, config_path, whole_number
 from sim2radar.factory.labels import (
     DEFAULT_POINT_CLOUD_RANGE_M,
     LabelConfig,
@@ -35,8 +35,6 @@ __all__ = ["GEOMETRIES", "DEFAULT_RADAR", "DatasetSpec", "as_spec", "resolve_rad
 
 #: Geometry modes: radar simulated on the world's meshes, or on meshes reconstructed from RGB.
 GEOMETRIES = ("ground_truth", "reconstructed")
-#: The radar preset every command uses unless told otherwise (TI's 4-chip cascade board).
-DEFAULT_RADAR = "ti-mmwcas"
 
 
 class DatasetSpec(BaseModel):

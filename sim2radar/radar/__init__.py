@@ -21,6 +21,7 @@ from sim2radar.radar.binning import (
     deposit,
 )
 from sim2radar.radar.config import (
+    DEFAULT_RADAR,
     DetectionConfig,
     RadarConfig,
     RadarConfigError,
@@ -46,6 +47,7 @@ from sim2radar.radar.raytrace import (
 from sim2radar.radar.simulate import simulate_frame
 
 __all__ = [
+    "DEFAULT_RADAR",
     "Accumulator",
     "ArrayGeometry",
     "PATH_KINDS",

@@ -27,11 +27,12 @@ from typing import Any, Literal
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
-from sim2radar.configio import read_yaml_mapping
+from sim2radar.configio import DEFAULT_RADAR, read_yaml_mapping
 from sim2radar.constants import SPEED_OF_LIGHT_M_S
 from sim2radar.em import get_material
 
 __all__ = [
+    "DEFAULT_RADAR",
     "DetectionConfig",
     "HardwareConfig",
     "SignalChainConfig",

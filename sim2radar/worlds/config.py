@@ -22,7 +22,7 @@ from typing import Any
 
 from pydantic import BaseModel, ConfigDict, ValidationError, field_validator, model_validator
 
-from sim2radar.configio import config_path, read_yaml_mapping
+from sim2radar.configio import DEFAULT_RADAR, config_path, read_yaml_mapping
 from sim2radar.vocab import MATERIAL_CLASSES
 
 __all__ = [
@@ -292,7 +292,7 @@ class RigConfig(BaseModel):
     camera_position_m: tuple[float, float, float] = (0.0, 0.0, 1.25)
     #: Downward pitch of the camera [deg] (positive looks down).
     camera_pitch_deg: float = 3.0
-    radar_preset: str = "ti-mmwcas"
+    radar_preset: str = DEFAULT_RADAR
     radar_position_m: tuple[float, float, float] = (0.05, 0.0, 1.05)
     #: Radar azimuth / elevation field of view, full angles [deg], and maximum range [m] used
     #: for the door flags; ``None`` takes them from the ``radar_preset``'s RadarConfig.
