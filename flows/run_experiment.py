@@ -42,6 +42,7 @@ from prefect.futures import as_completed
 
 from sim2radar.experiment.plan import PlannedPretrain, PretrainResult
 from sim2radar.flows import _progress
+from sim2radar.flows.runners import task_runner
 from sim2radar.tasks.experiment import (
     failed_row,
     finetune_task,
@@ -49,7 +50,6 @@ from sim2radar.tasks.experiment import (
     write_json,
     write_runs_table,
 )
-from sim2radar.tasks.runners import task_runner
 
 __all__ = ["run_experiment_flow", "run_experiment", "run_experiment_job", "progress_callback"]
 

@@ -109,8 +109,8 @@ def run_sweep(sim: str, real: str, *, profile: str, name: str, out: str, store: 
 
     _prefect_env(verbose)
     from sim2radar.flows.run_experiment import progress_callback, run_experiment_flow
+    from sim2radar.flows.runners import task_runner
     from sim2radar.tasks.experiment import prepare_sweep
-    from sim2radar.tasks.runners import task_runner
 
     plan = prepare_sweep({**(datasets or {}), "sim": sim, "real": real}, profile=profile,
                          name=name, out=out, store=store, ablations=ablations,

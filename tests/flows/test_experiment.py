@@ -309,7 +309,7 @@ def test_a_sweep_on_a_dask_cluster_gives_the_thread_runners_results(first, data,
     pytest.importorskip("prefect_dask")
     distributed = pytest.importorskip("distributed")
     from sim2radar.flows.run_experiment import run_experiment
-    from sim2radar.tasks.runners import local_cluster_kwargs
+    from sim2radar.flows.runners import local_cluster_kwargs
 
     with distributed.LocalCluster(**local_cluster_kwargs(2)) as lc:
         summary = run_experiment(data["sim"], data["real"], profile="smoke", name="t",
@@ -337,7 +337,7 @@ def test_a_dask_worker_killed_mid_run_loses_nothing(data, prefect_server, tmp_pa
 
     from sim2radar.experiment.claims import read_events
     from sim2radar.flows.run_experiment import run_experiment
-    from sim2radar.tasks.runners import local_cluster_kwargs
+    from sim2radar.flows.runners import local_cluster_kwargs
 
     sweep = tmp_path / "sweeps" / "kill"
     killed: dict = {}
