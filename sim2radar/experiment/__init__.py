@@ -2,10 +2,13 @@
 radar, fine-tune on real radar, and compare 3D AP with training from scratch over real-data
 fractions x paired trials.
 
-- :mod:`~sim2radar.experiment.profiles` — :class:`ExperimentProfile` (``paper``, ``demo``,
-  ``smoke`` in ``configs/experiment/``) and the registry of conditions.
+- :mod:`~sim2radar.experiment.profiles` — :class:`ExperimentProfile` (``paper``, ``study``,
+  ``demo``, ``smoke``, bundled as ``sim2radar.configs``) and the registry of conditions.
 - :mod:`~sim2radar.experiment.subsets` — trial seeds and nested real-data subsets.
-- :mod:`~sim2radar.experiment.plan` — the runs of a sweep and what identifies each.
+- :mod:`~sim2radar.experiment.plan` — the typed :class:`SweepPlan`: the runs of a sweep and
+  what identifies each.
+- :mod:`~sim2radar.experiment.sweep` — planning a sweep (datasets by role, the settings check,
+  costs) and finishing it (statistics, report, dashboard); ``tasks/experiment.py`` executes it.
 - :mod:`~sim2radar.experiment.stats` — paired statistics (t-interval, Holm, d_z, bootstrap).
 - :mod:`~sim2radar.experiment.report` — Table 1 as Markdown and as artifact rows.
 - :mod:`~sim2radar.experiment.data`, :mod:`~sim2radar.experiment.runner` — datasets of a sweep

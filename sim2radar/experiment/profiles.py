@@ -71,6 +71,9 @@ class Condition:
     description : str — one line for reports.
     label : str — table heading (``Sim Pretrain``).
     colour : str — the dashboard's colour (``#rrggbb``).
+    geometry : str — the geometry its sim dataset is exported with when the sweep is given
+        ``store:NAME`` without one (``reconstructed``, the factory's; ``ground_truth``, the
+        ablation without reconstruction errors).
     """
 
     name: str
@@ -79,6 +82,7 @@ class Condition:
     description: str
     label: str
     colour: str
+    geometry: str = "reconstructed"
 
     @property
     def flag(self) -> str | None:
@@ -97,7 +101,7 @@ CONDITIONS: dict[str, Condition] = {c.name: c for c in (
               "Sim Pretrain", "#d62728"),
     Condition("sim-gt-pretrain", "sim-gt", True,
               "encoder pre-trained on simulated radar of ground-truth geometry and materials "
-              "(reconstruction errors removed)", "Sim-GT Pretrain", "#2ca02c"),
+              "(reconstruction errors removed)", "Sim-GT Pretrain", "#2ca02c", "ground_truth"),
     Condition("sim-one-material-pretrain", "sim-one-material", True,
               "encoder pre-trained on simulated radar whose materials are all one material "
               "(material labelling removed)", "Sim One-Material Pretrain", "#9467bd"),

@@ -146,10 +146,11 @@ def sweep_conditions(profile: ExperimentProfile, ablations: bool,
     return tuple(conditions), tuple(r for r in ROLES if r in needed)
 
 
-#: roles whose ``store:NAME`` dataset is exported with the worlds' true geometry by default
-#: (measured-like data, and the ablation without reconstruction errors); the others with the
-#: reconstructed geometry
-GROUND_TRUTH_ROLES = ("real", "sim-gt")
+#: roles whose ``store:NAME`` dataset is exported with the worlds' true geometry by default: the
+#: real role (measured-like data) and the conditions registered with ``geometry="ground_truth"``
+#: (the ablation without reconstruction errors); the others with the reconstructed geometry
+GROUND_TRUTH_ROLES = ("real", *(c.sim_role for c in CONDITIONS.values()
+                                if c.sim_role and c.geometry == "ground_truth"))
 
 
 def open_datasets(sources: Mapping[str, Any], roles: Sequence[str],

@@ -28,7 +28,6 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 import pytest
 from scipy import stats as sps
-from sim2radar.storage import get_schema
 
 from sim2radar.experiment.dashboard import (
     SweepFolderError,
@@ -40,6 +39,7 @@ from sim2radar.experiment.dashboard import (
     write_dashboard,
 )
 from sim2radar.experiment.report import detectability_sentences
+from sim2radar.storage import get_schema
 
 REPO = Path(__file__).resolve().parents[2]
 PROXY = "proxy-real (reference radar simulation)"
