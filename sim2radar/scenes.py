@@ -38,6 +38,7 @@ from sim2radar.boxes import boxes_to_frame
 from sim2radar.mesh import MaterialMesh, MeshFileError, load_scene
 
 __all__ = [
+    "simulate_scene_poses",
     "expand_scenes",
     "scene_id_for",
     "Scene",
@@ -291,3 +292,33 @@ def expand_scenes(scenes: Sequence[str | os.PathLike]) -> list[str]:
     if not out:
         raise FileNotFoundError(f"no scene files found in {[os.fspath(s) for s in scenes]}")
     return list(dict.fromkeys(out))  # de-duplicated, order kept
+
+
+def simulate_scene_poses(scene: Scene, radar, seeds: Sequence[int],
+                         simulate_fn=None) -> tuple[list[np.ndarray], list[float], list[dict]]:
+    """The radar at every pose of a scene file: per frame its points ((N, 4) float32 x, y, z
+    [m], intensity [dB]), its seconds and its ``stats``.
+
+    ``seeds`` are the frames' noise seeds (:func:`sim2radar.factory.seeds.scene_file_frame_seed`);
+    ``simulate_fn`` replaces :func:`sim2radar.radar.simulate_frame` (same signature; tests and
+    other simulators), else the scene's Mitsuba geometry is built once for every pose.
+    """
+    import time
+
+    meshes = list(scene.meshes)
+    if simulate_fn is None:
+        from sim2radar.radar import RadarScene, simulate_frame
+
+        simulate_fn, geometry = simulate_frame, RadarScene(meshes)
+    else:
+        geometry = meshes
+    points, seconds, stats = [], [], []
+    for k, (pose, seed) in enumerate(zip(scene.radar_poses, seeds, strict=True)):
+        t0 = time.perf_counter()
+        frame = simulate_fn(geometry, radar, pose, seed=seed)
+        seconds.append(time.perf_counter() - t0)
+        points.append(np.asarray(frame.points, dtype=np.float32).reshape(-1, 4))
+        stats.append(dict(getattr(frame, "stats", {}) or {}))
+        log.info("%s frame %d: %d points in %.2f s", scene.name, k, len(points[-1]),
+                 seconds[-1])
+    return points, seconds, stats

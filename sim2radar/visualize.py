@@ -23,7 +23,8 @@ import numpy as np
 
 from sim2radar.boxes import box_corners
 
-__all__ = ["INPUTS_KEY", "bev_png", "box_corners_xy", "frames_bev_png", "scene_extent"]
+__all__ = ["INPUTS_KEY", "bev_png", "box_corners_xy", "frames_bev_png", "radar_frames_pngs",
+           "scene_extent"]
 
 #: PNG text chunk holding the digest of a picture's inputs (and of :data:`_DRAWING_VERSION`).
 INPUTS_KEY = "sim2radar-inputs"
@@ -214,3 +215,25 @@ def scene_extent(points: np.ndarray, boxes: np.ndarray, margin_m: float = 1.0
     xy = np.concatenate([pts_xy, b[:, :2], np.zeros((1, 2), np.float32)])
     lo, hi = xy.min(axis=0) - margin_m, xy.max(axis=0) + margin_m
     return float(lo[0]), float(hi[0]), float(lo[1]), float(hi[1])
+
+
+def radar_frames_pngs(frames: Sequence, png_dir: str | Path, *, radar=None,
+                      scene_id: str | None = None) -> list[str]:
+    """One bird's-eye-view PNG per radar frame (:class:`sim2radar.storage.codecs` radar frames:
+    ``points``, ``boxes``, ``box_labels``, ``frame_index``, ``scene_id``), framed on the scene
+    rather than the radar's full range, with ``radar``'s azimuth FOV drawn when given. Files
+    are ``<scene_id>_f<frame>.png``; returns their paths."""
+    fov = getattr(radar, "azimuth_fov_rad", None)
+    max_range = getattr(radar, "max_range_m", None)
+    fov_deg = float(np.degrees(fov)) if fov is not None else None
+    out = []
+    for f in frames:
+        sid = scene_id or f.scene_id
+        path = Path(png_dir) / f"{sid}_f{f.frame_index:03d}.png"
+        extent = scene_extent(f.points, f.boxes) if len(f.points) or len(f.boxes) else None
+        bev_png(f.points, boxes=f.boxes, box_labels=f.box_labels, fov_deg=fov_deg,
+                max_range_m=None if extent is not None or max_range is None else float(max_range),
+                extent_m=extent, title=f"{sid} frame {f.frame_index}: {len(f.points)} points",
+                path=path)
+        out.append(str(path))
+    return out

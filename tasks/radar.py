@@ -24,7 +24,6 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-import numpy as np
 from prefect import task
 from prefect.cache_policies import NO_CACHE
 
@@ -157,30 +156,16 @@ def simulate_scene(
 
 
 def _compute(scene_path, scene_id, cfg, store, keys, seed, timings, simulate_fn) -> list[int]:
-    from sim2radar.scenes import load_scene_file
+    from sim2radar.scenes import load_scene_file, simulate_scene_poses
 
     t0 = time.perf_counter()
     scene = load_scene_file(scene_path)
     meshes = list(scene.meshes)
-    if simulate_fn is None:
-        from sim2radar.radar import RadarScene, simulate_frame
-
-        # build the Mitsuba scene once, simulate every pose from it
-        simulate_fn, geometry = simulate_frame, RadarScene(meshes)
-    else:
-        geometry = meshes
     timings["load"] = time.perf_counter() - t0
-
-    points, seconds, stats = [], [], []
-    for k, pose in enumerate(scene.radar_poses):
-        t0 = time.perf_counter()
-        frame = simulate_fn(geometry, cfg, pose,
-                            seed=scene_file_frame_seed(seed, keys["scene_meshes"], k))
-        seconds.append(time.perf_counter() - t0)
-        pts = np.asarray(frame.points, dtype=np.float32).reshape(-1, 4)
-        points.append(pts)
-        stats.append(jsonable(getattr(frame, "stats", {}) or {}))
-        log.info("scene %s frame %d: %d points in %.2f s", scene_id, k, len(pts), seconds[-1])
+    seeds = [scene_file_frame_seed(seed, keys["scene_meshes"], k)
+             for k in range(len(scene.radar_poses))]
+    points, seconds, stats = simulate_scene_poses(scene, cfg, seeds, simulate_fn)
+    stats = [jsonable(s) for s in stats]
     timings["simulate"] = float(sum(seconds))
 
     t0 = time.perf_counter()
@@ -225,43 +210,14 @@ def _derived(cfg) -> dict[str, Any]:
         return {}
 
 
-def _radar_view(cfg) -> tuple[float | None, float | None]:
-    """Azimuth FOV [deg] and max range [m] of a radar config, if it exposes them."""
-    fov = getattr(cfg, "azimuth_fov_rad", None)
-    rng = getattr(cfg, "max_range_m", None)
-    return (float(np.degrees(fov)) if fov is not None else None, float(rng) if rng is not None else None)
-
-
-def render_scene_pngs(
-    store: ArtifactStore, radar_key: str, png_dir: str | os.PathLike, cfg=None, scene_id: str | None = None
-) -> list[str]:
-    """Bird's-eye-view PNG per frame of a stored ``radar_points`` artifact.
-
-    Files are named ``<scene_id>_f<frame>.png``; returns their paths.
-    """
-    from sim2radar.visualize import bev_png, scene_extent
+def render_scene_pngs(store: ArtifactStore, radar_key: str, png_dir: str | os.PathLike,
+                      cfg=None, scene_id: str | None = None) -> list[str]:
+    """Bird's-eye-view PNG per frame of a stored ``radar_points`` artifact
+    (:func:`sim2radar.visualize.radar_frames_pngs`); returns their paths."""
+    from sim2radar.visualize import radar_frames_pngs
 
     frames = radar_frames_from_table(store.read("radar_points", radar_key))
-    fov_deg, max_range_m = _radar_view(cfg) if cfg is not None else (None, None)
-    out = []
-    for f in frames:
-        sid = scene_id or f.scene_id
-        path = Path(png_dir) / f"{sid}_f{f.frame_index:03d}.png"
-        pts = f.points
-        # frame the picture on the scene, not the radar's full range
-        extent = scene_extent(pts, f.boxes) if len(pts) or len(f.boxes) else None
-        bev_png(
-            pts,
-            boxes=f.boxes,
-            box_labels=f.box_labels,
-            fov_deg=fov_deg,
-            max_range_m=None if extent is not None else max_range_m,
-            extent_m=extent,
-            title=f"{sid} frame {f.frame_index}: {len(pts)} points",
-            path=path,
-        )
-        out.append(str(path))
-    return out
+    return radar_frames_pngs(frames, png_dir, radar=cfg, scene_id=scene_id)
 
 
 def failed_outcome(scene_path: str | os.PathLike, error: BaseException | str) -> Outcome:

@@ -730,3 +730,17 @@ def test_server_binds_loopback_only_and_checks_the_folder_first(sweep_dir, tmp_p
         serve_dashboard(sweep_dir, host="0.0.0.0")
     with pytest.raises(SweepFolderError, match="no such sweep folder"):
         serve_dashboard(tmp_path / "missing")
+
+
+def test_the_columns_the_page_reads_are_the_run_tables_columns():
+    """The dashboard checks runs.parquet against RUNS_COLUMNS without importing the store (the
+    library sits below it): every column it reads must exist in experiment_runs with a type
+    of that kind, and the identity columns must be the schema's non-nullable ones."""
+    from sim2radar.experiment.dashboard.data import _RUN_IDENTITY, RUNS_COLUMNS, _holds
+
+    schema = get_schema("experiment_runs").schema
+    for name, kind in RUNS_COLUMNS.items():
+        assert name in schema.names, name
+        assert _holds(schema.field(name).type, kind), (name, kind, schema.field(name).type)
+    for name in _RUN_IDENTITY:
+        assert not schema.field(name).nullable, name
