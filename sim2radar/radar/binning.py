@@ -73,7 +73,6 @@ import functools
 import math
 
 import numpy as np
-import scipy.fft
 
 from sim2radar.radar.config import RadarConfig
 
@@ -274,6 +273,8 @@ class Accumulator:
         g = np.asarray(self.grid)
         if geometry.integer_x:
             # sum_g G[g] e^{j pi n (-1 + 2g/M)} = e^{-j pi n} M ifft(G)[n]
+            import scipy.fft  # imported here: ~0.2 s, only needed once a scene is traced
+
             n, post = geometry._fft_terms
             s = scipy.fft.ifft(g, axis=-1)[..., n] * post.astype(g.dtype)
         else:
