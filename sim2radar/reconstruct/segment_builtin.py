@@ -51,27 +51,46 @@ The keyword options of :class:`BuiltinSegments` name the main thresholds; every 
 the steps compare against is a field of
 :class:`~sim2radar.reconstruct.segment_builtin_thresholds.SegmenterThresholds`, grouped by step,
 with its unit (``thresholds`` option).
+
+Where each part is:
+
+- this module — :class:`BuiltinSegments`: the options, the stage entry (steps 1–2 and the order
+  of the rest), the seed regions (3), their merge (4) and the geometric labels (5);
+- :mod:`~sim2radar.reconstruct.segment_builtin_geometry` — the shape of a region
+  (:func:`region_geometry`) and label-map primitives (pure functions);
+- :mod:`~sim2radar.reconstruct.segment_builtin_walls` — wall planes, furniture proud of a wall,
+  pieces flush with it (5), floor and ceiling by room geometry (6);
+- :mod:`~sim2radar.reconstruct.segment_builtin_doors` — door leaves grown from their fragment
+  (5), wall openings (7), door frames on the rectified walls (8);
+- :mod:`~sim2radar.reconstruct.segment_builtin_thresholds` — the tuning thresholds.
 """
 
 from __future__ import annotations
 
-import dataclasses
 import math
 
 import cv2
 import numpy as np
 
-from sim2radar.boxes import DOOR_THICKNESS_M, wrap_heading
+from sim2radar.boxes import DOOR_THICKNESS_M
 from sim2radar.reconstruct.backproject import (
     FloorPlane,
-    column_extent,
     find_floor,
     gravity_up,
     level_from_camera,
     points_from_depth,
     surface_normals,
 )
-from sim2radar.reconstruct.facade import FacadeConfig, WallPlane, find_facade_doors
+from sim2radar.reconstruct.facade import FacadeConfig
+from sim2radar.reconstruct.segment_builtin_doors import DoorSteps
+from sim2radar.reconstruct.segment_builtin_geometry import (
+    SegmentGeometry,
+    UnionFind,
+    fill_columns,
+    fill_nearest,
+    footprint_gap_m,
+    region_geometry,
+)
 from sim2radar.reconstruct.segment_builtin_thresholds import (
     SegmenterThresholds,
     config_from_options,
@@ -88,166 +107,8 @@ __all__ = ["BuiltinSegments", "SegmentGeometry", "SegmenterThresholds", "region_
            "footprint_gap_m"]
 
 
-@dataclasses.dataclass(frozen=True)
-class SegmentGeometry:
-    """Shape of one region in the level frame (x forward, y left, z up) [m].
-
-    Attributes
-    ----------
-    n_px : int — pixel count.
-    centroid : (3,) float64 [m]
-    normal : (3,) float64 — unit plane normal (PCA), facing the camera.
-    planarity : float — RMS distance of the points to their plane [m].
-    width_m : float [m] — horizontal extent along the plane (1st–99th percentile).
-    z_min_m, z_max_m : float [m] — vertical extent (1st / 99th percentile).
-    fill : float — pixel count over the area of the region's convex hull in the image.
-    borders : str — the image borders the region reaches: any of ``t`` (top), ``b`` (bottom),
-        ``l`` (left), ``r`` (right); its extent is cut on those sides.
-    """
-
-    n_px: int
-    centroid: np.ndarray
-    normal: np.ndarray
-    planarity: float
-    width_m: float
-    z_min_m: float
-    z_max_m: float
-    fill: float
-    borders: str
-
-    @property
-    def touches_border(self) -> bool:
-        """The region reaches the image border (it is partly out of view)."""
-        return bool(self.borders)
-
-    @property
-    def height_m(self) -> float:
-        return self.z_max_m - self.z_min_m
-
-    @property
-    def vertical_cos(self) -> float:
-        """|n · z|: 1 for a horizontal plane, 0 for a vertical one."""
-        return abs(float(self.normal[2]))
-
-
-def footprint_gap_m(centroid: np.ndarray, normal: np.ndarray, pixel_angle_rad: float | None,
-                    min_gap_m: float = 0.25) -> float:
-    """Largest gap [m] between neighbouring samples of one surface to still call it
-    contiguous: three pixel footprints along the surface (range·pixel angle / cos incidence),
-    at least ``min_gap_m``."""
-    if not pixel_angle_rad:
-        return min_gap_m
-    rng = float(np.linalg.norm(centroid))
-    cos_inc = abs(float(normal @ centroid)) / max(rng, 1e-9)
-    return max(min_gap_m, 3.0 * rng * pixel_angle_rad / max(cos_inc, 0.1))
-
-
-def region_geometry(points_level: np.ndarray, mask: np.ndarray, max_points: int = 4000,
-                    pixel_angle_rad: float | None = None) -> SegmentGeometry:
-    """Plane fit and extents of the pixels ``mask`` of a level-frame point map (H, W, 3).
-
-    ``pixel_angle_rad`` (≈ 1/fx) sets the gap that splits the points along the plane
-    (:func:`footprint_gap_m`); the width is that of the largest contiguous run."""
-    pts = points_level[mask]
-    pts = pts[np.isfinite(pts).all(axis=1)].astype(np.float64)
-    h, w = mask.shape
-    touches = "".join(side for side, edge in (("t", mask[0]), ("b", mask[-1]), ("l", mask[:, 0]),
-                                              ("r", mask[:, -1])) if edge.any())
-    if len(pts) < 3:
-        c = pts.mean(axis=0) if len(pts) else np.zeros(3)
-        return SegmentGeometry(len(pts), c, np.array([1.0, 0, 0]), 0.0, 0.0, 0.0, 0.0, 0.0,
-                               touches)
-    if len(pts) > max_points:
-        pts = pts[np.linspace(0, len(pts) - 1, max_points).astype(int)]
-    c = pts.mean(axis=0)
-    _, s, vt = np.linalg.svd(pts - c, full_matrices=False)
-    n = vt[2]
-    if n @ c > 0:  # face the camera (origin)
-        n = -n
-    planarity = float(s[2] / math.sqrt(len(pts)))
-    horiz = np.array([-n[1], n[0], 0.0])
-    if np.linalg.norm(horiz) < 1e-6:
-        horiz = np.array([1.0, 0.0, 0.0])
-    horiz /= np.linalg.norm(horiz)
-    a = pts @ horiz
-    z = pts[:, 2]
-    # the largest run along the plane without a gap: stray pixels of a neighbouring surface
-    # seen at a grazing angle must not inflate the width
-    order = np.argsort(a)
-    breaks = np.flatnonzero(np.diff(a[order]) > footprint_gap_m(c, n, pixel_angle_rad))
-    if len(breaks):
-        keep = max(np.split(order, breaks + 1), key=len)
-        a, z = a[keep], z[keep]
-    a0, a1 = np.percentile(a, [1, 99])
-    z0, z1 = np.percentile(z, [1, 99])
-    # fill: pixels over the area of their convex hull in the image (a rectangle seen in
-    # perspective projects to a convex quadrilateral, so a whole door gives ~1)
-    ij = np.argwhere(mask)
-    if len(ij) >= 3:
-        hull = cv2.convexHull(ij[:, ::-1].astype(np.int32))
-        fill = min(1.0, len(ij) / max(cv2.contourArea(hull) + 0.5 * cv2.arcLength(hull, True) + 1, 1))
-    else:
-        fill = 0.0
-    return SegmentGeometry(int(mask.sum()), c, n, planarity, float(a1 - a0), float(z0), float(z1),
-                           float(fill), touches)
-
-
-def _fill_columns(labels: np.ndarray) -> np.ndarray:
-    """Unlabelled pixels below the lowest (above the highest) labelled pixel of their column
-    take its label: the bands a sensor misses at the bottom / top of the image continue the
-    surface seen at their edge (floor below, ceiling above), not the nearest one sideways."""
-    out = labels.copy()
-    known = labels >= 0
-    h = labels.shape[0]
-    has = known.any(axis=0)
-    cols = np.flatnonzero(has)
-    if not len(cols):
-        return out
-    first = np.argmax(known, axis=0)
-    last = h - 1 - np.argmax(known[::-1], axis=0)
-    rows = np.arange(h)[:, None]
-    top_lab = labels[first, np.arange(labels.shape[1])]
-    bot_lab = labels[last, np.arange(labels.shape[1])]
-    above = (rows < first[None, :]) & has[None, :]
-    below = (rows > last[None, :]) & has[None, :]
-    out = np.where(above, top_lab[None, :], out)
-    out = np.where(below, bot_lab[None, :], out)
-    return out
-
-
-class _UnionFind:
-    def __init__(self, n: int) -> None:
-        self.parent = list(range(n))
-
-    def find(self, i: int) -> int:
-        while self.parent[i] != i:
-            self.parent[i] = self.parent[self.parent[i]]
-            i = self.parent[i]
-        return i
-
-    def union(self, a: int, b: int) -> None:
-        ra, rb = self.find(a), self.find(b)
-        if ra != rb:
-            self.parent[max(ra, rb)] = min(ra, rb)
-
-
-def _fill_nearest(labels: np.ndarray, fillable: np.ndarray) -> np.ndarray:
-    """Give every ``fillable`` pixel with label < 0 the label of the nearest labelled pixel."""
-    known = labels >= 0
-    if known.all() or not known.any():
-        return labels
-    src = np.where(known, 0, 255).astype(np.uint8)
-    _, idx = cv2.distanceTransformWithLabels(src, cv2.DIST_L2, 5, labelType=cv2.DIST_LABEL_PIXEL)
-    # idx counts zero pixels in row-major order, starting at 1
-    lut = np.concatenate([[-1], labels[known]])
-    out = labels.copy()
-    todo = fillable & ~known
-    out[todo] = lut[idx[todo]]
-    return out
-
-
 @SEGMENT_BACKENDS.register("builtin")
-class BuiltinSegments:
+class BuiltinSegments(DoorSteps):
     """Weight-free segmentation + geometric labelling (see the module docstring).
 
     Keyword options (all optional; defaults suit 640×480 corridor images and scale with size):
@@ -375,7 +236,7 @@ class BuiltinSegments:
         if self.fill_no_depth:
             # pixels without depth (e.g. below the LiDAR's lowest beam) join the nearest
             # region in the image: they get a label and material, but no 3D point
-            regions = _fill_nearest(_fill_columns(regions), np.ones_like(valid))
+            regions = fill_nearest(fill_columns(regions), np.ones_like(valid))
         labels, scores, info = self._label(regions, pl, frame.rgb, floor_z_known)
         regions, labels, scores, proud = self._proud_of_walls(regions, labels, scores, pl,
                                                               info["floor_z_m"])
@@ -449,7 +310,7 @@ class BuiltinSegments:
         lut = np.full(n, -1, np.int64)
         lut[keep] = np.arange(int(keep.sum()))
         labels = lut[cc]
-        return _fill_nearest(labels, valid)
+        return fill_nearest(labels, valid)
 
     def _level(self, pl, nl, up: bool) -> float | None:
         """Median height of pixels on horizontal surfaces facing up (floor) or down (ceiling)."""
@@ -494,7 +355,7 @@ class BuiltinSegments:
                 pa, pb = a[m], b[m]
                 codes = np.unique(np.minimum(pa, pb) * n + np.maximum(pa, pb))
                 pairs.update(codes.tolist())
-            uf = _UnionFind(n)
+            uf = UnionFind(n)
             cos_m = math.cos(math.radians(self.merge_normal_deg))
             merged = False
             for code in sorted(pairs):
@@ -587,467 +448,6 @@ class BuiltinSegments:
             scores.append(score)
         info = {"floor_z_m": float(floor_z), "ceiling_z_m": float(ceil_z)}
         return labels, scores, info
-
-    def _proud_of_walls(self, regions, labels, scores, pl, floor_z):
-        """Furniture standing against a wall: vertical regions ``proud_m`` in front of a large
-        wall plane become ``clutter``.
-
-        A door leaf is flush with its wall or set into it, and a window is set into it; a cabinet
-        or a radiator stands 0.1–0.6 m in front of it. A door/wall/window region of fewer
-        pixels than the wall (a large furniture front may itself count among the walls), with
-        at least 80 % of its points within the wall's extent, whose median distance in front of
-        the plane is within ``proud_m`` and whose 10th percentile is more than 3 cm, is that
-        furniture — unless its top is at door height and its plane is turned from the wall's
-        (an open leaf swung out of its doorway stands proud too, up to the lintel, but turned
-        by its swing angle; a tall cabinet's front faces as the wall does), or it reaches
-        above any door or its top is cut by the image (a wall of its own). With
-        ``proud_split``, pixels of a large wall region itself that stand proud of its plane
-        (furniture or an open leaf that the depth completion blended into the wall) are split
-        off as their own regions, of at least 0.2 % of the image: ``door`` when door-sized up
-        to door height and turned from the wall, ``clutter`` otherwise. Returns the regions,
-        labels, scores and the region ids turned to clutter (the door growing step skips
-        them)."""
-        cfg = self.thresholds
-        lo, hi = self.proud_m
-        valid = np.isfinite(pl).all(axis=-1)
-        counts = np.bincount(regions[regions >= 0], minlength=len(labels))
-        walls = self._wall_extents(regions, labels, pl, cfg.wall_min_frac, cfg.wall_top_n)
-        labels, scores = list(labels), list(scores)
-        proud: set[int] = set()
-        if self.proud_split:
-            # furniture merged into its wall's region (a completion that blends the two):
-            # connected pixels of the wall region standing proud of its plane
-            h, w = regions.shape
-            regions = regions.copy()
-            for wi, nrm, d, _, _ in walls:
-                with np.errstate(invalid="ignore"):
-                    front = pl @ nrm - d
-                blob = (regions == wi) & valid & (front > lo) & (front < hi)
-                blob = cv2.morphologyEx(blob.astype(np.uint8), cv2.MORPH_OPEN,
-                                        np.ones((cfg.proud_open_px,) * 2, np.uint8))
-                n_cc, cc, stats, _ = cv2.connectedComponentsWithStats(blob, connectivity=4)
-                for c in range(1, n_cc):
-                    if stats[c, cv2.CC_STAT_AREA] < cfg.proud_split_min_frac * h * w:
-                        continue
-                    blob_c = cc == c
-                    regions[blob_c] = len(labels)
-                    g = region_geometry(pl, blob_c, pixel_angle_rad=self._pixel_angle)
-                    top = np.percentile(pl[..., 2][blob_c], cfg.proud_top_pct) - floor_z
-                    if (top >= self.door_height_m[0]
-                            and not self._parallel(g.normal, nrm, cfg.parallel_deg)):
-                        # up to door height and turned from the wall: an open leaf swung out of
-                        # its doorway when it is door-sized; either way no longer part of the
-                        # wall's plane
-                        label, score = self._vertical_label(g, floor_z, np.inf, False)
-                        labels.append("door" if label == "door" else "clutter")
-                        scores.append(score if label == "door" else 0.4)
-                        continue
-                    proud.add(len(labels))
-                    labels.append("clutter")
-                    scores.append(0.5)
-            counts = np.bincount(regions[regions >= 0], minlength=len(labels))
-        for i, lbl in enumerate(labels):
-            if lbl not in ("door", "wall", "window") or counts[i] < cfg.proud_min_px:
-                continue
-            pts = pl[(regions == i) & valid]
-            if len(pts) < cfg.proud_min_points:
-                continue
-            top = np.percentile(pts[:, 2], cfg.proud_top_pct) - floor_z
-            tall = top >= self.door_height_m[0]
-            if tall and (top > self.door_height_m[1] or (regions[0] == i).any()):
-                continue  # up to the ceiling, or its top not seen: a wall
-            normal = region_geometry(pl, regions == i).normal if tall else None
-            for wi, nrm, d, along, (s0, s1) in walls:
-                if counts[i] >= counts[wi] or (
-                        tall and not self._parallel(normal, nrm, cfg.parallel_deg)):
-                    continue
-                sa = pts @ along
-                margin = cfg.proud_extent_margin_m
-                if ((sa > s0 - margin) & (sa < s1 + margin)).mean() < cfg.proud_within_frac:
-                    continue
-                f10, f50 = np.percentile(pts @ nrm - d, [cfg.proud_front_pct, 50])
-                if lo <= f50 <= hi and f10 > cfg.proud_min_front_m:
-                    labels[i], scores[i] = "clutter", 0.5
-                    proud.add(i)
-                    break
-        return regions, labels, scores, proud
-
-    def _flush_with_walls(self, regions, labels, pl, skip=frozenset()):
-        """Wall pieces too small for a wall by size — the strips a handrail, a window or a
-        shadow cut out of a wall, below the size the vertical rule calls ``wall`` — are
-        ``clutter`` only if they stand apart from the walls: a vertical region whose points lie
-        on a large wall's plane (80 % within ``flush_tol_m`` + 1 % of their range) and within
-        its extent is that wall (furniture stands proud of it, :meth:`_proud_of_walls`)."""
-        cfg = self.thresholds
-        labels = list(labels)
-        valid = np.isfinite(pl).all(axis=-1)
-        walls = self._wall_extents(regions, labels, pl, cfg.wall_min_frac, cfg.wall_top_n)
-        if not walls:
-            return labels
-        for i, lbl in enumerate(labels):
-            if lbl != "clutter" or i in skip:
-                continue
-            m = (regions == i) & valid
-            if m.sum() < cfg.flush_min_px:
-                continue
-            pts = pl[m]
-            g = region_geometry(pl, m, pixel_angle_rad=self._pixel_angle)
-            if g.vertical_cos > cfg.flush_max_vertical_cos:
-                continue
-            tol = cfg.flush_tol_m + cfg.flush_tol_per_m * np.linalg.norm(pts, axis=1)
-            margin = cfg.flush_extent_margin_m
-            for _, nrm, d, along, (s0, s1) in walls:
-                sa = pts @ along
-                on = (np.abs(pts @ nrm - d) < tol) & (sa > s0 - margin) & (sa < s1 + margin)
-                if on.mean() >= cfg.flush_on_frac:
-                    labels[i] = "wall"
-                    break
-        return labels
-
-    @staticmethod
-    def _parallel(normal: np.ndarray, wall_normal: np.ndarray, max_deg: float) -> bool:
-        """The region's plane faces the same way as the wall's (within ``max_deg``): standing
-        proud of the wall, it is a cabinet's front, not a door leaf swung out of its doorway
-        (turned by the swing angle; a leaf swung against the wall is only its thickness proud)."""
-        return abs(float(normal[:2] @ wall_normal[:2])) / max(
-            float(np.linalg.norm(normal[:2])), 1e-9) > math.cos(math.radians(max_deg))
-
-    def _grow_doors(self, regions, labels, scores, pl, lab, floor_z, ceil_z, skip=frozenset()):
-        """Complete door leaves from their lower fragment by colour.
-
-        LiDAR-completed depth blurs a leaf into its wall, so often only the leaf's lower part
-        survives as a region (labelled clutter or a small wall) and its upper part joins the
-        wall. For each vertical fragment standing on the floor (bottom within
-        ``door_bottom_max_m``) whose mean colour differs from its wall's (ΔE > ``grow_colour``),
-        the pixels within its image columns that are connected to it and of its colour
-        (ΔE < ``grow_colour``) are taken; if that grown region is a door (door width, top at
-        door height, below the ceiling) it becomes a ``door`` region."""
-        cfg = self.thresholds
-        n = len(labels)
-        flat = regions.ravel()
-        ok = flat >= 0
-        cnt = np.bincount(flat[ok], minlength=n).astype(np.float64)
-        n_valid = int(np.isfinite(pl[..., 2]).sum())
-        col = np.stack([np.bincount(flat[ok], lab[..., c].ravel()[ok], minlength=n)
-                        for c in range(3)], 1) / np.maximum(cnt, 1)[:, None]
-        big_wall = np.array([lbl == "wall" and cnt[i] >= cfg.wall_min_frac * n_valid
-                             for i, lbl in enumerate(labels)], bool)
-        labels, scores = list(labels), list(scores)
-        regions = regions.copy()
-        h, w = regions.shape
-        taken = np.zeros((h, w), bool)
-        for i in np.argsort(-cnt):
-            i = int(i)
-            if (cnt[i] < cfg.grow_min_px or labels[i] not in ("clutter", "wall", "window")
-                    or big_wall[i]
-                    or i in skip):
-                continue
-            mask = regions == i
-            if (mask & taken).any():
-                continue
-            g = region_geometry(pl, mask, max_points=cfg.quick_fit_points,
-                                pixel_angle_rad=self._pixel_angle)
-            if (g.vertical_cos > cfg.grow_max_vertical_cos
-                    or g.z_min_m > floor_z + self.door_bottom_max_m
-                    or g.width_m > self.door_width_m[1]):
-                continue
-            ys, xs = np.nonzero(mask)
-            x0, x1 = xs.min(), xs.max() + 1
-            close = np.linalg.norm(lab - col[i], axis=-1) < self.grow_colour
-            allowed = np.zeros((h, w), bool)
-            allowed[:, x0:x1] = True
-            grow = close & allowed & (regions >= 0) & ~taken
-            grow &= np.isin(regions, np.flatnonzero(
-                [labels[j] in ("wall", "clutter", "window", "door") for j in range(n)]))
-            grow |= mask
-            ncc, cc = cv2.connectedComponents(grow.astype(np.uint8), connectivity=4)
-            ids = np.unique(cc[mask])
-            grown = np.isin(cc, ids[ids > 0])
-            # the wall the grown pixels came from must differ in colour from the leaf
-            donors = np.unique(regions[grown & ~mask])
-            if any(big_wall[j] and np.linalg.norm(col[j] - col[i]) < self.grow_colour
-                   for j in donors):
-                continue
-            gg = region_geometry(pl, grown, pixel_angle_rad=self._pixel_angle)
-            top = gg.z_max_m - floor_z
-            slack = cfg.door_top_slack_m
-            if (gg.vertical_cos < cfg.grow_max_vertical_cos
-                    and gg.z_min_m < floor_z + self.door_bottom_max_m
-                    and self.door_height_m[0] - slack <= top <= self.door_height_m[1] + slack
-                    and self.door_width_m[0] <= gg.width_m <= self.door_width_m[1]
-                    and gg.z_max_m < ceil_z - cfg.below_ceiling_m):
-                regions[grown] = i
-                labels[i] = "door"
-                scores[i] = 0.5
-                taken |= grown
-        return regions, labels, scores
-
-    def _below_floor(self, regions, labels, scores, pl, rays, floor_z, ceil_z):
-        """Pixels that can only be floor (ceiling) by the room's geometry join the floor
-        (ceiling) region.
-
-        * A measured point more than ``below_floor_m`` (+ 1 % of its range) below the floor
-          level (above the ceiling) is impossible in a room: the depth there was extrapolated
-          from a wall (LiDAR completion fills the band under the lowest beam from the nearest
-          beams), and the pixel sees the floor (ceiling) in front of that wall.
-        * With ``fill_no_depth``, a pixel without depth below the lowest (above the highest)
-          measured pixel of its column whose viewing ray points down (up) sees the floor
-          (ceiling).
-
-        Either way the ray must cross the floor (ceiling) plane in front of every large wall
-        plane; otherwise it sees that wall. ``rays`` (H, W, 3) are the level-frame viewing directions (camera z = 1).
-        """
-        cfg = self.thresholds
-        valid = np.isfinite(pl).all(axis=-1)
-        h = valid.shape[0]
-        rng = np.linalg.norm(np.where(valid[..., None], pl, 0), axis=-1)
-        tol = self.below_floor_m + cfg.below_floor_per_m * rng
-        with np.errstate(invalid="ignore"):
-            floor_px = valid & (pl[..., 2] < floor_z - tol)
-            ceil_px = valid & (pl[..., 2] > ceil_z + tol)
-        rows = np.arange(h)[:, None]
-        first, last = column_extent(valid)
-        if self.fill_no_depth:
-            floor_px |= ~valid & (rows > last[None, :]) & (rays[..., 2] < -cfg.fill_ray_slope)
-            ceil_px |= ~valid & (rows < first[None, :]) & (rays[..., 2] > cfg.fill_ray_slope)
-        # the ray must reach the floor (ceiling) plane in front of every large wall plane:
-        # otherwise the pixel sees the wall's lower (upper) part
-        walls = self._large_walls(regions, labels, pl, cfg.floor_wall_min_frac,
-                                  cfg.floor_wall_top_n)
-        for px, level in ((floor_px, floor_z), (ceil_px, ceil_z)):
-            with np.errstate(invalid="ignore", divide="ignore"):
-                t = level / rays[..., 2]
-            q = rays * t[..., None]
-            for _, (nrm, d, _, _) in walls:
-                with np.errstate(invalid="ignore"):
-                    px &= ~(q @ nrm < d - cfg.floor_wall_margin_m)
-        labels, scores = list(labels), list(scores)
-        regions = regions.copy()
-        for px, name in ((floor_px, "floor"), (ceil_px, "ceiling")):
-            if px.sum() < cfg.min_segment_px:
-                continue
-            ids = [i for i, lab in enumerate(labels) if lab == name]
-            if ids:
-                cnt = np.bincount(regions[regions >= 0], minlength=len(labels))
-                target = max(ids, key=lambda i: cnt[i])
-            else:
-                target = len(labels)
-                labels.append(name)
-                scores.append(0.6)
-            regions[px] = target
-        return regions, labels, scores
-
-    def _wall_openings(self, regions, labels, scores, pl, floor_z, ceil_z):
-        """Doors and windows set into walls: pixels seen *behind* a wall plane through a
-        rectangle of the wall (a recessed leaf, a window pane, or a room through an open door).
-
-        For each large wall region, every other pixel whose point lies 4 cm – 4 m behind the
-        wall plane and whose viewing ray crosses the plane inside the wall's extent is a
-        candidate; connected candidates form an opening, measured on the wall plane (width
-        along the wall, bottom and top height), when the wall frames it left and right (the
-        wall region, or another large wall region on its plane: a doorway may split its wall
-        in two). Door-sized openings standing on the floor become door boxes (spanning the
-        wall: ``door_thickness_m`` behind the wall face) and their recessed pixels (< 0.35 m
-        behind) a ``door`` segment; sill-height openings a ``window``.
-
-        Returns the updated regions, labels, scores and a list of door boxes (level frame,
-        ``x y z dx dy dz heading``).
-        """
-        cfg = self.thresholds
-        h, w = regions.shape
-        valid = np.isfinite(pl).all(axis=-1)
-        n_reg = int(regions.max()) + 1
-        counts = np.bincount(regions[regions >= 0], minlength=n_reg)
-        walls = [i for i in np.argsort(-counts) if labels[i] == "wall"
-                 and counts[i] > cfg.opening_wall_min_frac * valid.sum()]
-        boxes: list[list[float]] = []
-        used = np.zeros((h, w), bool)
-        labels, scores = list(labels), list(scores)
-        is_wall = np.isin(regions, walls)
-        for wi in walls[:cfg.opening_max_walls]:
-            mask = regions == wi
-            plane = self._wall_plane(pl, mask)
-            if plane is None:
-                continue
-            nrm, d, g, wp = plane
-            along = np.array([-nrm[1], nrm[0], 0.0])
-            s_w = wp @ along
-            s0, s1 = np.percentile(s_w, [cfg.opening_wall_extent_pct,
-                                         100 - cfg.opening_wall_extent_pct])
-            npd = pl @ nrm
-            with np.errstate(invalid="ignore", divide="ignore"):
-                behind = d - npd  # > 0 behind the wall
-                q = pl * (d / npd)[..., None]  # ray crossing with the wall plane
-            sq, zq = q @ along, q[..., 2]
-            # (pixels of the wall region itself count too: a recessed leaf of a similar colour
-            # may have been merged into the wall)
-            inset = cfg.opening_inset_m
-            cand = (valid & ~used & (behind > cfg.opening_plane_tol_m)
-                    & (behind < cfg.opening_max_behind_m)
-                    & (sq > s0 + inset) & (sq < s1 - inset)
-                    & (zq > floor_z - cfg.opening_below_floor_m)
-                    & (zq < g.z_max_m + cfg.opening_above_wall_m))
-            cand = cv2.morphologyEx(cand.astype(np.uint8), cv2.MORPH_OPEN,
-                                    np.ones((cfg.opening_open_px,) * 2, np.uint8))
-            n_cc, cc, stats, _ = cv2.connectedComponentsWithStats(cand, connectivity=8)
-            for c in range(1, n_cc):
-                if stats[c, cv2.CC_STAT_AREA] < max(cfg.opening_min_px,
-                                                    cfg.opening_min_frac * h * w):
-                    continue
-                m = cc == c
-                # the opening must be framed by this wall left and right of it: pixels of the
-                # wall region at its middle row, or of another wall region on the same plane at
-                # its quarter, middle and three-quarter rows (the wall beyond a door may be a
-                # region of its own)
-                x0, x1 = stats[c, cv2.CC_STAT_LEFT], stats[c, cv2.CC_STAT_LEFT] + stats[c, cv2.CC_STAT_WIDTH]
-                rows = np.flatnonzero(m.any(axis=1))
-                mid = rows[len(rows) // 2]
-                quart = rows[[len(rows) // 4, len(rows) // 2, 3 * len(rows) // 4]]
-                coplanar = is_wall[quart] & (np.abs(behind[quart]) < cfg.opening_plane_tol_m)
-                fp = cfg.opening_frame_px
-                left_wall = (mask[mid, max(0, x0 - fp):x0].any() or x0 == 0
-                             or coplanar[:, max(0, x0 - fp):x0].any(1).all())
-                right_wall = (mask[mid, x1:min(w, x1 + fp)].any() or x1 == w
-                              or coplanar[:, x1:min(w, x1 + fp)].any(1).all())
-                if not (left_wall and right_wall):
-                    continue
-                ss, zz = sq[m], zq[m]
-                pct = [cfg.opening_extent_pct, 100 - cfg.opening_extent_pct]
-                a0, a1 = np.percentile(ss, pct)
-                b0, b1 = np.percentile(zz, pct)
-                width, bottom, top = a1 - a0, b0 - floor_z, b1 - floor_z
-                recess = m & (behind < cfg.recess_max_m)
-                kind = None
-                # doors stand on the floor, windows have a sill (>= 0.8 m in the procedural
-                # worlds); LiDAR-completed depth often loses an opening's lowest band, so a
-                # door-height opening whose bottom is below ``door_bottom_max_m`` is a door
-                slack = cfg.door_top_slack_m
-                sill, win_w, win_h = (cfg.opening_window_bottom_m, cfg.window_width_m,
-                                      cfg.opening_window_height_m)
-                if (bottom < self.door_bottom_max_m
-                        and self.door_width_m[0] <= width
-                        <= self.door_width_m[1] + cfg.opening_door_width_slack_m
-                        and self.door_height_m[0] - slack <= top <= self.door_height_m[1] + slack
-                        and b1 < ceil_z - cfg.below_ceiling_m):
-                    kind = "door"
-                elif (max(sill[0], self.door_bottom_max_m) < bottom < sill[1]
-                      and win_w[0] <= width <= win_w[1] and win_h[0] <= b1 - b0 <= win_h[1]):
-                    kind = "window"
-                if kind is None:
-                    continue
-                used |= m
-                if recess.sum() >= cfg.min_segment_px:
-                    regions = regions.copy()
-                    regions[recess] = len(labels)
-                    labels.append(kind)
-                    scores.append(0.7)
-                if kind == "door":
-                    th = self.door_thickness_m
-                    cxy = 0.5 * (a0 + a1) * along[:2] + (d - th / 2) * nrm[:2]
-                    heading = wrap_heading(math.atan2(along[1], along[0]))
-                    boxes.append([float(cxy[0]), float(cxy[1]), float(floor_z + top / 2),
-                                  float(width), th, float(top), float(heading)])
-        return regions, labels, scores, boxes
-
-    def _wall_plane(self, pl, mask):
-        """Vertical plane ``nrm · p = d`` of a wall region (``nrm`` horizontal, facing the
-        camera, ``d`` the median offset of its points), its geometry and its valid points; None
-        when the region is not vertical, lies within ``wall_min_distance_m`` of the camera, or
-        has fewer than ``wall_min_points`` pixels with depth (a region grown over pixels the
-        LiDAR missed)."""
-        cfg = self.thresholds
-        wp = pl[mask & np.isfinite(pl).all(axis=-1)]
-        if len(wp) < cfg.wall_min_points:
-            return None
-        g = region_geometry(pl, mask, pixel_angle_rad=self._pixel_angle)
-        if g.vertical_cos > cfg.wall_max_vertical_cos:
-            return None
-        nrm = np.array([g.normal[0], g.normal[1], 0.0])
-        nrm /= np.linalg.norm(nrm)
-        d = float(np.median(wp @ nrm))
-        return None if d > -cfg.wall_min_distance_m else (nrm, d, g, wp)
-
-    def _large_walls(self, regions, labels, pl, min_frac: float, top: int):
-        """``(region id, (nrm, d, geometry, points))`` of the ``wall`` regions among the
-        ``top`` largest regions that hold at least ``min_frac`` of the valid pixels and have a
-        vertical plane (:meth:`_wall_plane`), largest first."""
-        n_valid = int(np.isfinite(pl).all(axis=-1).sum())
-        counts = np.bincount(regions[regions >= 0], minlength=len(labels))
-        out = []
-        for wi in np.argsort(-counts)[:top]:
-            if labels[wi] != "wall" or counts[wi] < min_frac * n_valid:
-                continue
-            plane = self._wall_plane(pl, regions == wi)
-            if plane is not None:
-                out.append((int(wi), plane))
-        return out
-
-    def _wall_extents(self, regions, labels, pl, min_frac: float, top: int):
-        """``(region id, nrm, d, along, (s0, s1))`` of :meth:`_large_walls`: the horizontal
-        along-wall axis and the extent of the wall's points along it (percentiles
-        ``wall_extent_pct``, 100 − that) [m]."""
-        pct = [self.thresholds.wall_extent_pct, 100 - self.thresholds.wall_extent_pct]
-        out = []
-        for wi, (nrm, d, _, wp) in self._large_walls(regions, labels, pl, min_frac, top):
-            along = np.array([-nrm[1], nrm[0], 0.0])
-            s0, s1 = np.percentile(wp @ along, pct)
-            out.append((wi, nrm, d, along, (float(s0), float(s1))))
-        return out
-
-    def _wall_planes(self, regions, labels, pl) -> list[WallPlane]:
-        """Planes of the large vertical ``wall`` regions (coplanar ones merged), with the
-        along-wall extent of their pixels widened by ``facade_wall_pad_m`` (a door may split
-        its wall).
-
-        Regions within ``facade_coplanar_deg`` and ``facade_coplanar_m`` of each other are one
-        wall; its face is the front-most of them
-        (the largest offset: normals face the camera). A closed leaf is recessed a few
-        centimetres behind its wall's face and a double door's leaves can outnumber the wall
-        pixels around them: on the leaves' plane the frame around them lies in front of it
-        (occluded cells) and the facade search would not see its posts."""
-        cfg = self.thresholds
-        pad = cfg.facade_wall_pad_m
-        cos_c = math.cos(math.radians(cfg.facade_coplanar_deg))
-        planes: list[WallPlane] = []
-        for _, nrm, d, _, (s0, s1) in self._wall_extents(regions, labels, pl,
-                                                         cfg.facade_wall_min_frac,
-                                                         cfg.facade_wall_top_n):
-            for j, q in enumerate(planes):
-                if q.normal @ nrm > cos_c and abs(q.offset_m - d) < cfg.facade_coplanar_m:
-                    lo, hi = q.s_range_m
-                    planes[j] = WallPlane(q.normal, max(q.offset_m, d),
-                                          (min(lo, s0 - pad), max(hi, s1 + pad)))
-                    break
-            else:
-                planes.append(WallPlane(nrm, d, (s0 - pad, s1 + pad)))
-        return planes
-
-    def _facade_doors(self, regions, labels, scores, pl, rot, k, rgb, floor_z, ceil_z):
-        """Doorways found by their frames on the rectified wall planes
-        (:mod:`sim2radar.reconstruct.facade`); their pixels become ``door`` segments."""
-        sigma = self.thresholds.facade_blur_sigma_px
-        lab = cv2.cvtColor(cv2.GaussianBlur(rgb, (0, 0), sigma).astype(np.float32) / 255.0,
-                           cv2.COLOR_RGB2LAB)[..., 0]
-        grad = (cv2.Sobel(lab, cv2.CV_32F, 1, 0, ksize=3) / 8.0,
-                cv2.Sobel(lab, cv2.CV_32F, 0, 1, ksize=3) / 8.0)
-        boxes: list[list[float]] = []
-        labels, scores = list(labels), list(scores)
-        regions = regions.copy()
-        self.last_facade = []
-        for plane in self._wall_planes(regions, labels, pl):
-            for door in find_facade_doors(plane, floor_z, ceil_z, rot, k, pl, grad,
-                                          self.facade_config):
-                self.last_facade.append(door)
-                boxes.append([float(x) for x in door.box_level])
-                m = door.mask & (regions >= 0)
-                keep = np.isin(regions, [i for i, lbl in enumerate(labels)
-                                         if lbl in ("wall", "clutter", "window", "door")])
-                m &= keep
-                if m.sum() >= self.thresholds.min_segment_px:
-                    regions[m] = len(labels)
-                    labels.append("door")
-                    scores.append(0.6 + 0.3 * door.score)
-        return regions, labels, scores, boxes
 
     def _vertical_label(self, g: SegmentGeometry, floor_z: float, ceil_z: float,
                         ceiling_seen: bool, brightness: float = 1.0) -> tuple[str, float]:
