@@ -15,44 +15,39 @@ path length, first and last interaction point, visibility), after the return mod
   only that grid comes back to NumPy.
 * :meth:`RadarScene.trace_paths` (the reference radar) keeps every (ray, interaction) return
   as a propagation path (:class:`~sim2radar.radar.paths.PathSet`) for signal-level synthesis.
+
+Where each part is:
+
+- this module — :class:`RadarScene`: the Mitsuba scene it builds, the per-(config, seed) cache,
+  the two consumers above, the visibility query :meth:`RadarScene.first_hit_distance` and the
+  bare-Mitsuba baseline :meth:`RadarScene.intersect_only`;
+- :mod:`sim2radar.radar.raytrace_mesh` — meshes merged into one with per-face material and
+  object indices, the pose check (NumPy; re-exported here);
+- :mod:`sim2radar.radar.raytrace_tables` — the device tables and ray grid of a config and seed;
+- :mod:`sim2radar.radar.raytrace_bounces` — the bounce loop (``RadarScene``'s base class);
+- :mod:`sim2radar.radar.raytrace_polarization` — the Jones-vector operations of polarised rays.
 """
 
 from __future__ import annotations
 
-import dataclasses
 import math
 import time
-from collections.abc import Iterator, Sequence
+from collections.abc import Sequence
 
 import numpy as np
 
-from sim2radar.em import get_material
 from sim2radar.hardware import to_drjit
 from sim2radar.mesh import MaterialMesh
 from sim2radar.radar.binning import Accumulator, TraceResult, array_geometry
 from sim2radar.radar.config import RadarConfig, load_radar_config
 from sim2radar.radar.frame import RadarFrame, simulate_scene_frame
 from sim2radar.radar.paths import PATH_KINDS, PathSet
-from sim2radar.radar.returns import (
-    DIRECTIVE_LUT_SIZE,
-    FRESNEL_LUT_SIZE,
-    GOLDEN,
-    MAX_RETURN_SLABS,
-    MIN_COS,
-    continuation_uniforms,
-    diffuse_phase_seed,
-    directive_lut,
-    fresnel_lut,
-    polarized_luts,
-    ray_angles,
-    transmission_lut,
-    transmit_probability,
-)
+from sim2radar.radar.raytrace_bounces import BounceLoop
+from sim2radar.radar.raytrace_mesh import check_pose, face_object_ids, merge_meshes, mesh_list
+from sim2radar.radar.raytrace_tables import Prepared, material_tables, prepare_rays
 
 __all__ = ["RadarScene", "face_object_ids", "merge_meshes", "check_pose"]
 
-#: Object index meaning "no object" (a ray that is not inside a transmitting slab).
-NO_OBJECT = 0xFFFFFFFF
 #: Default margin below the receiver noise per cell under which single paths are pruned [dB].
 PRUNE_BELOW_NOISE_DB = 40.0
 #: Fixed-point steps of :meth:`RadarScene.trace`'s sums. Returns are added up as 64-bit integers
@@ -71,131 +66,7 @@ POWER_STEP = 2.0**-54
 _SUM_LIMIT = 2**61
 
 
-def check_pose(pose: np.ndarray | None) -> np.ndarray:
-    """Validate a (4, 4) radar-to-world transform (rigid); ``None`` -> identity."""
-    if pose is None:
-        return np.eye(4)
-    m = np.asarray(pose, dtype=np.float64)
-    if m.shape != (4, 4):
-        raise ValueError(f"pose must be a (4, 4) radar-to-world matrix, got shape {m.shape}")
-    if not np.isfinite(m).all():
-        raise ValueError("pose contains NaN or inf")
-    r = m[:3, :3]
-    if not np.allclose(r @ r.T, np.eye(3), atol=1e-4) or np.linalg.det(r) < 0:
-        raise ValueError("pose[:3, :3] must be a rotation (orthonormal, det +1)")
-    if not np.allclose(m[3], [0, 0, 0, 1]):
-        raise ValueError("pose last row must be [0, 0, 0, 1]")
-    return m
-
-
-def _mesh_list(meshes: Sequence[MaterialMesh]) -> list[MaterialMesh]:
-    if isinstance(meshes, MaterialMesh):
-        return [meshes]
-    meshes = list(meshes)
-    if not meshes:
-        raise ValueError("the scene has no meshes; pass a non-empty list of MaterialMesh")
-    for i, mesh in enumerate(meshes):
-        if not isinstance(mesh, MaterialMesh):
-            raise TypeError(f"meshes[{i}] is {type(mesh).__name__}, expected MaterialMesh")
-    return meshes
-
-
-def merge_meshes(
-    meshes: Sequence[MaterialMesh],
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[str]]:
-    """Concatenate meshes into one triangle soup with a per-face material index.
-
-    Returns
-    -------
-    vertices : (V, 3) float32 [m]
-    faces : (F, 3) uint32
-    face_material : (F,) uint32 — index into ``materials``
-    materials : list[str] — normalised material names
-    """
-    meshes = _mesh_list(meshes)
-    materials: list[str] = []
-    verts, faces, mats = [], [], []
-    offset = 0
-    for i, mesh in enumerate(meshes):
-        try:
-            name = get_material(mesh.material).name
-        except KeyError as exc:
-            raise ValueError(f"meshes[{i}] ({mesh.name or 'unnamed'}): {exc}") from None
-        if name not in materials:
-            materials.append(name)
-        verts.append(mesh.vertices)
-        faces.append(mesh.faces.astype(np.int64) + offset)
-        mats.append(np.full(len(mesh.faces), materials.index(name), dtype=np.uint32))
-        offset += len(mesh.vertices)
-    f = np.concatenate(faces)
-    if len(f) == 0:
-        raise ValueError("the scene's meshes have no faces")
-    return (
-        np.concatenate(verts).astype(np.float32),
-        f.astype(np.uint32),
-        np.concatenate(mats),
-        materials,
-    )
-
-
-def face_object_ids(meshes: Sequence[MaterialMesh]) -> np.ndarray:
-    """(F,) uint32 — the index of the mesh each face of :func:`merge_meshes` belongs to (one
-    mesh = one object = one slab for transmission)."""
-    meshes = _mesh_list(meshes)
-    return np.concatenate(
-        [np.full(len(m.faces), i, dtype=np.uint32) for i, m in enumerate(meshes)]
-    )
-
-
-@dataclasses.dataclass
-class _Prepared:
-    """Per-(config, seed) device arrays: ray grid, solid angles, tables, random draws."""
-
-    directions: object  # mi.Vector3f (N,), radar frame
-    n_rays: int
-    solid_angle: object  # mi.Float (N,)
-    diffuse_u: object  # mi.Float (N,) in [0, 1)
-    spacing_rad: float
-    lut_re: object  # reflection table (n_mat * FRESNEL_LUT_SIZE,)
-    lut_im: object
-    s_coef: object  # S per material
-    spec_coef: object  # sqrt(1 - S^2) per material
-    directive: bool
-    alpha: object | None  # alpha_R per material
-    dir_lut: object | None  # F_alpha table (n_mat * DIRECTIVE_LUT_SIZE,)
-    transmits: bool
-    t_re: object | None  # transmission table (n_mat * FRESNEL_LUT_SIZE,)
-    t_im: object | None
-    choice_u: list | None  # per bounce: mi.Float (N,) reflect-or-transmit draws
-    polarized: bool = False
-    slant: tuple[float, float] = (1.0, 0.0)  # (cos, sin) of the antennas' slant from vertical
-    pol_r: tuple | None = None  # (te_re, te_im, tm_re, tm_im) reflection tables
-    pol_t: tuple | None = None  # (te_re, te_im, tm_re, tm_im) transmission tables
-
-
-@dataclasses.dataclass
-class _Interaction:
-    """One bounce of the whole ray batch (Dr.Jit arrays; points in the world frame).
-
-    ``spec`` / ``diff``: the physical-optics and diffuse samples of :mod:`returns` without the
-    carrier phase ``e^{-jkL}`` (return-leg gain included); zero where not ``visible``.
-    """
-
-    bounce: int
-    valid: object  # Bool: the ray hit a surface
-    visible: object  # Bool: its return reaches the radar
-    hit: object  # Point3f: the interaction point [m]
-    arrival: object  # Point3f: last interaction point on the way back [m]
-    departure: object  # Point3f: first interaction point of the ray [m]
-    path_m: object  # Float: total round-trip length L [m]
-    spec_re: object
-    spec_im: object
-    diff_re: object
-    diff_im: object
-    n_interactions: object  # UInt32
-
-
-class RadarScene:
+class RadarScene(BounceLoop):
     """A scene built once for Mitsuba, simulated from many radar poses.
 
     Parameters
@@ -226,7 +97,7 @@ class RadarScene:
         import mitsuba as mi
 
         self._mi, self._dr = mi, dr
-        meshes = _mesh_list(meshes)  # once: an iterator would be consumed by the first pass
+        meshes = mesh_list(meshes)  # once: an iterator would be consumed by the first pass
         vertices, faces, face_material, self.materials = merge_meshes(meshes)
         self.n_triangles = int(len(faces))
         self.n_objects = len(meshes)
@@ -244,456 +115,27 @@ class RadarScene:
         self._scene = mi.load_dict({"type": "scene", "mesh": mesh})
         self._face_material = to_drjit(mi.UInt32, face_material, np.uint32)
         self._face_object = to_drjit(mi.UInt32, face_object_ids(meshes), np.uint32)
-        self._prepared: dict[tuple[str, int | None], _Prepared] = {}
+        self._prepared: dict[tuple[str, int | None], Prepared] = {}
         self._tables: dict[str, dict] = {}
         self.build_seconds = time.perf_counter() - t0
 
     # ------------------------------------------------------------------------------------
-    def _prepare(self, radar: RadarConfig, seed: int | None) -> _Prepared:
+    def _prepare(self, radar: RadarConfig, seed: int | None) -> Prepared:
         """The device arrays of one (config, seed): the seed's ray grid, speckle phases and
         reflect-or-transmit draws over the config's material tables (built once per config)."""
         h = radar.content_hash()
         key = (h, seed)
         if key in self._prepared:
             return self._prepared[key]
-        mi = self._mi
         if h not in self._tables:
             if len(self._tables) > 4:
                 self._tables.pop(next(iter(self._tables)))
-            self._tables[h] = self._material_tables(radar)
-        tables = self._tables[h]
-        # ray_grid's rays, their directions and solid angles made on the device
-        az, el, d_az, d_el = ray_angles(radar.azimuth_fov_rad, radar.elevation_fov_rad,
-                                        math.radians(radar.ray_spacing_deg), seed=seed)
-        n = len(az)
-        az_d, el_d = to_drjit(mi.Float, az, np.float32), to_drjit(mi.Float, el, np.float32)
-        dr = self._dr
-        sin_az, cos_az = dr.sincos(az_d)
-        sin_el, cos_el = dr.sincos(el_d)
-        directions = mi.Vector3f(cos_el * cos_az, cos_el * sin_az, sin_el)
-        solid_angle = cos_el * (d_az * d_el)
-        dr.eval(directions, solid_angle)
-        choice = None
-        if tables["transmits"]:
-            draws = continuation_uniforms(n, radar.max_bounces, seed)
-            choice = [to_drjit(mi.Float, row, np.float32) for row in draws]
-        prep = _Prepared(
-            directions=directions,
-            n_rays=n,
-            solid_angle=solid_angle,
-            diffuse_u=to_drjit(mi.Float, diffuse_phase_seed(n, seed), np.float32),
-            spacing_rad=math.sqrt(d_az * d_el),
-            choice_u=choice,
-            **tables,
-        )
+            self._tables[h] = material_tables(self._mi, self.materials, radar)
+        prep = prepare_rays(self._mi, self._dr, radar, seed, self._tables[h])
         if len(self._prepared) > 8:
             self._prepared.pop(next(iter(self._prepared)))
         self._prepared[key] = prep
         return prep
-
-    def _material_tables(self, radar: RadarConfig) -> dict:
-        """Per-material device tables of a config (Fresnel, roughness, lobes, transmission,
-        polarised TE/TM): the :class:`_Prepared` fields that no seed changes."""
-        mi = self._mi
-        sc = radar.scattering
-        thickness = [sc.thickness_m(m) for m in self.materials]
-        lut = fresnel_lut(self.materials, radar.center_frequency_hz, thickness_m=thickness)
-        lut = lut.astype(np.complex64)
-        s = np.array([sc.coefficient(m) for m in self.materials], dtype=np.float32)
-        directive = sc.model == "directive"
-        alpha = dir_lut = None
-        if directive:
-            alphas = [sc.lobe(m) for m in self.materials]
-            alpha = to_drjit(mi.Float, alphas, np.float32)
-            dir_lut = to_drjit(mi.Float, directive_lut(alphas).ravel(), np.float32)
-        transmits = any(sc.transmits(m) for m in self.materials)
-        t_re = t_im = None
-        if transmits:
-            tl = transmission_lut(
-                self.materials,
-                radar.center_frequency_hz,
-                [d if sc.transmits(m) else None for m, d in zip(self.materials, thickness,
-                                                                  strict=True)],
-            ).astype(np.complex64)
-            t_re, t_im = to_drjit(mi.Float, tl.real.ravel()), to_drjit(mi.Float, tl.imag.ravel())
-        pol_r = pol_t = None
-        polarized = radar.hardware.polarization != "unpolarized"
-        if polarized:
-            refl, trans = polarized_luts(self.materials, radar.center_frequency_hz, thickness,
-                                         [sc.transmits(m) for m in self.materials])
-
-            def tables(table: np.ndarray) -> tuple:
-                table = table.astype(np.complex64)
-                return tuple(to_drjit(mi.Float, part(table[:, :, k]).ravel())
-                             for k in (0, 1) for part in (np.real, np.imag))
-
-            pol_r, pol_t = tables(refl), tables(trans)
-        slant = math.radians(90.0 if radar.hardware.polarization == "horizontal" else 0.0)
-        return {
-            "lut_re": to_drjit(mi.Float, lut.real.ravel()),
-            "lut_im": to_drjit(mi.Float, lut.imag.ravel()),
-            "s_coef": to_drjit(mi.Float, s),
-            "spec_coef": to_drjit(mi.Float, np.sqrt(1.0 - s**2), np.float32),
-            "directive": directive,
-            "alpha": alpha,
-            "dir_lut": dir_lut,
-            "transmits": transmits,
-            "t_re": t_re,
-            "t_im": t_im,
-            "polarized": polarized,
-            "slant": (math.cos(slant), math.sin(slant)),
-            "pol_r": pol_r,
-            "pol_t": pol_t,
-        }
-
-    def _primary_rays(self, prep: _Prepared, pose: np.ndarray):
-        """Rotate the cached radar-frame grid by the pose (opaque scalars: no recompilation)."""
-        mi, dr = self._mi, self._dr
-        rot = [[dr.opaque(mi.Float, float(pose[i, j])) for j in range(3)] for i in range(3)]
-        origin = mi.Point3f(*(dr.opaque(mi.Float, float(v)) for v in pose[:3, 3]))
-        d = prep.directions
-        d_world = mi.Vector3f(
-            *(rot[i][0] * d.x + rot[i][1] * d.y + rot[i][2] * d.z for i in range(3))
-        )
-        return mi.Ray3f(origin, d_world), origin
-
-    def _table(self, re, im, mat, cos_t, active, size: int):
-        """Linear interpolation of per-material complex tables sampled over cos in [0, 1]."""
-        mi, dr = self._mi, self._dr
-        x = dr.clip(cos_t, 0.0, 1.0) * (size - 1)
-        i0 = dr.minimum(mi.UInt32(dr.floor(x)), size - 2)
-        frac = x - mi.Float(i0)
-        base = mat * size + i0
-        out_re = dr.lerp(dr.gather(mi.Float, re, base, active),
-                         dr.gather(mi.Float, re, base + 1, active), frac)
-        if im is None:
-            return out_re
-        out_im = dr.lerp(dr.gather(mi.Float, im, base, active),
-                         dr.gather(mi.Float, im, base + 1, active), frac)
-        return out_re, out_im
-
-    def _intersect(self, ray, active, skip_obj):
-        """Closest hit; a ray inside a transmitting slab (``skip_obj``) ignores that object's
-        faces once (its back face: the slab is the whole object)."""
-        mi, dr = self._mi, self._dr
-        si = self._scene.ray_intersect(ray, active)
-        if skip_obj is None:
-            return si
-        obj = dr.gather(mi.UInt32, self._face_object, si.prim_index, active & si.is_valid())
-        again = active & si.is_valid() & (obj == skip_obj)
-        si2 = self._scene.ray_intersect(si.spawn_ray(ray.d), again)
-        return dr.select(again, si2, si)
-
-    def _return_leg(self, si, candidate, radar_pos, prep: _Prepared, fields=None):
-        """Gain of the way back from ``si`` to the radar through slab materials.
-
-        Returns ``(tau_re, tau_im, visible, arrival, n_slabs, fields)``: each transmissive
-        object on the line multiplies ``tau`` by its ``T`` (both faces of one object count
-        once), any other surface (or more than :data:`MAX_RETURN_SLABS` slabs) blocks. With
-        ``prep.polarized``, ``fields`` (a list of complex field vectors ``(re, im)``) pass each
-        slab through its TE/TM transmission instead and ``tau`` stays 1.
-        """
-        mi, dr = self._mi, self._dr
-        tau_re = dr.full(mi.Float, 1.0, dr.width(candidate))
-        tau_im = dr.zeros(mi.Float, dr.width(candidate))
-        n_slabs = dr.zeros(mi.UInt32, dr.width(candidate))
-        arrival = mi.Point3f(si.p)
-        visible = mi.Bool(candidate)
-        pending = mi.Bool(candidate)
-        ray = si.spawn_ray_to(radar_pos)
-        for step in range(MAX_RETURN_SLABS + 1):
-            sb = self._scene.ray_intersect(ray, pending)
-            blocked = pending & sb.is_valid()
-            if step == MAX_RETURN_SLABS:
-                visible &= ~blocked
-                break
-            mat = dr.gather(mi.UInt32, self._face_material, sb.prim_index, blocked)
-            obj = dr.gather(mi.UInt32, self._face_object, sb.prim_index, blocked)
-            u = dr.normalize(ray.d)
-            cos_b = dr.abs(dr.dot(u, sb.n))
-            if prep.polarized:
-                te = self._table(prep.pol_t[0], prep.pol_t[1], mat, cos_b, blocked,
-                                 FRESNEL_LUT_SIZE)
-                tm = self._table(prep.pol_t[2], prep.pol_t[3], mat, cos_b, blocked,
-                                 FRESNEL_LUT_SIZE)
-                through = blocked & ((te[0] * te[0] + te[1] * te[1]
-                                      + tm[0] * tm[0] + tm[1] * tm[1]) > 0.0)
-                s_b = self._te_basis(u, sb.n)
-                fields = [tuple(dr.select(through, new, old) for new, old in zip(
-                    self._jones(f, s_b, u, u, te, tm), f, strict=True)) for f in fields]
-            else:
-                t_re, t_im = self._table(prep.t_re, prep.t_im, mat, cos_b, blocked,
-                                         FRESNEL_LUT_SIZE)
-                through = blocked & ((t_re * t_re + t_im * t_im) > 0.0)
-                new_re = tau_re * t_re - tau_im * t_im
-                new_im = tau_re * t_im + tau_im * t_re
-                tau_re = dr.select(through, new_re, tau_re)
-                tau_im = dr.select(through, new_im, tau_im)
-            visible &= ~(blocked & ~through)
-            n_slabs += dr.select(through, mi.UInt32(1), mi.UInt32(0))
-            # leave the object: skip its other face on the way to the radar
-            ray2 = sb.spawn_ray_to(radar_pos)
-            sb2 = self._scene.ray_intersect(ray2, through)
-            obj2 = dr.gather(mi.UInt32, self._face_object, sb2.prim_index,
-                             through & sb2.is_valid())
-            same = through & sb2.is_valid() & (obj2 == obj)
-            arrival = dr.select(through, dr.select(same, sb2.p, sb.p), arrival)
-            ray = dr.select(same, sb2.spawn_ray_to(radar_pos), ray2)
-            pending = through
-        return tau_re, tau_im, visible, arrival, n_slabs, fields
-
-    # -- polarisation (prep.polarized) ---------------------------------------------------
-    def _te_basis(self, k, n):
-        """Unit TE vector ``s = k x n / |k x n|`` of a wave along ``k`` meeting a surface of
-        normal ``n`` (Sionna RT's Jones basis; any vector normal to ``k`` at normal
-        incidence)."""
-        mi, dr = self._mi, self._dr
-        s = dr.cross(k, n)
-        n2 = dr.squared_norm(s)
-        alt = dr.cross(k, dr.select(dr.abs(k.z) < 0.9, mi.Vector3f(0.0, 0.0, 1.0),
-                                    mi.Vector3f(1.0, 0.0, 0.0)))
-        s = dr.select(n2 > 1e-12, s, alt)
-        return s * dr.rsqrt(dr.maximum(dr.squared_norm(s), 1e-30))
-
-    def _jones(self, field, s, k_in, k_out, te, tm):
-        """A complex field vector ``field = (re, im)`` through one interaction: ``r_te (E.s) s +
-        r_tm (E.p_in) p_out`` with ``p = k x s`` for the incoming and outgoing directions
-        (reflection: ``k_out`` the reflected or returning direction; transmission through a
-        slab: ``k_out = k_in``); ``te``, ``tm`` = (re, im) coefficients (ITU-R P.2040-3
-        eq. (31) / (43); Sionna RT's sign convention, ``r_tm = -r_te`` at normal incidence).
-        """
-        dr = self._dr
-        e_re, e_im = field
-        p_in, p_out = dr.cross(k_in, s), dr.cross(k_out, s)
-        es_re, es_im = dr.dot(e_re, s), dr.dot(e_im, s)
-        ep_re, ep_im = dr.dot(e_re, p_in), dr.dot(e_im, p_in)
-        a_re = te[0] * es_re - te[1] * es_im
-        a_im = te[0] * es_im + te[1] * es_re
-        b_re = tm[0] * ep_re - tm[1] * ep_im
-        b_im = tm[0] * ep_im + tm[1] * ep_re
-        return a_re * s + b_re * p_out, a_im * s + b_im * p_out
-
-    def _apply(self, carry, op):
-        """``carry`` through one interaction ``op``: ``("scalar", (re, im), None)`` multiplies a
-        complex scalar carry; ``("jones", (s, k_in, k_out, te, tm), scale)`` sends a field
-        vector through :meth:`_jones` and multiplies it by the real ``scale`` (if any)."""
-        kind, args, scale = op
-        if kind == "scalar":
-            return (carry[0] * args[0] - carry[1] * args[1],
-                    carry[0] * args[1] + carry[1] * args[0])
-        out = self._jones(carry, *args)
-        return out if scale is None else (out[0] * scale, out[1] * scale)
-
-    def _antenna(self, d, up, prep: _Prepared):
-        """The antennas' unit polarisation vector for the direction ``d`` [world] (a wave
-        leaving the TX along ``d``, or reaching the RX from ``d``): ``cos(slant) v + sin(slant)
-        h`` with ``v`` the radar's up axis ``up`` made normal to ``d`` (theta-hat up to sign,
-        Sionna RT's "V") and ``h = up x d`` normalised (phi-hat, "H")."""
-        dr = self._dr
-        c, s = prep.slant
-        v = up - dr.dot(up, d) * d
-        e = v * (c * dr.rsqrt(dr.maximum(dr.squared_norm(v), 1e-30)))
-        if s != 0.0:
-            h = dr.cross(up, d)
-            e = e + h * (s * dr.rsqrt(dr.maximum(dr.squared_norm(h), 1e-30)))
-        return e
-
-    def _interactions(
-        self, radar: RadarConfig, pose: np.ndarray, prep: _Prepared, hits
-    ) -> Iterator[_Interaction]:
-        """THE bounce loop: yield what every ray's interaction sends back, bounce by bounce.
-
-        State (ray, carry, path, ...) is evaluated at the start of each following bounce, in
-        one kernel with whatever the consumer scheduled or scattered in between.
-        ``hits`` (UInt32, max_bounces) counts the rays that hit something per bounce.
-        """
-        mi, dr = self._mi, self._dr
-        ray, radar_pos = self._primary_rays(prep, pose)
-        n = prep.n_rays
-        wavenumber = 2.0 * math.pi / radar.wavelength_m
-        inv_lambda = 1.0 / radar.wavelength_m
-
-        # C: product of earlier specular factors. With transmission two copies: ``carry`` is
-        # amplitude-unbiased (E[C] exact; it weights the coherent PO samples) and ``carry_d``
-        # power-unbiased (E|C|^2 exact; it weights the diffuse samples) -- returns.py, item 3.
-        # Polarised (prep.polarized), C is the complex field vector (re, im) of the ray instead,
-        # starting as the TX antenna's polarisation along the ray.
-        up = None
-        if prep.polarized:
-            up = mi.Vector3f(*(dr.opaque(mi.Float, float(pose[i, 2])) for i in range(3)))
-            e0 = self._antenna(ray.d, up, prep)
-            carry = (e0, dr.zeros(mi.Vector3f, n))
-        else:
-            carry = (dr.full(mi.Float, 1.0, n), dr.zeros(mi.Float, n))
-        carry_d = carry
-        path_in = dr.zeros(mi.Float, n)
-        active = dr.full(mi.Bool, True, n)
-        d_omega = prep.solid_angle
-        prev_hit = mi.Point3f(radar_pos)
-        departure = mi.Point3f(radar_pos)
-        skip_obj = dr.full(mi.UInt32, NO_OBJECT, n) if prep.transmits else None
-
-        def cmul(a, b):
-            return a[0] * b[0] - a[1] * b[1], a[0] * b[1] + a[1] * b[0]
-
-        def power(c):
-            return dr.squared_norm(c[0]) + dr.squared_norm(c[1])
-
-        for bounce in range(radar.max_bounces):
-            if bounce > 0:
-                state = [ray, prev_hit, departure, *carry, path_in, active, hits]
-                if prep.transmits:
-                    state += [skip_obj, *carry_d]
-                dr.eval(*state)
-            si = self._intersect(ray, active, skip_obj if bounce > 0 else None)
-            valid = active & si.is_valid()
-            dr.scatter_reduce(dr.ReduceOp.Add, hits, mi.UInt32(1), mi.UInt32(bounce), valid)
-            normal = si.n
-            cos_in = -dr.dot(ray.d, normal)
-            normal = dr.select(cos_in < 0, -normal, normal)
-            cos_in = dr.abs(cos_in)
-            hit = si.p
-            if bounce == 0:
-                departure = mi.Point3f(hit)
-            # unfold the path from the true hit points: si.t is measured from the spawned
-            # origin, which Mitsuba offsets ~(1+|p|) 1e-4 m off the surface (~0.1 lambda)
-            path_in = path_in + dr.select(valid, dr.norm(hit - prev_hit), 0.0)
-            to_radar = radar_pos - hit
-            r_out = dr.norm(to_radar)
-            u_out = to_radar / r_out
-            cos_out = dr.dot(u_out, normal)
-            visible = valid & (cos_out > 0)
-            arrival = mi.Point3f(hit)
-            mat = dr.gather(mi.UInt32, self._face_material, si.prim_index, valid)
-            s_coef = dr.gather(mi.Float, prep.s_coef, mat, valid)
-            spec = dr.gather(mi.Float, prep.spec_coef, mat, valid)
-            reflected = ray.d + 2.0 * cos_in * normal
-            if prep.polarized:
-                # the field sent back toward the radar, TE/TM on this surface (returns.py)
-                r_te = self._table(prep.pol_r[0], prep.pol_r[1], mat, cos_in, valid,
-                                   FRESNEL_LUT_SIZE)
-                r_tm = self._table(prep.pol_r[2], prep.pol_r[3], mat, cos_in, valid,
-                                   FRESNEL_LUT_SIZE)
-                s_vec = self._te_basis(ray.d, normal)
-                fields = [self._jones(carry, s_vec, ray.d, u_out, r_te, r_tm)]
-                if prep.transmits:
-                    fields.append(self._jones(carry_d, s_vec, ray.d, u_out, r_te, r_tm))
-            n_ret = mi.UInt32(0)
-            tau = None
-            if bounce > 0:
-                if prep.transmits:
-                    tau_re, tau_im, visible, arrival, n_ret, fields_out = self._return_leg(
-                        si, visible, radar_pos, prep, fields if prep.polarized else None)
-                    if prep.polarized:
-                        fields = fields_out
-                    else:
-                        tau = (tau_re, tau_im)
-                else:
-                    visible &= ~self._scene.ray_test(si.spawn_ray_to(radar_pos), visible)
-
-            if prep.polarized:  # received: the RX antenna's polarisation . field
-                e_rx = self._antenna(-u_out, up, prep)
-                cg = (dr.dot(e_rx, fields[0][0]), dr.dot(e_rx, fields[0][1]))
-                cd = (dr.dot(e_rx, fields[-1][0]), dr.dot(e_rx, fields[-1][1])) \
-                    if prep.transmits else cg
-            else:
-                gamma = self._table(prep.lut_re, prep.lut_im, mat, cos_in, valid,
-                                    FRESNEL_LUT_SIZE)
-                cg = cmul(carry, gamma)                                     # C * Gamma
-                if tau is not None:
-                    cg = cmul(cg, tau)                                      # C * Gamma * tau
-                cd = cg
-                if prep.transmits:  # the diffuse sample's C * Gamma * tau
-                    cd = cmul(carry_d, gamma)
-                    if tau is not None:
-                        cd = cmul(cd, tau)
-            cg_re, cg_im = cg
-            cd_re, cd_im = cd
-
-            # physical-optics (specular) sample with the Nyquist window
-            ci = dr.maximum(cos_in, MIN_COS)
-            grad = ray.d - u_out
-            grad_t = grad - dr.dot(grad, normal) * normal
-            dphi = wavenumber * dr.norm(grad_t) * path_in * prep.spacing_rad / ci
-            xw = dr.clip((dphi - 0.5 * math.pi) / (0.5 * math.pi), 0.0, 1.0)
-            window = dr.select(xw < 1.0, dr.square(dr.cos(0.5 * math.pi * xw)), 0.0)
-            amp_c = (
-                inv_lambda * spec * d_omega * (cos_in + cos_out) / (2.0 * ci) * (path_in / r_out)
-            ) * window
-            amp_c = dr.select(visible, amp_c, 0.0)
-            # diffuse sample: S sqrt(dOmega f_s) / r_o with a per-ray speckle phase
-            if prep.directive:
-                alpha = dr.gather(mi.Float, prep.alpha, mat, valid)
-                f_norm = self._table(prep.dir_lut, None, mat, cos_in, valid, DIRECTIVE_LUT_SIZE)
-                x = dr.maximum(0.5 * (1.0 + dr.dot(u_out, reflected)), 1e-30)
-                pattern = dr.exp(alpha * dr.log(x)) / f_norm
-            else:
-                pattern = dr.maximum(cos_out, 0.0) / math.pi
-            amp_d = s_coef * dr.sqrt(d_omega * pattern) / r_out
-            amp_d = dr.select(visible, amp_d, 0.0)
-            u = prep.diffuse_u + bounce * GOLDEN
-            sin_d, cos_d = dr.sincos(-2.0 * math.pi * (u - dr.floor(u)))
-
-            record = _Interaction(
-                bounce=bounce,
-                valid=valid,
-                visible=visible,
-                hit=hit,
-                arrival=arrival,
-                departure=departure,
-                path_m=path_in + r_out,
-                spec_re=-cg_im * amp_c,  # j * C Gamma * amp_c
-                spec_im=cg_re * amp_c,
-                diff_re=(cd_re * cos_d - cd_im * sin_d) * amp_d,
-                diff_im=(cd_re * sin_d + cd_im * cos_d) * amp_d,
-                n_interactions=mi.UInt32(bounce + 1) + n_ret,
-            )
-
-            if bounce + 1 < radar.max_bounces:
-                # continuation: specular reflection, or (slabs) a seeded reflect-or-transmit
-                direction = reflected
-                if prep.polarized:
-                    r_op = ("jones", (s_vec, ray.d, reflected, r_te, r_tm), spec)
-                else:
-                    r_op = ("scalar", (gamma[0] * spec, gamma[1] * spec), None)
-                if prep.transmits:
-                    if prep.polarized:
-                        t_te = self._table(prep.pol_t[0], prep.pol_t[1], mat, cos_in, valid,
-                                           FRESNEL_LUT_SIZE)
-                        t_tm = self._table(prep.pol_t[2], prep.pol_t[3], mat, cos_in, valid,
-                                           FRESNEL_LUT_SIZE)
-                        t_op = ("jones", (s_vec, ray.d, ray.d, t_te, t_tm), None)
-                        e2 = dr.maximum(power(carry), 1e-30)
-                        q = transmit_probability(power(self._apply(carry, r_op)) / e2,
-                                                 power(self._apply(carry, t_op)) / e2)
-                    else:
-                        t_c = self._table(prep.t_re, prep.t_im, mat, cos_in, valid,
-                                          FRESNEL_LUT_SIZE)
-                        t_op = ("scalar", t_c, None)
-                        q = transmit_probability(
-                            (gamma[0] * gamma[0] + gamma[1] * gamma[1]) * spec * spec,
-                            t_c[0] * t_c[0] + t_c[1] * t_c[1])
-                    reflect = prep.choice_u[bounce] >= q
-                    w = dr.select(reflect, 1.0 - q, q)  # probability of the chosen branch
-                    k_c = dr.rcp(dr.maximum(w, 1e-30))  # amplitude-unbiased weight
-                    k_d = dr.rsqrt(dr.maximum(w, 1e-30))  # power-unbiased weight
-                    carry = tuple(dr.select(reflect, a, b) * k_c for a, b in zip(
-                        self._apply(carry, r_op), self._apply(carry, t_op), strict=True))
-                    carry_d = tuple(dr.select(reflect, a, b) * k_d for a, b in zip(
-                        self._apply(carry_d, r_op), self._apply(carry_d, t_op), strict=True))
-                    direction = dr.select(reflect, reflected, ray.d)
-                    obj = dr.gather(mi.UInt32, self._face_object, si.prim_index, valid)
-                    skip_obj = dr.select(reflect, mi.UInt32(NO_OBJECT), obj)
-                else:
-                    carry = self._apply(carry, r_op)
-                    carry_d = carry
-                ray = si.spawn_ray(direction)
-                prev_hit = hit
-                strength = power(carry)
-                if prep.transmits:
-                    strength = dr.maximum(strength, power(carry_d))
-                active = valid & (strength > 1e-10)
-            yield record
 
     # ------------------------------------------------------------------------------------
     def simulate(
