@@ -97,14 +97,14 @@ def reconstruct_cmd(
         radar_cfg = load_radar_config(radar)
 
     def on_frame(outcome) -> None:
-        name, keys = outcome.name, outcome.artifacts
+        name, keys = outcome.id, outcome.artifacts
         if outcome.status == "failed":
             console.print(f"[red]{name}: failed: {outcome.error}", soft_wrap=True)
             return
         if outcome.status == "skipped":
             console.print(f"[green]{name}[/]: skipped (cached)")
         else:
-            info = outcome.summary
+            info = outcome.measured["summary"]
             console.print(
                 f"[green]{name}[/]: {sum(info['segments'].values())} segments "
                 f"{info['segments']}, {info['meshes']} meshes, {info['door_boxes']} door "
