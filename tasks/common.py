@@ -175,7 +175,8 @@ def run_plain(items: Iterable[Any], work: Callable[[Any], Outcome],
         try:
             outcome = work(item)
         except Exception as exc:  # noqa: BLE001 - one broken item must not stop the others
-            log.error("%s failed: %s: %s", item, type(exc).__name__, exc)
+            # info: the outcome carries the error and the caller reports it (once)
+            log.info("%s failed: %s: %s", item, type(exc).__name__, exc)
             outcome = failed(item, exc)
         record(store, dataset, outcome)
         outcomes.append(outcome)
