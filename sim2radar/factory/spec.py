@@ -70,10 +70,14 @@ class DatasetSpec(BaseModel):
         standing still.
     """
 
-    model_config = ConfigDict(frozen=True, extra="forbid", arbitrary_types_allowed=True)
+    # the JSON schema (a deployment's parameter schema, which Prefect's server enforces) is
+    # the input form: `geometry` may be one mode, "both" or a list; `export_label_range_m`
+    # "detector"; the configs names, paths or fields
+    model_config = ConfigDict(frozen=True, extra="forbid", arbitrary_types_allowed=True,
+                              populate_by_name=True)
 
     frames_per_world: int = Field(4, ge=1)
-    geometries: tuple[str, ...] = ("reconstructed",)
+    geometries: tuple[str, ...] | str = Field(("reconstructed",), alias="geometry")
     radar: Any = DEFAULT_RADAR
     reconstruction: Any = None
     world: Any = None
@@ -82,7 +86,7 @@ class DatasetSpec(BaseModel):
     class_name: str = "door"
     labels: LabelConfig = LabelConfig()
     material_override: str | None = None
-    export_label_range_m: tuple[float, ...] | None = DEFAULT_POINT_CLOUD_RANGE_M
+    export_label_range_m: tuple[float, ...] | str | None = DEFAULT_POINT_CLOUD_RANGE_M
     render_rgb: bool = True
     motion: Any = None
 
@@ -94,9 +98,8 @@ class DatasetSpec(BaseModel):
         from sim2radar.worlds.config import RigMotion, resolve_world_configs
 
         data = dict(data)
-        if "geometry" in data:
-            data["geometries"] = data.pop("geometry")
-        data["geometries"] = _geometries(data.get("geometries", "reconstructed"))
+        geometry = data.pop("geometry", data.pop("geometries", "reconstructed"))
+        data["geometry"] = _geometries(geometry)
         data["radar"] = radar = resolve_radar(data.get("radar", DEFAULT_RADAR))
         data["reconstruction"] = resolve_reconstruction(data.get("reconstruction"))
         world, rig = resolve_world_configs(data.get("world"), data.get("rig"))

@@ -292,9 +292,10 @@ def test_deployment_run_on_a_postgres_backed_server_completes_and_stores_the_fra
                     "-p", 'dataset="postgres"', "-p", f'png_dir="{png}"',
                     "--flow-run-name", run_name, *watch], env, timeout_s=RUN_TIMEOUT_S + 60)
         gen_out = _run([*prefect, "deployment", "run", f"{GEN_FLOW}/{GEN_DEPLOYMENT}",
-                        "-p", "n_worlds=1", "-p", "frames_per_world=2", "-p", f'store="{store}"',
-                        "-p", 'dataset="postgres-worlds"', "-p", 'geometry="ground_truth"',
-                        "-p", 'rig={"width": 80, "height": 60}',
+                        "-p", "n_worlds=1", "-p", f'store="{store}"',
+                        "-p", 'dataset="postgres-worlds"',
+                        "-p", 'spec={"frames_per_world": 2, "geometry": "ground_truth", '
+                              '"rig": {"width": 80, "height": 60}}',
                         "-p", f'export_dir="{tmp_path / "openpcdet"}"',
                         "--flow-run-name", f"{run_name}-gen", *watch],
                        env, timeout_s=RUN_TIMEOUT_S + 60)

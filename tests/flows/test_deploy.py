@@ -61,6 +61,17 @@ def test_generate_deployments_resolve_to_the_factory_job(monkeypatch):
         on_demand["parameters"] | {"dask_address": "tcp://127.0.0.1:8786", "workers": 2})
     with pytest.raises(Exception, match="n_worlds"):
         flow.validate_parameters({"n_worlds": "many"})
+    # the server enforces the deployment's parameter schema (JSON Schema of the spec's input
+    # form): the parameters in the file and a spec's own JSON form must both pass it
+    import jsonschema
+    from prefect.utilities.callables import parameter_schema
+
+    schema = parameter_schema(flow).model_dump_for_openapi()
+    for dep in (nightly, on_demand):
+        jsonschema.validate(dep["parameters"], schema)
+    jsonschema.validate({"spec": spec.to_dict()}, schema)
+    with pytest.raises(jsonschema.ValidationError, match="frames"):
+        jsonschema.validate({"spec": {"frames": 4}}, schema)
 
 
 def test_expand_scenes_folders_globs_and_files(tmp_path):
