@@ -216,9 +216,9 @@ def test_generate_flow_on_dask_matches_threads(cluster, prefect_server, tmp_path
     # second run through the deployment entrypoint (as `prefect deploy` runs it): all cached
     before = _parquet_mtimes(dask_root / "store")
     job = load_flow_from_entrypoint(f"{REPO}/flows/generate_dataset.py:generate_dataset_job")
-    again = job(first_seed=5, n_worlds=2, frames_per_world=1, store=str(dask_root / "store"),
-                dataset="g", radar=radar.model_dump(mode="json"), geometry="both",
-                world=WORLD, rig=RIG, dask_address=cluster.scheduler_address)
+    again = job(spec={**spec, "radar": radar.model_dump(mode="json")}, first_seed=5,
+                n_worlds=2, store=str(dask_root / "store"), dataset="g",
+                dask_address=cluster.scheduler_address)
     assert again["counts"] == {"ok": 0, "skipped": 2, "failed": 0}
     assert again["frame_counts"]["skipped"] == 2
     assert _parquet_mtimes(dask_root / "store") == before
