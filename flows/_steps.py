@@ -22,9 +22,15 @@ from prefect.futures import as_completed
 from prefect.states import Completed, State
 
 from sim2radar.flows import _progress
-from sim2radar.tasks.common import Outcome, record_task
+from sim2radar.tasks.common import (
+    REMOTE_IO_RETRIES,
+    REMOTE_IO_RETRY_DELAYS_S,
+    Outcome,
+    record,
+    retry_transient_io,
+)
 
-__all__ = ["STEP_NAMES", "run_as_tasks", "gather"]
+__all__ = ["STEP_NAMES", "run_as_tasks", "gather", "record_task"]
 
 #: Every step's task name (the Prefect UI's task names).
 STEP_NAMES = ("render", "depth", "segments", "materials", "scene", "poses", "simulate")
@@ -80,12 +86,21 @@ def run_as_tasks(prefix: str, name_of: Callable[[str, tuple], str] | None = None
     return run
 
 
+@task(name="record-manifest", cache_policy=NO_CACHE, retries=REMOTE_IO_RETRIES,
+      retry_delay_seconds=REMOTE_IO_RETRY_DELAYS_S, retry_condition_fn=retry_transient_io,
+      persist_result=False)
+def record_task(store: str, dataset: str, outcome: Outcome) -> list[dict]:
+    """Prefect task around :func:`~sim2radar.tasks.common.record` (retried, but only on
+    transient storage errors: the work itself is deterministic and never retried)."""
+    return record(store, dataset, outcome)
+
+
 def gather(futures: dict, failed: Callable[[Any, BaseException | str], Outcome], *,
            store: str, dataset: str, progress_id=None, channel: str | None = None,
            what: str = "") -> dict:
     """Work tasks' outcomes as they finish (``futures``: future -> the work's identity): a task
     that did not return an :class:`Outcome` becomes ``failed(identity, error)``; each outcome is
-    recorded in the ``dataset`` manifest (:func:`~sim2radar.tasks.common.record_task`), logged,
+    recorded in the ``dataset`` manifest (:func:`record_task`), logged,
     counted on the progress artifact ``progress_id`` and reported on the progress ``channel``
     (each when given). Returns identity -> outcome."""
     from prefect.artifacts import update_progress_artifact

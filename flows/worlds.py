@@ -14,15 +14,26 @@ import os
 from collections.abc import Iterable
 from typing import Any
 
-from prefect import flow, get_run_logger
+from prefect import flow, get_run_logger, task
+from prefect.cache_policies import NO_CACHE
 
 from sim2radar.flows._steps import gather
 from sim2radar.flows.runners import ThreadRunner
 from sim2radar.storage import ArtifactStore
-from sim2radar.tasks.common import summarize
-from sim2radar.tasks.worlds import failed_world, generate_world_task
+from sim2radar.tasks.common import Outcome, summarize
+from sim2radar.tasks.worlds import failed_world, generate_world_artifacts
 
-__all__ = ["worlds_flow", "run_worlds"]
+__all__ = ["worlds_flow", "run_worlds", "generate_world_task"]
+
+
+@task(name="generate-world", cache_policy=NO_CACHE, retries=0, persist_result=False)
+def generate_world_task(seed: int, n_frames: int, store: str, world_cfg: dict, rig: dict,
+                        trajectory_seed: int = 0, force: bool = False,
+                        radar: str | None = None) -> Outcome:
+    """One world (:func:`sim2radar.tasks.worlds.generate_world_artifacts`); rendering is
+    deterministic, so no retries; caching is by content key inside it."""
+    return generate_world_artifacts(seed, n_frames, store, world_cfg, rig,
+                                    trajectory_seed=trajectory_seed, force=force, radar=radar)
 
 
 @flow(name="generate-worlds", task_runner=ThreadRunner(max_workers=1), log_prints=False)

@@ -1,4 +1,5 @@
-"""Task helpers shared by every stage: the one :class:`Outcome` record with its manifest
+"""Task helpers shared by every stage (no Prefect import: ``--no-prefect`` runs never load it;
+``flows/`` wraps these functions in Prefect tasks): the one :class:`Outcome` record with its manifest
 :func:`record` and run :func:`summarize`, the plain loop :func:`run_plain`, store handles, the
 retry policy.
 
@@ -14,9 +15,6 @@ import re
 from collections.abc import Callable, Iterable, Sequence
 from typing import Any
 
-from prefect import task
-from prefect.cache_policies import NO_CACHE
-
 from sim2radar.fileio import jsonable
 from sim2radar.storage import ArtifactStore, is_transient_io_error
 from sim2radar.storage.manifest import MANIFESTS, STATUSES
@@ -26,7 +24,6 @@ __all__ = [
     "Outcome",
     "count_statuses",
     "record",
-    "record_task",
     "run_plain",
     "summarize",
     "failed_scene_ids",
@@ -133,15 +130,6 @@ def record(store: str | os.PathLike | ArtifactStore, dataset: str, outcome: Outc
                              timings_s=p.timings_s, source=p.source or
                              f"{outcome.source} frame={p.index}"))
     return rows
-
-
-@task(name="record-manifest", cache_policy=NO_CACHE, retries=REMOTE_IO_RETRIES,
-      retry_delay_seconds=REMOTE_IO_RETRY_DELAYS_S, retry_condition_fn=retry_transient_io,
-      persist_result=False)
-def record_task(store: str, dataset: str, outcome: Outcome) -> list[dict]:
-    """Prefect task around :func:`record` (retried, but only on transient storage errors: the
-    work itself is deterministic and never retried)."""
-    return record(store, dataset, outcome)
 
 
 def summarize(store: str | os.PathLike | ArtifactStore, dataset: str,

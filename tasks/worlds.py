@@ -25,9 +25,6 @@ import os
 import time
 from typing import Any
 
-from prefect import task
-from prefect.cache_policies import NO_CACHE
-
 from sim2radar.storage import ArtifactStore, content_key, meshes_to_table
 from sim2radar.tasks.common import Outcome, jsonable, open_store, run_plain, summarize
 
@@ -36,7 +33,6 @@ __all__ = [
     "generate_world_artifacts",
     "generate_worlds_plain",
     "failed_world",
-    "generate_world_task",
 ]
 
 log = logging.getLogger(__name__)
@@ -231,16 +227,3 @@ def generate_worlds_plain(seeds, n_frames: int, store="out/store", dataset: str 
                                         radar=radar)
 
     return summarize(st, dataset, run_plain(seeds, work, failed_world, st, dataset))
-
-
-# ---------------------------------------------------------------------------------------------
-# Prefect tasks: rendering is deterministic -> no retries; manifest writes are storage I/O ->
-# retried. Caching is by content key inside generate_world_artifacts.
-# ---------------------------------------------------------------------------------------------
-@task(name="generate-world", cache_policy=NO_CACHE, retries=0, persist_result=False)
-def generate_world_task(seed: int, n_frames: int, store: str, world_cfg: dict, rig: dict,
-                        trajectory_seed: int = 0, force: bool = False,
-                        radar: str | None = None) -> Outcome:
-    """Prefect task around :func:`generate_world_artifacts`."""
-    return generate_world_artifacts(seed, n_frames, store, world_cfg, rig,
-                                    trajectory_seed=trajectory_seed, force=force, radar=radar)

@@ -156,6 +156,19 @@ def test_no_import_climbs_up_the_layers():
     assert upward(import_graph(mods), mods) == []
 
 
+def test_the_plain_path_does_not_import_prefect():
+    """``--no-prefect`` runs use the tasks' plain functions: they must not load Prefect (about
+    1 s of a cached rerun, BENCHMARKS.md); the Prefect task wrappers live in ``flows/``."""
+    import subprocess
+
+    code = ("import sys, sim2radar.tasks.dataset, sim2radar.tasks.common, "
+            "sim2radar.tasks.worlds, sim2radar.tasks.steps, sim2radar.tasks.capture; "
+            "print(sorted(m for m in sys.modules if m.split('.')[0] == 'prefect')[:3])")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         check=True, cwd=ROOT)
+    assert out.stdout.strip() == "[]", out.stdout
+
+
 if __name__ == "__main__":
     mods = modules()
     edges = import_graph(mods)

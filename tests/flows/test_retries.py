@@ -7,8 +7,9 @@ import errno
 
 import pytest
 
+from sim2radar.flows._steps import record_task
 from sim2radar.storage.manifest import Manifest
-from sim2radar.tasks.common import REMOTE_IO_RETRIES, Outcome, record_task
+from sim2radar.tasks.common import REMOTE_IO_RETRIES, Outcome
 
 #: the one manifest task every flow uses, with outcomes of each kind to record: a scene, a
 #: reconstructed image, a world render, a dataset world with a frame (generate, captures)
