@@ -22,7 +22,8 @@ from typing import Any
 
 import yaml
 
-__all__ = ["CONFIG_KINDS", "DEFAULT_RADAR", "bundled_configs", "config_path", "read_yaml_mapping", "real_number",
+__all__ = ["CONFIG_KINDS", "DEFAULT_RADAR", "bundled_configs", "config_path", "looks_like_path",
+           "read_yaml_mapping", "real_number",
            "whole_number"]
 
 #: The radar preset (``sim2radar/radar/presets/<name>.yaml``) every command and function uses

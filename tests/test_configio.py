@@ -37,3 +37,25 @@ def test_scalar_fields_refuse_lists_words_and_fractions():
     for bad in ([120.0], "x", False, float("nan")):
         with pytest.raises(ValueError, match=r"k.yaml: cx: must be a number \[px\]"):
             real_number(bad, "k.yaml", "cx", unit="px")
+
+
+def test_a_bundled_config_is_found_by_name_from_any_folder(tmp_path, monkeypatch):
+    """Names resolve through the package (importlib.resources), not the working directory;
+    a path is taken as it is, and an unknown name lists what is bundled."""
+    from sim2radar.configio import bundled_configs, config_path
+    from sim2radar.experiment.profiles import load_profile
+    from sim2radar.factory.spec import resolve_reconstruction
+
+    monkeypatch.chdir(tmp_path)  # no configs/ here
+    assert {"demo", "paper", "smoke", "study"} <= set(bundled_configs("experiment"))
+    path = config_path("demo", "experiment")
+    assert path.is_file() and path.parent.name == "experiment"
+    assert load_profile("demo").name == "demo"
+    assert config_path(tmp_path / "mine.yaml", "experiment") == tmp_path / "mine.yaml"
+    with pytest.raises(FileNotFoundError, match=r"no bundled experiment profile 'nope'.*demo"):
+        load_profile("nope")
+    # a reconstruction config by name: the presets, or a bundled file (production's models)
+    assert resolve_reconstruction("production").depth.name == "moge"
+    assert resolve_reconstruction("builtin").depth.name == "lidar"
+    with pytest.raises(ValueError, match="bundled configs:.*production"):
+        resolve_reconstruction("nope")

@@ -22,7 +22,13 @@ from pydantic import (
     model_validator,
 )
 
-from sim2radar.configio import DEFAULT_RADAR, config_path, whole_number
+from sim2radar.configio import (
+    DEFAULT_RADAR,
+    bundled_configs,
+    config_path,
+    looks_like_path,
+    whole_number,
+)
 from sim2radar.factory.labels import (
     DEFAULT_POINT_CLOUD_RANGE_M,
     LabelConfig,
@@ -182,7 +188,9 @@ def _geometries(geometry: str | Sequence[str]) -> tuple[str, ...]:
 
 def resolve_reconstruction(value):
     """A :class:`~sim2radar.reconstruct.ReconstructionConfig` from itself, its dict, a YAML
-    path or a bundled preset name; None: the built-in backends with LiDAR."""
+    path, a preset name (``builtin``, ``oracle``, ``builtin-oracle-depth``) or the name of a
+    bundled config (``production``: ``sim2radar.configs/reconstruct``); None: the built-in
+    backends with LiDAR."""
     from sim2radar.reconstruct import ReconstructionConfig
 
     if value is None:
@@ -195,9 +203,15 @@ def resolve_reconstruction(value):
         except Exception as exc:
             raise ValueError(f"reconstruction config: {exc}") from None
     text = os.fspath(value)
-    if Path(text).suffix in (".yaml", ".yml") or Path(text).is_file():
+    if looks_like_path(text):
         return ReconstructionConfig.from_yaml(text)
-    return ReconstructionConfig.preset(text)
+    try:
+        return ReconstructionConfig.preset(text)
+    except ValueError as exc:
+        if text in bundled_configs("reconstruct"):  # e.g. "production" (user-supplied models)
+            return ReconstructionConfig.from_yaml(config_path(text, "reconstruct"))
+        raise ValueError(f"{exc}; bundled configs: {bundled_configs('reconstruct')} (or pass "
+                         "a YAML path)") from None
 
 
 def resolve_radar(value):
