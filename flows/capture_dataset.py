@@ -36,7 +36,7 @@ from sim2radar.flows.runners import ThreadRunner
 from sim2radar.storage import ArtifactStore
 from sim2radar.tasks import capture as steps
 from sim2radar.tasks.common import Outcome, run_plain
-from sim2radar.tasks.dataset import export_all, failed_scene_outcome, summarize_dataset
+from sim2radar.tasks.dataset import export_all, summarize_dataset
 
 __all__ = ["capture_dataset_flow", "capture_dataset", "capture_dataset_job", "progress_callback",
            "CAPTURE_DOMAIN", "stage_table"]
@@ -104,7 +104,7 @@ def capture_dataset_flow(
     futures = {capture_scene_task.with_options(task_run_name=f"scene-{s.scene_id}").submit(
         s, spec, store, force): i for i, s in enumerate(scenes)}
     outcomes = gather(
-        futures, lambda i, error: failed_scene_outcome(scenes[i].scene_id, error,
+        futures, lambda i, error: Outcome.failed(scenes[i].scene_id, error,
                                                        source=scenes[i].folder),
         store=store, dataset=dataset, progress_id=progress_id, channel="capture_dataset")
     summary = _finish(st, dataset, spec, [outcomes[i] for i in range(len(scenes))], export_dir)
@@ -134,7 +134,7 @@ def capture_dataset_plain(scenes: list[CaptureScene], spec: CaptureSpec, store: 
     # process_capture_scene records a broken scene in its outcome and never raises
     outcomes = run_plain(scenes, lambda s: steps.process_capture_scene(s, spec, store,
                                                                        force=force),
-                         lambda s, error: failed_scene_outcome(s.scene_id, error,
+                         lambda s, error: Outcome.failed(s.scene_id, error,
                                                                source=s.folder),
                          st, dataset, on_scene)
     return _finish(st, dataset, spec, outcomes, export_dir)

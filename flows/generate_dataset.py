@@ -43,10 +43,10 @@ from sim2radar.storage import ArtifactStore
 from sim2radar.tasks.common import Outcome
 from sim2radar.tasks.dataset import (
     export_all,
-    failed_world_outcome,
     generate_world_dataset,
     summarize_dataset,
 )
+from sim2radar.tasks.worlds import failed_world
 
 __all__ = ["generate_dataset_flow", "generate_dataset", "generate_dataset_job", "DatasetFailures",
            "progress_callback"]
@@ -162,7 +162,7 @@ def generate_dataset_flow(
             int(s), spec, store, force, frames_by_seed.get(int(s))): int(s)
         for s in seeds
     }
-    outcomes = gather(futures, failed_world_outcome, store=store, dataset=dataset,
+    outcomes = gather(futures, failed_world, store=store, dataset=dataset,
                       progress_id=progress_id, channel="generate_dataset", what="world")
     ordered = [outcomes[int(s)] for s in seeds]
     summary = summarize_dataset(st, dataset, spec, ordered)

@@ -41,13 +41,13 @@ from prefect import flow, get_run_logger
 from prefect.futures import as_completed
 
 from sim2radar.experiment.plan import PlannedPretrain, PretrainResult
+from sim2radar.fileio import write_json
 from sim2radar.flows import _progress
 from sim2radar.flows.runners import task_runner
 from sim2radar.tasks.experiment import (
     failed_row,
     finetune_task,
     pretrain_task,
-    write_json,
     write_runs_table,
 )
 

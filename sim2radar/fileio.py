@@ -86,9 +86,10 @@ def abandoned_temp_files(folder: str | os.PathLike) -> list[Path]:
 
 
 def write_json(path: str | os.PathLike, doc: Any, *, sort_keys: bool = False) -> Path:
-    """Write ``doc`` as indented JSON atomically, creating the parent folder; values JSON cannot
-    hold are written as their ``str``. Returns the path."""
+    """Write ``doc`` as indented JSON atomically, creating the parent folder; values go
+    through :func:`jsonable` (NumPy values as numbers, NaN/inf as null, anything else JSON
+    cannot hold as its ``str``). Returns the path."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    text = json.dumps(doc, indent=1, sort_keys=sort_keys, default=str) + "\n"
+    text = json.dumps(jsonable(doc), indent=1, sort_keys=sort_keys) + "\n"
     return atomic_write(path, text.encode())

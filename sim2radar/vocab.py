@@ -56,3 +56,7 @@ def material_id(name: str) -> int:
         return MATERIAL_CLASSES.index(name)
     except ValueError:
         raise ValueError(f"unknown material class {name!r}; known: {MATERIAL_CLASSES}") from None
+
+#: What became of one unit of work (a manifest row, a sweep's run): computed, found cached
+#: (nothing recomputed) or failed with its error.
+STATUSES: tuple[str, ...] = ("ok", "skipped", "failed")

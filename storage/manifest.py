@@ -32,10 +32,10 @@ import pyarrow.parquet as pq
 from sim2radar.storage._files import FileRoot
 from sim2radar.storage.integrity import is_corrupt_file_error
 from sim2radar.storage.schemas import MANIFEST
+from sim2radar.vocab import STATUSES
 
 __all__ = ["MANIFESTS", "Manifest", "STATUSES", "check_dataset_name"]
 
-STATUSES: tuple[str, ...] = ("ok", "skipped", "failed")
 #: folder of the store root that holds one folder of row files per dataset
 MANIFESTS = "manifests"
 _DATASET_RE = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]*$")

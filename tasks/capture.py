@@ -147,8 +147,7 @@ def simulate_stage(scene: CaptureScene, spec: CaptureSpec, store: str, keys: dic
     radar_scene = rec = None
     out = []
     for k, pose in zip(indices, poses, strict=True):
-        fo = Outcome(f"{scene.scene_id}_f{int(k):03d}", "skipped", index=int(k),
-                     source=f"{scene.folder} frame={int(k)}")
+        fo = Outcome(f"{scene.scene_id}_f{int(k):03d}", "skipped", index=int(k))
         key = capture_frame_key(keys, scene.scene_id, k, spec, yaml_digest)
         fo.artifacts.update({"dataset_frames/reconstructed": key,
                              "reconstruction/scene_meshes": keys["scene_meshes"],

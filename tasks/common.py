@@ -136,15 +136,12 @@ def summarize(store: str | os.PathLike | ArtifactStore, dataset: str,
               outcomes: Sequence[Outcome], **extra: Any) -> dict[str, Any]:
     """The run summary a flow returns and the CLI prints.
 
-    ``{"store", "dataset", "counts": {ok, skipped, failed}, "frame_counts"`` (when the outcomes
-    have frames), ``"outcomes": [Outcome.to_dict()], "manifest"`` (where its rows are)``}``
-    plus ``extra``.
+    ``{"store", "dataset", "counts": {ok, skipped, failed}, "outcomes": [Outcome.to_dict()],
+    "manifest"`` (where its rows are)``}`` plus ``extra``.
     """
     st = open_store(store)
     summary: dict[str, Any] = {"store": st.root, "dataset": dataset,
                                "counts": count_statuses(outcomes)}
-    if any(o.parts for o in outcomes):
-        summary["frame_counts"] = count_statuses(p for o in outcomes for p in o.parts)
     summary["outcomes"] = [o.to_dict() for o in outcomes]
     summary["manifest"] = st.join(MANIFESTS, dataset)
     summary.update(extra)

@@ -51,6 +51,7 @@ from sim2radar.tasks.common import (
     summarize,
 )
 from sim2radar.tasks.steps import call_step, reconstruction_steps
+from sim2radar.tasks.worlds import failed_world, world_source
 
 __all__ = [
     "DATASET_STAGE_VERSION",
@@ -61,8 +62,6 @@ __all__ = [
     "frame_key",
     "frame_id_for",
     "generate_world_dataset",
-    "failed_world_outcome",
-    "failed_scene_outcome",
     "outcomes_from_summary",
     "read_dataset_frame",
     "export_openpcdet",
@@ -131,20 +130,6 @@ def _reconstruction_keys(frame, camera_to_target: np.ndarray, config) -> dict[st
 def outcomes_from_summary(summary: dict[str, Any]) -> list[Outcome]:
     """The world outcomes of a summary dict (e.g. returned by the Prefect flow)."""
     return [Outcome.from_dict(d) for d in summary["outcomes"]]
-
-
-def failed_scene_outcome(scene_id: str, error: BaseException | str, *, seed: int = -1,
-                         source: str = "") -> Outcome:
-    """A ``failed`` outcome for a world or capture scene (``"Type: message"`` error text)."""
-    return Outcome.failed(scene_id, error, seed=int(seed), source=source)
-
-
-def failed_world_outcome(seed: int, error: BaseException | str) -> Outcome:
-    """A ``failed`` outcome for world ``seed``."""
-    from sim2radar.storage.worlds import world_id_for
-
-    return failed_scene_outcome(world_id_for(seed), error, seed=seed,
-                                source=f"sim2radar.worlds seed={int(seed)}")
 
 
 # ---------------------------------------------------------------------------------------------
@@ -324,9 +309,8 @@ def generate_world_dataset(
     inputs = _WorldInputs(st, keys, spec.material_override)
     timings = {"world": time.perf_counter() - t_start}
     computed_any = wo.status == "ok"
-    source = f"sim2radar.worlds seed={int(seed)}"
-    frames_out = [Outcome(frame_id_for(seed, k), "skipped", seed=int(seed), index=k,
-                          source=f"{source} frame={k}") for k in range(n_frames)]
+    frames_out = [Outcome(frame_id_for(seed, k), "skipped", seed=int(seed), index=k)
+                  for k in range(n_frames)]
     decoded: list[dict[str, DatasetFrame]] = [{} for _ in range(n_frames)]
     errors: list[list[str]] = [[] for _ in range(n_frames)]
 
@@ -393,7 +377,8 @@ def generate_world_dataset(
     n_failed = sum(f.status == "failed" for f in frames_out)
     status = "failed" if n_failed else ("ok" if computed_any else "skipped")
     error = f"{n_failed} of {len(frames_out)} frame(s) failed" if n_failed else ""
-    return Outcome(world_id, status, error, keys, timings, source, int(seed), parts=frames_out)
+    return Outcome(world_id, status, error, keys, timings, world_source(seed), int(seed),
+                   parts=frames_out)
 
 
 def render_world(seed: int, n_frames: int, store, spec: DatasetSpec):
@@ -610,7 +595,7 @@ def generate_dataset_plain(
         return generate_world_dataset(int(seed), spec, st, force=force,
                                       n_frames=(frames_by_seed or {}).get(int(seed)))
 
-    outcomes = run_plain(seeds, work, failed_world_outcome, st, dataset, on_world)
+    outcomes = run_plain(seeds, work, failed_world, st, dataset, on_world)
     summary = summarize_dataset(st, dataset, spec, outcomes)
     if export_dir is not None:
         summary["export"] = export_all(st, outcomes, export_dir, spec, splits=splits,

@@ -49,7 +49,7 @@ from sim2radar.experiment.plan import (
     SweepContext,
     SweepPlan,
 )
-from sim2radar.fileio import atomic_write_with, jsonable
+from sim2radar.fileio import atomic_write_with, write_json
 from sim2radar.storage import content_key, get_schema
 from sim2radar.storage.provenance import package_versions
 from sim2radar.storage.store import CorruptArtifactError
@@ -57,7 +57,7 @@ from sim2radar.tasks.common import open_store
 
 __all__ = ["EXPERIMENT_STAGE_VERSION", "prepare_sweep", "read_plan", "plan_cost",
            "run_pretraining", "run_finetuning", "force_runs", "failed_row", "write_runs_table",
-           "write_json", "pretrain_task", "finetune_task"]
+           "pretrain_task", "finetune_task"]
 
 log = logging.getLogger(__name__)
 
@@ -316,14 +316,6 @@ def write_runs_table(sweep_dir: str | os.PathLike, rows: list[dict[str, Any]]) -
     path = Path(sweep_dir) / RUNS_FILE
     atomic_write_with(path, lambda tmp: pq.write_table(table, tmp))
     return path
-
-
-def write_json(path: str | os.PathLike, doc: Any) -> Path:
-    """Write JSON atomically (for sweep.json, stats.json, progress.json), numpy values as
-    numbers (:func:`sim2radar.fileio.jsonable`)."""
-    from sim2radar.fileio import write_json as write
-
-    return write(path, jsonable(doc))
 
 
 # --- Prefect tasks: no retries (deterministic training); caching by content key inside.

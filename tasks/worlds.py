@@ -33,6 +33,7 @@ __all__ = [
     "generate_world_artifacts",
     "generate_worlds_plain",
     "failed_world",
+    "world_source",
 ]
 
 log = logging.getLogger(__name__)
@@ -162,10 +163,15 @@ def generate_world_artifacts(
                     [int(f.door_visible.sum()) for f in frames])
 
 
+def world_source(seed: int) -> str:
+    """A world's ``source`` in the manifest (its frames add ``frame=<k>``)."""
+    return f"sim2radar.worlds seed={int(seed)}"
+
+
 def _outcome(world_id: str, seed: int, status: str, keys: dict, timings: dict,
              visible: list[int]) -> Outcome:
     return Outcome(world_id, status, artifacts=keys, timings_s=timings, seed=int(seed),
-                   source=f"sim2radar.worlds seed={int(seed)}",
+                   source=world_source(seed),
                    measured={"n_frames": len(visible), "doors_visible": visible})
 
 
@@ -210,8 +216,7 @@ def failed_world(seed: int, error: BaseException | str) -> Outcome:
     """A ``failed`` outcome for world ``seed``."""
     from sim2radar.storage.worlds import world_id_for
 
-    return Outcome.failed(world_id_for(seed), error, seed=int(seed),
-                          source=f"sim2radar.worlds seed={int(seed)}")
+    return Outcome.failed(world_id_for(seed), error, seed=int(seed), source=world_source(seed))
 
 
 def generate_worlds_plain(seeds, n_frames: int, store="out/store", dataset: str = "worlds",

@@ -43,6 +43,7 @@ from sim2radar.experiment.plan import (
     settings_changes,
 )
 from sim2radar.experiment.profiles import ABLATIONS, CONDITIONS, ROLES, ExperimentProfile
+from sim2radar.vocab import STATUSES
 
 __all__ = [
     "KeyFn",
@@ -417,7 +418,7 @@ def finish_sweep(plan: SweepPlan, rows: Sequence[Mapping[str, Any]]) -> dict[str
     from sim2radar.experiment.dashboard import write_dashboard
     from sim2radar.experiment.report import results_markdown, results_table_rows
     from sim2radar.experiment.stats import sweep_stats
-    from sim2radar.fileio import jsonable, write_json
+    from sim2radar.fileio import atomic_write, write_json
 
     sweep_dir, doc, rows = Path(plan.context.sweep_dir), plan.sweep, list(rows)
     stats = sweep_stats(rows, plan.metric, conditions=doc["conditions"])
@@ -426,10 +427,10 @@ def finish_sweep(plan: SweepPlan, rows: Sequence[Mapping[str, Any]]) -> dict[str
                           settings={"profile": doc["profile"].get("name"),
                                     "digest": doc.get("settings_digest"),
                                     "fixed_at": doc.get("settings_fixed_at")})
-    write_json(sweep_dir / "stats.json", jsonable(stats))
-    (sweep_dir / "results.md").write_text(md)
+    write_json(sweep_dir / "stats.json", stats)
+    atomic_write(sweep_dir / "results.md", md.encode())
     dashboard = write_dashboard(sweep_dir, sweep_dir / "dashboard.html")
-    counts = {k: sum(r["status"] == k for r in rows) for k in ("ok", "skipped", "failed")}
+    counts = {k: sum(r["status"] == k for r in rows) for k in STATUSES}
     return {"name": plan.name, "sweep_dir": str(sweep_dir), "counts": counts,
             "metric": plan.metric, "stats": stats, "markdown": md,
             "table_rows": results_table_rows(stats),

@@ -48,6 +48,7 @@ from pydantic import BaseModel, ConfigDict, Field, field_validator, model_valida
 from sim2radar.configio import DEFAULT_RADAR
 from sim2radar.factory.labels import (
     DEFAULT_POINT_CLOUD_RANGE_M,
+    ClassName,
     LabelConfig,
     radar_visibility,
     scene_ray_caster,
@@ -138,7 +139,7 @@ class CaptureSpec(BaseModel):
     reconstruction: Any
     poses: PoseSampling = PoseSampling()
     labels: LabelConfig = LabelConfig()
-    class_name: str = "door"
+    class_name: ClassName = "door"
     seed: int = 0
     export_label_range_m: tuple[float, ...] | None = DEFAULT_POINT_CLOUD_RANGE_M
     frames_per_task: int = Field(18, ge=1, le=10_000)
@@ -165,13 +166,6 @@ class CaptureSpec(BaseModel):
         if data.get("export_label_range_m") is not None:
             data["export_label_range_m"] = tuple(float(v) for v in data["export_label_range_m"])
         return data
-
-    @field_validator("class_name")
-    @classmethod
-    def _word(cls, v: str) -> str:
-        if not v or any(c.isspace() for c in v):
-            raise ValueError(f"class_name must be a non-empty word, got {v!r}")
-        return v
 
     @property
     def view(self) -> tuple[float, float, float]:

@@ -20,13 +20,16 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Sequence
+from typing import Annotated
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import AfterValidator, BaseModel, ConfigDict, Field
 
 from sim2radar.boxes import as_boxes
 
 __all__ = [
+    "ClassName",
+    "check_class_name",
     "LabelConfig",
     "doorway_samples",
     "radar_visibility",
@@ -156,3 +159,15 @@ def boxes_in_point_cloud_range(boxes, point_cloud_range_m: Sequence[float] | Non
         raise ValueError(f"point_cloud_range_m must be [x_min, y_min, z_min, x_max, y_max, "
                          f"z_max] with max > min, got {list(r)}")
     return np.all((b[:, :3] >= r[:3]) & (b[:, :3] <= r[3:]), axis=1)
+
+
+def check_class_name(name: str) -> str:
+    """``name`` if it can be a label class (one non-empty word: OpenPCDet's label files are
+    whitespace-separated); ValueError otherwise."""
+    if not name or any(c.isspace() for c in name):
+        raise ValueError(f"class_name must be a non-empty word, got {name!r}")
+    return name
+
+
+#: A label class field of a pydantic model, checked by :func:`check_class_name`.
+ClassName = Annotated[str, AfterValidator(check_class_name)]

@@ -17,7 +17,6 @@ from pydantic import (
     BaseModel,
     ConfigDict,
     Field,
-    field_validator,
     model_serializer,
     model_validator,
 )
@@ -31,6 +30,7 @@ from sim2radar.configio import (
 )
 from sim2radar.factory.labels import (
     DEFAULT_POINT_CLOUD_RANGE_M,
+    ClassName,
     LabelConfig,
     boxes_in_point_cloud_range,
 )
@@ -89,7 +89,7 @@ class DatasetSpec(BaseModel):
     world: Any = None
     rig: Any = None
     seed: int = 0
-    class_name: str = "door"
+    class_name: ClassName = "door"
     labels: LabelConfig = LabelConfig()
     material_override: str | None = None
     export_label_range_m: tuple[float, ...] | str | None = DEFAULT_POINT_CLOUD_RANGE_M
@@ -132,13 +132,6 @@ class DatasetSpec(BaseModel):
                 raise ValueError(f"motion: {exc}") from None
         data["motion"] = motion if motion is not None and motion.moving else None
         return data
-
-    @field_validator("class_name")
-    @classmethod
-    def _word(cls, v: str) -> str:
-        if not v or any(c.isspace() for c in v):
-            raise ValueError(f"class_name must be a non-empty word, got {v!r}")
-        return v
 
     @model_validator(mode="after")
     def _rgb_for_reconstruction(self) -> DatasetSpec:
