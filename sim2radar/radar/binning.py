@@ -7,7 +7,10 @@ Model
 -----
 A contribution ``k`` (complex amplitude ``a_k`` with carrier phase, range ``r_k``, arrival
 direction cosines ``u_a = cos(el) sin(az)``, ``u_e = sin(el)`` of its last interaction point)
-lands in range bin ``i = round(r_k / dR)`` and reaches virtual element ``n`` at
+lands in range bin ``i = round(r_k / dR) mod N`` (``N`` bins over ``[0, R_max)``, scaled by the
+receiver's IF response of its true bin, :func:`sim2radar.radar.receiver.range_bin_gain`: the
+anti-alias roll-off over the last tenth of the range axis, and a path beyond ``R_max``
+aliased, attenuated) and reaches virtual element ``n`` at
 ``(x_n, z_n)`` [lambda/2] with the plane-wave phase ``e^{j pi (x_n u_a + z_n u_e)}`` (far field
 of each scatterer; monostatic virtual-array model: TX + RX position, one direction). Element
 positions are measured from the virtual array's centroid, the radar frame's origin from which
@@ -267,10 +270,15 @@ class Accumulator:
     power: np.ndarray
     range_w: np.ndarray
 
-    def aperture(self, geometry: ArrayGeometry) -> np.ndarray:
+    def aperture(self, geometry: ArrayGeometry, fine_mask: np.ndarray | None = None
+                 ) -> np.ndarray:
         """(n_range, n_z, n_x) complex — the channel signal ``s(x, z)`` per range bin and
-        distinct position (complex64 for a complex64 grid)."""
+        distinct position (complex64 for a complex64 grid); with ``fine_mask`` ((M,) bool),
+        only of the contributions on those fine azimuth points (one Doppler slab,
+        :func:`sim2radar.radar.detection.doppler_bins`)."""
         g = np.asarray(self.grid)
+        if fine_mask is not None:
+            g = g * np.asarray(fine_mask, dtype=bool)[None, None, :]
         if geometry.integer_x:
             # sum_g G[g] e^{j pi n (-1 + 2g/M)} = e^{-j pi n} M ifft(G)[n]
             import scipy.fft  # imported here: ~0.2 s, only needed once a scene is traced
@@ -344,19 +352,29 @@ def deposit(
 
     Parameters
     ----------
-    range_m : (N,) float [m] — half the path length.
+    range_m : (N,) float [m] — half the path length (the true range: the receiver's IF
+        response of its bin applies, and a range beyond ``R_max`` is seen modulo ``R_max``,
+        :mod:`sim2radar.radar.receiver`).
     u_az, u_el : (N,) float [-] — arrival direction cosines (radar frame).
-    amplitude : (N,) complex — with carrier phase [sim. amplitude]; zero = dropped.
+    amplitude : (N,) complex — with carrier phase [sim. amplitude], before the IF response;
+        zero = dropped.
 
     Returns
     -------
     Accumulator
     """
+    from sim2radar.radar.receiver import range_bin_gain
+
     geom = array_geometry(radar)
     n_r = radar.n_range_bins
-    a = np.asarray(amplitude, dtype=np.complex128)
-    ir = np.floor(np.asarray(range_m) / radar.range_resolution_m + 0.5).astype(np.int64)
-    ok = (ir >= 0) & (ir < n_r) & (a != 0)
+    ir_true = np.floor(np.asarray(range_m) / radar.range_resolution_m + 0.5).astype(np.int64)
+    gain = range_bin_gain(radar)
+    a = np.asarray(amplitude, dtype=np.complex128) * gain[np.clip(ir_true, 0, len(gain) - 1)]
+    # complex sampling: a return beyond R_max is seen in bin (true bin mod N), attenuated
+    wraps = np.floor_divide(ir_true, n_r)
+    ir = ir_true - wraps * n_r
+    range_m = np.asarray(range_m, dtype=np.float64) - wraps * (n_r * radar.range_resolution_m)
+    ok = (ir_true >= 0) & (a != 0)
     g, _ = fine_grid_index(u_az, geom)
     u_g = geom.fine_u[g]
     grid = np.zeros((len(geom.z_half_wl), n_r, geom.fine_az), dtype=np.complex128)

@@ -74,9 +74,10 @@ Amplitudes
 ``K_echo`` = :func:`~sim2radar.radar.link_budget.echo_power_scale_w` (radar equation),
 ``g`` the one-way element power patterns (:func:`~sim2radar.radar.link_budget.
 element_power_pattern`) at the departure / arrival direction seen from the array's phase
-centre, and ``H_IF`` the IF filter (:func:`if_filter_response`): a first-order high-pass at
-``if_highpass_hz`` and the anti-alias filter's pass band up to ``if_bandwidth_fraction * f_adc``
-with the roll-off ``if_rolloff_db`` beyond (a return past the unambiguous range aliases).
+centre, and ``H_IF`` the IF filter (:func:`sim2radar.radar.receiver.if_filter_response`): a
+first-order high-pass at ``if_highpass_hz`` and the anti-alias filter's pass band up to
+``if_bandwidth_fraction * f_adc`` with the roll-off ``if_rolloff_db`` beyond (a return past the
+unambiguous range aliases).
 The ``1/r`` difference between elements (< 5 % at 2 m for the 0.17 m array) is neglected; the
 phase difference is not.
 
@@ -109,6 +110,7 @@ from sim2radar.constants import SPEED_OF_LIGHT_M_S
 from sim2radar.radar import link_budget
 from sim2radar.radar.config import RadarConfig
 from sim2radar.radar.paths import PathSet
+from sim2radar.radar.receiver import if_filter_response
 
 __all__ = [
     "NUFFT_OVERSAMPLING",
@@ -211,29 +213,6 @@ def window_weights(name: str, n: int) -> np.ndarray:
     if name == "hanning":
         return 0.5 - 0.5 * np.cos(2.0 * np.pi * np.arange(1, n + 1) / (n + 1))
     return scipy.signal.get_window(name, n, fftbins=True).astype(np.float64)
-
-
-def if_filter_response(radar: RadarConfig, beat_hz: np.ndarray) -> np.ndarray:
-    """Complex IF-chain response at beat frequency ``beat_hz`` [Hz] [-].
-
-    First-order high-pass ``H = j f/f_c / (1 + j f/f_c)`` at ``hardware.if_highpass_hz``
-    (AWR2243 HPF1; TI SWRS223), times the anti-alias / decimation filter: 1 for ``|f| <=
-    if_bandwidth_fraction * f_adc``, beyond that the gain of ``hardware.if_rolloff_db``
-    (linear in dB between its points, the last value beyond them). Nothing is removed: a return
-    beyond the unambiguous range keeps its beat frequency, which complex sampling aliases by
-    ``f_adc`` (the synthesis' grid is periodic), at the filter's attenuation.
-    """
-    f = np.asarray(beat_hz, dtype=np.float64)
-    hw = radar.hardware
-    frac = np.abs(f) / radar.adc_sample_rate_hz
-    xs = [hw.if_bandwidth_fraction] + [float(p[0]) for p in hw.if_rolloff_db]
-    ys = [0.0] + [float(p[1]) for p in hw.if_rolloff_db]
-    gain_db = np.interp(frac, xs, ys, left=0.0, right=ys[-1])
-    h = (10.0 ** (gain_db / 20.0)).astype(np.complex128)
-    if hw.if_highpass_hz is not None:
-        jf = 1j * f / hw.if_highpass_hz
-        h = h * jf / (1.0 + jf)
-    return h
 
 
 # -- impairments --------------------------------------------------------------------------

@@ -157,8 +157,10 @@ class RadarScene(BounceLoop):
     ) -> TraceResult:
         """Trace one frame and return the accumulated (not yet beamformed) returns.
 
-        Each visible return, with its carrier phase ``e^{-jkL}``, is added to its range bin
-        and fine azimuth point once per element row (:mod:`sim2radar.radar.binning`).
+        Each visible return, with its carrier phase ``e^{-jkL}`` and the receiver's IF response
+        (:mod:`sim2radar.radar.receiver`: the anti-alias roll-off near ``R_max``; a path
+        beyond it aliases into bin ``i mod N``), is added to its range bin and fine azimuth
+        point once per element row (:mod:`sim2radar.radar.binning`).
         """
         mi, dr = self._mi, self._dr
         pose = check_pose(pose)
@@ -171,6 +173,8 @@ class RadarScene(BounceLoop):
         n_r, n_a, n_e = radar.n_range_bins, radar.n_azimuth_bins, radar.n_elevation_bins
         n_z, m_fine = len(geom.z_half_wl), geom.fine_az
         inv_dr = 1.0 / radar.range_resolution_m
+        n_if = dr.width(prep.if_re)
+        alias_m = n_r * radar.range_resolution_m
         inv_ua, inv_ue = 1.0 / radar.azimuth_bin_u, 1.0 / radar.elevation_bin_u
         radar_pos = [dr.opaque(mi.Float, float(v)) for v in pose[:3, 3]]
         # world -> radar rotation (R^T) as opaque scalars so a new pose reuses the kernel
@@ -202,8 +206,18 @@ class RadarScene(BounceLoop):
             inv_q = dr.rsqrt(dr.maximum(qx * qx + qy * qy + qz * qz, 1e-24))
             ua, ue = qy * inv_q, qz * inv_q
             rng_m = 0.5 * it.path_m
-            ir = mi.Int32(dr.floor(rng_m * inv_dr + 0.5))
-            keep = it.visible & (ir >= 0) & (ir < n_r)
+            # the receiver's IF chain (sim2radar.radar.receiver): the response of the return's
+            # true range bin; complex sampling shows it in that bin modulo n_r (a path beyond
+            # R_max aliases, attenuated by the anti-alias roll-off)
+            ir_true = mi.Int32(dr.floor(rng_m * inv_dr + 0.5))
+            g_if = mi.UInt32(dr.clip(ir_true, 0, n_if - 1))
+            h_re = dr.gather(mi.Float, prep.if_re, g_if)
+            h_im = dr.gather(mi.Float, prep.if_im, g_if)
+            a_re, a_im = a_re * h_re - a_im * h_im, a_re * h_im + a_im * h_re
+            wraps = ir_true // n_r
+            ir = ir_true - wraps * n_r
+            rng_m = rng_m - mi.Float(wraps) * alias_m  # apparent range, for the range sums
+            keep = it.visible & (ir_true >= 0)
             g = mi.Int32(dr.floor((ua + 1.0) * (0.5 * m_fine) + 0.5))
             g = dr.select(g >= m_fine, g - m_fine, g)
             ug_phase = -math.pi * geom.x_shift * (-1.0 + (2.0 / m_fine) * mi.Float(g))

@@ -1,7 +1,8 @@
 """What the radar ray tracer puts on the device per radar config and seed, before tracing.
 
 :func:`material_tables` builds the per-material tables of a config (Fresnel reflection, the
-scattering coefficient and lobes, slab transmission, polarised TE/TM) once per config;
+scattering coefficient and lobes, slab transmission, polarised TE/TM) and the receiver's IF
+response per range bin once per config;
 :func:`prepare_rays` adds a seed's ray grid (directions and solid angles made on the device),
 speckle phases and reflect-or-transmit draws. Together they are a :class:`Prepared`, which
 :class:`~sim2radar.radar.raytrace.RadarScene` caches per (config, seed) and its bounce loop
@@ -21,6 +22,7 @@ import numpy as np
 
 from sim2radar.hardware import to_drjit
 from sim2radar.radar.config import RadarConfig
+from sim2radar.radar.receiver import range_bin_gain
 from sim2radar.radar.returns import (
     continuation_uniforms,
     diffuse_phase_seed,
@@ -58,6 +60,8 @@ class Prepared:
     slant: tuple[float, float] = (1.0, 0.0)  # (cos, sin) of the antennas' slant from vertical
     pol_r: tuple | None = None  # (te_re, te_im, tm_re, tm_im) reflection tables
     pol_t: tuple | None = None  # (te_re, te_im, tm_re, tm_im) transmission tables
+    if_re: object = None  # IF response per true range bin (receiver.range_bin_gain)
+    if_im: object = None
 
 
 def material_tables(mi, materials: list[str], radar: RadarConfig) -> dict:
@@ -98,6 +102,7 @@ def material_tables(mi, materials: list[str], radar: RadarConfig) -> dict:
 
         pol_r, pol_t = tables(refl), tables(trans)
     slant = math.radians(90.0 if radar.hardware.polarization == "horizontal" else 0.0)
+    if_gain = range_bin_gain(radar).astype(np.complex64)
     return {
         "lut_re": to_drjit(mi.Float, lut.real.ravel()),
         "lut_im": to_drjit(mi.Float, lut.imag.ravel()),
@@ -113,6 +118,8 @@ def material_tables(mi, materials: list[str], radar: RadarConfig) -> dict:
         "slant": (math.cos(slant), math.sin(slant)),
         "pol_r": pol_r,
         "pol_t": pol_t,
+        "if_re": to_drjit(mi.Float, if_gain.real),
+        "if_im": to_drjit(mi.Float, if_gain.imag),
     }
 
 
