@@ -22,6 +22,7 @@ from typing import Any
 from prefect import flow
 
 from sim2radar.factory.reference import DOMAIN_LABEL, REFERENCE_FIRST_SEED, plan_reference
+from sim2radar.worlds.config import WALKING_SPEED_MPS
 
 __all__ = ["REFERENCE_RADAR", "reference_dataset", "reference_dataset_job", "reference_spec",
            "reference_run"]
@@ -29,8 +30,8 @@ __all__ = ["REFERENCE_RADAR", "reference_dataset", "reference_dataset_job", "ref
 #: The reference radar's preset.
 REFERENCE_RADAR = "ti-mmwcas-reference"
 #: The reference rig's walking speed range [m/s] (min, max; drawn per frame): a person
-#: carrying the rig through a corridor.
-REFERENCE_SPEED_MPS = (0.5, 1.5)
+#: carrying the rig through a corridor, as every procedural-world dataset's.
+REFERENCE_SPEED_MPS = WALKING_SPEED_MPS
 
 
 def reference_spec(frames_per_world: int = 10, radar: Any = REFERENCE_RADAR, world: Any = None,

@@ -46,9 +46,9 @@ OBJECTS = [
 
 #: radar poses: position [m] and yaw [deg] (radar at chest height looking along / across)
 RADAR_POSES = [
-    {"position": [0.0, 0.0, 1.0], "yaw_deg": 0.0},
-    {"position": [2.1, -0.6, 1.0], "yaw_deg": 50.0},
-    {"position": [4.7, 0.5, 1.0], "yaw_deg": -40.0},
+    {"position": [0.0, 0.0, 1.0], "yaw_deg": 0.0, "speed_mps": 1.0},
+    {"position": [2.1, -0.6, 1.0], "yaw_deg": 50.0, "speed_mps": 1.0},
+    {"position": [4.7, 0.5, 1.0], "yaw_deg": -40.0, "speed_mps": 1.0},
 ]
 
 

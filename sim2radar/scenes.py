@@ -12,6 +12,7 @@ the labelled boxes::
         yaw_deg: 0.0               # about world +z, counter-clockwise (toward +y) [deg]
         pitch_deg: 0.0             # about the radar's +y; positive tilts the boresight down [deg]
         roll_deg: 0.0              # about the radar's +x [deg]
+        speed_mps: 1.0             # optional: the rig walks along its heading [m/s] (0: at rest)
       - matrix: [[1,0,0,0],[0,1,0,0],[0,0,1,1.2],[0,0,0,1]]   # or a full radar-to-world (4, 4)
     boxes:                         # optional ground-truth boxes in the world frame
       - label: door
@@ -78,6 +79,10 @@ class Scene:
         World-frame geometry [m].
     radar_poses : (K, 4, 4) float64
         Radar-to-world transform of each frame [m].
+    radar_speeds_mps : (K,) float64
+        The rig's speed along its heading at each frame [m/s] (0: at rest;
+        :func:`sim2radar.worlds.trajectory.rig_velocity`): the Doppler that separates the
+        returns on the device's range-Doppler map.
     boxes_world : (M, 7) float32
         Ground-truth boxes ``x y z dx dy dz heading`` in the world frame [m, rad].
     box_labels : tuple of str
@@ -92,6 +97,23 @@ class Scene:
     boxes_world: np.ndarray
     box_labels: tuple[str, ...] = ()
     path: Path | None = None
+    radar_speeds_mps: np.ndarray | None = None
+
+    def __post_init__(self) -> None:
+        speeds = (np.zeros(len(self.radar_poses)) if self.radar_speeds_mps is None
+                  else np.asarray(self.radar_speeds_mps, np.float64).reshape(-1))
+        if len(speeds) != len(self.radar_poses):
+            raise ValueError(f"{len(speeds)} radar speeds for {len(self.radar_poses)} poses")
+        object.__setattr__(self, "radar_speeds_mps", speeds)
+
+    def radar_velocity(self, frame_index: int) -> np.ndarray | None:
+        """(3,) the rig's velocity in the radar frame at ``frame_index`` [m/s]; None at rest."""
+        speed = float(self.radar_speeds_mps[frame_index])
+        if speed <= 0.0:
+            return None
+        from sim2radar.worlds.trajectory import rig_velocity
+
+        return rig_velocity(self.radar_poses[frame_index], speed)
 
     def boxes_in_radar(self, frame_index: int) -> np.ndarray:
         """(M, 7) float32 boxes in the radar frame of ``frame_index`` [m, rad]."""
@@ -131,9 +153,22 @@ def check_materials(meshes, where: str) -> None:
             raise MeshFileError(f"{where}: mesh {m.name!r}: {exc}") from None
 
 
+def _parse_speed(entry: dict, where: str) -> float:
+    """A pose entry's ``speed_mps`` (default 0: at rest) [m/s]."""
+    try:
+        speed = float(entry.get("speed_mps", 0.0))
+    except (TypeError, ValueError):
+        speed = float("nan")
+    if not (np.isfinite(speed) and 0.0 <= speed <= 10.0):
+        raise MeshFileError(f"{where}.speed_mps: expected a speed in [0, 10] m/s, got "
+                            f"{entry.get('speed_mps')!r}")
+    return speed
+
+
 def _parse_pose(entry, where: str) -> np.ndarray:
     if not isinstance(entry, dict):
         raise MeshFileError(f"{where}: expected a mapping with 'position' (+ angles) or 'matrix'")
+    entry = {k: v for k, v in entry.items() if k != "speed_mps"}
     if "matrix" in entry:
         extra = set(entry) - {"matrix"}
         if extra:
@@ -153,7 +188,8 @@ def _parse_pose(entry, where: str) -> np.ndarray:
     allowed = {"position", "yaw_deg", "pitch_deg", "roll_deg"}
     unknown = set(entry) - allowed
     if unknown:
-        raise MeshFileError(f"{where}: unknown field(s) {sorted(unknown)}; allowed: {sorted(allowed)} or matrix")
+        raise MeshFileError(f"{where}: unknown field(s) {sorted(unknown)}; allowed: "
+                            f"{sorted(allowed | {'speed_mps'})} or matrix")
     if "position" not in entry:
         raise MeshFileError(f"{where}: missing field 'position' ([x, y, z] in metres)")
     try:
@@ -208,11 +244,13 @@ def load_scene_file(path: str | Path, *, validate_materials: bool = True) -> Sce
         check_materials(meshes, str(path))
     poses_doc = doc.get("radar_poses")
     if poses_doc is None:
-        poses = np.eye(4)[None]
+        poses, speeds = np.eye(4)[None], np.zeros(1)
     else:
         if not isinstance(poses_doc, list) or not poses_doc:
             raise MeshFileError(f"{path}: radar_poses must be a non-empty list")
         poses = np.stack([_parse_pose(e, f"{path}: radar_poses[{i}]") for i, e in enumerate(poses_doc)])
+        speeds = np.array([_parse_speed(e, f"{path}: radar_poses[{i}]")
+                           for i, e in enumerate(poses_doc)])
     boxes, labels = _parse_boxes(doc.get("boxes", []) or [], f"{path}: boxes")
     name = str(doc.get("name") or path.stem)
     return Scene(
@@ -222,6 +260,7 @@ def load_scene_file(path: str | Path, *, validate_materials: bool = True) -> Sce
         boxes_world=boxes,
         box_labels=labels,
         path=path,
+        radar_speeds_mps=speeds,
     )
 
 
@@ -315,7 +354,9 @@ def simulate_scene_poses(scene: Scene, radar, seeds: Sequence[int],
     points, seconds, stats = [], [], []
     for k, (pose, seed) in enumerate(zip(scene.radar_poses, seeds, strict=True)):
         t0 = time.perf_counter()
-        frame = simulate_fn(geometry, radar, pose, seed=seed)
+        velocity = scene.radar_velocity(k)
+        frame = (simulate_fn(geometry, radar, pose, seed=seed) if velocity is None
+                 else simulate_fn(geometry, radar, pose, seed=seed, velocity_mps=velocity))
         seconds.append(time.perf_counter() - t0)
         points.append(np.asarray(frame.points, dtype=np.float32).reshape(-1, 4))
         stats.append(dict(getattr(frame, "stats", {}) or {}))

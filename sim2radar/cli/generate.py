@@ -6,7 +6,8 @@
 Prefect and the flows are imported inside the command, so ``sim2radar --help`` stays fast.
 A YAML file (``--config``, e.g. ``configs/generate/default.yaml``) may hold the same settings
 (``worlds``, ``frames``, ``geometry``, ``radar``, ``reconstruction``, ``seed``, ``class_name``,
-``world:`` and ``rig:`` sections); command-line options win over it.
+``motion: {speed_mps: [MIN, MAX]}``, ``world:`` and ``rig:`` sections); command-line options
+win over it.
 """
 
 from __future__ import annotations
@@ -155,6 +156,10 @@ def generate(
     material_override: str | None = typer.Option(
         None, "--material-override",
         help="Simulate every mesh as this material (the one-material ablation)."),
+    speed: tuple[float, float] | None = typer.Option(
+        None, "--speed", help="The rig's walking speed range [m/s], drawn per frame (MIN MAX; "
+        "0 0 stands still) [0.5 1.5]: Doppler of the reference radar, Doppler bins of the "
+        "ray tracer's detector."),
     export_openpcdet: Path | None = typer.Option(
         None, "--export-openpcdet", help="Also write the OpenPCDet custom layout here."),
     png_dir: Path | None = typer.Option(None, "--png-dir",
@@ -201,9 +206,10 @@ def generate(
             reconstruction=reconstruction, seed=seed, export_openpcdet=export_openpcdet,
             png_dir=png_dir, no_png=no_png, force=force, strict=strict, workers=workers,
             dask=dask, no_prefect=no_prefect, json_out=json_out, verbose=verbose,
-            retry_failed=retry_failed, procedural={"--worlds": worlds, "--first-seed": first_seed, "--geometry": geometry,
-                        "--width": width, "--height": height, "--spp": spp,
-                        "--material-override": material_override})
+            retry_failed=retry_failed, procedural={
+                "--worlds": worlds, "--first-seed": first_seed, "--geometry": geometry,
+                "--width": width, "--height": height, "--spp": spp,
+                "--material-override": material_override, "--speed": speed})
         return
     if not no_prefect:
         _prefect_env(verbose)  # before the config check below imports Prefect
@@ -236,6 +242,8 @@ def generate(
             "labels": cfg.get("labels"),
             "material_override": material_override or cfg.get("material_override"),
             "export_label_range_m": cfg.get("export_label_range_m", "detector"),
+            **({"motion": {"speed_mps": list(speed)}} if speed is not None
+               else {"motion": cfg["motion"]} if "motion" in cfg else {}),
         })
         if "reconstructed" in spec.geometries:
             preflight(spec.reconstruction)   # a misconfigured VLM server: exit 2 here

@@ -9,7 +9,8 @@ path (no store, no Prefect; ``tasks/dataset.py`` adds caching and I/O).
 * :func:`reconstructed_frame` — the paper's pipeline: meshes reconstructed from the frame's RGB
   + LiDAR (:func:`world_frame_input`; the reconstruction's steps run in ``tasks/steps.py``)
   moved into the rig's radar frame (``inv(radar_to_world) @ camera_to_world``) and
-  simulated; labels are the reconstructed door
+  simulated with the rig moving as for the ground truth (:func:`rig_motion`: the same speed
+  per frame); labels are the reconstructed door
   boxes the radar sees on the reconstructed geometry (the same visibility rule), the paper's
   pre-training pseudo-labels. The ground-truth doors the radar sees are stored alongside.
 """
@@ -24,8 +25,8 @@ import numpy as np
 from sim2radar.factory.frames import DatasetFrame, points_near_boxes
 from sim2radar.factory.labels import radar_visibility, scene_ray_caster
 
-__all__ = ["frame_id_for", "with_material", "ground_truth_labels", "ground_truth_frame",
-           "world_frame_input", "reconstructed_frame",
+__all__ = ["frame_id_for", "with_material", "rig_motion", "ground_truth_labels", "ground_truth_frame",
+           "world_frame_input", "reconstructed_frame", "world_surface_offsets",
            "render_seconds", "world_radar_frames"]
 
 
@@ -62,16 +63,24 @@ def ground_truth_labels(frame, world_scene, spec):
     return boxes[idx], idx, vis[idx].astype(np.float32)
 
 
-def ground_truth_frame(frame, world_id: str, world_scene, spec, radar_seed: int) -> DatasetFrame:
-    """The radar on the world's meshes (``world_scene``, a RadarScene in the world frame) at the
-    frame's radar pose, labelled with the ground-truth doors it sees."""
+def rig_motion(frame, spec) -> tuple[float, np.ndarray | None]:
+    """The rig's speed [m/s] while ``frame`` is taken (drawn per frame from the spec's
+    ``motion``, :func:`~sim2radar.factory.seeds.frame_speed`: the same for every geometry and
+    radar of the frame) and its velocity in the radar frame [m/s] (None at rest)."""
     from sim2radar.factory.seeds import frame_speed
-    from sim2radar.radar import simulate_scene_frame
     from sim2radar.worlds import rig_velocity
 
     speed = (frame_speed(spec.motion.speed_mps, spec.seed, frame.seed, frame.frame_index)
              if spec.moving else 0.0)
-    velocity = rig_velocity(frame.radar_to_world, speed) if speed > 0 else None
+    return speed, (rig_velocity(frame.radar_to_world, speed) if speed > 0 else None)
+
+
+def ground_truth_frame(frame, world_id: str, world_scene, spec, radar_seed: int) -> DatasetFrame:
+    """The radar on the world's meshes (``world_scene``, a RadarScene in the world frame) at the
+    frame's radar pose, labelled with the ground-truth doors it sees."""
+    from sim2radar.radar import simulate_scene_frame
+
+    speed, velocity = rig_motion(frame, spec)
     t0 = time.perf_counter()
     rf = simulate_scene_frame(world_scene, spec.radar, frame.radar_to_world, seed=radar_seed,
                               velocity_mps=velocity)
@@ -86,7 +95,17 @@ def ground_truth_frame(frame, world_id: str, world_scene, spec, radar_seed: int)
         gt_visibility=vis, n_triangles=world_scene.n_triangles,
         timings_s={"render": render_seconds(frame), "simulate": sim_s},
         stats={"radar": rf.stats, "radar_seed": radar_seed, "rig_speed_mps": speed},
+        surface_offset_m=world_surface_offsets(rf.points, world_scene, frame),
     )
+
+
+def world_surface_offsets(points, world_scene, frame) -> np.ndarray:
+    """(N,) float32 — each radar point's range minus the first surface of the world's
+    meshes (``world_scene``, a RadarScene in the world frame) along its ray from the frame's
+    true radar pose [m] (:func:`sim2radar.evaluate.fidelity.surface_offsets`)."""
+    from sim2radar.evaluate.fidelity import surface_offsets
+
+    return surface_offsets(points, scene_ray_caster(world_scene, frame.radar_to_world))
 
 
 def world_frame_input(frame):
@@ -118,9 +137,11 @@ def reconstructed_frame(frame, world_id: str, world_scene, spec, radar_seed: int
         raise ValueError(f"{fid}: reconstruction produced no meshes; nothing for the radar")
     boxes = np.asarray(door_boxes, np.float32).reshape(-1, 7)
     n_fitted = int(len(boxes))
+    speed, velocity = rig_motion(frame, spec)
     t0 = time.perf_counter()
     radar_scene = RadarScene(with_material(meshes, spec.material_override))
-    rf = simulate_scene_frame(radar_scene, spec.radar, None, seed=radar_seed)
+    rf = simulate_scene_frame(radar_scene, spec.radar, None, seed=radar_seed,
+                              velocity_mps=velocity)
     sim_s = time.perf_counter() - t0
     # the reconstructed doors the radar sees on the reconstructed geometry are the labels
     vis = radar_visibility(boxes, scene_ray_caster(radar_scene), radar_view(spec.rig), spec.labels)
@@ -136,7 +157,9 @@ def reconstructed_frame(frame, world_id: str, world_scene, spec, radar_seed: int
         n_triangles=radar_scene.n_triangles,
         timings_s={"render": render_seconds(frame), "reconstruct": reconstruct_s,
                    "simulate": sim_s},
-        stats={"radar": rf.stats, "radar_seed": radar_seed, **stats, "n_boxes_fitted": n_fitted},
+        stats={"radar": rf.stats, "radar_seed": radar_seed, "rig_speed_mps": speed, **stats,
+               "n_boxes_fitted": n_fitted},
+        surface_offset_m=world_surface_offsets(rf.points, world_scene, frame),
     )
 
 

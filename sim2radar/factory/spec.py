@@ -71,9 +71,10 @@ class DatasetSpec(BaseModel):
         in this point-cloud range [m] (``"detector"``: the detector's; None keeps every label).
     render_rgb : bool — path trace RGB and cast LiDAR for the world frames (needed by
         ``reconstructed``; a ground-truth-only run such as the reference radar can skip it).
-    motion : RigMotion or None — the rig's speed range while frames are taken (the
-        signal-level radar's Doppler; :func:`sim2radar.worlds.trajectory.rig_velocity`); None:
-        standing still.
+    motion : RigMotion or None — the rig's speed range while frames are taken (Doppler of the
+        signal-level radar; the ray tracer's Doppler bins; :func:`sim2radar.worlds.trajectory.
+        rig_velocity`); by default a person walking (:data:`sim2radar.worlds.config.
+        WALKING_SPEED_MPS`, drawn per frame); None or ``{speed_mps: [0, 0]}``: standing still.
     """
 
     # the JSON schema (a deployment's parameter schema, which Prefect's server enforces) is
@@ -101,7 +102,7 @@ class DatasetSpec(BaseModel):
     def _resolve(cls, data: Any) -> Any:
         if not isinstance(data, dict):
             return data
-        from sim2radar.worlds.config import RigMotion, resolve_world_configs
+        from sim2radar.worlds.config import WALKING_SPEED_MPS, RigMotion, resolve_world_configs
 
         data = dict(data)
         geometry = data.pop("geometry", data.pop("geometries", "reconstructed"))
@@ -124,7 +125,8 @@ class DatasetSpec(BaseModel):
             boxes_in_point_cloud_range(np.zeros((0, 7)), rng)  # validates
             rng = tuple(float(v) for v in rng)
         data["export_label_range_m"] = rng
-        motion = data.get("motion")
+        # a walking rig unless told otherwise (None or speed 0 0: at rest)
+        motion = data.get("motion", {"speed_mps": list(WALKING_SPEED_MPS)})
         if motion is not None and not isinstance(motion, RigMotion):
             try:
                 motion = RigMotion.model_validate(motion)
@@ -270,7 +272,7 @@ def dataset_metadata(spec: DatasetSpec, geometry: str, domain: str | None = None
 #: Settings a generate YAML (``sim2radar generate --config``) may hold.
 GENERATE_CONFIG_KEYS = {"worlds", "first_seed", "frames", "geometry", "radar", "reconstruction", "seed",
                 "class_name", "world", "rig", "dataset", "labels", "material_override",
-                "export_label_range_m", "poses"}
+                "export_label_range_m", "poses", "motion"}
 
 
 #: Whole-number settings and their smallest allowed value (None: any integer).

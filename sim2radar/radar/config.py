@@ -33,6 +33,7 @@ from sim2radar.em import get_material
 
 __all__ = [
     "DEFAULT_RADAR",
+    "DETECTION_DOMAINS",
     "DetectionConfig",
     "HardwareConfig",
     "SignalChainConfig",
@@ -107,33 +108,72 @@ class _Frozen(BaseModel):
     model_config = ConfigDict(frozen=True, extra="forbid")
 
 
+#: Where the ray tracer's detector runs (``DetectionConfig.domain``).
+DETECTION_DOMAINS = ("integrated", "range-azimuth")
+
+
 class DetectionConfig(_Frozen):
-    """Peak detection (:mod:`sim2radar.radar.detection`): on the range-azimuth map of the virtual
-    array's complete row, each peak's elevation then read from the 2D beam (TI's cascade DOA).
+    """Peak detection of the ray tracer (:mod:`sim2radar.radar.detection`).
 
-    CA-CFAR along range (per azimuth beam): a cell is a detection when
-    ``P > alpha * (mean(training cells) + N)`` with ``alpha = 10**(threshold_db/10)``
-    (Richards, *Fundamentals of Radar Signal Processing*, §6.5), ``P > N * 10**(min_snr_db/10)``
-    and (``peak_grouping``) it is a local maximum of its neighbourhood (3 cells per axis);
-    ``N`` is the map's noise, ``N0`` times ``N_virtual / n`` for the ``n`` channels it uses.
-    Peaks more than ``sidelobe_level_db`` below the strongest peak of their range bin are taken
-    for sidelobes of the array response and dropped, like the ``sidelobeLevel_dB_azim`` rule
-    of TI's cascade DOA (whose default, 1 dB per range-Doppler cell, would leave about one
-    point per range bin here, where no Doppler axis separates directions). The default 20 dB
-    lies below the -13.3 dB first sidelobe of a filled row with margin (a heuristic).
+    ``domain: integrated`` (default) is TI's cascade chain (``CFAR_CASO/datapath.m``,
+    ``DOACascade.m``): the map the CFAR tests is the range-Doppler map **integrated over the
+    virtual channels** (``sum |s(x, z)|^2`` per cell). The ray tracer has no chirps; on a
+    moving rig (``velocity_mps``) its returns go to the Doppler bin of their direction,
+    ``-v . u`` in bins of :attr:`RadarConfig.range_rate_resolution_mps`
+    (:func:`sim2radar.radar.detection.doppler_bins`), each bin's channels summed on their own;
+    at rest every return shares the zero bin. A ``cfar_kind`` CFAR (``caso``: TI's
+    smallest-of) runs along range (``cfar_training_cells`` / ``cfar_guard_cells`` per side,
+    threshold factor ``10^(cfar_threshold_db / 10)``, TI's ``K0``; the first / last
+    ``cfar_discard_range_bins`` never tested) and one along Doppler (``doppler_cfar_*``,
+    circular); a cell must pass both. Then, in each detected cell, every azimuth peak of its
+    channels' map (a local maximum along azimuth) at least ``min_snr_db`` over the map's noise
+    and within ``sidelobe_level_db`` of the cell's strongest peak (TI's
+    ``sidelobeLevel_dB_azim``, 1 dB in its example); each peak's elevation is read from the 2D
+    beam. A diffuse multipath field spread over many directions is thus compared with the
+    integrated return of its whole cell, as the device compares it.
 
-    ``N0`` is the receiver noise power per cell. By default (``noise_floor_db: null``) it is
-    derived from the preset's ``hardware`` link budget
+    ``domain: range-azimuth`` is the earlier detector: a cell-averaging CFAR along range in
+    every azimuth beam, ``P > alpha * (mean(training cells) + N)`` with ``alpha =
+    10**(cfar_threshold_db/10)`` (Richards, *Fundamentals of Radar Signal Processing*, §6.5),
+    ``P > N * 10**(min_snr_db/10)``, (``peak_grouping``) a local maximum of its neighbourhood
+    (3 cells per axis) and within ``sidelobe_level_db`` of the strongest peak of its range
+    bin. Each beam's threshold follows the weak diffuse multipath behind walls and near
+    ``R_max`` wherever nothing stronger shares the beam, so it detects that multipath's
+    speckle at the CFAR's false-alarm rate everywhere (docs/radar_model.md: 63 % of the
+    ground-truth sim's points more than 1 m behind the first surface; the reference radar's
+    own paths through a per-beam CFAR: 64 %). Kept for comparisons; it ignores the rig's
+    motion.
+
+    ``N`` is the map's receiver noise: ``N0`` (per beam cell of the all-channel matched filter)
+    times ``N_virtual / n`` for the ``n`` channel positions the map uses. ``N0`` by default
+    (``noise_floor_db: null``) comes from the preset's ``hardware`` link budget
     (:func:`sim2radar.radar.link_budget.noise_power_per_cell`: ``k T F f_s`` over the echo
     scale and the coherent processing gain); a number overrides it [dB re the simulator's
     ``|a|^2`` unit]. Receiver noise is added to the simulated channels only when the frame has a
     seed and ``add_noise`` is on: ``seed=None`` stays deterministic and noise-free (the
-    thresholds still use ``N0``).
+    thresholds then use the expected noise).
     """
 
-    cfar_guard_cells: int = Field(2, ge=0, le=64, description="guard cells each side [bins]")
+    domain: Literal["integrated", "range-azimuth"] = Field(
+        "integrated", description="where the CFAR runs: the channel-integrated range profile "
+        "(TI's chain at rest) or every azimuth beam of the range-azimuth map")
+    cfar_kind: Literal["ca", "caso", "os"] = Field(
+        "caso", description="integrated domain: cell averaging, smallest-of (TI's CASO) or "
+        "ordered statistic (rank 0.75); the range-azimuth domain is always 'ca'")
+    cfar_guard_cells: int = Field(8, ge=0, le=64, description="guard cells each side [bins]")
     cfar_training_cells: int = Field(8, ge=1, le=256, description="training cells each side [bins]")
-    cfar_threshold_db: float = Field(10.0, ge=0.0, le=60.0, description="CFAR scale alpha [dB]")
+    cfar_threshold_db: float = Field(6.99, ge=0.0, le=60.0,
+                                     description="CFAR scale alpha [dB] (TI's K0 = 5: 6.99 dB)")
+    cfar_discard_range_bins: tuple[int, int] = Field(
+        (10, 20), description="integrated domain: first and last range bins never tested "
+        "(TI's discardCellLeft / discardCellRight)")
+    doppler_cfar_guard_cells: int = Field(
+        0, ge=0, le=16, description="integrated domain, Doppler pass: guard cells each side")
+    doppler_cfar_training_cells: int = Field(
+        4, ge=1, le=16, description="integrated domain, Doppler pass: training cells each side")
+    doppler_cfar_threshold_db: float = Field(
+        4.77, ge=0.0, le=60.0, description="integrated domain, Doppler pass: CFAR scale [dB] "
+        "(TI's K0 = 3: 4.77 dB)")
     noise_floor_db: float | None = Field(
         None,
         description="receiver noise power per cell [dB re simulator power unit]; "
@@ -143,13 +183,14 @@ class DetectionConfig(_Frozen):
         True, description="add receiver noise to frames simulated with a seed (seed=None: never)"
     )
     min_snr_db: float = Field(10.0, ge=0.0, description="minimum cell SNR over the noise [dB]")
-    peak_grouping: bool = Field(True, description="keep only local maxima (3 cells per axis)")
+    peak_grouping: bool = Field(
+        True, description="range-azimuth domain: keep only local maxima (3 cells per axis)")
     sidelobe_level_db: float | None = Field(
-        20.0,
+        1.0,
         ge=0.0,
         le=100.0,
-        description="drop azimuth peaks more than this below the strongest of their range bin "
-        "(array sidelobes) [dB]; None keeps all",
+        description="drop azimuth peaks more than this below the strongest of their detection "
+        "cell (range-Doppler cell; range bin in the range-azimuth domain) [dB]; None keeps all",
     )
     max_points: int | None = Field(None, ge=1, description="keep the strongest N points")
 
@@ -159,6 +200,20 @@ class DetectionConfig(_Frozen):
         if value is not None and not (math.isfinite(value) and -300.0 < value < 100.0):
             raise ValueError(f"noise_floor_db must be a finite dB value or null, got {value}")
         return value
+
+    @field_validator("cfar_discard_range_bins")
+    @classmethod
+    def _check_discard(cls, value: tuple[int, int]) -> tuple[int, int]:
+        if any(int(v) < 0 for v in value):
+            raise ValueError(f"cfar_discard_range_bins must be >= 0 bins, got {list(value)}")
+        return (int(value[0]), int(value[1]))
+
+    @model_validator(mode="after")
+    def _check_domain(self) -> DetectionConfig:
+        if self.domain == "range-azimuth" and self.cfar_kind != "ca":
+            raise ValueError(f"cfar_kind {self.cfar_kind!r} needs domain 'integrated'; the "
+                             "range-azimuth detector is cell averaging ('ca')")
+        return self
 
 
 class ScatteringConfig(_Frozen):
@@ -562,6 +617,12 @@ class RadarConfig(_Frozen):
     def sampling_time_s(self) -> float:
         """ADC sampling window per chirp ``N_adc / f_s`` [s]."""
         return self.adc_samples / self.adc_sample_rate_hz
+
+    @property
+    def range_rate_resolution_mps(self) -> float:
+        """Doppler bin width in range rate, ``lambda / (2 N_chirps T_loop)`` [m/s] with the TDM
+        loop ``T_loop = N_tx * chirp_period_s`` (TI SWRA553, velocity-resolution section)."""
+        return self.wavelength_m / (2.0 * self.n_chirps * self.n_tx * self.chirp_period_s)
 
     @property
     def chirp_period_s(self) -> float:

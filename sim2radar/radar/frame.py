@@ -17,13 +17,15 @@ import numpy as np
 
 from sim2radar.radar.binning import TraceResult, add_receiver_noise, array_geometry, beamform
 from sim2radar.radar.config import RadarConfig
-from sim2radar.radar.detection import cell_noise_power, detect_points
+from sim2radar.radar.detection import cell_noise_power, detect_frame
 from sim2radar.radar.paths import PathSet
 
 __all__ = ["RadarFrame", "TracedScene", "simulate_scene_frame"]
 
 #: Second seed word of the receiver-noise random stream (distinct from the ray jitter's).
 NOISE_STREAM = 0x4E01
+#: ... and of the noise on a returned beam cube (a picture; detection draws its own).
+CUBE_NOISE_STREAM = 0x4E02
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -36,8 +38,9 @@ class RadarFrame:
         x, y, z [m] in the radar frame (x forward, y left, z up), intensity [dB]
         (``10 log10(4 pi |a|^2)`` = RCS [dBsm] - 40 log10(range [m])), strongest first.
     doppler_mps : (N,) float32
-        Radial velocity of each point [m/s] (positive = receding). The ray tracer has no
-        Doppler axis (zeros); the signal-level radar measures it.
+        Radial velocity of each point [m/s] (positive = receding): the signal-level radar
+        measures it; the ray tracer gives the range rate of the point's range-Doppler cell
+        (its direction's, :func:`sim2radar.radar.detection.doppler_bins`; 0 at rest).
     cube : (n_range, n_az, n_el) complex64 or None
         Beamformed range-azimuth-elevation returns of the virtual array (``return_cube=True``;
         :mod:`sim2radar.radar.binning`), receiver noise included when a seed was given.
@@ -49,11 +52,12 @@ class RadarFrame:
     elevation_bins_rad : (n_el,) float32 — elevation beam centres [rad] (+ = up), uniform in
         ``sin``.
     stats : dict
-        ``fidelity``; at ``raytrace``: ``n_rays``, ``n_hits`` (first bounce), ``hits_per_bounce``, ``n_points``,
-        ``n_triangles``, ``variant``, ``seed``, ``noise_power_per_cell`` (N0 [sim. |a|^2]),
-        ``noise_added`` and ``seconds`` per stage (``rays``, ``trace``, ``readback``,
-        ``beamform``, ``detect``, ``total``); at ``signal``: ``n_paths``, the signal chain's
-        stats (:class:`~sim2radar.radar.signal.SignalFrame`) and ``seconds`` (``trace``,
+        ``fidelity``, ``max_range_m`` (R_max [m]); at ``raytrace``: ``n_rays``, ``n_hits``
+        (first bounce), ``hits_per_bounce``, ``n_points``, ``n_triangles``, ``variant``,
+        ``seed``, ``noise_power_per_cell`` (N0 [sim. |a|^2]), ``noise_added`` and ``seconds``
+        per stage (``rays``, ``trace``, ``readback``, ``beamform``, ``detect``, ``total``); at
+        ``signal``: ``n_paths``, the signal chain's stats
+        (:class:`~sim2radar.radar.signal.SignalFrame`) and ``seconds`` (``trace``,
         ``signal``, ``total``).
     """
 
@@ -123,17 +127,21 @@ def simulate_scene_frame(
     result = scene.trace(radar, pose, seed=seed)
     t1 = time.perf_counter()
     geom = array_geometry(radar)
-    aperture = result.accumulator.aperture(geom)
     n0 = cell_noise_power(radar)
     noise_added = seed is not None and radar.detection.add_noise
-    if noise_added:
-        # receiver noise per virtual channel (binning.add_receiver_noise), from its own stream
-        # (the ray jitter draws from default_rng(seed))
-        rng = np.random.default_rng([int(seed), NOISE_STREAM])
-        aperture = add_receiver_noise(aperture, geom, n0, rng)
-    cube = beamform(aperture, geom) if return_cube else None
+    # receiver noise per virtual channel (binning.add_receiver_noise), from its own stream
+    # (the ray jitter draws from default_rng(seed))
+    rng = np.random.default_rng([int(seed), NOISE_STREAM]) if noise_added else None
+    cube = None
+    if return_cube:
+        aperture = result.accumulator.aperture(geom)
+        if noise_added:
+            aperture = add_receiver_noise(aperture, geom, n0,
+                                          np.random.default_rng([int(seed), CUBE_NOISE_STREAM]))
+        cube = beamform(aperture, geom)
     t2 = time.perf_counter()
-    points = detect_points(cube, result.accumulator, radar, aperture=aperture)
+    found = detect_frame(result.accumulator, radar, velocity_mps=velocity_mps, rng=rng)
+    points = found.points
     t3 = time.perf_counter()
     seconds = dict(result.seconds)
     seconds["beamform"] = t2 - t1
@@ -141,6 +149,7 @@ def simulate_scene_frame(
     seconds["total"] = t3 - t0
     stats = {
         "fidelity": radar.fidelity,
+        "max_range_m": radar.max_range_m,
         "n_rays": result.n_rays,
         "n_hits": result.hits_per_bounce[0] if result.hits_per_bounce else 0,
         "hits_per_bounce": list(result.hits_per_bounce),
@@ -150,11 +159,13 @@ def simulate_scene_frame(
         "seed": seed,
         "noise_power_per_cell": n0,
         "noise_added": noise_added,
+        "rig_velocity_mps": (None if velocity_mps is None
+                             else [float(v) for v in np.asarray(velocity_mps).reshape(3)]),
         "seconds": seconds,
     }
     return RadarFrame(
         points=points,
-        doppler_mps=np.zeros(len(points), np.float32),
+        doppler_mps=found.doppler_mps,
         cube=cube,
         range_bins_m=radar.range_bins_m,
         azimuth_bins_rad=radar.azimuth_bins_rad,
@@ -177,6 +188,7 @@ def _simulate_signal_scene_frame(
     t2 = time.perf_counter()
     stats = {
         "fidelity": radar.fidelity,
+        "max_range_m": radar.max_range_m,
         "n_paths": int(len(paths)),
         "n_points": sf.n_points,
         "n_triangles": scene.n_triangles,

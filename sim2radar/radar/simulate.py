@@ -52,8 +52,10 @@ def simulate_frame(
     velocity_mps : (3,), optional
         The radar's velocity in its own frame [m/s] over a static scene (None: standing
         still). The signal-level radar (``fidelity: signal``) turns it into each path's range
-        rate and so into Doppler; the ray tracer's binned cube has no Doppler axis and
-        ignores it.
+        rate and so into Doppler; the ray tracer's ``integrated`` detector separates its
+        returns into Doppler bins by direction with it
+        (:func:`sim2radar.radar.detection.doppler_bins`), as the device's range-Doppler map
+        does.
 
     Returns
     -------

@@ -9,6 +9,7 @@ See :mod:`sim2radar.worlds.frame` for the data types and frame conventions.
 """
 
 from sim2radar.worlds.config import (
+    WALKING_SPEED_MPS,
     RigConfig,
     RigMotion,
     WorldConfig,
@@ -37,6 +38,7 @@ __all__ = [
     "NO_INSTANCE",
     "RENDER_VERSION",
     "STAGE_VERSION",
+    "WALKING_SPEED_MPS",
     "Appearance",
     "DoorSpec",
     "RigConfig",

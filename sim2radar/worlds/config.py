@@ -26,6 +26,7 @@ from sim2radar.configio import DEFAULT_RADAR, config_path, read_yaml_mapping
 from sim2radar.vocab import MATERIAL_CLASSES
 
 __all__ = [
+    "WALKING_SPEED_MPS",
     "WorldConfig",
     "RigConfig",
     "WorldConfigError",
@@ -252,12 +253,19 @@ class WorldConfig(BaseModel):
         return self
 
 
+#: A person carrying the rig through a corridor walks at about this speed range [m/s] (min,
+#: max; drawn per frame): the default motion of every procedural-world dataset, so the sim and
+#: the reference radar take each frame at the same speed.
+WALKING_SPEED_MPS = (0.5, 1.5)
+
+
 class RigMotion(BaseModel):
     """How the rig moves while each frame is taken: along its heading (the radar's forward
     axis, levelled) at a speed drawn per frame uniformly from ``speed_mps`` [m/s]
     (:func:`sim2radar.worlds.trajectory.rig_velocity`); ``(0, 0)`` stands still. A person
-    carrying the rig walks at ~0.5-1.5 m/s. The signal-level radar turns the motion into
-    Doppler; the ray tracer has no Doppler axis and ignores it.
+    carrying the rig walks at ~0.5-1.5 m/s (:data:`WALKING_SPEED_MPS`). The signal-level radar
+    turns the motion into each path's Doppler; the ray tracer's detector separates its returns
+    into Doppler bins by direction (:func:`sim2radar.radar.detection.doppler_bins`).
     """
 
     model_config = ConfigDict(frozen=True, extra="forbid")

@@ -8,6 +8,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 from typer.testing import CliRunner
 
 from sim2radar.cli import app
@@ -35,12 +36,15 @@ def test_demo_runs_procedural_worlds_end_to_end(prefect_server, tmp_path):
         assert (out / "openpcdet" / geometry / "ImageSets" / "train.txt").is_file()
     # ground-truth labels are the world's doors the radar sees
     assert sim["geometry"]["ground_truth"]["label_recall"] == 1.0
-    # the proxy-real domain: denser than the ray-traced sim, labelled as a proxy, 5 columns
+    # the proxy-real domain: labelled as a proxy, 5 columns (Doppler of the walking rig)
     ref = real["geometry"]["ground_truth"]
     assert real["counts"] == {"ok": 3, "skipped": 0, "failed": 0} and ref["frames"] == 6
-    assert ref["points_per_frame"] > 2 * sim["geometry"]["ground_truth"]["points_per_frame"]
+    assert ref["points_per_frame"] > 20
     meta = json.loads((out / "openpcdet" / "proxy_real" / "dataset.json").read_text())
     assert meta["domain"] == "proxy-real (reference radar simulation)"
+    assert meta["point_columns"][-1] == "doppler_mps" and meta["point_geometry"]["points"] > 0
+    pts = np.load(next((out / "openpcdet" / "proxy_real" / "points").glob("*.npy")))
+    assert pts.shape[1] == 5 and np.any(pts[:, 4] != 0)
     gap = summary["gap"]
     assert 0 < gap["points_ratio"] < 1 and (out / "sweeps" / "demo" / "gap" / "gap.json").is_file()
     assert summary["sweep"]["counts"]["failed"] == 0 and summary["sweep"]["counts"]["ok"] > 0

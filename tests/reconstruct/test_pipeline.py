@@ -64,7 +64,9 @@ def test_scene_goes_to_the_radar_frame_and_simulator(frame, builtin_scene):
     assert boxes.shape[1] == 7 and np.all(boxes[:, 2] > -1.4) and np.all(boxes[:, 0] > 0)
     from sim2radar.radar import load_radar_config, simulate_frame
 
-    points = simulate_frame(meshes, load_radar_config("ti-mmwcas")).points
+    # the rig walking forward at 1 m/s (radar frame: x forward), as the factory's rig does
+    points = simulate_frame(meshes, load_radar_config("ti-mmwcas"),
+                            velocity_mps=np.array([1.0, 0.0, 0.0])).points
     assert len(points) > 20
     # detections lie on the reconstructed corridor: inside its walls, beyond the radar
     assert np.all(points[:, 0] > 0) and np.all(np.abs(points[:, 1]) < 3.0)
