@@ -30,7 +30,7 @@ __all__ = ["CONFIG_KINDS", "DEFAULT_RADAR", "bundled_configs", "config_path", "l
 #: when no radar is named: TI's 4-chip cascade imaging radar (MMWCAS-RF-EVM), the paper's sensor.
 DEFAULT_RADAR = "ti-mmwcas"
 #: folders of ``sim2radar.configs``: the kinds of config a command loads by name
-CONFIG_KINDS = ("detect", "experiment", "generate", "reconstruct", "worlds")
+CONFIG_KINDS = ("detect", "evaluation", "experiment", "generate", "reconstruct", "worlds")
 
 
 def _bundled_dir(kind: str) -> Path:

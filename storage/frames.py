@@ -47,7 +47,18 @@ def dataset_frame_to_table(f: DatasetFrame) -> pa.Table:
         "n_triangles": pa.array([int(f.n_triangles)], pa.int64()),
         "timings_s": pa.array([list(f.timings_s.items())], pa.map_(pa.string(), pa.float64())),
         "stats_json": [json.dumps(jsonable(f.stats), sort_keys=True)],
+        "surface_offset_m": ragged_column([_offsets(f, len(pts))], pa.float32()),
     })
+
+
+def _offsets(f: DatasetFrame, n: int) -> np.ndarray:
+    """The frame's surface offsets, NaN for each point when the geometry is unknown."""
+    if f.surface_offset_m is None:
+        return np.full(n, np.nan, np.float32)
+    off = np.asarray(f.surface_offset_m, np.float32).reshape(-1)
+    if len(off) != n:
+        raise ValueError(f"{f.frame_id}: {len(off)} surface offsets for {n} points")
+    return off
 
 
 def dataset_frame_from_table(t: pa.Table) -> DatasetFrame:
@@ -73,4 +84,10 @@ def dataset_frame_from_table(t: pa.Table) -> DatasetFrame:
         gt_visibility=np.asarray(col("gt_visibility"), np.float32).reshape(-1),
         n_triangles=int(row["n_triangles"]), timings_s=dict(row["timings_s"]),
         stats=json.loads(row["stats_json"]),
+        surface_offset_m=_decoded_offsets(col("surface_offset_m")),
     )
+
+
+def _decoded_offsets(off: np.ndarray) -> np.ndarray | None:
+    off = np.asarray(off, np.float32).reshape(-1)
+    return None if len(off) and np.isnan(off).all() else off

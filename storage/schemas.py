@@ -438,7 +438,7 @@ RECONSTRUCTION = register_schema(
 DATASET_FRAMES = register_schema(
     ArtifactSchema(
         stage="dataset_frames",
-        version=2,
+        version=3,
         row="one radar frame of one world frame and one geometry",
         description="radar points (radar frame) + door labels with their visibility + "
         "ground-truth doors + timings",
@@ -474,6 +474,9 @@ DATASET_FRAMES = register_schema(
             field("timings_s", pa.map_(pa.string(), pa.float64()), unit="s",
                   doc="render / reconstruct / simulate wall time of this frame"),
             field("stats_json", pa.string(), doc="radar stats, reconstruction diagnostics (JSON)"),
+            field("surface_offset_m", pa.list_(pa.float32()), unit="m",
+                  doc="(N,) point range minus the first world surface along its ray (inf: "
+                  "none; NaN: geometry unknown)"),
         ]),
     )
 )

@@ -208,9 +208,11 @@ from sim2radar.radar.config import PRESET_DIR, load_radar_config, preset_names
 from sim2radar.reconstruct.pipeline import ReconstructionConfig
 from sim2radar.scenes import demo_scene_paths, load_scene_file
 from sim2radar.worlds.config import load_worlds_config
+from sim2radar.evaluate.fidelity import heldout_world_seeds
 
 loaders = {"detect": load_config, "experiment": load_profile, "generate": load_generate_config,
-           "reconstruct": ReconstructionConfig.from_yaml, "worlds": load_worlds_config}
+           "reconstruct": ReconstructionConfig.from_yaml, "worlds": load_worlds_config,
+           "evaluation": heldout_world_seeds}
 configs = {}
 for kind in CONFIG_KINDS:
     configs[kind] = {}

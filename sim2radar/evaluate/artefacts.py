@@ -135,11 +135,16 @@ class DatasetInfo:
     range_resolution_m : float or None [m] — its ``range_resolution_m``.
     radar_height_m : float or None [m] — its ``radar_height_m``: the radar's height above the
         floor (the floor is at z = -radar_height_m in the radar frame).
+    point_geometry, labels_vs_truth : dict or None — its ``point_geometry`` and
+        ``labels_vs_truth`` (what the factory measured against the true geometry of procedural
+        worlds, :func:`sim2radar.factory.export.export_frames`); None when absent.
     """
 
     domain: str = UNDECLARED
     range_resolution_m: float | None = None
     radar_height_m: float | None = None
+    point_geometry: dict | None = None
+    labels_vs_truth: dict | None = None
 
 
 @dataclass(frozen=True)
@@ -581,5 +586,12 @@ def read_dataset_info(root: str | Path) -> DatasetInfo:
             raise DatasetError(f"{path}: {key} must be a number {'>' if strict else '>='} "
                                f"{low:g} [m], got {v!r}; fix it or remove the key")
         values[key] = float(v)
+    measured = {}
+    for key in ("point_geometry", "labels_vs_truth"):
+        v = doc.get(key)
+        if v is not None and not isinstance(v, dict):
+            raise DatasetError(f"{path}: {key} must be an object (or null), got "
+                               f"{type(v).__name__}; fix it or remove the key")
+        measured[key] = v
     return DatasetInfo(domain=domain if isinstance(domain, str) and domain.strip()
-                       else UNDECLARED, **values)
+                       else UNDECLARED, **values, **measured)

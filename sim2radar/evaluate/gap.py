@@ -41,7 +41,13 @@ import numpy as np
 
 from sim2radar.datasets.openpcdet import DatasetError, read_labels, read_points
 from sim2radar.evaluate.artefacts import DatasetInfo, artefact_definitions, read_dataset_info
-from sim2radar.evaluate.gap_figures import FIGURES, _pct, gap_figures, overlay_png
+from sim2radar.evaluate.fidelity import (
+    BEHIND_SURFACE_M,
+    FAR_RANGE_FRACTION,
+    domain_fidelity,
+    fidelity_readings,
+)
+from sim2radar.evaluate.gap_figures import FIGURES, _pct, fidelity_png, gap_figures, overlay_png
 from sim2radar.evaluate.gap_metrics import (
     ChamferResult,
     FovInterval,
@@ -76,6 +82,22 @@ __all__ = [
     "point_count_stats",
     "write_gap_report",
 ]
+
+
+#: What each figure of ``gap.json["fidelity"]`` measures.
+FIDELITY_DEFINITIONS = {
+    "behind_share": f"share of points more than {BEHIND_SURFACE_M:g} m behind the first "
+                    "surface of the true geometry along their ray from the radar (multipath, "
+                    "returns through slabs); from the dataset's dataset.json point_geometry, "
+                    "written by the factory for procedural worlds",
+    "beyond_share": f"share of points beyond {FAR_RANGE_FRACTION:g} R_max (the device's chain "
+                    "tests range bins up to ~0.87 R_max; its IF filter rolls off from 0.9)",
+    "points_per_label": "median number of points inside a door label box (no margin)",
+    "labels_empty": "share of door label boxes with no point inside",
+    "azimuth": "1 % and 99 % percentiles of the points' azimuth atan2(y, x)",
+    "labels_vs_truth": "the dataset's door labels against the true doors the radar sees, "
+                       "one-to-one at 3D IoU 0.3; width/depth error of the matched labels",
+}
 
 
 # ------------------------------------------------------------------------------------ I/O
@@ -138,13 +160,15 @@ def write_gap_report(
     :func:`compute_gap` (with each folder's ``dataset.json``:
     :func:`~sim2radar.evaluate.artefacts.read_dataset_info`), and
     writes into ``out_dir``: ``gap.json``, ``overlay.png``, ``azimuth.png``, ``range.png``,
-    ``intensity.png``, ``points.png``, ``artefacts.png``.
+    ``intensity.png``, ``points.png``, ``artefacts.png``, ``fidelity.png`` (where the points
+    are against the true geometry and what the door labels hold,
+    :mod:`sim2radar.evaluate.fidelity`).
 
     Parameters
     ----------
     sim_root, real_root : dataset folders (SIM: simulated; REAL: measured or the reference
         radar's proxy). Frames are the ``points/*.npy`` files, sorted by id; labels are read
-        only for the overlay frame (drawn when present).
+        for the overlay frame (drawn when present) and the door figures.
     out_dir : report folder (created).
     max_frames : analyse at most the first N frame ids (sorted) of each dataset, and fit the
         intensity match on at most the first N train ids.
@@ -168,6 +192,8 @@ def write_gap_report(
          "overlay_frame": id or null,
          "artefacts": {"settings", "definitions", "doppler_edges_mps", "sim", "real"}
                       (:func:`artefacts_dict`),
+         "fidelity": {"sim", "real" (:class:`~sim2radar.evaluate.fidelity.DomainFidelity`),
+                      "readings" (one sentence per figure), "definitions"},
          "figures": {"overlay": "overlay.png", ...}}
 
     Raises
@@ -218,6 +244,12 @@ def write_gap_report(
     overlay_png(sim_pts, real_pts, title=title, boxes=boxes, path=out_dir / FIGURES["overlay"])
     for name, data in gap_figures(rep).items():
         atomic_write(out_dir / FIGURES[name], data)
+    fid = {role: domain_fidelity(pts, _labels(root, pts), info.point_geometry,
+                                 info.labels_vs_truth)
+           for role, pts, root, info in (("sim", sim, sim_root, rep.info_sim),
+                                         ("real", real, real_root, rep.info_real))}
+    atomic_write(out_dir / FIGURES["fidelity"],
+                 fidelity_png(fid["sim"], fid["real"], rep.info_sim.domain, rep.info_real.domain))
 
     doc = jsonable({
         "sim": _dataset_dict(sim_root, rep.sim, rep.info_sim),
@@ -238,10 +270,23 @@ def write_gap_report(
             "per_frame": dict(rep.chamfer.per_frame)},
         "overlay_frame": chosen,
         "artefacts": artefacts_dict(rep),
+        "fidelity": {"sim": fid["sim"].to_dict(), "real": fid["real"].to_dict(),
+                     "readings": fidelity_readings(fid["sim"], fid["real"]),
+                     "definitions": FIDELITY_DEFINITIONS},
         "figures": dict(FIGURES),
     })
     write_json(out_dir / "gap.json", doc)
     return doc
+
+
+def _labels(root: Path, frames: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """The label boxes of the analysed frames that have a label file."""
+    out = {}
+    for fid in frames:
+        path = root / "labels" / f"{fid}.txt"
+        if path.is_file():
+            out[fid] = np.asarray(read_labels(path)[0], np.float64).reshape(-1, 7)
+    return out
 
 
 def _dataset_dict(root: Path, st: PointCountStats, info: DatasetInfo) -> dict[str, Any]:

@@ -16,14 +16,16 @@ from pathlib import Path
 
 import numpy as np
 
+from sim2radar.evaluate.fidelity import BEHIND_SURFACE_M, FAR_RANGE_FRACTION, DomainFidelity
 from sim2radar.evaluate.gap_metrics import GapReport
 from sim2radar.fileio import atomic_write
 
-__all__ = ["FIGURES", "gap_figures", "overlay_png"]
+__all__ = ["FIGURES", "fidelity_png", "gap_figures", "overlay_png"]
 
 #: Figure names in ``gap.json`` -> file names in the report folder.
 FIGURES = {"overlay": "overlay.png", "azimuth": "azimuth.png", "range": "range.png",
-           "intensity": "intensity.png", "points": "points.png", "artefacts": "artefacts.png"}
+           "intensity": "intensity.png", "points": "points.png", "artefacts": "artefacts.png",
+           "fidelity": "fidelity.png"}
 
 _SIM_COLOR = "tab:red"  # the paper's Figure 3: simulated radar in red
 _REAL_COLOR = "tab:blue"  # ... and real radar in blue
@@ -297,6 +299,49 @@ def _artefacts_png(rep: GapReport) -> bytes:
     ax_share.set_title("range coverage and points below the floor", fontsize=9)
     ax_share.legend(fontsize=8)
     ax_share.grid(True, axis="y", lw=0.3, alpha=0.5)
+    return _png(fig)
+
+
+def fidelity_png(sim: DomainFidelity, real: DomainFidelity, sim_domain: str = "sim",
+                 real_domain: str = "real") -> bytes:
+    """Two panels: where the points are and what the door labels hold, per dataset (shares
+    [%]: behind the first true surface, beyond 0.85 R_max, door label boxes without points
+    and with fewer than 5), and the median points inside a door label box. A figure a dataset
+    cannot measure (no true geometry) is written as "unknown", not drawn as 0."""
+    fig = _new_figure(12, 4.4)
+    ax_share, ax_door = fig.subplots(1, 2, width_ratios=[2.2, 1.0])
+    groups = [f"> {BEHIND_SURFACE_M:g} m behind\nthe first surface",
+              f"beyond {FAR_RANGE_FRACTION:g} R_max", "door boxes\nwithout points",
+              "door boxes\n< 5 points"]
+    gx = np.arange(len(groups))
+    w = 0.38
+    sides = (("sim", sim, sim_domain, _SIM_COLOR), ("real", real, real_domain, _REAL_COLOR))
+    for k, (role, f, domain, color) in enumerate(sides):
+        dx = (k - 0.5) * w
+        values = (f.behind_share, f.beyond_share, f.labels_empty, f.labels_under_5)
+        for g, value in enumerate(values):
+            known = value is not None and math.isfinite(value)
+            v = 100 * value if known else 0.0
+            ax_share.bar(gx[g] + dx, v, w, color=color,
+                         label=f"{role} ({_short(domain)})" if g == 0 else None)
+            ax_share.annotate(_fmt(v, ".1f") if known else "unknown", (gx[g] + dx, v),
+                              ha="center", va="bottom", fontsize=8, rotation=0 if known else 90)
+    ax_share.set_xticks(gx, groups, fontsize=8)
+    ax_share.set_ylabel("points or boxes [%]")
+    ax_share.set_ylim(0, 110)
+    ax_share.set_title("where the points are (against the true geometry) and door label boxes",
+                       fontsize=9)
+    ax_share.legend(fontsize=8, loc="upper right")
+    ax_share.grid(True, axis="y", lw=0.3, alpha=0.5)
+    for k, (_, f, _, color) in enumerate(sides):
+        v = f.points_per_label if math.isfinite(f.points_per_label) else 0.0
+        ax_door.bar(k, v, 0.6, color=color)
+        ax_door.annotate(_fmt(f.points_per_label, ".0f"), (k, v), ha="center", va="bottom",
+                         fontsize=8)
+    ax_door.set_xticks([0, 1], ["sim", "real"], fontsize=8)
+    ax_door.set_ylabel("points in a door label box (median)")
+    ax_door.set_title("the door signal", fontsize=9)
+    ax_door.grid(True, axis="y", lw=0.3, alpha=0.5)
     return _png(fig)
 
 

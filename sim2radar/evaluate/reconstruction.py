@@ -161,7 +161,8 @@ def match_boxes(pred: np.ndarray, gt: np.ndarray, iou_threshold: float = 0.3,
     -------
     dict: ``tp`` (matched pairs at ≥ threshold), ``n_pred``, ``n_gt``, ``recall``,
     ``precision``, ``ious`` (best IoU of each ground-truth box, 0 if unmatched),
-    ``n_ignored`` (predictions dropped by ``ignore``).
+    ``n_ignored`` (predictions dropped by ``ignore``), ``pairs`` (the matched ``(pred index,
+    gt index)`` pairs at ≥ threshold).
     """
     pred = np.asarray(pred, np.float64).reshape(-1, 7)
     gt_arr = np.asarray(gt, np.float64).reshape(-1, 7)
@@ -171,12 +172,14 @@ def match_boxes(pred: np.ndarray, gt: np.ndarray, iou_threshold: float = 0.3,
         # at IoU 1, the best any pair can reach, so the greedy matching pairs them one-to-one
         n = len(pred)
         return {"tp": n, "n_pred": n, "n_gt": n, "recall": 1.0 if n else float("nan"),
-                "precision": 1.0 if n else float("nan"), "ious": np.ones(n), "n_ignored": 0}
+                "precision": 1.0 if n else float("nan"), "ious": np.ones(n), "n_ignored": 0,
+                "pairs": [(i, i) for i in range(n)]}
     iou = box_iou_3d(pred, gt)
     n_pred, n_gt = iou.shape
     best = np.zeros(n_gt)
     hit = np.zeros(n_pred, bool)
     used_p, used_g = set(), set()
+    pairs: list[tuple[int, int]] = []
     order = np.dstack(np.unravel_index(np.argsort(-iou, axis=None), iou.shape))[0] if iou.size else []
     for i, j in order:
         if iou[i, j] <= 0:
@@ -187,6 +190,8 @@ def match_boxes(pred: np.ndarray, gt: np.ndarray, iou_threshold: float = 0.3,
         used_g.add(int(j))
         best[j] = iou[i, j]
         hit[i] = iou[i, j] >= iou_threshold
+        if hit[i]:
+            pairs.append((int(i), int(j)))
     tp = int((best >= iou_threshold).sum())
     n_ignored = 0
     if ignore is not None and n_pred:
@@ -198,7 +203,7 @@ def match_boxes(pred: np.ndarray, gt: np.ndarray, iou_threshold: float = 0.3,
         "tp": tp, "n_pred": n_counted, "n_gt": n_gt,
         "recall": tp / n_gt if n_gt else float("nan"),
         "precision": tp / n_counted if n_counted else float("nan"),
-        "ious": best, "n_ignored": n_ignored,
+        "ious": best, "n_ignored": n_ignored, "pairs": pairs,
     }
 
 

@@ -11,12 +11,15 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from sim2radar.datasets import Frame, write_dataset, write_metadata
 from sim2radar.datasets.splits import split_groups
+from sim2radar.evaluate.fidelity import label_quality
 from sim2radar.factory.frames import DatasetFrame
 from sim2radar.factory.labels import DEFAULT_POINT_CLOUD_RANGE_M, boxes_in_point_cloud_range
 
-__all__ = ["export_frames"]
+__all__ = ["export_frames", "point_geometry"]
 
 log = logging.getLogger(__name__)
 
@@ -35,16 +38,27 @@ def export_frames(frames: Iterable[DatasetFrame], export_dir: str | os.PathLike,
     <class>``, only labels whose centre lies in ``label_range_m`` (the detector's point-cloud
     range; None keeps all); ``ImageSets/{train,val,test}.txt`` split by world (seeded,
     :func:`~sim2radar.datasets.splits.split_groups`, or the given ``splits``: split name -> world ids); ``dataset.json``
-    (:func:`sim2radar.datasets.write_metadata`): ``metadata`` plus the counts, the label rule
-    and the worlds of each split.
+    (:func:`sim2radar.datasets.write_metadata`): ``metadata`` plus the counts, the label rule,
+    the worlds of each split, and for procedural worlds (frames that know the true geometry)
+    where the points are (``point_geometry``, :func:`point_geometry`) and how the exported
+    labels compare with the true doors the radar sees (``labels_vs_truth``,
+    :func:`sim2radar.evaluate.fidelity.label_quality`), both read by the gap report.
 
     Returns ``{"root", "frames", "labels", "labels_dropped_out_of_range", "splits": {name:
     n_frames}}``.
     """
     out_frames, world_of = [], {}
     n_labels = n_dropped = 0
+    geometry_parts: list[tuple[np.ndarray | None, np.ndarray, float | None]] = []
+    label_pairs: list[tuple[np.ndarray, np.ndarray]] = []   # frames that know the true doors
     for df in frames:
+        geometry_parts.append((df.surface_offset_m,
+                               np.linalg.norm(np.asarray(df.points)[:, :3], axis=1),
+                               (df.stats.get("radar") or {}).get("max_range_m")))
         keep = boxes_in_point_cloud_range(df.boxes, label_range_m)
+        if df.surface_offset_m is not None:  # a procedural world: its doors are known
+            truth = df.gt_boxes[boxes_in_point_cloud_range(df.gt_boxes, label_range_m)]
+            label_pairs.append((df.boxes[keep], truth))
         n_labels += int(keep.sum())
         n_dropped += int((~keep).sum())
         points = df.points_with_doppler if with_doppler else df.points
@@ -78,6 +92,31 @@ def export_frames(frames: Iterable[DatasetFrame], export_dir: str | os.PathLike,
             ["doppler_mps"] if with_doppler else []),
         "label_range_m": None if label_range_m is None else list(label_range_m),
         "worlds": {k: sorted(set(v)) for k, v in worlds.items()},
+        "point_geometry": point_geometry(geometry_parts),
+        "labels_vs_truth": (label_quality([p for p, _ in label_pairs],
+                                          [t for _, t in label_pairs])
+                            if label_pairs else None),
         "exported_at": datetime.now(UTC).isoformat(timespec="seconds"),
     })
     return out
+
+
+def point_geometry(parts: Sequence[tuple[np.ndarray | None, np.ndarray, float | None]]
+                   ) -> dict[str, Any] | None:
+    """Where an export's points are (``dataset.json["point_geometry"]``, read by the gap
+    report): :class:`sim2radar.evaluate.fidelity.FidelityCounts` pooled over the frames that
+    know their surface offsets and R_max, from per-frame ``(surface offsets or None, point
+    ranges [m], R_max [m] or None)``; None when no frame does (capture folders, measured
+    data: no true geometry)."""
+    from sim2radar.evaluate.fidelity import FidelityCounts
+
+    known = [(o, r, m) for o, r, m in parts if o is not None and m]
+    if not known:
+        return None
+    max_range = {float(m) for _, _, m in known}
+    if len(max_range) > 1:
+        raise ValueError(f"frames of one export have different R_max {sorted(max_range)}")
+    counts = FidelityCounts.of([o for o, _, _ in known], [r for _, r, _ in known],
+                               max_range.pop())
+    return {**counts.to_dict(), "frames": len(known),
+            "surface": "the world's meshes along each point's ray from the true radar pose"}

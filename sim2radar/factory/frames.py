@@ -34,6 +34,10 @@ class DatasetFrame:
     gt_door_index : (G,) int32; gt_points_near : (G,) int32
     gt_visibility : (G,) float32 — their visibility on the world's geometry.
     n_triangles : int; timings_s : dict [s]; stats : dict
+    surface_offset_m : (N,) float32 or None — each point's range minus the distance to the
+        first surface of the *world's* geometry along its ray [m] (``inf``: none;
+        :func:`sim2radar.evaluate.fidelity.surface_offsets`); None where no true geometry is
+        known (capture folders).
     """
 
     frame_id: str
@@ -54,6 +58,7 @@ class DatasetFrame:
     n_triangles: int
     timings_s: dict
     stats: dict
+    surface_offset_m: np.ndarray | None = None
 
     @property
     def points_with_doppler(self) -> np.ndarray:

@@ -537,6 +537,40 @@ def _gap_artefact_rows(art: Any) -> list[list[str]]:
     ]
 
 
+def _gap_fidelity_rows(fid: Any) -> list[list[str]]:
+    """Rows [label, sim, real] of ``gap.json["fidelity"]`` (sim2radar.evaluate.gap: where the
+    points are against the true geometry, the door label boxes); none for a report written
+    before it existed."""
+    if not isinstance(fid, Mapping):
+        return []
+    sides = [f if isinstance(f, Mapping) else {} for f in (fid.get("sim"), fid.get("real"))]
+
+    def known(v: Any, text: str) -> str:
+        return "not measured (no true geometry)" if v is None else text
+
+    def azimuth(f: Mapping) -> str:
+        lo, hi = num(f.get("azimuth_lo_deg")), num(f.get("azimuth_hi_deg"))
+        return "—" if lo is None or hi is None else f"{lo:+.0f}° to {hi:+.0f}°"
+
+    def labels(f: Mapping) -> str:
+        if f.get("label_recall") is None:
+            return "—"
+        return (f"{_share_cell(f.get('label_recall'))} / {_share_cell(f.get('label_precision'))}"
+                f" (width error {_fmt(f.get('label_width_error_m'), '.2f')} m)")
+
+    return [
+        ["points > 1 m behind the first true surface",
+         *(known(f.get("behind_share"), _share_cell(f.get("behind_share"))) for f in sides)],
+        ["points beyond 0.85 R_max",
+         *(known(f.get("beyond_share"), _share_cell(f.get("beyond_share"))) for f in sides)],
+        ["points in a door label box (median)",
+         *(_fmt(f.get("points_per_label"), ".0f") for f in sides)],
+        ["door label boxes without points", *(_share_cell(f.get("labels_empty")) for f in sides)],
+        ["azimuth covered (1–99 %)", *(azimuth(f) for f in sides)],
+        ["door labels vs true doors: recall / precision", *(labels(f) for f in sides)],
+    ]
+
+
 def _gap(data: SweepData) -> dict[str, Any] | None:
     gap = data.gap
     if gap is None:
@@ -552,6 +586,7 @@ def _gap(data: SweepData) -> dict[str, Any] | None:
             ["domain (dataset.json)", str(sim.get("domain") or "—"),
              str(real.get("domain") or "—")],
             *_gap_artefact_rows(gap.get("artefacts")),
+            *_gap_fidelity_rows(gap.get("fidelity")),
             ["dataset folder", str(sim.get("root", "—")), str(real.get("root", "—"))]]
     ratio = num(gap.get("points_ratio"))
     ch = gap.get("chamfer")
@@ -572,6 +607,10 @@ def _gap(data: SweepData) -> dict[str, Any] | None:
                            ("beyond_range", "range coverage"), ("below_floor", "below floor")):
             if defs.get(key):
                 facts.append([label, str(defs[key])])
+    fid = gap.get("fidelity")
+    readings = fid.get("readings") if isinstance(fid, Mapping) else None
+    if isinstance(readings, list):
+        facts += [["reading", str(r)] for r in readings]
     figures = [{"name": name, "uri": uri} for name, uri in data.gap_images.items()]
     return jsonable({"rows": rows, "facts": facts, "figures": figures})
 
