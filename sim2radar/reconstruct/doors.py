@@ -15,7 +15,8 @@ count (frame and closed leaves; an open leaf swung into the room does not): the 
 **doorway box** of the procedural worlds (frame outline × wall thickness, whatever the leaves'
 swing angle). Door
 segments that are coplanar and touch along the wall (double-door leaves, a leaf and its frame)
-are merged into one box first.
+are merged into one box first. Boxes too narrow or too wide for a doorway are dropped at the
+end (:func:`plausible_door_boxes`).
 """
 
 from __future__ import annotations
@@ -28,8 +29,8 @@ import numpy as np
 from sim2radar.boxes import DOOR_THICKNESS_M, transform_boxes, wrap_heading
 from sim2radar.boxes import box_corners as _box_corners
 
-__all__ = ["DoorFitConfig", "fit_door_box", "fit_door_boxes", "dedupe_boxes", "transform_boxes",
-           "box_corners"]
+__all__ = ["DoorFitConfig", "fit_door_box", "fit_door_boxes", "dedupe_boxes",
+           "plausible_door_boxes", "transform_boxes", "box_corners"]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -60,6 +61,13 @@ class DoorFitConfig:
         2.06–2.26 m high in the procedural worlds), and a box whose top lies at doorway height
         (``min_top_m`` − 0.25 to + 0.6 above the floor) is extended down to the floor (its lower
         part lost). 0 disables both.
+    min_width_m, max_width_m : float [m] — a fitted box narrower or wider than this cannot be
+        a door and is dropped (:func:`plausible_door_boxes`): a doorway (leaf + frame) of a
+        single door is ~0.7-1.2 m wide, of a double door up to ~2 m (DIN 18101 nominal
+        widths: 0.625-1.25 m per leaf; the procedural worlds: 0.92-1.12 m and 1.52-1.92 m);
+        narrower boxes are slivers of a door (a jamb, a leaf edge) or a mislabelled object,
+        wider ones a door merged with the wall. Chosen from these standards, not from
+        reconstruction results. 0 disables each bound.
     """
 
     thickness_m: float = DOOR_THICKNESS_M
@@ -73,6 +81,8 @@ class DoorFitConfig:
     inlier_m: float = 0.04
     split_gap_m: float = 0.25
     min_top_m: float = 0.0
+    min_width_m: float = 0.6
+    max_width_m: float = 2.0
 
 
 def _wrap_half(angle: float | np.ndarray):
@@ -313,6 +323,28 @@ def dedupe_boxes(boxes: np.ndarray, max_angle_deg: float = 15.0,
             d = b[j, :2] - b[i, :2]
             if abs(d @ n) <= max_offset_m and abs(d @ a) < 0.5 * (b[i, 3] + b[j, 3]):
                 keep[j] = False
+    return b[keep]
+
+
+def plausible_door_boxes(boxes: np.ndarray, config: DoorFitConfig = DoorFitConfig()
+                         ) -> np.ndarray:
+    """The boxes whose width (``dx``) can be a doorway's: within ``[min_width_m,
+    max_width_m]`` (a bound of 0 is off).
+
+    Parameters
+    ----------
+    boxes : (M, 7) ``x y z dx dy dz heading`` [m, rad].
+
+    Returns
+    -------
+    (K, 7) float32, K <= M, in input order.
+    """
+    b = np.asarray(boxes, np.float32).reshape(-1, 7)
+    keep = np.ones(len(b), bool)
+    if config.min_width_m > 0:
+        keep &= b[:, 3] >= config.min_width_m
+    if config.max_width_m > 0:
+        keep &= b[:, 3] <= config.max_width_m
     return b[keep]
 
 

@@ -40,6 +40,7 @@ from sim2radar.reconstruct.doors import (
     DoorFitConfig,
     dedupe_boxes,
     fit_door_boxes,
+    plausible_door_boxes,
     transform_boxes,
 )
 from sim2radar.reconstruct.meshing import MeshingConfig, segment_meshes
@@ -73,8 +74,9 @@ log = logging.getLogger(__name__)
 #: output of the same inputs and config changes (2: LiDAR depth completed down to the floor;
 #: 3: the rig calibration, furniture fronts up to door height; 4: door height ≤ 2.3 m, double
 #: doors, front-most wall faces, glass door leaves; 5: doorway boxes from the wall face measured
-#: around the doorway, doorways from 0.78 m wide, openings framed by coplanar wall regions).
-STAGE_VERSION = 5
+#: around the doorway, doorways from 0.78 m wide, openings framed by coplanar wall regions;
+#: 6: boxes outside the doorway widths DoorFitConfig.min/max_width_m dropped).
+STAGE_VERSION = 6
 
 
 class BackendSpec(BaseModel):
@@ -502,6 +504,8 @@ def build_scene(frame: FrameInput, depth: DepthResult, segments: Segments,
                           - np.maximum(0.5, 0.5 * (measured[:, 3] + b[3]))) > 0]
         boxes = np.vstack([measured, *[b[None] for b in kept]]).astype(np.float32)
     boxes = dedupe_boxes(boxes)
+    n_fitted = len(boxes)
+    boxes = plausible_door_boxes(boxes, config.doors.to_config())  # doorway widths only
     timings["doors"] = time.perf_counter() - t
 
     seg_info = dict(segments.info)
@@ -513,6 +517,7 @@ def build_scene(frame: FrameInput, depth: DepthResult, segments: Segments,
         "segments": seg_info,
         "up_cam": up.tolist(),
         "rig_calibration": frame.rig_calibration,
+        "door_boxes_implausible": n_fitted - len(boxes),
         "fallbacks": fallbacks,
         "config": config.to_dict(),
     }
