@@ -29,7 +29,8 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-__all__ = ["MaterialMesh", "MeshFileError", "load_mesh", "load_scene", "save_ply", "box_mesh"]
+__all__ = ["MaterialMesh", "MeshFileError", "load_mesh", "load_scene", "save_ply", "box_mesh",
+           "cylinder_arrays", "cylinder_mesh"]
 
 
 class MeshFileError(ValueError):
@@ -157,6 +158,56 @@ def box_mesh(
         ]
     )
     return MaterialMesh(vertices, faces, material=material, name=name, semantic=semantic)
+
+
+def cylinder_arrays(
+    base: Sequence[float],
+    axis: Sequence[float],
+    radius_m: float,
+    length_m: float,
+    segments: int = 16,
+) -> tuple[np.ndarray, np.ndarray]:
+    """A closed cylinder from ``base`` [m] along ``axis`` (normalised here) with ``radius_m``
+    and ``length_m`` [m], its side a prism of ``segments`` flat facets: vertices (2S+2, 3)
+    float64 and outward-facing faces (4S, 3) int64."""
+    if segments < 3 or not radius_m > 0 or not length_m > 0:
+        raise ValueError(f"cylinder needs >= 3 segments and a positive radius and length, got "
+                         f"{segments}, {radius_m}, {length_m}")
+    a = np.asarray(axis, dtype=np.float64)
+    a = a / np.linalg.norm(a)
+    helper = np.array([1.0, 0.0, 0.0]) if abs(a[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+    e1 = np.cross(a, helper)
+    e1 /= np.linalg.norm(e1)
+    e2 = np.cross(a, e1)
+    ang = 2 * np.pi * np.arange(segments) / segments
+    ring = radius_m * (np.cos(ang)[:, None] * e1 + np.sin(ang)[:, None] * e2)
+    b = np.asarray(base, dtype=np.float64)
+    verts = np.concatenate([b + ring, b + a * length_m + ring, [b], [b + a * length_m]])
+    s = segments
+    i = np.arange(s)
+    j = (i + 1) % s
+    faces = np.concatenate([
+        np.stack([i, j, s + j], axis=1), np.stack([i, s + j, s + i], axis=1),   # side
+        np.stack([np.full(s, 2 * s), j, i], axis=1),                            # base cap
+        np.stack([np.full(s, 2 * s + 1), s + i, s + j], axis=1),                # top cap
+    ]).astype(np.int64)
+    return verts, faces
+
+
+def cylinder_mesh(
+    base: Sequence[float],
+    axis: Sequence[float],
+    radius_m: float,
+    length_m: float,
+    segments: int = 16,
+    *,
+    material: str,
+    name: str = "",
+    semantic: str = "",
+) -> MaterialMesh:
+    """A closed cylinder mesh (:func:`cylinder_arrays`)."""
+    v, f = cylinder_arrays(base, axis, radius_m, length_m, segments)
+    return MaterialMesh(v, f, material=material, name=name, semantic=semantic)
 
 
 # ---------------------------------------------------------------------------------------

@@ -28,6 +28,7 @@ import math
 import numpy as np
 
 from sim2radar.boxes import wrap_heading
+from sim2radar.door_parts import hinge_parts, lever_handle_parts
 from sim2radar.mesh import MaterialMesh
 from sim2radar.vocab import MATERIAL_CLASSES, SEMANTIC_CLASSES
 from sim2radar.worlds.appearance import sample_appearance
@@ -44,7 +45,8 @@ from sim2radar.worlds.geometry import (
 __all__ = ["generate_world", "STAGE_VERSION"]
 
 #: Bump when generation changes what a seed produces (part of every artifact key).
-STAGE_VERSION = 2  # 2: doorway door boxes; material-correlated textures
+STAGE_VERSION = 3  # 2: doorway door boxes; material-correlated textures; 3: door hardware
+#                    (sim2radar.door_parts): lever handles on both faces, hinge knuckles
 
 _STREAMS = {"layout": 1, "rooms": 2, "doors": 3, "materials": 4, "appearance": 5, "props": 6,
             "windows": 7, "lights": 8}
@@ -404,7 +406,7 @@ def generate_world(seed: int, config: WorldConfig | None = None) -> World:
         leaf_w = clear / n_leaves - 0.008
         leaf_h = hd - 0.015
         hinge_v = t / 2 - 0.005
-        leaves, handles = [], []
+        leaves, handles, hinges = [], [], []
         for i, ang in enumerate(angles):
             sgn = 1.0 if i == 0 else -1.0
             th = math.radians(ang)
@@ -415,8 +417,10 @@ def generate_world(seed: int, config: WorldConfig | None = None) -> World:
             heading = math.atan2(d[1], d[0])
             leaves.append(box_arrays((c[0], c[1], 0.01 + leaf_h / 2), (leaf_w, lt, leaf_h),
                                      heading))
-            hc = hinge + d * (leaf_w - 0.07) + n * lt / 2
-            handles.append(box_arrays((hc[0], hc[1], 1.02), (0.11, lt + 0.12, 0.025), heading))
+            # a lever handle on both faces near the free edge, knuckles on the hinge line
+            # (their centres on the swing-side wall face: they stand proud of it)
+            handles += lever_handle_parts(hinge + d * leaf_w + n * lt / 2, d, n, lt)
+            hinges += hinge_parts((hinge[0], t / 2), leaf_h)
         leaf_mat = material_for("door_leaf")
         leaf_app = sample_appearance(leaf_mat, "door_leaf", ra)
         space_of_door = side.space
@@ -425,8 +429,12 @@ def generate_world(seed: int, config: WorldConfig | None = None) -> World:
         for i, leaf in enumerate(leaves):
             add(to_world([leaf]), "door", "door_leaf", f"door_{k}_leaf_{i}", material=leaf_mat,
                 door_index=k, space_index=space_of_door, appearance=leaf_app)
-        add(to_world(handles), "door", "door_handle", f"door_{k}_handle", prior="door_handle",
-            door_index=k, space_index=space_of_door)
+        handle = add(to_world(handles), "door", "door_handle", f"door_{k}_handle",
+                     prior="door_handle", door_index=k, space_index=space_of_door)
+        # the hinges are the handle's metal (no draw of their own: the seed's other objects
+        # keep their materials and looks)
+        add(to_world(hinges), "door", "door_hinge", f"door_{k}_hinges", material=handle.material,
+            door_index=k, space_index=space_of_door, appearance=handle.appearance)
         # doorway box (see frame.py): the frame's outline × its depth through the wall,
         # independent of the leaves' swing
         lo = np.array([-ow / 2, -dv, 0.0])

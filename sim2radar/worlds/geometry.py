@@ -1,4 +1,5 @@
-"""Small mesh builders for world generation: boxes, cylinders, merging, greedy rectangles.
+"""Small mesh builders for world generation: boxes, cylinders (:func:`sim2radar.mesh.
+cylinder_arrays`, re-exported), merging, greedy rectangles.
 
 All lengths in metres; meshes are closed and outward-facing.
 """
@@ -10,7 +11,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from sim2radar.mesh import MaterialMesh, box_mesh
+from sim2radar.mesh import MaterialMesh, box_mesh, cylinder_arrays
 
 __all__ = ["box_arrays", "cylinder_arrays", "merge_arrays", "mesh_from_parts", "greedy_rects",
            "yaw_matrix"]
@@ -28,39 +29,6 @@ def box_arrays(
     """Vertices (8, 3) float64 and faces (12, 3) of a box (see :func:`sim2radar.mesh.box_mesh`)."""
     m = box_mesh(center, size, heading_rad, material="concrete")
     return m.vertices.astype(np.float64), m.faces.astype(np.int64)
-
-
-def cylinder_arrays(
-    base: Sequence[float],
-    axis: Sequence[float],
-    radius_m: float,
-    length_m: float,
-    segments: int = 16,
-) -> tuple[np.ndarray, np.ndarray]:
-    """A closed cylinder from ``base`` [m] along unit ``axis`` with radius and length [m].
-
-    Returns vertices (2S+2, 3) float64 and faces (4S, 3) int64, outward-facing.
-    """
-    a = np.asarray(axis, dtype=np.float64)
-    a = a / np.linalg.norm(a)
-    helper = np.array([1.0, 0.0, 0.0]) if abs(a[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
-    e1 = np.cross(a, helper)
-    e1 /= np.linalg.norm(e1)
-    e2 = np.cross(a, e1)
-    ang = 2 * np.pi * np.arange(segments) / segments
-    ring = radius_m * (np.cos(ang)[:, None] * e1 + np.sin(ang)[:, None] * e2)
-    b = np.asarray(base, dtype=np.float64)
-    bottom = b + ring
-    top = b + a * length_m + ring
-    verts = np.concatenate([bottom, top, [b], [b + a * length_m]])
-    s = segments
-    i = np.arange(s)
-    j = (i + 1) % s
-    side1 = np.stack([i, j, s + j], axis=1)
-    side2 = np.stack([i, s + j, s + i], axis=1)
-    cap_b = np.stack([np.full(s, 2 * s), j, i], axis=1)
-    cap_t = np.stack([np.full(s, 2 * s + 1), s + i, s + j], axis=1)
-    return verts, np.concatenate([side1, side2, cap_b, cap_t]).astype(np.int64)
 
 
 def merge_arrays(parts: Sequence[tuple[np.ndarray, np.ndarray]]) -> tuple[np.ndarray, np.ndarray]:
