@@ -36,6 +36,7 @@ from sim2radar.reconstruct.backproject import (
     normals_from_points,
     points_from_depth,
 )
+from sim2radar.reconstruct.door_template import DoorTemplateConfig, door_template_meshes
 from sim2radar.reconstruct.doors import (
     DoorFitConfig,
     dedupe_boxes,
@@ -75,7 +76,8 @@ log = logging.getLogger(__name__)
 #: 3: the rig calibration, furniture fronts up to door height; 4: door height ≤ 2.3 m, double
 #: doors, front-most wall faces, glass door leaves; 5: doorway boxes from the wall face measured
 #: around the doorway, doorways from 0.78 m wide, openings framed by coplanar wall regions;
-#: 6: boxes outside the doorway widths DoorFitConfig.min/max_width_m dropped).
+#: 6: boxes outside the doorway widths DoorFitConfig.min/max_width_m dropped, the door template:
+#: casing, lever handle and hinges at every door box).
 STAGE_VERSION = 6
 
 
@@ -127,13 +129,21 @@ DoorOptions = _options_model(
 )
 
 
+DoorTemplateOptions = _options_model(
+    "DoorTemplateOptions", DoorTemplateConfig,
+    """Door-template options in a config; fields and defaults of
+    :class:`sim2radar.reconstruct.door_template.DoorTemplateConfig` (``enabled: false``: the
+    paper's pipeline, door pixels only).""")
+
+
 class ReconstructionConfig(BaseModel):
     """Typed configuration of :func:`reconstruct`.
 
     Attributes
     ----------
     depth, segments, materials : BackendSpec — registry name + options per stage.
-    meshing : MeshingOptions; doors : DoorOptions.
+    meshing : MeshingOptions; doors : DoorOptions; door_template : DoorTemplateOptions (casing,
+        handle and hinges placed at each door box, :mod:`sim2radar.reconstruct.door_template`).
     max_depth_m : float [m] — depth beyond this is treated as invalid.
     unknown_material : str — material given to meshes whose label is ``unknown`` (the radar
         simulator needs a material); recorded as a fallback.
@@ -148,6 +158,7 @@ class ReconstructionConfig(BaseModel):
     materials: BackendSpec = BackendSpec(name="prior")
     meshing: MeshingOptions = MeshingOptions()
     doors: DoorOptions = DoorOptions()
+    door_template: DoorTemplateOptions = DoorTemplateOptions()
     max_depth_m: float = 30.0
     unknown_material: str = "plasterboard"
     rig_calibration: bool = True
@@ -217,7 +228,8 @@ class LabeledScene:
     segment_materials : tuple[MaterialLabel, ...] — material label per segment.
     semantic_id : (H, W) uint8 — per-pixel index into ``vocab.SEMANTIC_CLASSES``.
     material_id : (H, W) uint8 — per-pixel index into ``vocab.MATERIAL_CLASSES``.
-    meshes : list[MaterialMesh] — one per segment, camera frame [m].
+    meshes : list[MaterialMesh] — one per segment, then the door template's (casing and
+        hardware per door box, :mod:`sim2radar.reconstruct.door_template`), camera frame [m].
     door_boxes : (M, 7) float32 — ``x y z dx dy dz heading`` in the level frame.
     level_from_camera : (4, 4) float64 — camera frame -> level frame (x fwd, y left, z up).
     floor_z_m : float [m] — floor height in the level frame (NaN if no floor seen).
@@ -506,6 +518,12 @@ def build_scene(frame: FrameInput, depth: DepthResult, segments: Segments,
     boxes = dedupe_boxes(boxes)
     n_fitted = len(boxes)
     boxes = plausible_door_boxes(boxes, config.doors.to_config())  # doorway widths only
+    door_pts = pl[semantic_id == SEMANTIC_CLASSES.index("door")]
+    template = door_template_meshes(boxes, door_pts[np.isfinite(door_pts).all(axis=1)],
+                                    None if np.isnan(floor_z) else floor_z,
+                                    config.door_template.to_config())
+    camera_from_level = np.linalg.inv(level)
+    meshes = list(meshes) + [m.transformed(camera_from_level) for m in template]
     timings["doors"] = time.perf_counter() - t
 
     seg_info = dict(segments.info)
