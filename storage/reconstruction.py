@@ -91,6 +91,12 @@ def frame_input_digests(frame) -> dict[str, str]:
             "intrinsics": frame_digest(kk, rig_calibration=frame.rig_calibration)}
 
 
+#: Reconstruction settings applied after one view's reconstruction (multi-view fusion,
+#: :mod:`sim2radar.reconstruct.fusion`): they change no per-view artifact, so its keys leave them
+#: out (the dataset frames that use them hash the whole config).
+AFTER_THE_VIEW = ("fusion",)
+
+
 def stage_keys(inputs: dict[str, str], config: dict, *, stage_version: int = 1) -> dict[str, str]:
     """Content keys of every artifact of one frame's reconstruction, stage by stage:
     ``depth_maps`` (inputs + depth backend), ``segmentations`` (+ depth key + segmenter),
@@ -126,8 +132,9 @@ def reconstruction_keys(inputs: dict[str, str], config: dict,
     stage_version : the reconstruction's ``STAGE_VERSION``.
     """
     frame_cfg = None if camera_to_target is None else np.asarray(camera_to_target).round(9).tolist()
+    per_view = {k: v for k, v in config.items() if k not in AFTER_THE_VIEW}
     return {stage: content_key(stage=stage, stage_version=stage_version, inputs=inputs,
-                               config={"reconstruction": config, "camera_to_target": frame_cfg})
+                               config={"reconstruction": per_view, "camera_to_target": frame_cfg})
             for stage in ("scene_meshes", "reconstruction")}
 
 

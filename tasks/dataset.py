@@ -160,22 +160,44 @@ def _world_frame_source(frame, world_id: str, spec: DatasetSpec):
                        camera_to_target=cam_to_radar, ground_truth=frame, seed=frame.seed)
 
 
-def _reconstructed_frame(frame, world_id, world_scene, store, spec, radar_seed,
-                         fresh: bool = False) -> tuple[DatasetFrame, dict[str, str]]:
-    """The paper's pipeline on one world frame, from its reconstruction in the store (made by
-    the reconstruction steps before; ``fresh``: in this run)."""
-    from sim2radar.factory.pipeline import reconstructed_frame
+def _stored_view(frame, store, spec) -> tuple[list, np.ndarray, dict, dict[str, str]]:
+    """A world frame's reconstruction from the store, in its rig's radar frame: meshes, door
+    boxes, the reconstruction record and its keys."""
     from sim2radar.storage.reconstruction import read_reconstruction
 
     cam_to_radar = np.linalg.inv(frame.radar_to_world) @ frame.camera_to_world
     rkeys = _reconstruction_keys(frame, cam_to_radar, spec.reconstruction)
     meshes = meshes_from_table(store.read("scene_meshes", rkeys["scene_meshes"]))
     rec = read_reconstruction(store, rkeys["reconstruction"])
+    return meshes, np.asarray(rec["door_boxes"], np.float32).reshape(-1, 7), rec, rkeys
+
+
+def _reconstructed_frame(frame, world_id, world_scene, store, spec, radar_seed,
+                         fresh: bool = False, earlier_frames=()) -> tuple[DatasetFrame, dict[str, str]]:
+    """The paper's pipeline on one world frame, from its reconstruction in the store (made by
+    the reconstruction steps before; ``fresh``: in this run), fused with the reconstructions of
+    ``earlier_frames`` (the previous frames of its trajectory, most recent first,
+    ``reconstruction.fusion.frames`` of them; :func:`sim2radar.reconstruct.fusion.fuse_views`)."""
+    from sim2radar.factory.pipeline import reconstructed_frame
+
+    meshes, boxes, rec, rkeys = _stored_view(frame, store, spec)
     info = {"fallbacks": rec["info"].get("fallbacks", []), "cached": not fresh}
     if fresh:
         info["n_segments"] = len(rec["segment_labels"])
+    if earlier_frames:
+        from sim2radar.reconstruct.fusion import EarlierView, fuse_views
+
+        radar_from_world = np.linalg.inv(frame.radar_to_world)
+        views = [EarlierView(*_stored_view(f, store, spec)[:2], radar_from_world @ f.radar_to_world)
+                 for f in earlier_frames]
+        fused = fuse_views(meshes, boxes, views, frame.intrinsics,
+                           radar_from_world @ frame.camera_to_world)
+        meshes, boxes = fused.meshes, fused.door_boxes
+        info["fusion"] = {"views": fused.views, "triangles_added": fused.triangles_added,
+                          "boxes_added": fused.boxes_added,
+                          "frames": [int(f.frame_index) for f in earlier_frames]}
     df = reconstructed_frame(frame, world_id, world_scene, spec, radar_seed, meshes=meshes,
-                             door_boxes=rec["door_boxes"],
+                             door_boxes=boxes,
                              reconstruct_s=float(rec["timings_s"].get("total", 0.0)),
                              stats={"reconstruction": info, "reconstruction_keys": rkeys})
     return df, rkeys
@@ -342,11 +364,13 @@ def generate_world_dataset(
                         done(k, df, rkeys)
                         continue
                 if geometry == "reconstructed":
-                    src = _world_frame_source(inputs.frames()[k], world_id, spec)
                     fresh[k] = False
-                    if not st.all_exist(src.keys):
-                        steps = reconstruction_steps(src, spec.reconstruction, st, run)
-                        fresh[k] = steps["scene"].status == "ok"
+                    # this frame's reconstruction and those fused into it
+                    for i in (k, *_earlier_indices(k, spec)):
+                        src = _world_frame_source(inputs.frames()[i], world_id, spec)
+                        if not st.all_exist(src.keys):
+                            steps = reconstruction_steps(src, spec.reconstruction, st, run)
+                            fresh[i] = fresh.get(i, False) or steps["scene"].status == "ok"
                 todo[geometry].append(k)
             except Exception as exc:  # noqa: BLE001 - one broken frame must not stop the rest
                 fail(k, geometry, f"{type(exc).__name__}: {exc}")
@@ -423,7 +447,16 @@ def _simulate_world_frame(inputs: _WorldInputs, k: int, geometry: str, world_id:
         from sim2radar.factory.pipeline import ground_truth_frame
 
         return ground_truth_frame(frame, world_id, scene, spec, radar_seed), {}
-    return _reconstructed_frame(frame, world_id, scene, store, spec, radar_seed, fresh)
+    earlier = [inputs.frames()[i] for i in _earlier_indices(k, spec)]
+    return _reconstructed_frame(frame, world_id, scene, store, spec, radar_seed, fresh,
+                                earlier)
+
+
+def _earlier_indices(k: int, spec: DatasetSpec) -> list[int]:
+    """Frames fused into frame ``k``'s reconstruction: the previous
+    ``reconstruction.fusion.frames`` of its trajectory, most recent first."""
+    n = int(spec.reconstruction.fusion.frames)
+    return list(range(k - 1, max(-1, k - 1 - n), -1))
 
 
 def _provenance(spec, keys, df: DatasetFrame, geometry, rkeys) -> dict:

@@ -37,6 +37,7 @@ from sim2radar.reconstruct.backproject import (
     points_from_depth,
 )
 from sim2radar.reconstruct.door_template import DoorTemplateConfig, door_template_meshes
+from sim2radar.reconstruct.fusion import FusionConfig
 from sim2radar.reconstruct.doors import (
     DoorFitConfig,
     dedupe_boxes,
@@ -129,6 +130,13 @@ DoorOptions = _options_model(
 )
 
 
+FusionOptions = _options_model(
+    "FusionOptions", FusionConfig,
+    """Multi-view fusion options in a config; fields and defaults of
+    :class:`sim2radar.reconstruct.fusion.FusionConfig` (``frames: 0``: the current image
+    only). Fusion happens after each view's own reconstruction, so it changes no per-view
+    artifact (their content keys leave it out).""")
+
 DoorTemplateOptions = _options_model(
     "DoorTemplateOptions", DoorTemplateConfig,
     """Door-template options in a config; fields and defaults of
@@ -143,7 +151,9 @@ class ReconstructionConfig(BaseModel):
     ----------
     depth, segments, materials : BackendSpec — registry name + options per stage.
     meshing : MeshingOptions; doors : DoorOptions; door_template : DoorTemplateOptions (casing,
-        handle and hinges placed at each door box, :mod:`sim2radar.reconstruct.door_template`).
+        handle and hinges placed at each door box, :mod:`sim2radar.reconstruct.door_template`);
+        fusion : FusionOptions (the previous frames of a scene added where the current camera
+        does not look, :mod:`sim2radar.reconstruct.fusion`).
     max_depth_m : float [m] — depth beyond this is treated as invalid.
     unknown_material : str — material given to meshes whose label is ``unknown`` (the radar
         simulator needs a material); recorded as a fallback.
@@ -159,6 +169,7 @@ class ReconstructionConfig(BaseModel):
     meshing: MeshingOptions = MeshingOptions()
     doors: DoorOptions = DoorOptions()
     door_template: DoorTemplateOptions = DoorTemplateOptions()
+    fusion: FusionOptions = FusionOptions()
     max_depth_m: float = 30.0
     unknown_material: str = "plasterboard"
     rig_calibration: bool = True

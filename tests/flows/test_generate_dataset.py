@@ -249,3 +249,33 @@ def test_prefect_flow_run_strict(run, prefect_server):
     assert summary["frame_counts"]["skipped"] == 2
     rows = {r["scene_id"]: r["status"] for r in run["store"].manifest("flow").rows()}
     assert rows["world_000005"] == "skipped" and "failed" in rows.values()
+
+
+def test_reconstruction_fused_with_the_previous_frame_covers_more_azimuth(run, monkeypatch):
+    """Default fusion (1 earlier frame): frame 1's scene adds what frame 0 saw outside frame
+    1's camera, frame 0 has nothing earlier; without fusion (k = 0, the paper's pipeline) the
+    same stored reconstructions are simulated again (nothing is reconstructed: per-view keys
+    leave fusion out) and frame 1's points stay within the camera's view."""
+    from sim2radar.reconstruct.pipeline import ReconstructionConfig
+
+    fused = _frames(run, "reconstructed")
+    assert "fusion" not in fused[0].stats["reconstruction"]
+    info = fused[1].stats["reconstruction"]["fusion"]
+    assert info["views"] == 1 and info["frames"] == [0] and info["triangles_added"] > 0
+    called = []
+    monkeypatch.setattr(td, "reconstruction_steps", lambda *a, **k: called.append(a))
+    single = td.generate_dataset_plain(
+        [SEED], _spec(geometry="reconstructed",
+                      reconstruction=ReconstructionConfig(fusion={"frames": 0})),
+        run["store"], "gen-single")
+    assert not called
+    world = td.outcomes_from_summary(single)[0]
+    alone = td.read_dataset_frame(run["store"],
+                                  world.parts[1].artifacts["dataset_frames/reconstructed"])
+    assert "fusion" not in alone.stats["reconstruction"]
+
+    def wide(df) -> float:
+        az = np.degrees(np.abs(np.arctan2(df.points[:, 1], df.points[:, 0])))
+        return float(np.mean(az > 40.0))
+
+    assert wide(alone) < 0.05 < wide(fused[1])
