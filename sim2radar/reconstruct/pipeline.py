@@ -37,7 +37,6 @@ from sim2radar.reconstruct.backproject import (
     points_from_depth,
 )
 from sim2radar.reconstruct.door_template import DoorTemplateConfig, door_template_meshes
-from sim2radar.reconstruct.fusion import FusionConfig
 from sim2radar.reconstruct.doors import (
     DoorFitConfig,
     dedupe_boxes,
@@ -45,6 +44,7 @@ from sim2radar.reconstruct.doors import (
     plausible_door_boxes,
     transform_boxes,
 )
+from sim2radar.reconstruct.fusion import FusionConfig
 from sim2radar.reconstruct.meshing import MeshingConfig, segment_meshes
 from sim2radar.reconstruct.types import (
     DEPTH_BACKENDS,
