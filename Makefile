@@ -13,7 +13,7 @@ OUT ?= out
 .PHONY: setup demo test test-all bench lint clean
 
 $(BIN)/.installed: pyproject.toml
-	@# Mitsuba's LLVM variants need libllvm19 (LLVM 14 is refused, 15/16 crash): DESIGN.md
+	@# Mitsuba's LLVM variants need libllvm19 (LLVM 14 is refused, 15/16 crash): docs/design.md
 	@if ! ldconfig -p | grep -q 'libLLVM.so.19\|libLLVM-19'; then \
 	  echo "[setup] installing libllvm19 (apt)"; \
 	  SUDO=$$( [ "$$(id -u)" = 0 ] || echo sudo ); \
@@ -37,7 +37,7 @@ $(BIN)/.installed: pyproject.toml
 	    || echo "[setup] could not install postgresql: the Postgres-backed Prefect server test will fail until it is installed"; \
 	fi
 	@[ -x $(BIN)/python ] || $(PY) -m venv $(VENV)
-	@# torch first, pinned: any other spec downloads the multi-GB CUDA build (DESIGN.md)
+	@# torch first, pinned: any other spec downloads the multi-GB CUDA build (docs/design.md)
 	$(BIN)/python -m pip install -q --upgrade pip
 	$(BIN)/python -m pip install -q torch==2.13.0
 	$(BIN)/python -m pip install -q -e '.[dev]'

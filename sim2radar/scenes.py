@@ -18,7 +18,7 @@ the labelled boxes::
       - label: door
         box: [8.0, 0.0, 1.0, 0.05, 0.9, 2.0, 0.0]   # x y z dx dy dz [m], heading [rad]
 
-Frames: world z up; the radar frame is x forward, y left, z up (DESIGN.md). Boxes follow
+Frames: world z up; the radar frame is x forward, y left, z up (docs/design.md). Boxes follow
 ``sim2radar.vocab.BOX_FIELDS`` with z at the box centre.
 """
 

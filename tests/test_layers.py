@@ -9,8 +9,9 @@ Layers, lowest first (a module may import its own layer and the ones below):
   4 flows     sim2radar.flows    (folder flows/)     Prefect flows
   5 cli       sim2radar.cli, benchmarks
 
-The rule is the one of ``../shared/tools/layers.py``, adapted to the package layout (the
-top-level folders install as ``sim2radar.flows`` etc., README "Package layout").
+The rule: a module imports only from its own layer or the ones below, and no import cycle
+(docs/design.md, "Layout"; the top-level folders install as ``sim2radar.flows`` etc., README
+"Package layout").
 ``python tests/test_layers.py`` prints the graph's cycles and upward arrows.
 """
 

@@ -80,11 +80,17 @@ def print_generate_summary(summary: dict[str, Any]) -> None:
             ("frames with a label", "frac_frames_with_label", ".0%"),
             ("GT doors with radar points", "frac_gt_doors_with_points", ".0%"),
             ("label recall (3D IoU 0.3)", "label_recall", ".0%"),
-            ("label precision (3D IoU 0.3)", "label_precision", ".0%"))
+            ("label precision (3D IoU 0.3)", "label_precision", ".0%"),
+            ("matched label width error [m]", "label_width_error_m", ".2f"),
+            ("points in a label box (median)", "points_per_label", ".1f"),
+            ("label boxes without points", "labels_without_points", ".0%"),
+            ("points > 1 m behind the true surface", "behind_surface_share", ".0%"),
+            ("points beyond 0.85 R_max", "beyond_range_share", ".0%"))
+    truth = ("GT", "label_recall", "label_precision", "label_width", "behind_surface")
     for name, key, fmt in rows:
-        if not summary.get("ground_truth", True) and ("GT" in name or "label_" in key):
+        if not summary.get("ground_truth", True) and any(t in name or t in key for t in truth):
             continue  # a capture folder has no ground truth to compare with
-        table.add_row(name, *(_fmt(summary["geometry"][g][key], fmt) for g in geoms))
+        table.add_row(name, *(_fmt(summary["geometry"][g].get(key), fmt) for g in geoms))
     console.print(table)
     secs = summary.get("seconds_per_frame", {})
     if secs:

@@ -4,7 +4,7 @@ Frames
 ------
 camera : OpenCV (x right, y down, z forward) — :mod:`sim2radar.camera`.
 level  : origin at the camera centre, x forward (optical axis projected on the horizontal plane),
-    y left, z up (gravity-aligned; the radar/KITTI-LiDAR convention of DESIGN.md). Door boxes
+    y left, z up (gravity-aligned; the radar/KITTI-LiDAR convention of docs/design.md). Door boxes
     are fitted in this frame because their heading is a rotation about the vertical.
 """
 

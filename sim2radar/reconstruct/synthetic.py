@@ -14,7 +14,7 @@ Frames
 ------
 world : z up; the corridor runs along +x, floor at z = 0.
 camera : OpenCV (x right, y down, z forward), :mod:`sim2radar.camera`.
-radar : x forward, y left, z up (DESIGN.md), at the rig, 0.1 m below the camera.
+radar : x forward, y left, z up (docs/design.md), at the rig, 0.1 m below the camera.
 Boxes : ``x y z dx dy dz heading`` (``vocab.BOX_FIELDS``); for a door ``dx`` is its width
     (along the wall), ``dy`` = 0.17 m (a nominal 0.15 m wall behind the corridor's wall
     plane plus 1 cm frame lips, as the worlds' boxes span the wall), ``dz`` its height, heading the wall direction.

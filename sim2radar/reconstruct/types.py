@@ -1,6 +1,6 @@
 """Stage interfaces of the reconstruction pipeline (paper §3) and their backend registries.
 
-Data flows through four stages; each stage has a registry of named backends (DESIGN.md table):
+Data flows through four stages; each stage has a registry of named backends (docs/design.md, "Model backends"):
 
     Stage 1 depth      DEPTH_BACKENDS     "moge" | "lidar" | "oracle"
     Stage 2 segments   SEGMENT_BACKENDS   "sam2-gdino" | "builtin" | "oracle"

@@ -8,6 +8,7 @@ sim intensities around -60 dB and real ones around +20 dB.
 from __future__ import annotations
 
 import json
+import math
 
 import numpy as np
 import pytest
@@ -143,7 +144,17 @@ def test_histogram_edges_cover_the_span_and_respect_the_bin_cap():
 def test_report_has_exactly_the_dashboard_structure(report):
     out, doc = report
     assert set(doc) == {"sim", "real", "points_ratio", "azimuth", "range", "intensity",
-                        "chamfer", "overlay_frame", "artefacts", "figures"}
+                        "chamfer", "overlay_frame", "artefacts", "fidelity", "figures"}
+    fid = doc["fidelity"]
+    assert set(fid) == {"sim", "real", "readings", "definitions"}
+    for role in ("sim", "real"):
+        assert set(fid[role]) == {
+            "behind_share", "beyond_share", "points_per_label", "labels_empty",
+            "labels_under_5", "azimuth_lo_deg", "azimuth_hi_deg", "label_recall",
+            "label_precision", "label_width_error_m", "label_depth_error_m"}
+        # no dataset.json with the true geometry's measures: not measured, never 0
+        assert fid[role]["behind_share"] is None and fid[role]["label_recall"] is None
+    assert all(isinstance(r, str) for r in fid["readings"]) and len(fid["readings"]) >= 4
     for role in ("sim", "real"):
         assert set(doc[role]) == {"root", "domain", "frames", "points_per_frame_mean",
                                   "points_per_frame_median"}
@@ -384,3 +395,36 @@ def test_report_carries_the_artefact_settings_it_was_given(tmp_path):
     assert art["sim"]["beyond_range_share"] == 0.0                   # 9 m is not beyond 10 m
     with pytest.raises(TypeError, match="ArtefactSettings"):
         GapSettings(artefacts={"far_range_m": 10.0})
+
+
+def test_fidelity_section_reads_what_the_datasets_measured(datasets, tmp_path):
+    """Each side's dataset.json point_geometry / labels_vs_truth (written by the factory for
+    procedural worlds) reach gap.json, the readings and the dashboard; the door figures are
+    counted from the exported points and labels."""
+    root, sim_pts, real_pts, _ = datasets
+    import shutil
+
+    for side, share in (("sim", 0.4), ("real", 0.2)):
+        shutil.copytree(root / side, tmp_path / side)
+        write_metadata(tmp_path / side, {
+            "domain": side, "point_geometry": {"behind_share": share, "beyond_share": 0.05},
+            "labels_vs_truth": {"recall": 0.5, "precision": 0.75, "width_error_m": 0.2,
+                                "depth_error_m": 0.03}})
+    doc = write_gap_report(tmp_path / "sim", tmp_path / "real", tmp_path / "report")
+    fid = doc["fidelity"]
+    assert fid["sim"]["behind_share"] == pytest.approx(0.4)
+    assert fid["real"]["behind_share"] == pytest.approx(0.2)
+    assert fid["sim"]["label_recall"] == pytest.approx(0.5)
+    assert any("SIM 40 %, REAL 20 % (2.0x)" in r for r in fid["readings"])
+    box = _box()[0]
+    c, s_ = math.cos(box[6]), math.sin(box[6])
+
+    def inside(p):
+        d = p[:, :3] - box[:3]
+        along, across = d[:, 0] * c + d[:, 1] * s_, -d[:, 0] * s_ + d[:, 1] * c
+        return int(np.sum((np.abs(along) <= box[3] / 2) & (np.abs(across) <= box[4] / 2)
+                          & (np.abs(d[:, 2]) <= box[5] / 2)))
+
+    want = float(np.median([inside(p) for p in sim_pts.values()]))
+    assert fid["sim"]["points_per_label"] == pytest.approx(want)
+    assert (tmp_path / "report" / "fidelity.png").read_bytes()[:4] == b"\x89PNG"

@@ -323,6 +323,9 @@ def _gap_report_into(sweep: Path) -> dict:
     for name, pts in (("sim", sim), ("real", real)):
         write_dataset(data / name, [Frame("f0", pts, np.zeros((0, 7)), ())], {"train": ["f0"]})
     write_metadata(data / "real", {"domain": "measured", "radar_height_m": 1.0})
+    write_metadata(data / "sim", {"point_geometry": {"behind_share": 0.5, "beyond_share": 0.25},
+                                  "labels_vs_truth": {"recall": 0.5, "precision": 1.0,
+                                                      "width_error_m": 0.12}})
     return write_gap_report(data / "sim", data / "real", sweep / "gap")
 
 
@@ -341,8 +344,16 @@ def test_gap_section_shows_the_artefact_figures_and_artefacts_png(tmp_path):
     assert rows["range > 8 m"] == ["0.0 %", "50.0 %"]
     below_sim, below_real = rows["> 0.1 m below the floor"]
     assert "floor height unknown" in below_sim and below_real == "25.0 %"
+    # the fidelity rows: what SIM's dataset.json measured; REAL (measured) has no truth
+    assert rows["points > 1 m behind the first true surface"] == [
+        "50.0 %", "not measured (no true geometry)"]
+    assert rows["points beyond 0.85 R_max"][0] == "25.0 %"
+    assert rows["door labels vs true doors: recall / precision"] == [
+        "50.0 % / 100.0 % (width error 0.12 m)", "—"]
+    assert rows["azimuth covered (1–99 %)"][0].startswith("-")
     facts = dict(gap["gap"]["facts"])
     assert "13 dB stronger" in facts["sidelobe share"]
+    assert any(k == "reading" and "SIM 50 %" in v for k, v in gap["gap"]["facts"])
     assert [f["name"] for f in gap["gap"]["figures"]].count("artefacts") == 1
     page = render_html(gap)
     assert _embedded(page)["gap"]["rows"] == gap["gap"]["rows"]
