@@ -53,7 +53,9 @@ __all__ = [
 log = logging.getLogger(__name__)
 
 #: Bump when the radar_points output of the same inputs changes (simulator or table logic).
-RADAR_POINTS_STAGE_VERSION = 1
+#: (2: the ray tracer's IF response and element patterns, TI's detection chain; scene files
+#: may give each pose a speed.)
+RADAR_POINTS_STAGE_VERSION = 2
 #: Bump when scene_meshes output changes for the same files.
 SCENE_MESHES_STAGE_VERSION = 1
 

@@ -41,6 +41,7 @@ from sim2radar.mesh import MaterialMesh
 from sim2radar.radar.binning import Accumulator, TraceResult, array_geometry
 from sim2radar.radar.config import RadarConfig, load_radar_config
 from sim2radar.radar.frame import RadarFrame, simulate_scene_frame
+from sim2radar.radar.link_budget import pattern_exponent
 from sim2radar.radar.paths import PATH_KINDS, PathSet
 from sim2radar.radar.raytrace_bounces import BounceLoop
 from sim2radar.radar.raytrace_mesh import check_pose, face_object_ids, merge_meshes, mesh_list
@@ -64,6 +65,16 @@ AMPLITUDE_STEP = 2.0**-40
 POWER_STEP = 2.0**-54
 #: A margin under the 2^63 steps a 64-bit sum holds; the tests check the headroom against it.
 _SUM_LIMIT = 2**61
+
+
+def _element_gain(dr, x, y, z, q_az: float, q_el: float):
+    """One-way element power gain ``cos^q_az(az) cos^q_el(el)`` of radar-frame direction
+    ``(x, y, z)`` (Dr.Jit twin of :func:`sim2radar.radar.link_budget.element_power_pattern`:
+    0 behind the array)."""
+    h2 = x * x + y * y
+    cos_az = dr.select(x > 0, x * dr.rsqrt(dr.maximum(h2, 1e-24)), 0.0)
+    cos_el = dr.sqrt(h2) * dr.rsqrt(dr.maximum(h2 + z * z, 1e-24))
+    return dr.power(cos_az, q_az) * dr.power(cos_el, q_el)
 
 
 class RadarScene(BounceLoop):
@@ -157,10 +168,12 @@ class RadarScene(BounceLoop):
     ) -> TraceResult:
         """Trace one frame and return the accumulated (not yet beamformed) returns.
 
-        Each visible return, with its carrier phase ``e^{-jkL}`` and the receiver's IF response
-        (:mod:`sim2radar.radar.receiver`: the anti-alias roll-off near ``R_max``; a path
-        beyond it aliases into bin ``i mod N``), is added to its range bin and fine azimuth
-        point once per element row (:mod:`sim2radar.radar.binning`).
+        Each visible return, with its carrier phase ``e^{-jkL}``, the antenna elements'
+        two-way gain toward its first and from its last interaction (``hardware``'s
+        ``cos^q`` patterns, as the signal-level synthesis applies them) and the receiver's IF
+        response (:mod:`sim2radar.radar.receiver`: the anti-alias roll-off near ``R_max``; a
+        path beyond it aliases into bin ``i mod N``), is added to its range bin and fine
+        azimuth point once per element row (:mod:`sim2radar.radar.binning`).
         """
         mi, dr = self._mi, self._dr
         pose = check_pose(pose)
@@ -175,6 +188,8 @@ class RadarScene(BounceLoop):
         inv_dr = 1.0 / radar.range_resolution_m
         n_if = dr.width(prep.if_re)
         alias_m = n_r * radar.range_resolution_m
+        q_az = pattern_exponent(radar.hardware.azimuth_hpbw_deg)
+        q_el = pattern_exponent(radar.hardware.elevation_hpbw_deg)
         inv_ua, inv_ue = 1.0 / radar.azimuth_bin_u, 1.0 / radar.elevation_bin_u
         radar_pos = [dr.opaque(mi.Float, float(v)) for v in pose[:3, 3]]
         # world -> radar rotation (R^T) as opaque scalars so a new pose reuses the kernel
@@ -205,6 +220,13 @@ class RadarScene(BounceLoop):
             qz = rt[2][0] * q.x + rt[2][1] * q.y + rt[2][2] * q.z
             inv_q = dr.rsqrt(dr.maximum(qx * qx + qy * qy + qz * qz, 1e-24))
             ua, ue = qy * inv_q, qz * inv_q
+            # the antenna elements' two-way gain: TX toward the first interaction, RX from the
+            # last (link_budget.two_way_pattern_gain, the signal-level synthesis' too)
+            d = it.departure - mi.Point3f(*radar_pos)
+            gain = dr.sqrt(_element_gain(dr, qx, qy, qz, q_az, q_el) * _element_gain(
+                dr, *(sum(rt[i][j] * c for j, c in enumerate((d.x, d.y, d.z)))
+                      for i in range(3)), q_az, q_el))
+            a_re, a_im = a_re * gain, a_im * gain
             rng_m = 0.5 * it.path_m
             # the receiver's IF chain (sim2radar.radar.receiver): the response of the return's
             # true range bin; complex sampling shows it in that bin modulo n_r (a path beyond

@@ -4,7 +4,8 @@ Brute-force Möller–Trumbore ray–triangle intersection and the return model 
 :mod:`sim2radar.radar.returns` evaluated in float64 with the exact Fresnel / slab coefficients
 and the exact directive-lobe normalisation (no look-up tables), bounce by bounce like
 ``RadarScene._interactions``: :func:`reference_interactions` yields per-bounce NumPy records,
-:func:`reference_trace` bins them with :func:`sim2radar.radar.binning.deposit`,
+:func:`reference_trace` weights them by the elements' two-way gain and bins them with
+:func:`sim2radar.radar.binning.deposit`,
 :func:`reference_paths` keeps them as paths.
 """
 
@@ -18,6 +19,7 @@ import numpy as np
 from sim2radar.em import unpolarized_reflection, unpolarized_transmission
 from sim2radar.radar.binning import Accumulator, deposit, direction_cosines
 from sim2radar.radar.config import RadarConfig
+from sim2radar.radar.link_budget import two_way_pattern_gain
 from sim2radar.radar.paths import PATH_KINDS
 from sim2radar.radar.raytrace import check_pose, face_object_ids, merge_meshes
 from sim2radar.radar.returns import (
@@ -269,6 +271,8 @@ def reference_trace(meshes, radar: RadarConfig, pose=None, seed: int | None = No
         vis = rec["visible"]
         a = (rec["spec"] + rec["diff"]) * np.exp(-1j * k * rec["path_m"])
         q = (rec["arrival"] - pose[:3, 3]) @ pose[:3, :3]
+        dep = (rec["departure"] - pose[:3, 3]) @ pose[:3, :3]
+        a = a * np.sqrt(two_way_pattern_gain(radar, dep, q))   # the elements' two-way gain
         _, ua, ue = direction_cosines(q)
         cols["a"].append(np.where(vis, a, 0.0))
         cols["r"].append(0.5 * rec["path_m"])
