@@ -21,6 +21,9 @@ The sweep folder (``<out>/<name>/``)::
     sweep.json        profile, conditions, datasets (+ domain, digest), provenance
     plan.json         the prepared plan the flow runs (run specs, configs, intensity matches)
     runs.parquet      one experiment_runs row per run (storage/schemas.py)
+    pretrainings.parquet  one experiment_pretrain row per pre-training: its check (held-out
+                      sim AP, zero-shot real AP, AP on its training frames) and loss curve
+    preregistration.md    the study's pre-registration, when its profile declares one
     progress.json     total / finished / failed runs
     stats.json        paired statistics (sim2radar.experiment.stats)
     results.md        Table-1-style results with confidence intervals
@@ -45,9 +48,11 @@ from sim2radar.fileio import write_json
 from sim2radar.flows import _progress
 from sim2radar.flows.runners import task_runner
 from sim2radar.tasks.experiment import (
+    failed_pretrain_row,
     failed_row,
     finetune_task,
     pretrain_task,
+    write_pretrainings_table,
     write_runs_table,
 )
 
@@ -83,6 +88,17 @@ def run_experiment_flow(plan_path: str) -> dict[str, Any]:
         progress=0.0, key=_progress.artifact_key("sweep", name, "progress"),
         description=f"sweep {name}: finished training runs of {total}")
     rows: dict[str, dict] = {}
+    pretrainings: dict[str, dict] = {}
+
+    def record_pretraining(row: dict) -> None:
+        pretrainings[row["pretrain_key"]] = row
+        write_pretrainings_table(sweep_dir, list(pretrainings.values()))
+        if row["status"] == "failed":
+            logger.error("%s FAILED: %s", row["pretrain_id"], row["error"])
+        else:
+            logger.info("%s: %s, held-out sim AP %s, zero-shot real AP %s", row["pretrain_id"],
+                        row["status"], _ap(row["heldout_ap_3d_r40_iou03"]),
+                        _ap(row["zero_shot_ap_3d_r40_iou03"]))
 
     def record(row: dict) -> None:
         rows[row["run_key"]] = row
@@ -121,6 +137,8 @@ def run_experiment_flow(plan_path: str) -> dict[str, Any]:
         error = result if isinstance(result, BaseException) else (
             None if fut.state.is_completed() else (fut.state.message or repr(result)))
         if isinstance(job, PlannedPretrain):
+            record_pretraining(result.row if error is None and result.row
+                               else failed_pretrain_row(ctx, job, _text(error or "no check")))
             for r in plan.runs_after(job):
                 if error is None:
                     finetune(r, result)
@@ -130,7 +148,7 @@ def run_experiment_flow(plan_path: str) -> dict[str, Any]:
         else:
             record(result if error is None else failed_row(ctx, job, pretrain, _text(error)))
 
-    summary = finish_sweep(plan, sorted(rows.values(), key=_order))
+    summary = finish_sweep(plan, sorted(rows.values(), key=_order), list(pretrainings.values()))
     create_table_artifact(table=summary["table_rows"],
                           key=_progress.artifact_key("sweep", name, "results"),
                           description=f"sweep {name}: {summary['metric']} per cell")
@@ -140,6 +158,10 @@ def run_experiment_flow(plan_path: str) -> dict[str, Any]:
     logger.info("sweep %s: %s runs; results %s; dashboard %s", name, summary["counts"],
                 summary["results_md"], summary["dashboard"])
     return {k: v for k, v in summary.items() if k not in ("markdown", "table_rows")}
+
+
+def _ap(v: float | None) -> str:
+    return "-" if v is None else f"{v:.1f}"
 
 
 def _text(error: Any) -> str:

@@ -529,6 +529,56 @@ EXPERIMENT_RUNS = register_schema(
 )
 
 
+# --- experiment_pretrain (every pre-training of a sweep, checked; tasks/experiment.py) ------
+_CHECK_FIELDS = [
+    field(f"{where}_ap_{metric}_r40_iou03", pa.float64(), unit="%", nullable=True,
+          doc=f"{metric.upper()} AP, R40, IoU 0.3 of the pre-trained detector (encoder and head, "
+              f"no fine-tuning) {text} (null: no such frames)")
+    for where, text in (("train", "on its own (simulated) training frames"),
+                        ("heldout", "on the held-out simulated split (worlds it never saw)"),
+                        ("zero_shot", "zero-shot on the real validation split"))
+    for metric in ("3d", "bev")
+]
+
+EXPERIMENT_PRETRAININGS = register_schema(
+    ArtifactSchema(
+        stage="experiment_pretrain",
+        version=1,
+        row="one pre-training of the experiment sweep, with its learnability check",
+        description="what a pre-training learned before any fine-tuning (held-out sim AP, "
+                    "zero-shot real AP), its loss curve, timing and outcome",
+        schema=pa.schema([
+            field("sweep", pa.string(), doc="sweep name"),
+            field("pretrain_key", pa.string(), doc="content key of the pre-training"),
+            field("pretrain_id", pa.string(), doc="readable id, e.g. pretrain-sim-t2-f0.05"),
+            field("sim_role", pa.string(), doc="dataset role it trained on (sim, sim-gt, ref...)"),
+            field("conditions", pa.list_(pa.string()),
+                  doc="conditions whose runs load its encoder"),
+            field("trial", pa.int32(), nullable=True, doc="trial index (null: shared)"),
+            field("fraction", pa.float64(), nullable=True,
+                  doc="real fraction whose intensities it was matched to (null: none)"),
+            field("seed", pa.int64(), doc="seed of its weights and data order"),
+            field("n_sim_frames", pa.int32(), doc="simulated frames it trained on"),
+            field("holdout_split", pa.string(), nullable=True,
+                  doc="sim split held out of it (null: trained on every frame)"),
+            field("n_heldout_frames", pa.int32(), doc="held-out sim frames checked"),
+            field("n_real_val_frames", pa.int32(), doc="real validation frames checked"),
+            *_CHECK_FIELDS,
+            field("epochs", pa.int32(), doc="pre-training epochs"),
+            field("steps", pa.int32(), doc="optimiser steps"),
+            field("history_epoch", pa.list_(pa.int32()), doc="(E,) epoch numbers"),
+            field("history_loss", pa.list_(pa.float64()), doc="(E,) mean training loss"),
+            field("wall_time_s", pa.float64(), unit="s", doc="training wall time"),
+            field("check_s", pa.float64(), unit="s", doc="wall time of the check"),
+            field("checkpoint", pa.string(), doc="its checkpoint, relative to the sweeps folder"),
+            field("status", pa.string(), doc="ok | failed | skipped"),
+            field("error", pa.string(), doc="failure reason, empty when ok"),
+            field("finished_at", pa.string(), doc="UTC ISO-8601 time it finished"),
+        ]),
+    )
+)
+
+
 # --- reconstruction stages one by one (the capture factory: tasks/capture.py) ---------------
 # Each stage of sim2radar.reconstruct.pipeline is its own cached artifact, so a run that
 # changes only the material backend re-labels materials without re-estimating depth.

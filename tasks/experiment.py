@@ -30,8 +30,10 @@ import dataclasses
 import functools
 import json
 import logging
+import math
 import os
 import tempfile
+import time
 from collections.abc import Mapping, Sequence
 from datetime import UTC, datetime
 from pathlib import Path
@@ -48,8 +50,9 @@ from sim2radar.experiment.plan import (
     PretrainResult,
     SweepContext,
     SweepPlan,
+    condition_config,
 )
-from sim2radar.fileio import atomic_write_with, write_json
+from sim2radar.fileio import atomic_write, atomic_write_with, write_json
 from sim2radar.storage import content_key, get_schema
 from sim2radar.storage.provenance import package_versions
 from sim2radar.storage.store import CorruptArtifactError
@@ -57,7 +60,7 @@ from sim2radar.tasks.common import open_store
 
 __all__ = ["EXPERIMENT_STAGE_VERSION", "prepare_sweep", "read_plan", "plan_cost",
            "run_pretraining", "run_finetuning", "force_runs", "failed_row", "write_runs_table",
-           "pretrain_task", "finetune_task"]
+           "failed_pretrain_row", "write_pretrainings_table", "pretrain_task", "finetune_task"]
 
 log = logging.getLogger(__name__)
 
@@ -67,6 +70,7 @@ EXPERIMENT_STAGE_VERSION = 1
 #: store stage of each kind of training job
 STAGES = {"pretrain": "experiment_pretrain", "finetune": "experiment_runs"}
 RUNS_FILE = "runs.parquet"
+PRETRAININGS_FILE = "pretrainings.parquet"
 PLAN_FILE = "plan.json"
 
 
@@ -149,6 +153,9 @@ def prepare_sweep(datasets: Mapping[str, str | os.PathLike | None], *, profile: 
         fixed_at=fixed_at, key_of=_key_of,
         provenance={"versions": package_versions(), "code": _code_version()})
     write_json(sweep_dir / "sweep.json", plan.sweep)
+    if setup.preregistration is not None:   # the copy the results link (same digest: settings)
+        atomic_write(sweep_dir / sweep.PREREGISTRATION_FILE,
+                     setup.preregistration["text"].encode())
     if force:
         force_runs(st.root_uri, sweep_dir, plan.find_runs(force))
     # the flow takes this file's path, not the plan: a paper-sized grid's plan (run subsets,
@@ -217,24 +224,131 @@ def _claim(ctx: SweepContext, key: str, done, out: Path, what: str):
                                         what, holder.get("pid"), holder.get("host")))
 
 
+def _pretrain_ids(ctx: SweepContext, job: PlannedPretrain) -> tuple[list[str], list[str]]:
+    """A pre-training's training frame ids and held-out frame ids (its sim dataset's
+    ``holdout_split``; none when it has no such split)."""
+    sim, spec = ctx.datasets[job.spec.sim_role], job.spec
+    held = sim.ids([spec.holdout_split]) if spec.holdout_split else []
+    out = set(held)
+    train_ids = [i for i in sim.ids() if i not in out]
+    if not train_ids:
+        raise ValueError(f"{sim.root}: every frame is in the held-out split "
+                         f"{spec.holdout_split!r}; nothing is left to pre-train on (export more "
+                         "worlds, or set the profile's pretrain_holdout_split: null)")
+    return train_ids, held
+
+
 def run_pretraining(ctx: SweepContext, job: PlannedPretrain) -> PretrainResult:
-    """Pre-train (or find finished) the encoder of ``job``."""
+    """Pre-train (or find finished) the encoder of ``job`` and check what it learned
+    (:func:`sim2radar.experiment.learnability.check_pretraining`: its training frames, the
+    held-out sim split, zero-shot on the real validation split). ``done.json`` and ``check.json``
+    in its folder mark it finished; its ``experiment_pretrain`` row goes into the store."""
     from sim2radar.detect.config import DetectConfig
     from sim2radar.experiment.data import with_intensity
+    from sim2radar.experiment.learnability import PretrainingCheck, check_pretraining
     from sim2radar.experiment.runner import pretrain_encoder
     from sim2radar.radar.intensity import IntensityMatch
 
     spec, cfg = job.spec, DetectConfig.model_validate(ctx.pretrain_config)
-    frames = _load(ctx, spec.sim_role, ctx.datasets[spec.sim_role].ids(), cfg)
-    if job.intensity_match is not None:
-        frames = with_intensity(frames, IntensityMatch.from_dict(job.intensity_match))
+    train_ids, held_ids = _pretrain_ids(ctx, job)
+    match = (IntensityMatch.from_dict(job.intensity_match) if job.intensity_match is not None
+             else None)
+
+    def sim_frames(ids: list[str]) -> list:
+        frames = _load(ctx, spec.sim_role, ids, cfg)
+        return with_intensity(frames, match) if match is not None and frames else frames
+
     out = Path(ctx.sweep_dir) / "pretrain" / job.key
-    claim = _claim(ctx, job.key, lambda: (out / "done.json").is_file(), out,
-                   f"pre-training {job.id}")
-    with claim or contextlib.nullcontext():     # None: finished, pretrain_encoder reads it
+    done, checked = out / "done.json", out / "check.json"
+    claim = _claim(ctx, job.key, checked.is_file, out, f"pre-training {job.id}")
+    status = "skipped" if claim is None else "ok"
+    with claim or contextlib.nullcontext():     # None: finished, read back below
+        frames = sim_frames(train_ids) if claim is not None else []
         ckpt = pretrain_encoder(cfg, frames, out, seed=spec.seed, epochs=spec.epochs,
-                                device=ctx.device)
-    return PretrainResult(job.key, str(ckpt), len(frames))
+                                device=ctx.device) if claim is not None else out / "last.pt"
+        if claim is not None:
+            t0 = time.perf_counter()
+            real = ctx.datasets["real"]
+            check = check_pretraining(
+                ckpt, sim_frames(held_ids), _load(ctx, "real", real.ids([ctx.val_split]), cfg),
+                train_frames=frames, device=ctx.device)
+            write_json(checked, {**check.to_dict(), "seconds": time.perf_counter() - t0})
+    check_doc = json.loads(checked.read_text())
+    row = _pretrain_row(ctx, job, PretrainingCheck.from_dict(check_doc),
+                        json.loads(done.read_text()), float(check_doc.get("seconds", 0.0)),
+                        status, out)
+    st = open_store(ctx.store)
+    if not st.exists(STAGES["pretrain"], job.key):
+        schema = get_schema(STAGES["pretrain"])
+        table = schema.validate(pa.Table.from_pylist([{**row, "status": "ok"}],
+                                                     schema=schema.schema))
+        st.write(STAGES["pretrain"], job.key, table, stage_version=EXPERIMENT_STAGE_VERSION,
+                 provenance={"inputs": {"sim": ctx.datasets[spec.sim_role].key},
+                             "config": {"detector": ctx.pretrain_config,
+                                        "spec": job.to_dict()},
+                             "seed": spec.seed, "timings_s": {"run": float(row["wall_time_s"])},
+                             "extra": {"sweep": ctx.name, "train_ids": train_ids}})
+    return PretrainResult(job.key, str(ckpt), int(row["n_sim_frames"]), row)
+
+
+def _pretrain_row(ctx: SweepContext, job: PlannedPretrain, check, done: Mapping[str, Any],
+                  check_s: float, status: str, out: Path) -> dict[str, Any]:
+    """The ``experiment_pretrain`` row of a finished, checked pre-training."""
+    from sim2radar.experiment.learnability import PRIMARY_AP
+
+    hist = list(done.get("history") or [])
+    bev = PRIMARY_AP.replace("_3d_", "_bev_")
+    row = _pretrain_base_row(ctx, job)
+    row.update(
+        n_sim_frames=int(done.get("frames", 0)), n_heldout_frames=check.sim_frames,
+        n_real_val_frames=check.real_frames, epochs=int(done.get("epochs", job.spec.epochs)),
+        steps=int(done.get("steps", 0)), history_epoch=[int(h["epoch"]) for h in hist],
+        history_loss=[float(h["total"]) for h in hist],
+        wall_time_s=float(done.get("seconds", 0.0)), check_s=float(check_s),
+        checkpoint=os.path.relpath(out / "last.pt", Path(ctx.sweep_dir).parent),
+        status=status, error="", finished_at=datetime.now(UTC).isoformat(timespec="seconds"))
+    for where, aps in (("train", check.train), ("heldout", check.sim),
+                       ("zero_shot", check.real)):
+        for col in (PRIMARY_AP, bev):
+            v = aps.get(col)
+            row[f"{where}_{col}"] = (
+                None if v is None or not math.isfinite(float(v)) else float(v))
+    return row
+
+
+def _pretrain_base_row(ctx: SweepContext, job: PlannedPretrain) -> dict[str, Any]:
+    spec = job.spec
+    row = {c: None for c in get_schema(STAGES["pretrain"]).schema.names}
+    row.update(sweep=ctx.name, pretrain_key=job.key, pretrain_id=job.id,
+               sim_role=spec.sim_role, conditions=list(job.conditions), trial=spec.trial,
+               fraction=spec.fraction, seed=spec.seed, holdout_split=spec.holdout_split)
+    return row
+
+
+def failed_pretrain_row(ctx: SweepContext, job: PlannedPretrain,
+                        error: BaseException | str) -> dict[str, Any]:
+    """The ``experiment_pretrain`` row of a pre-training that failed (APs null, ``error``)."""
+    text = error if isinstance(error, str) else f"{type(error).__name__}: {error}"
+    row = _pretrain_base_row(ctx, job)
+    row.update(n_sim_frames=0, n_heldout_frames=0, n_real_val_frames=0,
+               epochs=job.spec.epochs, steps=0, history_epoch=[], history_loss=[],
+               wall_time_s=0.0, check_s=0.0, checkpoint="", status="failed",
+               error=text[:2000], finished_at=datetime.now(UTC).isoformat(timespec="seconds"))
+    return row
+
+
+def write_pretrainings_table(sweep_dir: str | os.PathLike,
+                             rows: Sequence[Mapping[str, Any]]) -> Path:
+    """Write ``<sweep>/pretrainings.parquet`` atomically (validated against
+    experiment_pretrain), ordered by id."""
+    import pyarrow.parquet as pq
+
+    schema = get_schema(STAGES["pretrain"])
+    ordered = sorted((dict(r) for r in rows), key=lambda r: str(r["pretrain_id"]))
+    table = schema.validate(pa.Table.from_pylist(ordered, schema=schema.schema))
+    path = Path(sweep_dir) / PRETRAININGS_FILE
+    atomic_write_with(path, lambda tmp: pq.write_table(table, tmp))
+    return path
 
 
 def run_finetuning(ctx: SweepContext, job: PlannedRun,
@@ -263,7 +377,7 @@ def _finetune(ctx: SweepContext, st, job: PlannedRun, pretrain: PretrainResult |
     from sim2radar.experiment.runner import finetune_and_test
 
     spec, real = job.spec, ctx.datasets["real"]
-    cfg = DetectConfig.model_validate(ctx.finetune_config)
+    cfg = DetectConfig.model_validate(condition_config(ctx.finetune_config, spec.condition))
     fields = finetune_and_test(
         cfg, _load(ctx, "real", spec.train_ids, cfg),
         _load(ctx, "real", real.ids([ctx.eval_split]), cfg), out, seed=spec.seed,

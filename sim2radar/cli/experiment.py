@@ -4,6 +4,9 @@
     sim2radar sweep data/sim data/ifr --profile paper --name ifr     # a GPU or a cluster
     sim2radar sweep store:demo store:reference --profile smoke --name s --store out/store
     sim2radar sweep data/sim data/ifr --profile paper --plan --plan-workers 1,8   # cost only
+    sim2radar sweep data/sim data/proxy_real --profile diagnosis --name diagnosis \
+        --sim-gt data/sim_gt --ref data/ref_on_sim                 # the diagnosis arms
+    sim2radar sweep-report docs/results/diagnosis      # rebuild results.md + dashboard.html
 
 Prefect and torch are imported inside the command, so ``sim2radar --help`` stays fast.
 """
@@ -19,7 +22,8 @@ import typer
 
 from sim2radar.cli._app import app, exit_unless_writable, exit_unless_writable_outputs
 
-__all__ = ["sweep", "run_sweep", "sweep_datasets", "print_sweep_summary", "print_plan"]
+__all__ = ["sweep", "sweep_report", "run_sweep", "sweep_datasets", "condition_overrides",
+           "print_sweep_summary", "print_plan"]
 
 
 def _fractions(text: str | None) -> list[float] | None:
@@ -79,6 +83,29 @@ def print_plan(cost: dict[str, Any]) -> None:
                   "tests and start-up not included)")
     for n, hours in cost["wall_hours"].items():
         console.print(f"expected wall time on {n} worker(s), one run each: {hours:.2f} h")
+
+
+def condition_overrides(text: str | None) -> dict[str, list[str]]:
+    """``--conditions baseline,sim-pretrain,ref-pretrain`` as profile overrides: the
+    registered main conditions under ``conditions`` and the ablations under ``ablations``.
+
+    Raises
+    ------
+    ValueError — an unknown name (listing the known ones) or no baseline.
+    """
+    from sim2radar.experiment.profiles import BASELINE, CONDITIONS
+
+    if text is None:
+        return {}
+    names = [n.strip() for n in text.split(",") if n.strip()]
+    unknown = [n for n in names if n not in CONDITIONS]
+    if unknown:
+        raise ValueError(f"--conditions: unknown condition(s) {unknown}; known: "
+                         f"{sorted(CONDITIONS)}")
+    if BASELINE not in names:
+        names.insert(0, BASELINE)
+    return {"conditions": [n for n in names if not CONDITIONS[n].ablation],
+            "ablations": [n for n in names if CONDITIONS[n].ablation]}
 
 
 def sweep_datasets(sim: str, real: str, options: dict[str, str | None]) -> dict[str, str]:
@@ -163,6 +190,19 @@ def print_sweep_summary(summary: dict[str, Any]) -> None:
                       "" if x is None else fmt(x["p_holm"], ".3f"),
                       "" if x is None else x["verdict"])
     console.print(table)
+    for x in sorted(stats.get("pooled") or [], key=lambda x: not x["primary"]):
+        lo, hi = x["t_ci"]
+        ci = f" [{fmt(lo, '+.1f')}, {fmt(hi, '+.1f')}]" if lo is not None else ""
+        fr = ", ".join(f"{100 * f:g}%" for f in x["fractions"])
+        console.print(f"{'PRIMARY' if x['primary'] else 'diagnostic'}: {x['condition']} vs "
+                      f"baseline pooled over {fr}: Δ {fmt(x['mean_diff'], '+.1f')}{ci}, MDE "
+                      f"{fmt(x['mde'])}, {x['n_pairs']} trials: {x['verdict']}")
+    for s in (stats.get("pretrainings") or {}).get("summary", []):
+        h, z = s["heldout"], s["zero_shot"]
+        console.print(f"pre-trainings of {s['condition']} ({s['n']}, {s['n_failed']} failed): "
+                      f"held-out sim AP {fmt(h['mean'])}, zero-shot real AP {fmt(z['mean'])}"
+                      + ("" if s["threshold"] is None else
+                         f"; threshold {s['threshold']:g} met by {s['n_met']}/{s['n']}"))
     console.print(f"results:   {summary['results_md']}")
     console.print(f"dashboard: {summary['dashboard']}")
 
@@ -182,6 +222,15 @@ def sweep(
                                       help="Ground-truth-geometry sim dataset (ablation)."),
     sim_one_material: str | None = typer.Option(
         None, "--sim-one-material", help="One-material sim dataset (ablation)."),
+    ref: str | None = typer.Option(
+        None, "--ref", help="Reference radar on the sim worlds' ground truth (the ref-pretrain "
+        "positive control)."),
+    conditions: str | None = typer.Option(
+        None, "--conditions", help="Override the profile's conditions, e.g. "
+        "baseline,sim-pretrain,sim-gt-pretrain,ref-pretrain,sim-pretrain-lowlr."),
+    preregistration: Path | None = typer.Option(
+        None, "--preregistration", help="The study's pre-registration (Markdown) when the "
+        "profile's path does not resolve (e.g. an installed package)."),
     trials: int | None = typer.Option(None, help="Override the profile's trials."),
     fractions: str | None = typer.Option(None, help="Override the fractions, e.g. 0.1,0.5,1."),
     workers: int | None = typer.Option(None, help="Concurrent runs (default: the profile's)."),
@@ -222,8 +271,12 @@ def sweep(
         fr = _fractions(fractions)
         if fr is not None:
             overrides["fractions"] = fr
+        overrides.update(condition_overrides(conditions))
+        if preregistration is not None:
+            overrides["preregistration"] = preregistration.resolve()
         datasets = sweep_datasets(sim, real, {"--sim-gt": sim_gt,
-                                              "--sim-one-material": sim_one_material})
+                                              "--sim-one-material": sim_one_material,
+                                              "--ref": ref})
         if plan:
             from sim2radar.tasks.experiment import plan_cost
 
@@ -249,3 +302,34 @@ def sweep(
         json_out.write_text(json.dumps(summary, indent=1, default=str))
     if summary["counts"]["failed"]:
         raise typer.Exit(1)
+
+
+@app.command("sweep-report")
+def sweep_report(
+    folder: Path = typer.Argument(..., help="A sweep folder, or a published one "
+                                  "(docs/results/<study>/): sweep.json, runs.parquet and, when "
+                                  "recorded, pretrainings.parquet."),
+) -> None:
+    """Rebuild a sweep's stats.json, results.md and dashboard.html from its raw files (a
+    finished sweep, or one published under docs/results/<study>/). Trains nothing."""
+    import pyarrow.parquet as pq
+
+    from sim2radar.experiment.sweep import write_results
+
+    try:
+        doc_path, runs_path = folder / "sweep.json", folder / "runs.parquet"
+        for p in (doc_path, runs_path):
+            if not p.is_file():
+                raise FileNotFoundError(f"{p}: not found; a sweep folder holds sweep.json and "
+                                        "runs.parquet (publish them with the sweep)")
+        doc = json.loads(doc_path.read_text())
+        rows = pq.read_table(runs_path).to_pylist()
+        pre_path = folder / "pretrainings.parquet"
+        pre = pq.read_table(pre_path).to_pylist() if pre_path.is_file() else []
+        exit_unless_writable_outputs({"FOLDER": folder})
+        res = write_results(folder, doc, rows, pre)
+    except (ValueError, FileNotFoundError, KeyError, OSError) as exc:
+        typer.secho(f"error: {exc}", fg="red", err=True)
+        raise typer.Exit(2) from None
+    typer.echo(f"results:   {res['results_md']}")
+    typer.echo(f"dashboard: {res['dashboard']}")

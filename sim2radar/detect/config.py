@@ -211,12 +211,24 @@ class OptimConfig(_Frozen):
     div_factor: float = 10.0
     final_div_factor: float = 1e4
     grad_norm_clip: float = 10.0
+    #: the encoder's (VFE + scatter + backbone) learning rate as a share of ``lr``, the head
+    #: keeping ``lr``: discriminative fine-tuning of a transferred encoder (Howard & Ruder,
+    #: "Universal Language Model Fine-tuning", ACL 2018, §3.2); 1.0 (every parameter at
+    #: ``lr``) is the paper's protocol
+    encoder_lr_scale: float = 1.0
 
     @field_validator("batch_size", "epochs")
     @classmethod
     def _positive(cls, v: int) -> int:
         if v < 1:
             raise ValueError(f"must be >= 1, got {v}")
+        return v
+
+    @field_validator("encoder_lr_scale")
+    @classmethod
+    def _scale(cls, v: float) -> float:
+        if not 0.0 < v <= 1.0:
+            raise ValueError(f"must lie in (0, 1] (a share of lr), got {v}")
         return v
 
 

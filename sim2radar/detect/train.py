@@ -41,7 +41,7 @@ import torch
 from sim2radar.datasets.openpcdet import Frame, OpenPCDetDataset
 from sim2radar.detect.augment import GTDatabase, augment_frame, build_gt_database
 from sim2radar.detect.config import DetectConfig, load_config
-from sim2radar.detect.model import Detections, PointPillars
+from sim2radar.detect.model import ENCODER_MODULES, Detections, PointPillars
 from sim2radar.evaluate.ap import evaluate_detections
 from sim2radar.fileio import atomic_write_with
 from sim2radar.hardware import autocast_dtype
@@ -304,6 +304,18 @@ def _run_folder(out_dir: Path):
         raise
 
 
+def _param_groups(model: PointPillars, lr: float, encoder_scale: float) -> list[dict]:
+    """AdamW parameter groups: everything at ``lr``, or (``encoder_scale`` < 1) the encoder's
+    parameters (:data:`~sim2radar.detect.model.ENCODER_MODULES`) at ``lr * encoder_scale`` in
+    a first group and the rest at ``lr``; the one-cycle schedule scales each group's peak."""
+    if encoder_scale == 1.0:
+        return [{"params": list(model.parameters()), "lr": lr}]
+    enc, rest = [], []
+    for name, p in model.named_parameters():
+        (enc if name.split(".", 1)[0] in ENCODER_MODULES else rest).append(p)
+    return [{"params": enc, "lr": lr * encoder_scale}, {"params": rest, "lr": lr}]
+
+
 def _train(config, train_ids, out_dir: Path, init_encoder_from, seed, *, data_dir, epochs,
            resume, device, frames, on_epoch_end) -> TrainResult:
     """:func:`train` inside its run folder."""
@@ -340,13 +352,14 @@ def _train(config, train_ids, out_dir: Path, init_encoder_from, seed, *, data_di
     if encoder_ckpt is not None:
         loaded_encoder = load_encoder_from(model, encoder_ckpt)
     model.to(dev)
-    optimizer = torch.optim.AdamW(model.parameters(), lr=opt_cfg.lr, betas=opt_cfg.betas,
+    optimizer = torch.optim.AdamW(_param_groups(model, opt_cfg.lr, opt_cfg.encoder_lr_scale),
+                                  lr=opt_cfg.lr, betas=opt_cfg.betas,
                                   weight_decay=opt_cfg.weight_decay)
     bs = opt_cfg.batch_size
     steps_per_epoch = math.ceil(len(frames) / bs)
     total_steps = steps_per_epoch * opt_cfg.epochs
     scheduler = torch.optim.lr_scheduler.OneCycleLR(
-        optimizer, max_lr=opt_cfg.lr, total_steps=total_steps, pct_start=opt_cfg.pct_start,
+        optimizer, max_lr=[g["lr"] for g in optimizer.param_groups], total_steps=total_steps, pct_start=opt_cfg.pct_start,
         anneal_strategy="cos", cycle_momentum=True, base_momentum=opt_cfg.moms[1],
         max_momentum=opt_cfg.moms[0], div_factor=opt_cfg.div_factor,
         final_div_factor=opt_cfg.final_div_factor,
@@ -423,7 +436,7 @@ def _train(config, train_ids, out_dir: Path, init_encoder_from, seed, *, data_di
             scaler.scale(loss).backward()
             scaler.unscale_(optimizer)
             torch.nn.utils.clip_grad_norm_(model.parameters(), opt_cfg.grad_norm_clip)
-            lr_used = optimizer.param_groups[0]["lr"]
+            lr_used = optimizer.param_groups[-1]["lr"]      # the head's (the peak lr)
             scaler.step(optimizer)
             scaler.update()
             scheduler.step()

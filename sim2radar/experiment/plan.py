@@ -40,6 +40,7 @@ __all__ = [
     "RunSpec",
     "SweepContext",
     "SweepPlan",
+    "condition_config",
     "epochs_for",
     "ids_digest",
     "plan_sweep",
@@ -50,10 +51,13 @@ __all__ = [
     "settings_changes",
 ]
 
-#: version of :meth:`SweepPlan.to_dict`'s layout (``plan.json``); 1 was the untyped dict plan
-PLAN_FORMAT = 2
+#: version of :meth:`SweepPlan.to_dict`'s layout (``plan.json``); 1 was the untyped dict plan,
+#: 2 had no held-out split and no pre-training check
+PLAN_FORMAT = 3
 #: profile fields that only say how a sweep is executed or described, not what it measures
-EXECUTION_FIELDS = ("name", "description", "detector", "threads_per_run", "concurrent_runs")
+#: (the pre-registration's path: its content's digest is part of the settings instead)
+EXECUTION_FIELDS = ("name", "description", "detector", "threads_per_run", "concurrent_runs",
+                    "preregistration")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -71,6 +75,8 @@ class PretrainSpec:
         it: the sim intensities are matched to that run's own real fine-tuning subset
         (``real_ids``), so each (trial, fraction) has its own pre-training; None otherwise.
     real_ids : tuple of str — that subset's real frame ids (empty without matching).
+    holdout_split : str or None — the sim dataset's split held out of the pre-training (its
+        held-out sim AP is measured on it); None: it trains on every frame.
     """
 
     condition: str
@@ -80,6 +86,7 @@ class PretrainSpec:
     epochs: int
     fraction: float | None = None
     real_ids: tuple[str, ...] = ()
+    holdout_split: str | None = None
 
     @property
     def name(self) -> str:
@@ -199,7 +206,8 @@ def plan_sweep(
         if key not in pretrains:
             pretrains[key] = PretrainSpec(condition, key_trial, seed, role,
                                           profile.pretrain_epochs, key_fraction,
-                                          ids if per_subset else ())
+                                          ids if per_subset else (),
+                                          profile.pretrain_holdout_split)
         return pretrains[key]
 
     runs: list[RunSpec] = []
@@ -213,6 +221,17 @@ def plan_sweep(
                 runs.append(RunSpec(condition, float(fraction), trial, seed, len(ids),
                                     pretrain_for(condition, trial, fraction, ids), epochs, ids))
     return tuple(pretrains.values()), tuple(runs)
+
+
+def condition_config(finetune: Mapping[str, Any], condition: str) -> dict[str, Any]:
+    """A condition's fine-tuning ``DetectConfig`` dump: the sweep's (``finetune``), with the
+    condition's encoder learning-rate share (:attr:`~.profiles.Condition.encoder_lr_scale`) in
+    ``optimization.encoder_lr_scale``."""
+    scale = float(CONDITIONS[condition].encoder_lr_scale)
+    if scale == 1.0:
+        return dict(finetune)
+    return {**finetune, "optimization": {**dict(finetune["optimization"]),
+                                         "encoder_lr_scale": scale}}
 
 
 def ids_digest(ids: Sequence[str]) -> str:
@@ -229,7 +248,10 @@ def _detector_identity(detector: Mapping[str, Any]) -> dict[str, Any]:
     missing = [k for k in ("model", "augmentation", "optimization") if k not in det]
     if missing:
         raise ValueError(f"detector: expected a DetectConfig dump, missing sections {missing}")
-    optim = {k: v for k, v in dict(det["optimization"]).items() if k != "epochs"}
+    # encoder_lr_scale at its default 1.0 is left out: the runs planned before it existed
+    # keep their keys
+    optim = {k: v for k, v in dict(det["optimization"]).items()
+             if k != "epochs" and not (k == "encoder_lr_scale" and v == 1.0)}
     return {"model": det["model"], "augmentation": det["augmentation"],
             "optimization": optim, "amp": dict(det.get("runtime") or {}).get("amp", False)}
 
@@ -245,9 +267,12 @@ def pretrain_key_inputs(spec: PretrainSpec, detector: Mapping[str, Any],
     detector : resolved pre-training DetectConfig dump (``model_dump(mode="json")``).
     intensity_match : the intensity mapping applied to the sim frames (its dict form), or None.
     """
-    return {"kind": "pretrain", "sim_role": spec.sim_role, "seed": int(spec.seed),
-            "epochs": int(spec.epochs), "detector": _detector_identity(detector),
-            "intensity_match": None if intensity_match is None else dict(intensity_match)}
+    out = {"kind": "pretrain", "sim_role": spec.sim_role, "seed": int(spec.seed),
+           "epochs": int(spec.epochs), "detector": _detector_identity(detector),
+           "intensity_match": None if intensity_match is None else dict(intensity_match)}
+    if spec.holdout_split is not None:      # a pre-training on every frame keeps its old key
+        out["holdout_split"] = spec.holdout_split
+    return out
 
 
 def run_key_inputs(spec: RunSpec, profile: ExperimentProfile, detector: Mapping[str, Any],
@@ -402,11 +427,14 @@ class PlannedPretrain:
     key : str — its content key (sim dataset, :func:`pretrain_key_inputs`, code version).
     intensity_match : dict or None — the intensity mapping applied to its sim frames
         (:meth:`~sim2radar.experiment.data.SubsetIntensityMatch.to_dict`), None without.
+    conditions : tuple of str — the conditions whose runs load its encoder (``sim-pretrain``
+        and ``sim-pretrain-lowlr`` share one).
     """
 
     spec: PretrainSpec
     key: str
     intensity_match: dict[str, Any] | None = None
+    conditions: tuple[str, ...] = ()
 
     @property
     def id(self) -> str:
@@ -414,13 +442,13 @@ class PlannedPretrain:
 
     def to_dict(self) -> dict[str, Any]:
         return {**self.spec.to_dict(), "id": self.id, "key": self.key,
-                "intensity_match": self.intensity_match}
+                "intensity_match": self.intensity_match, "conditions": list(self.conditions)}
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> PlannedPretrain:
         names = [f.name for f in dataclasses.fields(PretrainSpec)]
         spec = PretrainSpec(**{**{k: d[k] for k in names}, "real_ids": tuple(d["real_ids"])})
-        return cls(spec, d["key"], d["intensity_match"])
+        return cls(spec, d["key"], d["intensity_match"], tuple(d["conditions"]))
 
 
 @dataclasses.dataclass(frozen=True)
@@ -475,11 +503,14 @@ class PretrainResult:
     key : str — the pre-training's content key.
     checkpoint : str — the checkpoint whose encoder the runs load ('' when it failed).
     n_frames : int — simulated frames it trained on (0 when it failed).
+    row : dict — its ``experiment_pretrainings`` row (check, loss curve, status), for the
+        sweep's pre-training table; empty when not recorded.
     """
 
     key: str
     checkpoint: str
     n_frames: int
+    row: dict[str, Any] = dataclasses.field(default_factory=dict)
 
 
 @dataclasses.dataclass(frozen=True)

@@ -32,10 +32,18 @@ exactly the same number of steps.
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
+from pydantic import (
+    BaseModel,
+    ConfigDict,
+    Field,
+    ValidationError,
+    field_validator,
+    model_validator,
+)
 
 from sim2radar.configio import bundled_configs, config_path, read_yaml_mapping
 
@@ -48,6 +56,7 @@ __all__ = [
     "Condition",
     "ExperimentProfile",
     "bundled_profiles",
+    "default_primary_fractions",
     "load_profile",
 ]
 
@@ -73,7 +82,10 @@ class Condition:
     colour : str — the dashboard's colour (``#rrggbb``).
     geometry : str — the geometry its sim dataset is exported with when the sweep is given
         ``store:NAME`` without one (``reconstructed``, the factory's; ``ground_truth``, the
-        ablation without reconstruction errors).
+        ablation without reconstruction errors and the reference radar's positive control).
+    encoder_lr_scale : float — the transferred encoder's fine-tuning learning rate as a share
+        of the profile's ``lr`` (the head keeps ``lr``; :class:`sim2radar.detect.config.
+        OptimConfig`); 1.0 is the paper's protocol.
     """
 
     name: str
@@ -83,6 +95,7 @@ class Condition:
     label: str
     colour: str
     geometry: str = "reconstructed"
+    encoder_lr_scale: float = 1.0
 
     @property
     def flag(self) -> str | None:
@@ -92,13 +105,29 @@ class Condition:
 
 
 #: the registry of conditions, by name (colours: baseline blue, sim-pretrain red as in the
-#: paper's Figure 4, ablations after)
+#: paper's Figure 4, the diagnosis conditions and ablations after). Main conditions (``ablation``
+#: False) are listed in a profile's ``conditions``; besides the paper's two, the diagnosis:
+#: ``ref-pretrain``, the positive control (pre-trained on the reference radar — the proxy-real
+#: data's own device model — run on the sim worlds' ground truth, the same worlds and poses as
+#: the sim set: if the protocol can see transfer at all, this must transfer), the top rung of the
+#: fidelity ladder sim-pretrain (reconstructed) -> sim-gt-pretrain (ground-truth geometry) ->
+#: ref-pretrain (the device model); and ``sim-pretrain-lowlr``, the same pre-training fine-tuned
+#: with the encoder at a tenth of the learning rate (discriminative fine-tuning), a second
+#: protocol beside the paper's.
 CONDITIONS: dict[str, Condition] = {c.name: c for c in (
     Condition(BASELINE, None, False, "random initialisation, trained on real data only",
               "Baseline", "#1f77b4"),
     Condition("sim-pretrain", "sim", False,
               "encoder pre-trained on the factory's simulated radar, then fine-tuned on real",
               "Sim Pretrain", "#d62728"),
+    Condition("ref-pretrain", "ref", False,
+              "positive control: encoder pre-trained on the reference radar (the proxy-real "
+              "data's device model) run on the sim worlds' ground truth, then fine-tuned on "
+              "real", "Ref Pretrain (control)", "#ff7f0e", "ground_truth"),
+    Condition("sim-pretrain-lowlr", "sim", False,
+              "the sim-pretrain encoder fine-tuned at 0.1 x lr (the head at lr): "
+              "discriminative fine-tuning, a second protocol beside the paper's",
+              "Sim Pretrain, encoder lr x0.1", "#8c564b", encoder_lr_scale=0.1),
     Condition("sim-gt-pretrain", "sim-gt", True,
               "encoder pre-trained on simulated radar of ground-truth geometry and materials "
               "(reconstruction errors removed)", "Sim-GT Pretrain", "#2ca02c", "ground_truth"),
@@ -110,6 +139,18 @@ CONDITIONS: dict[str, Condition] = {c.name: c for c in (
 ROLES: tuple[str, ...] = ("real", *dict.fromkeys(c.sim_role for c in CONDITIONS.values()
                                                  if c.sim_role))
 ABLATIONS = tuple(n for n, c in CONDITIONS.items() if c.ablation)
+
+
+#: the largest fraction of the default primary endpoint: the paper's low-data regime
+LOW_DATA_FRACTION = 0.25
+
+
+def default_primary_fractions(fractions: Sequence[float]) -> tuple[float, ...]:
+    """The primary endpoint's default fractions: those <= :data:`LOW_DATA_FRACTION` (where the
+    paper's effect is largest and scarce real data is the point), or the smallest fraction when
+    none is."""
+    fr = sorted(float(f) for f in fractions)
+    return tuple(f for f in fr if f <= LOW_DATA_FRACTION) or tuple(fr[:1])
 
 
 def _check_names(names: tuple[str, ...]) -> None:
@@ -160,6 +201,30 @@ class ExperimentProfile(BaseModel):
     #: True: one pre-training per trial seed, shared by that trial's fractions; False: one
     #: pre-training per sim dataset, shared by all trials
     pretrain_per_trial: bool = True
+    #: split of every pre-training dataset held out of pre-training (the export's splits are
+    #: world-disjoint): each pre-training is checked on it (held-out sim AP) and zero-shot on the
+    #: real ``val_split`` (:mod:`sim2radar.experiment.learnability`). None pre-trains on every
+    #: frame, as the paper does, and leaves the held-out sim AP unmeasured
+    pretrain_holdout_split: str | None = "val"
+    #: pre-registered learnability thresholds: condition -> the held-out sim AP [%] its
+    #: pre-trainings are expected to reach. The report states whether each met it; no run is
+    #: selected or dropped by it
+    learnability_thresholds: dict[str, float] = Field(default_factory=dict)
+    #: the primary endpoint's fractions: the mean paired difference pooled over them (per trial,
+    #: then across trials) is the sweep's pre-registered answer; per-fraction comparisons are
+    #: secondary. None: the fractions <= 25 % (the paper's low-data regime, where its effect is
+    #: largest and scarce data is the point), or the smallest fraction when none is
+    primary_fractions: tuple[float, ...] | None = None
+    #: the condition whose pooled difference to the baseline is the primary endpoint (the other
+    #: conditions' pooled differences are reported beside it as diagnostics)
+    primary_condition: str = "sim-pretrain"
+    #: the sweep refuses to run without its pre-registration file (question, conditions,
+    #: endpoints, trials, decision rules, written before the first run)
+    preregistered: bool = False
+    #: the pre-registration (Markdown), relative to the profile's folder; the sweep records its
+    #: SHA-256 with the settings (an edit after the first run is refused like any other change)
+    #: and copies it into the sweep folder
+    preregistration: Path | None = None
     #: map simulated intensities onto the real ones (log-space histogram matching, §6.1),
     #: fitted on each run's own real fine-tuning subset (one pre-training per trial and
     #: fraction)
@@ -211,6 +276,48 @@ class ExperimentProfile(BaseModel):
         if main:
             raise ValueError(f"{main} are main conditions; ablations are {list(ABLATIONS)}")
         return v
+
+    @field_validator("learnability_thresholds")
+    @classmethod
+    def _thresholds(cls, v: dict[str, float]) -> dict[str, float]:
+        for name, ap in v.items():
+            if name not in CONDITIONS or CONDITIONS[name].sim_role is None:
+                raise ValueError(f"{name!r} is no pre-trained condition; known: "
+                                 f"{sorted(c for c, x in CONDITIONS.items() if x.sim_role)}")
+            if not 0.0 <= float(ap) <= 100.0:
+                raise ValueError(f"{name}: a threshold is an AP in [0, 100] %, got {ap}")
+        return v
+
+    @field_validator("primary_condition")
+    @classmethod
+    def _primary_condition(cls, v: str) -> str:
+        if v not in CONDITIONS or v == BASELINE:
+            raise ValueError(f"{v!r}: the primary condition is a registered condition other "
+                             f"than {BASELINE!r}; known: {sorted(CONDITIONS)}")
+        return v
+
+    @model_validator(mode="after")
+    def _primary(self) -> ExperimentProfile:
+        if self.primary_fractions is not None:
+            if not self.primary_fractions:
+                raise ValueError("primary_fractions: give at least one fraction, or null for "
+                                 "the fractions <= 25 %")
+            off = [f for f in self.primary_fractions if f not in self.fractions]
+            if off:
+                raise ValueError(f"primary_fractions {off} are not among fractions "
+                                 f"{list(self.fractions)}")
+        if self.preregistered and self.preregistration is None:
+            raise ValueError("preregistered: true needs 'preregistration' (the file written "
+                             "before the first run)")
+        return self
+
+    @property
+    def primary(self) -> tuple[float, ...]:
+        """The primary endpoint's fractions (:attr:`primary_fractions`, or
+        :func:`default_primary_fractions`)."""
+        if self.primary_fractions is not None:
+            return tuple(self.primary_fractions)
+        return default_primary_fractions(self.fractions)
 
     @field_validator("detector_overrides")
     @classmethod
@@ -296,6 +403,11 @@ def load_profile(name_or_path: str | Path) -> ExperimentProfile:
     if not det.is_absolute():
         det = (path.resolve().parent / det).resolve()
     profile = profile.model_copy(update={"detector": det})
+    if profile.preregistration is not None:
+        pre = profile.preregistration.expanduser()
+        if not pre.is_absolute():
+            pre = (path.resolve().parent / pre).resolve()
+        profile = profile.model_copy(update={"preregistration": pre})
     from sim2radar.detect.config import load_config
 
     try:

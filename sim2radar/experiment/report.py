@@ -104,7 +104,9 @@ def results_table_rows(stats: Mapping[str, Any]) -> list[dict[str, str]]:
     table artifact (``create_table_artifact(table=rows)``).
 
     Keys: ``condition``, ``real data``, ``N``, ``Sim:Real``, ``baseline``, ``condition AP``,
-    ``Δ``, ``95 % CI`` (Student t), ``MDE`` (minimum detectable effect at 80 % power [AP
+    ``Δ``, ``95 % CI`` (Student t, unadjusted), ``simultaneous CI`` (the ``1 - alpha / m``
+    Student-t interval over the condition's m fractions, the one the Holm verdict agrees
+    with), ``MDE`` (minimum detectable effect at 80 % power [AP
     points]; a dash with the reason where there is none), ``p (Holm)``, ``d_z``, ``k/n``,
     ``P(improved)`` (k/n as a percentage with its Clopper–Pearson interval), ``verdict``,
     ``paper Δ (trials)`` (the paper's Δ at the fraction and the trials that would detect it at
@@ -122,6 +124,7 @@ def results_table_rows(stats: Mapping[str, Any]) -> list[dict[str, str]]:
         n_real = next((c["n_real_frames"] for c in (base, cond)
                        if c is not None and c["n_real_frames"] is not None), None)
         lo, hi = comp["t_ci"]
+        s_lo, s_hi = comp.get("t_ci_simultaneous") or [None, None]
         b_lo, b_hi = comp["bootstrap_ci"]
         rows.append({
             "condition": comp["condition"],
@@ -132,6 +135,8 @@ def results_table_rows(stats: Mapping[str, Any]) -> list[dict[str, str]]:
             "condition AP": _mean_std(cond),
             "Δ": _f(comp["mean_diff"], signed=True),
             level: _DASH if lo is None else f"[{_f(lo, signed=True)}, {_f(hi, signed=True)}]",
+            "simultaneous CI": _DASH if s_lo is None
+            else f"[{_f(s_lo, signed=True)}, {_f(s_hi, signed=True)}]",
             "MDE": _mde(comp),
             "p (Holm)": _p(comp["p_holm"]),
             "d_z": _f(comp["d_z"], 2),
@@ -226,6 +231,75 @@ def detectability_sentences(stats: Mapping[str, Any]) -> list[str]:
     return out
 
 
+def _primary_section(stats: Mapping[str, Any], level: str, power: float) -> list[str]:
+    """The pre-registered primary endpoint: the pooled Δ per condition, the primary first."""
+    pooled = list(stats.get("pooled") or [])
+    if not pooled:
+        return []
+    fracs = ", ".join(_pct(f) for f in pooled[0]["fractions"])
+    out = ["## Primary endpoint: Δ pooled over the low-data fractions", "",
+           f"Per trial, the mean of the paired Δ at {fracs}; then the mean over trials with its "
+           f"{level} (Student t, one pre-registered test at alpha = "
+           f"{float(stats['alpha']):g}), its MDE at {100 * power:g} % power and the verdict. "
+           "Rows other than the primary are diagnostics at the same unadjusted level.", ""]
+    header = ["Condition", "role", "trials", condition_label(BASELINE), "Condition",
+              f"Δ [{level}]", "MDE", "p", "d_z", "k/n", "Verdict"]
+    body = []
+    for c in sorted(pooled, key=lambda c: not c["primary"]):
+        lo, hi = c["t_ci"]
+        ci = "" if lo is None else f" [{_f(lo, signed=True)}, {_f(hi, signed=True)}]"
+        mde = _f(c["mde"]) if c.get("mde") is not None else (
+            f"{_DASH} (< 2 pairs)" if c["n_pairs"] < 2 else _DASH)
+        body.append([condition_label(c["condition"]),
+                     "**primary**" if c["primary"] else "diagnostic", str(c["n_pairs"]),
+                     _f(c["baseline_mean"]), _f(c["condition_mean"]),
+                     f"{_f(c['mean_diff'], signed=True)}{ci}", mde, _p(c["p"]), _f(c["d_z"], 2),
+                     f"{c['k_improved']}/{c['n_pairs']}", c["verdict"]])
+    out += _table(header, body, ["l", "l", "r", "r", "r", "l", "r", "r", "r", "r", "l"])
+    return out + [""]
+
+
+def _pretraining_section(pre: Mapping[str, Any] | None) -> list[str]:
+    """Every pre-training's check: the summary per condition, then one row each."""
+    if not pre or not pre.get("rows"):
+        return []
+    out = ["## Pre-trainings: what each learned before fine-tuning", "",
+           "3D AP (R40, IoU 0.3, %) of the pre-trained detector (encoder and head, no "
+           "fine-tuning) on its own simulated training frames, on the held-out simulated split "
+           "(worlds it never saw), and zero-shot on the real validation split. A threshold is "
+           "the pre-registered held-out AP a condition's pre-trainings were expected to reach; "
+           "it is reported, never used to select or drop a run.", ""]
+
+    def ms(d: Mapping[str, Any]) -> str:
+        if d.get("mean") is None:
+            return _DASH
+        return _f(d["mean"]) if d.get("std") is None else f"{d['mean']:.1f} ± {d['std']:.1f}"
+
+    body = []
+    for s in pre.get("summary", []):
+        thr = _DASH if s["threshold"] is None else (
+            f"{s['threshold']:.1f} (met {s['n_met']}/{s['n']})")
+        body.append([condition_label(s["condition"]), s["role"], str(s["n"]),
+                     str(s["n_failed"]), ms(s["train"]), ms(s["heldout"]), ms(s["zero_shot"]),
+                     thr])
+    out += _table(["Condition", "dataset", "pre-trainings", "failed", "train AP",
+                   "held-out sim AP", "zero-shot real AP", "threshold"], body,
+                  ["l", "l", "r", "r", "r", "r", "r", "l"]) + [""]
+    body = []
+    for r in pre["rows"]:
+        met = ", ".join(f"{c}: {'met' if v else 'not met'}" for c, v in r["met"].items()
+                        if v is not None) or _DASH
+        body.append([str(r["id"]), str(r["n_sim_frames"]), str(r["n_heldout_frames"]),
+                     _f(r["train"]), _f(r["heldout"]), _f(r["zero_shot"]),
+                     _f(r["final_loss"], 3), met,
+                     r["status"] if r["status"] != "failed" else f"failed: {r['error'][:120]}"])
+    out += ["<details><summary>Every pre-training</summary>", ""]
+    out += _table(["Pre-training", "sim frames", "held-out frames", "train AP",
+                   "held-out sim AP", "zero-shot real AP", "final loss", "threshold", "status"],
+                  body, ["l", "r", "r", "r", "r", "r", "r", "l", "l"])
+    return out + ["", "</details>", ""]
+
+
 def domain_kind(label: str, proxy: bool | None = None) -> str:
     """What a dataset's declared ``domain`` says it is: ``"proxy"`` (a labelled stand-in for
     measured radar: ``proxy`` is True, or the label starts with "proxy"), ``"undeclared"``
@@ -274,6 +348,7 @@ def results_markdown(
     real_domain_label: str,
     proxy: bool | None = None,
     settings: Mapping[str, Any] | None = None,
+    preregistration: Mapping[str, Any] | None = None,
 ) -> str:
     """A Markdown report of a sweep.
 
@@ -292,12 +367,16 @@ def results_markdown(
         measured radar.
     settings : ``{"profile", "digest", "fixed_at"}`` from sweep.json: the line saying when the
         sweep's settings were fixed (before its first run; a changed profile is refused).
+    preregistration : ``{"file", "sha256"}`` from sweep.json: the pre-registration the report
+        links (its copy beside the report).
 
     Returns
     -------
-    str — what the sweep could detect (:func:`detectability_sentences`), Table 1 (one block
-    per non-baseline condition) with the MDE beside every Δ and verdict, every trial's value
-    per cell, failed runs, notes, and the real domain's status.
+    str — the pre-registered primary endpoint (the pooled Δ over the low-data fractions, with
+    its interval, MDE and verdict), what the sweep could detect per fraction
+    (:func:`detectability_sentences`), the pre-trainings' checks, Table 1 (one block per
+    non-baseline condition, secondary, Holm-adjusted) with the MDE beside every Δ and verdict,
+    every trial's value per cell, failed runs, notes, and the real domain's status.
     """
     line = domain_line(real_domain_label, proxy)
     cells = _cells(stats)
@@ -315,25 +394,35 @@ def results_markdown(
         out += [f"Settings: profile `{settings.get('profile', '?')}` (digest "
                 f"`{settings.get('digest', '?')}`), fixed at {settings.get('fixed_at', '?')}, "
                 "before any run of this sweep; a rerun with changed settings is refused.", ""]
+    if preregistration:
+        out += [f"Pre-registration: [{preregistration.get('file', 'preregistration.md')}]"
+                f"({preregistration.get('file', 'preregistration.md')}) (SHA-256 "
+                f"`{str(preregistration.get('sha256', '?'))[:16]}…`, part of the settings: "
+                "it cannot change once the sweep has started).", ""]
+    out += _primary_section(stats, level, power)
     out += [f"- {s}" for s in detectability_sentences(stats)]
     if out[-1] != "":
         out.append("")
+    out += _pretraining_section(stats.get("pretrainings"))
 
     rows_by_cond: dict[str, list[dict[str, str]]] = {}
     for row in results_table_rows(stats):
         rows_by_cond.setdefault(row["condition"], []).append(row)
+    secondary = "secondary, " if stats.get("pooled") else ""
     for cond, rows in rows_by_cond.items():
         label = condition_label(cond)
-        out += [f"## {label} vs {condition_label(BASELINE)}", ""]
+        out += [f"## {label} vs {condition_label(BASELINE)} per fraction ({secondary}"
+                "Holm-adjusted)", ""]
         header = ["Real Data", "N", "Sim:Real", condition_label(BASELINE), label,
-                  f"Δ [{level}]", "MDE", "p (Holm)", "d_z", "k/n", "P(improved)", "Verdict",
-                  "Paper Δ (trials)", "Bootstrap CI (ref.)"]
+                  f"Δ [{level}, unadjusted]", "simultaneous CI", "MDE", "p (Holm)", "d_z",
+                  "k/n", "P(improved)", "Verdict", "Paper Δ (trials)", "Bootstrap CI (ref.)"]
         body = [[r["real data"], r["N"], r["Sim:Real"], r["baseline"], r["condition AP"],
-                 f"{r['Δ']} {r[level]}" if r[level] != _DASH else r["Δ"], r["MDE"],
-                 r["p (Holm)"], r["d_z"], r["k/n"], r["P(improved)"], r["verdict"],
-                 r["paper Δ (trials)"], r["bootstrap CI"]] for r in rows]
-        out += _table(header, body, ["r", "r", "r", "r", "r", "l", "r", "r", "r", "r", "r",
-                                     "l", "r", "l"])
+                 f"{r['Δ']} {r[level]}" if r[level] != _DASH else r["Δ"],
+                 r["simultaneous CI"], r["MDE"], r["p (Holm)"], r["d_z"], r["k/n"],
+                 r["P(improved)"], r["verdict"], r["paper Δ (trials)"], r["bootstrap CI"]]
+                for r in rows]
+        out += _table(header, body, ["r", "r", "r", "r", "r", "l", "l", "r", "r", "r", "r",
+                                     "r", "l", "r", "l"])
         out.append("")
 
     trials = sorted({t for c in stats["cells"] for t in c["trials"]})

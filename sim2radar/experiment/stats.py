@@ -65,7 +65,7 @@ import numpy as np
 from scipy import optimize
 from scipy import stats as sps
 
-from sim2radar.experiment.profiles import BASELINE, CONDITIONS
+from sim2radar.experiment.profiles import BASELINE, CONDITIONS, default_primary_fractions
 
 __all__ = [
     "AP_METRICS",
@@ -87,6 +87,7 @@ __all__ = [
     "paired_t_power",
     "paper_delta",
     "proportion_improved",
+    "sweep_statistics",
     "sweep_stats",
     "trials_to_detect",
 ]
@@ -484,6 +485,8 @@ def sweep_stats(
     n_resamples: int = N_RESAMPLES,
     seed: int = 0,
     power: float = POWER,
+    primary_fractions: Sequence[float] | None = None,
+    primary_condition: str | None = "sim-pretrain",
 ) -> dict[str, Any]:
     """The sweep's statistics as one JSON-able dict (read by the dashboard and the report).
 
@@ -498,6 +501,11 @@ def sweep_stats(
         :data:`~sim2radar.experiment.profiles.CONDITIONS` order).
     n_resamples, seed : bootstrap resamples and generator seed.
     power : power at which the minimum detectable effects are stated.
+    primary_fractions : the pooled (primary) endpoint's fractions (default
+        :func:`~sim2radar.experiment.profiles.default_primary_fractions` of the runs'
+        fractions; those without runs are dropped).
+    primary_condition : the condition whose pooled difference is the pre-registered primary
+        endpoint (the others' are diagnostics beside it).
 
     Returns
     -------
@@ -513,8 +521,24 @@ def sweep_stats(
                           "mde_alpha", "mde_note", "paper_delta", "n_for_paper_delta",
                           "n_for_paper_delta_note", "differences": [float],
                           "trials": [int]}],
+         "pooled": [{"condition", "primary": bool, "fractions": [float], "n_pairs",
+                     "baseline_mean", "condition_mean", "mean_diff", "sd_diff",
+                     "t_ci": [lo, hi], "p", "d_z", "k_improved", "p_improved",
+                     "p_improved_ci", "verdict", "mde", "mde_alpha", "mde_note",
+                     "differences": [float], "trials": [int]}],
+         "primary": {"condition", "fractions"},
          "power": {"power", "sided", "level", "paper_delta": {fraction: Δ}, "source"},
          "notes": [str]}
+
+    ``pooled``: per non-baseline condition, the **primary endpoint**'s form: per trial the mean
+    over ``primary_fractions`` of the paired differences (trials complete at every one of them
+    only), then the paired t-interval, test and MDE of those per-trial means at ``alpha``
+    (one pre-registered test, no family adjustment; the non-primary conditions' pooled
+    differences are diagnostics at the same unadjusted level). The per-fraction comparisons are
+    secondary; each carries ``t_ci_simultaneous``, the ``1 - alpha / m`` t-interval (Bonferroni
+    over its condition's m fractions): it excludes 0 only where the Holm verdict calls a gain
+    or loss (Holm rejects all that Bonferroni does; it may call a fraction whose simultaneous
+    interval still touches 0).
 
     ``cells``: one per (condition, fraction), conditions in order then fractions ascending;
     ``std`` is the sample standard deviation (ddof 1); values and trials in trial order.
@@ -597,7 +621,8 @@ def sweep_stats(
                 "condition": c, "fraction": f, "n_pairs": len(trials),
                 "mean_diff": _num(np.mean(d)) if d else None,
                 "sd_diff": _num(np.std(d, ddof=1)) if len(d) > 1 else None,
-                "t_ci": [None, None], "bootstrap_ci": [None, None], "bootstrap_coverage": None,
+                "t_ci": [None, None], "t_ci_simultaneous": [None, None],
+                "bootstrap_ci": [None, None], "bootstrap_coverage": None,
                 "p": None, "p_holm": None, "d_z": None, "k_improved": k,
                 "p_improved": share, "p_improved_ci": share_ci,
                 "verdict": "insufficient trials", "mde": None, "mde_dz": None,
@@ -638,7 +663,19 @@ def sweep_stats(
             comp.update(mde=_num(mde.mde), mde_dz=_num(mde.mde_dz),
                         mde_alpha=float(level) if m_family else None, mde_note=mde.note,
                         n_for_paper_delta=need.n, n_for_paper_delta_note=need.note)
+            if p_adj is not None:
+                f = float(comp["fraction"])
+                trials = comp["trials"]
+                sim = paired_comparison(np.array([values[(c, f)][t] for t in trials]),
+                                        np.array([values[(BASELINE, f)][t] for t in trials]),
+                                        level, n_resamples=0)
+                comp["t_ci_simultaneous"] = [_num(sim["t_lo"]), _num(sim["t_hi"])]
         comparisons += block
+
+    primary = [f for f in (default_primary_fractions(fractions) if primary_fractions is None
+                           else sorted(float(f) for f in primary_fractions)) if f in fractions]
+    pooled = [_pooled(c, primary, values, alpha, power, c == primary_condition)
+              for c in conds if c != BASELINE] if primary else []
 
     power_doc = {"power": float(power), "sided": "two-sided",
                  "level": "alpha / m, m = the condition's Holm family size (fractions with a "
@@ -648,9 +685,96 @@ def sweep_stats(
                  "source": "paper Table 1 (Sim Pretrain minus Baseline, 3D AP @ IoU 0.3)"}
     return {"metric": metric, "alpha": float(alpha), "conditions": conds,
             "fractions": fractions, "cells": cells, "comparisons": comparisons,
+            "pooled": pooled, "primary": {"condition": primary_condition, "fractions": primary},
             "power": power_doc,
-            "notes": _notes(metric, alpha, power, cells, comparisons, len(fractions),
-                            n_resamples)}
+            "notes": _pooled_notes(primary, primary_condition, alpha, power, pooled)
+            + _notes(metric, alpha, power, cells, comparisons, len(fractions), n_resamples)}
+
+
+def _pooled(condition: str, fractions: Sequence[float],
+            values: Mapping[tuple[str, float], Mapping[int, float]], alpha: float, power: float,
+            primary: bool) -> dict[str, Any]:
+    """One condition's pooled endpoint (see :func:`sweep_stats`)."""
+    def complete(c: str) -> set[int]:
+        sets = [set(values.get((c, f), {})) for f in fractions]
+        return set.intersection(*sets) if sets else set()
+
+    trials = sorted(complete(BASELINE) & complete(condition))
+    base = np.array([np.mean([values[(BASELINE, f)][t] for f in fractions]) for t in trials])
+    treat = np.array([np.mean([values[(condition, f)][t] for f in fractions]) for t in trials])
+    d = treat - base
+    k = int(np.sum(d > 0))
+    share, share_ci = proportion_improved(k, len(d), 1.0 - alpha)
+    out: dict[str, Any] = {
+        "condition": condition, "primary": bool(primary), "fractions": list(fractions),
+        "n_pairs": len(trials), "baseline_mean": _num(base.mean()) if len(d) else None,
+        "condition_mean": _num(treat.mean()) if len(d) else None,
+        "mean_diff": _num(d.mean()) if len(d) else None,
+        "sd_diff": _num(d.std(ddof=1)) if len(d) > 1 else None, "t_ci": [None, None],
+        "p": None, "d_z": None, "k_improved": k, "p_improved": share, "p_improved_ci": share_ci,
+        "verdict": "insufficient trials", "mde": None, "mde_alpha": float(alpha),
+        "mde_note": None, "differences": [float(x) for x in d], "trials": trials,
+    }
+    if len(d) >= 2:
+        s = paired_comparison(treat, base, alpha, n_resamples=0)
+        out.update(t_ci=[_num(s["t_lo"]), _num(s["t_hi"])], p=_num(s["p"]), d_z=_num(s["d_z"]))
+        if bool(s["flat"]):
+            out["verdict"] = DEGENERATE
+        else:
+            out["verdict"] = ("no detectable difference" if out["p"] >= alpha
+                              else "gain" if out["mean_diff"] > 0 else "loss")
+    mde = minimum_detectable_effect(len(d), out["sd_diff"], alpha, power)
+    out.update(mde=_num(mde.mde), mde_note=mde.note)
+    return out
+
+
+def _pooled_notes(fractions: Sequence[float], condition: str | None, alpha: float,
+                  power: float, pooled: Sequence[Mapping[str, Any]]) -> list[str]:
+    if not pooled:
+        return []
+    which = ", ".join(_pct(f) for f in fractions)
+    return [
+        f"Primary endpoint (pre-registered): the mean paired difference pooled over {which}: "
+        f"per trial the mean of its paired differences at those fractions (trials complete at "
+        f"all of them), then the {100 * (1 - alpha):g} % Student-t interval and paired t-test "
+        f"of those per-trial means at alpha = {alpha:g}, one test, no family adjustment; its "
+        f"MDE at {100 * power:g} % power from their observed sd. "
+        + (f"The primary comparison is {condition} vs baseline; the other conditions' pooled "
+           "differences are diagnostics at the same unadjusted level, not further tests of "
+           "the primary question." if condition else ""),
+        "Secondary: the per-fraction comparisons below, Holm-adjusted within each condition. "
+        "Their 'simultaneous' interval is the 1 - alpha / m Student-t interval (Bonferroni over "
+        "the condition's m fractions): where it excludes 0, Holm calls the fraction too; the "
+        "plain interval beside it is the unadjusted per-fraction interval, which may exclude 0 "
+        "where the adjusted test does not.",
+    ]
+
+
+def sweep_statistics(doc: Mapping[str, Any], rows: Iterable[Mapping[str, Any]] | Any,
+                     pretrainings: Sequence[Mapping[str, Any]] = (), *,
+                     conditions: Sequence[str] | None = None,
+                     n_resamples: int = N_RESAMPLES) -> dict[str, Any]:
+    """The statistics of a sweep (``stats.json``) from its ``sweep.json`` document, its runs'
+    rows and its pre-trainings' rows: :func:`sweep_stats` with the
+    profile's primary endpoint, and the pre-training table
+    (:func:`~sim2radar.experiment.learnability.pretraining_table`) under ``pretrainings``."""
+    from sim2radar.experiment.learnability import pretraining_table
+
+    rows = as_rows(rows)
+    profile = dict(doc.get("profile") or {})
+    conditions = list(conditions if conditions is not None else doc.get("conditions") or
+                      dict.fromkeys(str(r["condition"]) for r in rows))
+    fractions = profile.get("fractions") or doc.get("fractions") or []
+    primary = profile.get("primary_fractions") or (
+        default_primary_fractions(fractions) if fractions else None)
+    stats = sweep_stats(rows, doc.get("metric", DEFAULT_METRIC), conditions=conditions,
+                        primary_fractions=primary,
+                        primary_condition=profile.get("primary_condition", "sim-pretrain"),
+                        n_resamples=n_resamples)
+    stats["pretrainings"] = pretraining_table(
+        pretrainings, profile.get("learnability_thresholds"),
+        [c for c in conditions if CONDITIONS.get(c) and CONDITIONS[c].sim_role])
+    return stats
 
 
 def _pct(fraction: float) -> str:

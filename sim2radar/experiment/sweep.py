@@ -35,6 +35,7 @@ from sim2radar.experiment.plan import (
     PlannedRun,
     SweepContext,
     SweepPlan,
+    condition_config,
     plan_sweep,
     pretrain_key_inputs,
     protocol_digest,
@@ -46,13 +47,16 @@ from sim2radar.experiment.profiles import ABLATIONS, CONDITIONS, ROLES, Experime
 from sim2radar.vocab import STATUSES
 
 __all__ = [
+    "PREREGISTRATION_FILE",
     "KeyFn",
+    "PreregistrationMissing",
     "SweepSettingsChanged",
     "SweepSetup",
     "build_plan",
     "check_sweep_name",
     "finish_sweep",
     "open_datasets",
+    "preregistration",
     "resolve_profile",
     "role_flag",
     "settings_fixed_at",
@@ -60,8 +64,11 @@ __all__ = [
     "stage_configs",
     "sweep_conditions",
     "sweep_cost",
+    "write_results",
 ]
 
+#: the pre-registration's copy in a sweep folder
+PREREGISTRATION_FILE = "preregistration.md"
 #: ``key_of(kind, inputs, key_inputs) -> content key``: ``kind`` is ``"pretrain"`` or
 #: ``"finetune"``, ``inputs`` the dataset digests by name, ``key_inputs`` what
 #: :func:`~.plan.pretrain_key_inputs` / :func:`~.plan.run_key_inputs` give
@@ -194,8 +201,10 @@ class SweepSetup:
     roles : tuple of str — the dataset roles they need, in ROLES order.
     configs : (DetectConfig, DetectConfig) — pre-training and fine-tuning
         (:func:`stage_configs`).
-    settings : dict — :func:`~.plan.protocol_settings`: what fixes what the sweep measures.
+    settings : dict — :func:`~.plan.protocol_settings`: what fixes what the sweep measures
+        (with the pre-registration's SHA-256 when the profile names one).
     device : str or None — torch device of every run (None: automatic).
+    preregistration : dict or None — :func:`preregistration`.
     """
 
     profile: ExperimentProfile
@@ -204,6 +213,7 @@ class SweepSetup:
     configs: tuple[Any, Any]
     settings: dict[str, Any]
     device: str | None = None
+    preregistration: dict[str, Any] | None = None
 
 
 def setup_sweep(profile: str | os.PathLike | ExperimentProfile, datasets: Mapping[str, Any], *,
@@ -216,7 +226,45 @@ def setup_sweep(profile: str | os.PathLike | ExperimentProfile, datasets: Mappin
     conditions, roles = sweep_conditions(prof, ablations, datasets)
     configs = stage_configs(prof, device)
     settings = protocol_settings(prof, *(c.model_dump(mode="json") for c in configs))
-    return SweepSetup(prof, conditions, roles, configs, settings, device)
+    prereg = preregistration(prof)
+    if prereg is not None:
+        settings["preregistration"] = {"sha256": prereg["sha256"]}
+    return SweepSetup(prof, conditions, roles, configs, settings, device, prereg)
+
+
+class PreregistrationMissing(ValueError):
+    """A profile that declares ``preregistered: true`` has no readable pre-registration."""
+
+
+def preregistration(profile: ExperimentProfile) -> dict[str, Any] | None:
+    """The profile's pre-registration: ``{"path", "sha256", "text"}``, or None when it names
+    none.
+
+    Raises
+    ------
+    PreregistrationMissing — ``preregistered: true`` and the file is absent or empty (the
+    sweep refuses to run: a pre-registered study is written down before its first run).
+    """
+    import hashlib
+
+    path = profile.preregistration
+    if path is None:
+        return None
+    try:
+        text = Path(path).read_text(encoding="utf-8")
+    except OSError as exc:
+        if not profile.preregistered:
+            return None
+        raise PreregistrationMissing(
+            f"profile {profile.name!r} is pre-registered but its pre-registration {path} "
+            f"cannot be read ({exc.strerror or exc}). Write it (question, conditions, "
+            "endpoints, trials, decision rules, what would count as transfer) and commit it "
+            "before the first run, or give its path with --preregistration.") from None
+    if profile.preregistered and not text.strip():
+        raise PreregistrationMissing(f"{path}: the pre-registration of profile "
+                                     f"{profile.name!r} is empty")
+    return {"path": str(path), "sha256": hashlib.sha256(text.encode()).hexdigest(),
+            "text": text}
 
 
 class SweepSettingsChanged(ValueError):
@@ -325,16 +373,19 @@ def build_plan(setup: SweepSetup, domains: Mapping[str, Any], *, name: str, swee
     specs, run_specs = plan_sweep(profile, real.splits[profile.train_split], setup.conditions)
     matches = _intensity_matches(profile, domains, specs, ft_cfg.model.num_point_features,
                                  ft_cfg.model.class_names)
+    users = {p.name: tuple(dict.fromkeys(r.condition for r in run_specs
+                                         if r.pretrain is not None and r.pretrain.name == p.name))
+             for p in specs}
     pretrains = tuple(PlannedPretrain(p, key_of(
         "pretrain", {"sim": domains[p.sim_role].key},
-        pretrain_key_inputs(p, pre_dump, matches.get(p.name))), matches.get(p.name))
-        for p in specs)
+        pretrain_key_inputs(p, pre_dump, matches.get(p.name))), matches.get(p.name),
+        users[p.name]) for p in specs)
     pre_key = {p.id: p.key for p in pretrains}
     runs = []
     for r in run_specs:
         pkey = pre_key[r.pretrain.name] if r.pretrain else None
-        runs.append(PlannedRun(r, key_of("finetune", {"real": real.key},
-                                         run_key_inputs(r, profile, ft_dump, pkey)), pkey))
+        runs.append(PlannedRun(r, key_of("finetune", {"real": real.key}, run_key_inputs(
+            r, profile, condition_config(ft_dump, r.condition), pkey)), pkey))
     context = SweepContext(
         name=name, sweep_dir=sweep_dir, store=store,
         datasets={role: DatasetRef(str(ds.root), ds.key, {k: tuple(v) for k, v in
@@ -353,6 +404,9 @@ def build_plan(setup: SweepSetup, domains: Mapping[str, Any], *, name: str, swee
         "provenance": {**provenance, "configs": {"pretrain": pre_dump, "finetune": ft_dump}},
         "settings": dict(settings), "settings_digest": protocol_digest(settings),
         "settings_fixed_at": fixed_at, "created_at": _now(),
+        "preregistration": None if setup.preregistration is None else {
+            "file": PREREGISTRATION_FILE, "sha256": setup.preregistration["sha256"],
+            "source": setup.preregistration["path"]},
     }
     return SweepPlan(context, pretrains, tuple(runs), sweep, profile.concurrent_runs,
                      DEFAULT_METRIC)
@@ -408,30 +462,50 @@ def sweep_cost(setup: SweepSetup, domains: Mapping[str, Any], *,
             "wall_hours": {int(n): wall_time(jobs, sec, int(n)) / 3600 for n in workers}}
 
 
-def finish_sweep(plan: SweepPlan, rows: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
-    """Statistics, report and dashboard of a sweep's ``experiment_runs`` rows; writes
-    ``stats.json``, ``results.md`` and ``dashboard.html`` into the sweep folder.
+def write_results(sweep_dir: str | os.PathLike, doc: Mapping[str, Any],
+                  rows: Sequence[Mapping[str, Any]],
+                  pretrainings: Sequence[Mapping[str, Any]] = ()) -> dict[str, Any]:
+    """Write a sweep folder's ``stats.json``, ``results.md`` and ``dashboard.html`` from its
+    ``sweep.json`` document and rows (what :func:`finish_sweep` does at the end of a sweep, and
+    ``sim2radar sweep-report`` does for a published one). Returns ``stats``, ``markdown`` and
+    the paths ``results_md``, ``dashboard``."""
+    from sim2radar.experiment.dashboard import write_dashboard
+    from sim2radar.experiment.report import results_markdown
+    from sim2radar.experiment.stats import sweep_statistics
+    from sim2radar.fileio import atomic_write, write_json
+
+    sweep_dir = Path(sweep_dir)
+    stats = sweep_statistics(doc, rows, pretrainings)
+    prereg = doc.get("preregistration")
+    md = results_markdown(stats, rows, title=f"Sweep {doc.get('name', sweep_dir.name)}",
+                          real_domain_label=doc.get("real_domain", ""),
+                          proxy=doc.get("real_is_proxy"),
+                          settings={"profile": (doc.get("profile") or {}).get("name"),
+                                    "digest": doc.get("settings_digest"),
+                                    "fixed_at": doc.get("settings_fixed_at")},
+                          preregistration=prereg)
+    write_json(sweep_dir / "stats.json", stats)
+    atomic_write(sweep_dir / "results.md", md.encode())
+    dashboard = write_dashboard(sweep_dir, sweep_dir / "dashboard.html")
+    return {"stats": stats, "markdown": md, "results_md": str(sweep_dir / "results.md"),
+            "dashboard": str(dashboard)}
+
+
+def finish_sweep(plan: SweepPlan, rows: Sequence[Mapping[str, Any]],
+                 pretrainings: Sequence[Mapping[str, Any]] = ()) -> dict[str, Any]:
+    """Statistics, report and dashboard of a sweep's ``experiment_runs`` rows and its
+    pre-trainings' ``experiment_pretrain`` rows; writes ``stats.json``, ``results.md`` and
+    ``dashboard.html`` into the sweep folder (:func:`write_results`).
 
     Returns ``counts`` (runs by status), ``metric``, ``stats``, ``markdown``, ``table_rows``
     (for a Prefect table artifact) and the paths ``sweep_dir``, ``results_md``, ``dashboard``.
     """
-    from sim2radar.experiment.dashboard import write_dashboard
-    from sim2radar.experiment.report import results_markdown, results_table_rows
-    from sim2radar.experiment.stats import sweep_stats
-    from sim2radar.fileio import atomic_write, write_json
+    from sim2radar.experiment.report import results_table_rows
 
-    sweep_dir, doc, rows = Path(plan.context.sweep_dir), plan.sweep, list(rows)
-    stats = sweep_stats(rows, plan.metric, conditions=doc["conditions"])
-    md = results_markdown(stats, rows, title=f"Sweep {plan.name}",
-                          real_domain_label=doc["real_domain"], proxy=doc["real_is_proxy"],
-                          settings={"profile": doc["profile"].get("name"),
-                                    "digest": doc.get("settings_digest"),
-                                    "fixed_at": doc.get("settings_fixed_at")})
-    write_json(sweep_dir / "stats.json", stats)
-    atomic_write(sweep_dir / "results.md", md.encode())
-    dashboard = write_dashboard(sweep_dir, sweep_dir / "dashboard.html")
+    sweep_dir, rows = Path(plan.context.sweep_dir), list(rows)
+    res = write_results(sweep_dir, plan.sweep, rows, pretrainings)
     counts = {k: sum(r["status"] == k for r in rows) for k in STATUSES}
     return {"name": plan.name, "sweep_dir": str(sweep_dir), "counts": counts,
-            "metric": plan.metric, "stats": stats, "markdown": md,
-            "table_rows": results_table_rows(stats),
-            "results_md": str(sweep_dir / "results.md"), "dashboard": str(dashboard)}
+            "metric": plan.metric, "stats": res["stats"], "markdown": res["markdown"],
+            "table_rows": results_table_rows(res["stats"]), "results_md": res["results_md"],
+            "dashboard": res["dashboard"]}

@@ -125,6 +125,43 @@ def test_encoder_transfer_loads_encoder_only(tmp_path):
     assert torch.load(fine.checkpoint, weights_only=False)["encoder_from"] == str(pre.checkpoint)
 
 
+def test_encoder_lr_scale_moves_the_encoder_less_and_the_head_the_same(tmp_path):
+    """Discriminative fine-tuning: at encoder_lr_scale 0.1 the encoder's first AdamW steps are
+    a tenth of those at 1.0 (Adam's first step is lr * sign(grad) per weight, so the ratio is
+    exact up to the clipped gradients' sign), the head's the same; the schedule's peak per
+    group is recorded in the optimiser."""
+    frames = make_door_frames(4, seed=2, points_per_frame=500)
+    # lr 0.1: first steps of lr / div_factor = 0.01, far above float32's resolution at the
+    # weights' magnitude (at 0.003 the rounding of w + step blurs the ratio by ~15 %)
+    cfg = small_config(optimization=dict(batch_size=4, epochs=1, lr=0.1))
+    pre = train(cfg, out_dir=tmp_path / "pre", frames=frames, seed=0)
+
+    def moved(scale):
+        c = cfg.with_updates(optimization={"encoder_lr_scale": scale, "weight_decay": 0.0})
+        res = train(c, out_dir=tmp_path / f"s{scale}", frames=frames, seed=1,
+                    init_encoder_from=pre.checkpoint)
+        after = torch.load(res.checkpoint, weights_only=False)
+        torch.manual_seed(1)
+        start = PointPillars(cfg.model)
+        load_encoder_from(start, pre.checkpoint)
+        s0 = start.state_dict()
+        delta = {part: float(sum((after["model"][k].float() - s0[k].float()).abs().sum()
+                                 for k, _ in start.named_parameters()
+                                 if (k.split(".")[0] in ENCODER_MODULES) == (part == "enc")))
+                 for part in ("enc", "head")}
+        groups = after["optimizer"]["param_groups"]
+        return delta, [g["max_lr"] for g in groups]
+
+    full, lr_full = moved(1.0)
+    low, lr_low = moved(0.1)
+    assert lr_full == [cfg.optimization.lr]
+    assert lr_low == pytest.approx([0.1 * cfg.optimization.lr, cfg.optimization.lr])
+    assert low["enc"] == pytest.approx(0.1 * full["enc"], rel=0.02)
+    assert low["head"] == pytest.approx(full["head"], rel=0.02)
+    with pytest.raises(ValueError, match="encoder_lr_scale"):
+        cfg.with_updates(optimization={"encoder_lr_scale": 0.0})
+
+
 def test_train_and_evaluate_from_a_dataset_on_disk(tmp_path):
     root = tmp_path / "data"
     write_synthetic_dataset(root, n_train=4, n_val=1, n_test=3, seed=5, points_per_frame=500)

@@ -1,10 +1,12 @@
 """The sweep dashboard without a browser: what the page shows for a constructed sweep (cell
-means, paired differences with their t-interval, the MDE and P(improved) per cell and the
-sentence on what the sweep could detect, trial points, runs with their folders, progress,
-banner per real domain, gap figures), that the page is self-contained, that partial and broken
+means, paired differences with their simultaneous interval, the MDE and P(improved) per cell
+and the sentence on what the sweep could detect, the pooled primary endpoint, the
+pre-trainings' checks and loss curves, trial points, runs with their folders, progress, banner
+per real domain, gap figures), that the page is self-contained, that partial, old and broken
 sweep folders behave, the CLI, and the live server's endpoints.
 
-``make_sweep`` / ``append_run`` are shared with test_dashboard_browser.py.
+``make_sweep`` / ``append_run`` / ``pretrain_row`` / ``write_pretrainings`` are shared with
+test_dashboard_browser.py.
 """
 
 from __future__ import annotations
@@ -100,6 +102,44 @@ def append_run(folder: Path, row: dict) -> int:
     rows = pq.read_table(folder / "runs.parquet").to_pylist() + [row]
     write_runs(folder, rows)
     return len(rows)
+
+
+def pretrain_row(trial: int | None, *, heldout: float | None = 30.0,
+                 zero_shot: float | None = 5.0, train: float | None = 60.0,
+                 conditions=("sim-pretrain",), role: str = "sim", status: str = "ok",
+                 error: str = "", loss=(3.0, 2.0, 1.5)) -> dict:
+    """One experiment_pretrain row (a pre-training of the constructed sweep and its check);
+    a failed one has no AP and the loss of the epochs it made."""
+    ok = status != "failed"
+    row = {
+        "sweep": "t", "pretrain_key": f"pre-{role}-{trial}-" + "0" * 40,
+        "pretrain_id": f"pretrain-{role}-t{trial}", "sim_role": role,
+        "conditions": list(conditions), "trial": trial, "fraction": None, "seed": 7 + (trial or 0),
+        "n_sim_frames": 100, "holdout_split": "val", "n_heldout_frames": 20,
+        "n_real_val_frames": 10, "epochs": len(loss), "steps": 13 * len(loss),
+        "history_epoch": list(range(1, len(loss) + 1)), "history_loss": list(loss),
+        "wall_time_s": 30.0, "check_s": 2.0,
+        "checkpoint": f"t/pretrain/{role}-{trial}/last.pt" if ok else "",
+        "status": status, "error": error, "finished_at": "2026-11-20T09:30:00+00:00",
+    }
+    for where, ap in (("train", train), ("heldout", heldout), ("zero_shot", zero_shot)):
+        for m in ("3d", "bev"):
+            row[f"{where}_ap_{m}_r40_iou03"] = ap if ok and ap is not None else None
+    return row
+
+
+def write_pretrainings(folder: Path, rows: list[dict]) -> None:
+    """pretrainings.parquet, validated against the declared experiment_pretrain schema."""
+    schema = get_schema("experiment_pretrain")
+    pq.write_table(schema.validate(pa.Table.from_pylist(rows, schema=schema.schema)),
+                   folder / "pretrainings.parquet")
+
+
+def edit_sweep_json(folder: Path, **profile) -> None:
+    """Add ``profile`` fields to the sweep.json profile (as the sweep flow writes them)."""
+    doc = json.loads((folder / "sweep.json").read_text())
+    doc["profile"].update(profile)
+    (folder / "sweep.json").write_text(json.dumps(doc))
 
 
 def png_bytes(width: int = 64, height: int = 48) -> bytes:
@@ -225,15 +265,24 @@ def test_trial_points_are_every_finished_run(sweep_dir):
                                           for t in range(TRIALS) if (f, t) != (0.5, 2))
 
 
-def test_delta_is_the_paired_mean_difference_with_its_t_interval(sweep_dir):
+#: the constructed sweep's paired differences 3 + 0.5 t: (3, 3.5, 4) at 10 % and 100 %,
+#: (3, 3.5) at 50 % (sim-pretrain's trial 2 failed there)
+DIFFS = {0.1: [3.0, 3.5, 4.0], 0.5: [3.0, 3.5], 1.0: [3.0, 3.5, 4.0]}
+
+
+def _half_width(d: list[float], level: float) -> float:
+    """Half-width of the two-sided ``level`` Student-t interval of mean(d)."""
+    return sps.t.ppf(0.5 + level / 2, len(d) - 1) * np.std(d, ddof=1) / np.sqrt(len(d))
+
+
+def test_delta_is_the_paired_mean_difference_with_its_simultaneous_interval(sweep_dir):
     data = dashboard_data(load_sweep(sweep_dir))
     (delta,) = _traces(data["figures"]["delta"], "delta")
     assert delta["meta"]["condition"] == "sim-pretrain"
-    # differences 3 + 0.5 t: (3, 3.5, 4) at 10 % and 100 %, (3, 3.5) at 50 % (trial 2 failed)
-    diffs = {0.1: [3.0, 3.5, 4.0], 0.5: [3.0, 3.5], 1.0: [3.0, 3.5, 4.0]}
+    diffs = DIFFS
     np.testing.assert_allclose(delta["y"], [np.mean(diffs[f]) for f in FRACTIONS])
-    half = [sps.t.ppf(0.975, len(d) - 1) * np.std(d, ddof=1) / np.sqrt(len(d))
-            for d in diffs.values()]
+    # the bars: the 1 - 0.05 / 3 interval (Bonferroni over the condition's 3 fractions)
+    half = [_half_width(d, 1 - 0.05 / 3) for d in diffs.values()]
     np.testing.assert_allclose(delta["error_y"]["array"], half, rtol=1e-6)
     np.testing.assert_allclose(delta["error_y"]["arrayminus"], half, rtol=1e-6)
     (points,) = _traces(data["figures"]["delta"], "delta-trials")
@@ -408,8 +457,16 @@ def test_summary_has_the_mde_and_p_improved_per_cell_and_says_what_was_detectabl
     cols, rows = data["summary"]["columns"], data["summary"]["rows"]
     i_delta, i_mde = cols.index("Δ"), cols.index("MDE")
     i_kn, i_share = cols.index("k/n"), cols.index("P(improved)")
-    assert i_mde == cols.index("95 % CI") + 1 and i_share == i_kn + 1   # beside Δ and k/n
+    # Δ, its unadjusted interval, the simultaneous one the Holm verdict agrees with, the MDE
+    i_ci, i_sim = cols.index("95 % CI (unadjusted)"), cols.index(
+        "simultaneous 95 % CI (Holm family)")
+    assert (i_ci, i_sim, i_mde) == (i_delta + 1, i_delta + 2, i_delta + 3)
+    assert i_share == i_kn + 1                                          # beside k/n
+    assert "95 % CI" not in cols and "simultaneous CI" not in cols
     assert cols.index("verdict") > i_mde
+    note = data["summary"]["interval_note"]
+    assert "Holm-adjusted" in note and "simultaneous 95 % CI" in note
+    assert "may exclude 0 beside \"no detectable difference\"" in note
     for row, comp in zip(rows, stats["comparisons"], strict=True):
         assert row[i_mde] == f"{comp['mde']:.1f}" and row[i_delta].startswith("+")
         assert row[i_share].startswith(f"{100 * comp['p_improved']:.0f} % [")
@@ -441,6 +498,181 @@ def test_delta_plot_shows_the_mde_and_the_papers_delta(sweep_dir):
     assert [c[6] for c in delta["customdata"]] == [f"{c['mde']:.2f}"
                                                    for c in stats["comparisons"]]
     assert delta["customdata"][0][7] == "100 % [29, 100]"           # P(improved), 3/3
+
+
+def test_delta_bars_are_the_simultaneous_interval_and_an_old_stats_json_the_unadjusted(
+        sweep_dir):
+    stats = load_sweep(sweep_dir).stats
+    (delta,) = _traces(dashboard_data(load_sweep(sweep_dir))["figures"]["delta"], "delta")
+    for i, comp in enumerate(stats["comparisons"]):
+        lo, hi = comp["t_ci_simultaneous"]
+        assert delta["error_y"]["array"][i] == pytest.approx(hi - comp["mean_diff"])
+        assert delta["error_y"]["arrayminus"][i] == pytest.approx(comp["mean_diff"] - lo)
+        # wider than the unadjusted interval, which the hover gives beside it
+        assert hi > comp["t_ci"][1] and lo < comp["t_ci"][0]
+        assert delta["customdata"][i][8] == "[{:+.2f}, {:+.2f}]".format(*comp["t_ci"])
+    fig = dashboard_data(load_sweep(sweep_dir))["figures"]["delta"]
+    assert "simultaneous 95 % CI, Holm family" in fig["layout"]["yaxis"]["title"]["text"]
+    assert "simultaneous 95 % CI, Holm family" in delta["hovertemplate"]
+    # a stats.json written before the simultaneous interval: the unadjusted one, said so
+    old = dict(stats, comparisons=[{k: v for k, v in c.items() if k != "t_ci_simultaneous"}
+                                   for c in stats["comparisons"]])
+    (sweep_dir / "stats.json").write_text(json.dumps(old))
+    data = dashboard_data(load_sweep(sweep_dir))
+    (delta,) = _traces(data["figures"]["delta"], "delta")
+    np.testing.assert_allclose(delta["error_y"]["array"],
+                               [_half_width(d, 0.95) for d in DIFFS.values()], rtol=1e-6)
+    assert "95 % t-interval, unadjusted" in data["figures"]["delta"]["layout"]["yaxis"][
+        "title"]["text"]
+    sim = data["summary"]["columns"].index("simultaneous 95 % CI (Holm family)")
+    assert {r[sim] for r in data["summary"]["rows"]} == {"—"}
+    assert "written before the simultaneous interval" in data["summary"]["interval_note"]
+
+
+def _primary_sweep(folder: Path) -> Path:
+    """The constructed sweep with a diagnostic condition listed before the primary one and
+    the primary endpoint pooled over 10 % and 50 %."""
+    make_sweep(folder, conditions=("baseline", "sim-gt-pretrain", "sim-pretrain"))
+    edit_sweep_json(folder, primary_fractions=[0.1, 0.5], primary_condition="sim-pretrain")
+    return folder
+
+
+def test_primary_endpoint_rows_and_sentence_put_the_primary_first(tmp_path):
+    sweep = load_sweep(_primary_sweep(tmp_path / "p"))
+    assert [c["condition"] for c in sweep.stats["pooled"]] == ["sim-gt-pretrain",
+                                                               "sim-pretrain"]
+    primary = dashboard_data(sweep)["primary"]
+    cols = primary["columns"]
+    assert cols[:3] == ["condition", "role", "trials"] and cols[-1] == "verdict"
+    first, second = primary["rows"]
+    assert first[:2] == ["Sim Pretrain", "primary"]
+    assert second[:2] == ["Sim-GT Pretrain", "diagnostic"]
+    # sim-pretrain's trial 2 failed at 50 %: trials 0 and 1 are complete at 10 % and 50 %;
+    # per trial the mean of its differences there is 3 + 0.5 t, so Δ = 3.25 from (3, 3.5)
+    assert first[2] == 2 and second[2] == 3
+    d = [3.0, 3.5]
+    lo, hi = np.mean(d) - _half_width(d, 0.95), np.mean(d) + _half_width(d, 0.95)
+    assert first[cols.index("Δ [95 % CI]")] == f"+3.2 [{lo:+.1f}, {hi:+.1f}]"
+    # baseline at 10 % and 50 %: 20 + 40 f + t over trials 0, 1 -> 20 + 12 + 0.5 = 32.5
+    assert first[cols.index("Baseline")] == "32.5"
+    assert first[cols.index("condition AP")] == "35.8"            # 32.5 + 3.25
+    assert first[cols.index("k/n")] == "2/2"
+    p = sps.ttest_rel([35.0, 36.5], [32.0, 33.0]).pvalue
+    assert first[cols.index("p")] == f"{p:.3f}"
+    assert first[-1] == ("gain" if p < 0.05 else "no detectable difference")
+    pooled = next(c for c in sweep.stats["pooled"] if c["primary"])
+    assert first[cols.index("MDE")] == f"{pooled['mde']:.1f}"
+    assert primary["numeric"][cols.index("trials")] and not primary["numeric"][-1]
+    assert primary["sentence"] == (
+        "Primary endpoint (pre-registered): Sim Pretrain vs Baseline pooled over 10 %, 50 %: "
+        f"Δ +3.2 AP [{lo:+.1f}, {hi:+.1f}] (95 % CI, 2 trials), MDE {pooled['mde']:.1f} AP at "
+        f"80 % power, {first[-1]}.")
+    assert "no family adjustment" in primary["note"]
+
+
+def test_an_old_stats_json_without_the_pooled_endpoint_renders_without_it(tmp_path):
+    folder = _primary_sweep(tmp_path / "o")
+    old = {k: v for k, v in load_sweep(folder).stats.items()
+           if k not in ("pooled", "primary", "pretrainings")}
+    (folder / "stats.json").write_text(json.dumps(old))
+    sweep = load_sweep(folder)
+    assert sweep.stats_source == "stats.json" and "pooled" not in sweep.stats
+    data = dashboard_data(sweep)
+    assert data["primary"] == {"sentence": None, "note": None, "columns": [], "rows": [],
+                               "numeric": []}
+    assert data["pretrainings"]["n"] == 0 and data["pretrainings"]["figures"] == {
+        "check": None, "loss": None}
+    page = render_html(data)
+    assert 'id="primary-section"' in page and "No pre-training recorded." in page
+    assert _embedded(page) == data
+
+
+def _pretrain_sweep(folder: Path, thresholds: dict | None = None) -> Path:
+    """The constructed sweep with three sim pre-trainings: trials 0 and 1 checked (held-out
+    30 / 40, zero-shot 5 / 7, train 60 / 70), trial 2 failed after one epoch."""
+    make_sweep(folder)
+    if thresholds is not None:
+        edit_sweep_json(folder, learnability_thresholds=thresholds)
+    write_pretrainings(folder, [
+        pretrain_row(0, heldout=30.0, zero_shot=5.0, train=60.0, loss=(3.0, 2.0, 1.5)),
+        pretrain_row(1, heldout=40.0, zero_shot=7.0, train=70.0, loss=(2.8, 1.9, 1.2)),
+        pretrain_row(2, status="failed", loss=(3.3,),
+                     error="RuntimeError: diverged </script><b>pre</b>"),
+    ])
+    return folder
+
+
+def test_pretrainings_are_read_summarised_and_plotted(tmp_path):
+    folder = _pretrain_sweep(tmp_path / "t", thresholds={"sim-pretrain": 35.0})
+    sweep = load_sweep(folder)
+    assert [r["pretrain_id"] for r in sweep.pretrainings] == [
+        "pretrain-sim-t0", "pretrain-sim-t1", "pretrain-sim-t2"]
+    pre = dashboard_data(sweep)["pretrainings"]
+    assert (pre["n"], pre["n_failed"]) == (3, 1)
+    (summary,) = pre["summary"]["rows"]
+    sd = np.std([30.0, 40.0], ddof=1)                                      # 7.07
+    assert summary == ["Sim Pretrain", "sim", 2, 1, f"65.0 ± {sd:.1f}", f"35.0 ± {sd:.1f}",
+                       f"6.0 ± {np.std([5.0, 7.0], ddof=1):.1f}", "35.0 (met 1/2)"]
+    cols = pre["table"]["columns"]
+    rows = {r[0]: r for r in pre["table"]["rows"]}
+    assert rows["pretrain-sim-t1"][cols.index("held-out sim AP")] == "40.0"
+    assert rows["pretrain-sim-t1"][cols.index("threshold")] == "Sim Pretrain: met"
+    assert rows["pretrain-sim-t0"][cols.index("threshold")] == "Sim Pretrain: not met"
+    failed = rows["pretrain-sim-t2"]
+    assert failed[cols.index("status")] == "failed" and "diverged" in failed[cols.index("error")]
+    assert failed[cols.index("held-out sim AP")] == "—"
+    # loss curves: one per pre-training that did not fail, its loss per epoch
+    loss = _traces(pre["figures"]["loss"], "pretrain_loss")
+    assert [t["meta"]["pretrain_id"] for t in loss] == ["pretrain-sim-t0", "pretrain-sim-t1"]
+    assert loss[0]["y"] == [3.0, 2.0, 1.5] and loss[1]["y"] == [2.8, 1.9, 1.2]
+    assert loss[0]["x"] == [1, 2, 3]
+    assert {t["line"]["color"] for t in loss} == {"#d62728"}               # sim-pretrain's
+    assert {t["legendgroup"] for t in loss} == {"sim"}
+    assert [t["showlegend"] for t in loss] == [True, False]                # one per role
+    # checks: held-out and zero-shot APs of the two checked ones, and the threshold line
+    check = _traces(pre["figures"]["check"], "pretrain_check")
+    by = {t["meta"]["measure"]: t for t in check}
+    assert sorted(by["heldout"]["y"]) == [30.0, 40.0]
+    assert sorted(by["zero_shot"]["y"]) == [5.0, 7.0]
+    assert by["threshold"]["y"] == [35.0, 35.0] and by["threshold"]["line"]["dash"] == "dash"
+    assert pre["figures"]["check"]["layout"]["xaxis"]["ticktext"] == ["Sim Pretrain"]
+    # the statistics carry the same table (sweep_statistics on the live sweep)
+    assert sweep.stats["pretrainings"]["thresholds"] == {"sim-pretrain": 35.0}
+    data = dashboard_data(sweep)
+    json.dumps(data, allow_nan=False)
+    page = render_html(data)
+    assert _embedded(page) == data
+    assert "</script><b>pre</b>" not in page                     # the error cannot close it
+    for needle in ('id="pretrain-section"', "<h2>Pre-trainings</h2>", 'id="plot-pretrain-check"',
+                   'id="plot-pretrain-loss"', 'id="pretrain-rows"', "<h2>Primary endpoint</h2>",
+                   'id="summary-note"'):
+        assert needle in page, needle
+
+
+def test_pretrainings_without_a_threshold_draw_no_threshold_line(tmp_path):
+    pre = dashboard_data(load_sweep(_pretrain_sweep(tmp_path / "t")))["pretrainings"]
+    assert pre["summary"]["rows"][0][-1] == "—"
+    measures = [t["meta"]["measure"] for t in _traces(pre["figures"]["check"],
+                                                      "pretrain_check")]
+    assert measures == ["heldout", "zero_shot"]
+
+
+def test_a_stats_json_without_the_pretraining_table_gets_it_from_the_parquet(tmp_path):
+    folder = _pretrain_sweep(tmp_path / "t", thresholds={"sim-pretrain": 35.0})
+    stats = load_sweep(folder).stats
+    (folder / "stats.json").write_text(json.dumps(
+        {k: v for k, v in stats.items() if k != "pretrainings"}))
+    sweep = load_sweep(folder)
+    assert sweep.stats_source.startswith("stats.json (pre-training table from "
+                                         "pretrainings.parquet")
+    assert sweep.stats["pretrainings"] == stats["pretrainings"]
+    # a fourth pre-training finished after stats.json was written: the table follows the file
+    (folder / "stats.json").write_text(json.dumps(stats))
+    assert load_sweep(folder).stats_source == "stats.json"
+    rows = pq.read_table(folder / "pretrainings.parquet").to_pylist()
+    write_pretrainings(folder, [*rows, pretrain_row(3, heldout=50.0)])
+    table = load_sweep(folder).stats["pretrainings"]
+    assert len(table["rows"]) == 4 and table["summary"][0]["n_met"] == 2
 
 
 def test_every_run_and_trial_point_names_its_run_folder(sweep_dir):
@@ -571,6 +803,9 @@ def test_partial_sweeps_render(tmp_path, case):
     ("malformed stats.json", "stats.json"),
     ("stats.json without cells", "stats.json"),
     ("gap.json not an object", "gap.json"),
+    ("damaged pretrainings.parquet", "pretrainings.parquet"),
+    ("pretrainings.parquet of another table", "pretrainings.parquet"),
+    ("thresholds not numbers", "sweep.json"),
 ])
 def test_bad_sweep_folders_name_the_file_and_the_fix(tmp_path, case, named):
     folder = make_sweep(tmp_path / "b")
@@ -586,6 +821,12 @@ def test_bad_sweep_folders_name_the_file_and_the_fix(tmp_path, case, named):
         (folder / "stats.json").write_text("{nan}")
     elif case == "stats.json without cells":
         (folder / "stats.json").write_text('{"conditions": []}')
+    elif case == "damaged pretrainings.parquet":
+        (folder / "pretrainings.parquet").write_bytes(b"PAR1 not really")
+    elif case == "pretrainings.parquet of another table":
+        pq.write_table(pq.read_table(folder / "runs.parquet"), folder / "pretrainings.parquet")
+    elif case == "thresholds not numbers":
+        edit_sweep_json(folder, learnability_thresholds={"sim-pretrain": "high"})
     else:
         (folder / "gap" / "gap.json").write_text("[1, 2]")
     with pytest.raises(SweepFolderError) as info:

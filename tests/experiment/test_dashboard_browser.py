@@ -1,7 +1,8 @@
 """The sweep dashboard in a real browser (headless Debian Chromium through Playwright): the
 static page loads with no console error and requests nothing but itself, the AP plot has one
 mean series per condition, the runs table sorts, a screenshot is taken; the served page shows a
-run appended to runs.parquet without a reload.
+run appended to runs.parquet without a reload; the primary endpoint and the pre-trainings'
+sections render, and hide where an old sweep has neither.
 
 Needs ``/usr/bin/chromium`` (``make setup`` installs Debian's ``chromium``; Playwright's own
 browser downloads are not used). Skipped only on a machine without apt.
@@ -9,14 +10,22 @@ browser downloads are not used). Skipped only on a machine without apt.
 
 from __future__ import annotations
 
+import json
 import shutil
 import struct
 from pathlib import Path
 
 import pytest
 
-from sim2radar.experiment.dashboard import serve_dashboard, write_dashboard
-from tests.experiment.test_dashboard import append_run, make_sweep, run_row
+from sim2radar.experiment.dashboard import load_sweep, serve_dashboard, write_dashboard
+from tests.experiment.test_dashboard import (
+    append_run,
+    edit_sweep_json,
+    make_sweep,
+    pretrain_row,
+    run_row,
+    write_pretrainings,
+)
 
 CHROMIUM = Path("/usr/bin/chromium")
 #: flags for a sandbox-less container; without the background-networking ones Chromium's own
@@ -139,7 +148,6 @@ def test_runs_filter_group_and_download_offline(tmp_path, page):
     still requests nothing but itself. The summary states what the sweep could detect."""
     import csv
     import io
-    import json
 
     sweep = make_sweep(tmp_path / "t")
     html = write_dashboard(sweep, tmp_path / "dash.html")
@@ -204,3 +212,47 @@ def test_runs_filter_group_and_download_offline(tmp_path, page):
     assert nums == sorted(nums) and len(vals) == 9
     assert page.errors == []
     assert page.requests == [html.as_uri()]             # downloads built in the page
+
+
+def test_primary_endpoint_and_pretrainings_render(tmp_path, page):
+    """A sweep with pre-trainings and a threshold: the primary sentence and table, the
+    pre-training summary, the check and loss plots (drawn) and every pre-training in the
+    details; an old sweep without them hides the primary section and says so for the
+    pre-trainings."""
+    sweep = make_sweep(tmp_path / "t")
+    edit_sweep_json(sweep, learnability_thresholds={"sim-pretrain": 35.0})
+    write_pretrainings(sweep, [pretrain_row(0, heldout=30.0), pretrain_row(1, heldout=40.0),
+                               pretrain_row(2, status="failed", loss=(3.0,),
+                                            error="diverged </script><b>x</b>")])
+    html = write_dashboard(sweep, tmp_path / "dash.html")
+    page.goto(html.as_uri())
+    page.wait_for_selector("#plot-pretrain-check .main-svg")
+    page.wait_for_selector("#plot-pretrain-loss .main-svg")
+    assert page.locator("#primary-section").is_visible()
+    assert page.locator("#primary-sentence").inner_text().startswith(
+        "Primary endpoint (pre-registered): Sim Pretrain vs Baseline pooled over 10 %")
+    assert page.locator("#primary-table td", has_text="primary").count() == 1
+    assert page.locator("#summary th", has_text="simultaneous 95 % CI (Holm family)").count() == 1
+    assert "Holm-adjusted" in page.locator("#summary-note").inner_text()
+    assert page.locator("#pretrain-empty").is_hidden()
+    assert "35.0 (met 1/2)" in page.locator("#pretrain-summary").inner_text()
+    assert page.evaluate("""() => document.getElementById('plot-pretrain-loss').data
+        .filter(t => t.meta.role === 'pretrain_loss').length""") == 2
+    assert page.evaluate("""() => document.getElementById('plot-pretrain-check').data
+        .filter(t => t.meta.measure === 'threshold').length""") == 1
+    page.click("#pretrain-details-summary")
+    assert page.locator("#pretrain-rows tbody tr").count() == 3
+    assert "diverged </script><b>x</b>" in page.locator("#pretrain-rows").inner_text()
+    assert page.errors == [] and page.requests == [html.as_uri()]
+
+    old = make_sweep(tmp_path / "old")
+    doc = {k: v for k, v in load_sweep(old).stats.items()
+           if k not in ("pooled", "primary", "pretrainings")}
+    (old / "stats.json").write_text(json.dumps(doc))
+    html = write_dashboard(old, tmp_path / "old.html")
+    page.goto(html.as_uri())
+    page.wait_for_selector("#plot-delta .main-svg")
+    assert page.locator("#primary-section").is_hidden()
+    assert page.locator("#pretrain-empty").inner_text() == "No pre-training recorded."
+    assert page.locator("#plot-pretrain-check").is_hidden()
+    assert page.errors == []

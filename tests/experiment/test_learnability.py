@@ -2,13 +2,19 @@
 
 from __future__ import annotations
 
+import json
 import math
 
 import pytest
 
 from sim2radar.datasets import make_door_frames
 from sim2radar.experiment import load_profile
-from sim2radar.experiment.learnability import PRIMARY_AP, check_pretraining
+from sim2radar.experiment.learnability import (
+    PRIMARY_AP,
+    PretrainingCheck,
+    check_pretraining,
+    pretraining_table,
+)
 from sim2radar.experiment.runner import pretrain_encoder
 
 
@@ -40,3 +46,43 @@ def test_empty_sets_and_no_threshold(checkpoints):
     c = check_pretraining(checkpoints[1], [], [])
     assert math.isnan(c.sim_ap) and math.isnan(c.real_zero_shot_ap)
     assert c.met is None and c.sim == {} and c.real == {}
+
+
+def test_the_training_frames_check_and_the_round_trip(checkpoints):
+    train = make_door_frames(16, seed=1, points_per_frame=300)
+    c = check_pretraining(checkpoints[20], [], [], train_frames=train)
+    assert c.train_frames == 16 and c.train_ap == c.train[PRIMARY_AP] > 0
+    again = PretrainingCheck.from_dict(json.loads(json.dumps(c.to_dict())))
+    assert again.train_ap == c.train_ap and again.train == c.train
+
+
+def _row(pid, conds, heldout, zero, train=None, status="ok", loss=(1.0, 0.5)):
+    return {"pretrain_id": pid, "sim_role": "sim" if "sim-pretrain" in conds else "ref",
+            "conditions": list(conds), "trial": 0, "fraction": 0.05, "n_sim_frames": 10,
+            "n_heldout_frames": 4, "n_real_val_frames": 3, "heldout_ap_3d_r40_iou03": heldout,
+            "zero_shot_ap_3d_r40_iou03": zero, "train_ap_3d_r40_iou03": train,
+            "history_loss": list(loss), "status": status, "error": "boom" if status ==
+            "failed" else ""}
+
+
+def test_the_pretraining_table_summarises_per_condition_and_judges_thresholds():
+    rows = [_row("a", ["sim-pretrain", "sim-pretrain-lowlr"], 4.0, 10.0, 8.0),
+            _row("b", ["sim-pretrain", "sim-pretrain-lowlr"], 8.0, 12.0, 9.0),
+            _row("c", ["ref-pretrain"], 30.0, 40.0),
+            _row("d", ["ref-pretrain"], None, None, status="failed", loss=())]
+    t = pretraining_table(rows, {"sim-pretrain": 5.0, "ref-pretrain": 20.0})
+    by = {s["condition"]: s for s in t["summary"]}
+    assert list(by) == ["sim-pretrain", "sim-pretrain-lowlr", "ref-pretrain"]
+    sim = by["sim-pretrain"]
+    assert (sim["n"], sim["n_failed"], sim["threshold"], sim["n_met"]) == (2, 0, 5.0, 1)
+    assert sim["heldout"]["mean"] == pytest.approx(6.0)
+    assert sim["heldout"]["std"] == pytest.approx(math.sqrt(8.0))
+    assert by["sim-pretrain-lowlr"]["threshold"] is None and by["sim-pretrain-lowlr"][
+        "n_met"] is None
+    ref = by["ref-pretrain"]
+    assert (ref["n"], ref["n_failed"], ref["n_met"]) == (1, 1, 1)
+    assert ref["train"]["mean"] is None and ref["heldout"]["std"] is None
+    rows_out = {r["id"]: r for r in t["rows"]}
+    assert rows_out["a"]["met"] == {"sim-pretrain": False, "sim-pretrain-lowlr": None}
+    assert rows_out["b"]["final_loss"] == 0.5 and rows_out["d"]["final_loss"] is None
+    json.dumps(t, allow_nan=False)

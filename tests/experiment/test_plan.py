@@ -146,3 +146,36 @@ def test_run_identity():
     d = runs[1].to_dict()
     assert d["pretrain"]["sim_role"] == "sim" and isinstance(d["train_ids"], list)
     json.dumps(d)
+
+
+def test_the_diagnosis_arms_share_and_separate_what_they_should():
+    """sim-pretrain-lowlr loads sim-pretrain's pre-training (one pre-training, two fine-tuning
+    protocols) but is its own run: its encoder learning-rate share is in its key; ref-pretrain
+    pre-trains on its own dataset; every pre-training holds out the profile's split."""
+    from sim2radar.experiment.plan import condition_config
+
+    profile = ExperimentProfile(detector=Path("x.yaml"), trials=2, fractions=(0.05, 0.25),
+                                conditions=("baseline", "sim-pretrain", "ref-pretrain",
+                                            "sim-pretrain-lowlr"))
+    pretrains, runs = plan_sweep(profile, IDS[:80])
+    assert {p.sim_role for p in pretrains} == {"sim", "ref"}
+    assert all(p.holdout_split == "val" for p in pretrains)
+    assert len(pretrains) == 2 * 2 * 2          # roles x trials x fractions (matching on)
+    cell = {r.condition: r for r in runs if r.trial == 1 and r.fraction == 0.25}
+    assert cell["sim-pretrain-lowlr"].pretrain is cell["sim-pretrain"].pretrain
+    assert cell["ref-pretrain"].pretrain.sim_role == "ref"
+    det = _detector()
+    low = condition_config(det, "sim-pretrain-lowlr")
+    assert low["optimization"]["encoder_lr_scale"] == 0.1 and condition_config(
+        det, "sim-pretrain") == det
+    k_sim = run_key_inputs(cell["sim-pretrain"], profile, det, pretrain_key="p")
+    k_low = run_key_inputs(cell["sim-pretrain-lowlr"], profile, low, pretrain_key="p")
+    assert k_low != k_sim and k_low["detector"]["optimization"]["encoder_lr_scale"] == 0.1
+    # the default share (1.0) is not in a key: runs planned before it existed keep theirs
+    assert "encoder_lr_scale" not in k_sim["detector"]["optimization"]
+    # the held-out split is part of a pre-training's identity
+    p = pretrains[0]
+    import dataclasses
+
+    whole = dataclasses.replace(p, holdout_split=None)
+    assert pretrain_key_inputs(p, det, None) != pretrain_key_inputs(whole, det, None)

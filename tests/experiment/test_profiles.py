@@ -129,3 +129,31 @@ def test_profile_is_frozen_and_defaults_are_the_papers():
     assert p.all_conditions == ("baseline", "sim-pretrain")
     with pytest.raises(ValueError):
         p.trials = 3  # frozen
+
+
+def test_primary_endpoint_thresholds_and_preregistration_fields(tmp_path):
+    from sim2radar.experiment.profiles import default_primary_fractions
+
+    paper = load_profile("paper")
+    assert paper.primary == (0.05, 0.10, 0.25) and paper.primary_condition == "sim-pretrain"
+    assert paper.pretrain_holdout_split == "val" and not paper.preregistered
+    assert default_primary_fractions([0.5, 1.0]) == (0.5,)       # none <= 25 %: the smallest
+    base = {"detector": "x.yaml", "fractions": [0.1, 0.5, 1.0]}
+    assert ExperimentProfile(**base, primary_fractions=[0.5, 1.0]).primary == (0.5, 1.0)
+    with pytest.raises(ValueError, match=r"primary_fractions \[0.25\] are not among"):
+        ExperimentProfile(**base, primary_fractions=[0.25])
+    with pytest.raises(ValueError, match="'nope' is no pre-trained condition"):
+        ExperimentProfile(**base, learnability_thresholds={"nope": 5})
+    with pytest.raises(ValueError, match="baseline.*is no pre-trained condition"):
+        ExperimentProfile(**base, learnability_thresholds={"baseline": 5})
+    with pytest.raises(ValueError, match="AP in"):
+        ExperimentProfile(**base, learnability_thresholds={"sim-pretrain": 120})
+    with pytest.raises(ValueError, match="preregistered: true needs 'preregistration'"):
+        ExperimentProfile(**base, preregistered=True)
+    # the pre-registration's path resolves against the YAML's folder
+    (tmp_path / "sub").mkdir()
+    (tmp_path / "sub" / "p.yaml").write_text(
+        "detector: ../det.yaml\npreregistered: true\npreregistration: ../pre.md\n")
+    (tmp_path / "det.yaml").write_text((Path(paper.detector)).read_text())
+    prof = load_profile(tmp_path / "sub" / "p.yaml")
+    assert prof.preregistration == (tmp_path / "pre.md").resolve()

@@ -40,7 +40,8 @@ def test_table_rows_match_table_1_layout():
     rows = results_table_rows(sweep_stats(_runs()))
     assert len(rows) == 5
     assert list(rows[0]) == ["condition", "real data", "N", "Sim:Real", "baseline",
-                             "condition AP", "Δ", "95 % CI", "MDE", "p (Holm)", "d_z", "k/n",
+                             "condition AP", "Δ", "95 % CI", "simultaneous CI", "MDE",
+                             "p (Holm)", "d_z", "k/n",
                              "P(improved)", "verdict", "paper Δ (trials)", "bootstrap CI"]
     # N and Sim:Real as in the paper's Table 1 (270 sim frames)
     assert [r["N"] for r in rows] == ["18", "37", "92", "185", "371"]
@@ -61,9 +62,20 @@ def test_markdown_report():
                           real_domain_label="proxy-real (reference radar simulation)")
     assert md.startswith("# Demo sweep")
     # one Table 1 block per non-baseline condition
-    assert "## Sim Pretrain vs Baseline" in md and "## Sim-GT Pretrain vs Baseline" in md
-    assert ("| Real Data | N | Sim:Real | Baseline | Sim Pretrain | Δ [95 % CI] | MDE | "
-            "p (Holm) | d_z | k/n | P(improved) | Verdict | Paper Δ (trials) |") in md
+    assert ("## Sim Pretrain vs Baseline per fraction (secondary, Holm-adjusted)" in md
+            and "## Sim-GT Pretrain vs Baseline per fraction" in md)
+    assert ("| Real Data | N | Sim:Real | Baseline | Sim Pretrain | Δ [95 % CI, unadjusted] | "
+            "simultaneous CI | MDE | p (Holm) | d_z | k/n | P(improved) | Verdict | "
+            "Paper Δ (trials) |") in md
+    # the primary endpoint first: the pooled Δ over 5/10/25 %, sim-pretrain the primary row
+    primary = next(c for c in stats["pooled"] if c["primary"])
+    assert primary["condition"] == "sim-pretrain" and primary["fractions"] == [0.05, 0.1, 0.25]
+    assert md.index("## Primary endpoint") < md.index("## Sim Pretrain vs Baseline per")
+    lo, hi = primary["t_ci"]
+    assert (f"| Sim Pretrain | **primary** | {primary['n_pairs']} | "
+            f"{primary['baseline_mean']:.1f} | {primary['condition_mean']:.1f} | "
+            f"{primary['mean_diff']:+.1f} [{lo:+.1f}, {hi:+.1f}] |") in md
+    assert "| Sim-GT Pretrain | diagnostic |" in md
     assert "| 5 % | 18 | 15:1 |" in md
     # every trial's value of every cell
     for cell in stats["cells"]:

@@ -181,7 +181,7 @@ def test_output_structure_metric_choice_and_table_input():
     rows = _sweep(2.0, seed=4)
     res = sweep_stats(rows)
     assert list(res) == ["metric", "alpha", "conditions", "fractions", "cells", "comparisons",
-                         "power", "notes"]
+                         "pooled", "primary", "power", "notes"]
     assert res["power"]["power"] == 0.8 and res["power"]["source"].startswith("paper Table 1")
     assert res["metric"] == DEFAULT_METRIC == "ap_3d_r40_iou03" and res["alpha"] == 0.05
     assert res["conditions"] == ["baseline", "sim-pretrain"]
@@ -189,7 +189,8 @@ def test_output_structure_metric_choice_and_table_input():
     assert set(res["cells"][0]) == {"condition", "fraction", "n_real_frames", "sim_real_ratio",
                                     "n", "n_failed", "mean", "std", "values", "trials"}
     assert set(res["comparisons"][0]) == {
-        "condition", "fraction", "n_pairs", "mean_diff", "sd_diff", "t_ci", "bootstrap_ci",
+        "condition", "fraction", "n_pairs", "mean_diff", "sd_diff", "t_ci",
+        "t_ci_simultaneous", "bootstrap_ci",
         "bootstrap_coverage", "p", "p_holm", "d_z", "k_improved", "p_improved",
         "p_improved_ci", "verdict", "mde", "mde_dz", "mde_alpha", "mde_note", "paper_delta",
         "n_for_paper_delta", "n_for_paper_delta_note", "differences", "trials"}
@@ -350,3 +351,44 @@ def test_p_improved_has_a_clopper_pearson_interval():
     comp = res["comparisons"][0]
     assert comp["k_improved"] == 5 and comp["p_improved"] == 1.0
     assert comp["p_improved_ci"] == pytest.approx([0.025 ** (1 / 5), 1.0])
+
+
+def test_the_pooled_primary_endpoint_is_the_t_test_of_per_trial_mean_differences():
+    """Pooled over 5/10/25 %: per trial the mean paired Δ of those fractions, then a one-sample
+    t-test of the per-trial means (scipy.stats.ttest_1samp), at alpha without adjustment; a
+    trial missing one of the fractions (failed run) is left out; the per-fraction comparisons
+    carry the 1 - alpha/m interval."""
+    rows = _sweep(2.0, seed=7)
+    fail = next(r for r in rows if r["condition"] == "sim-pretrain" and r["fraction"] == 0.1
+                and r["trial"] == 2)
+    fail.update(status="failed", ap_3d_r40_iou03=None)
+    res = sweep_stats(rows, n_resamples=0)
+    assert res["primary"] == {"condition": "sim-pretrain", "fractions": [0.05, 0.1, 0.25]}
+    (pooled,) = res["pooled"]
+    ap = {(r["condition"], r["fraction"], r["trial"]): r["ap_3d_r40_iou03"] for r in rows}
+    trials = sorted({r["trial"] for r in rows} - {2})
+    d = [np.mean([ap[("sim-pretrain", f, t)] - ap[("baseline", f, t)]
+                  for f in (0.05, 0.1, 0.25)]) for t in trials]
+    ref = sps.ttest_1samp(d, 0.0)
+    ci = ref.confidence_interval(0.95)
+    assert pooled["trials"] == trials and pooled["primary"]
+    assert pooled["mean_diff"] == pytest.approx(np.mean(d))
+    assert pooled["p"] == pytest.approx(ref.pvalue)
+    assert pooled["t_ci"] == pytest.approx([ci.low, ci.high])
+    assert pooled["mde"] == pytest.approx(minimum_detectable_effect(
+        len(d), np.std(d, ddof=1), 0.05).mde)
+    assert pooled["verdict"] == ("gain" if ref.pvalue < 0.05 and np.mean(d) > 0 else
+                                 "loss" if ref.pvalue < 0.05 else "no detectable difference")
+    # the simultaneous interval of each fraction: 1 - alpha / m, m = 5 fractions
+    for comp in res["comparisons"]:
+        x = np.array([ap[("sim-pretrain", comp["fraction"], t)] for t in comp["trials"]])
+        y = np.array([ap[("baseline", comp["fraction"], t)] for t in comp["trials"]])
+        sim = sps.ttest_rel(x, y).confidence_interval(1 - 0.05 / 5)
+        assert comp["t_ci_simultaneous"] == pytest.approx([sim.low, sim.high])
+        lo, hi = comp["t_ci_simultaneous"]
+        if lo > 0 or hi < 0:        # it excludes 0 only where Holm calls the fraction
+            assert comp["verdict"] in ("gain", "loss")
+    # explicit fractions and another primary condition
+    other = sweep_stats(rows, n_resamples=0, primary_fractions=[0.5, 1.0],
+                        primary_condition="sim-gt-pretrain")
+    assert other["pooled"][0]["fractions"] == [0.5, 1.0] and not other["pooled"][0]["primary"]

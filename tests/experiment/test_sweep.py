@@ -13,7 +13,7 @@ import pytest
 from sim2radar.datasets import make_door_frames, write_dataset, write_metadata
 from sim2radar.experiment.data import open_domain
 from sim2radar.experiment.plan import SweepPlan, pretrain_key_inputs, run_key_inputs
-from sim2radar.experiment.profiles import CONDITIONS, ROLES
+from sim2radar.experiment.profiles import ABLATIONS, CONDITIONS, ROLES
 from sim2radar.experiment.sweep import (
     SweepSettingsChanged,
     build_plan,
@@ -76,6 +76,14 @@ def test_conditions_and_dataset_roles_come_from_the_registry():
                                          "--sim-one-material"):
         sweep_conditions(prof, True, {"sim": "s", "real": "r", "sim-gt": None})
     conds, roles = sweep_conditions(prof, True, {r: r for r in ROLES})
+    assert set(conds) == {"baseline", "sim-pretrain", *ABLATIONS}
+    assert roles == ("real", "sim", "sim-gt", "sim-one-material")
+    # the diagnosis conditions are main conditions a profile lists: the control needs --ref
+    every = resolve_profile("smoke", {"conditions": [c for c in CONDITIONS if c not in ABLATIONS],
+                                      "ablations": list(ABLATIONS)})
+    with pytest.raises(ValueError, match="ref-pretrain need the dataset.*--ref"):
+        sweep_conditions(every, False, {r: r for r in ROLES if r != "ref"})
+    conds, roles = sweep_conditions(every, False, {r: r for r in ROLES})
     assert set(conds) == set(CONDITIONS) and roles == ROLES
     with pytest.raises(ValueError, match="unknown dataset role.*'sim-noisy'.*known"):
         sweep_conditions(prof, False, {"sim": "s", "real": "r", "sim-noisy": "n"})
@@ -183,3 +191,53 @@ def test_datasets_are_folders_or_exported_from_the_store(domains, tmp_path):
     assert open_datasets({"sim": domains["sim"].root}, ("sim",), export)["sim"].role == "sim"
     with pytest.raises(FileNotFoundError, match="sim dataset .*no such folder"):
         open_datasets({"sim": str(tmp_path / "nope")}, ("sim",), export)
+
+
+def test_a_preregistered_profile_refuses_to_run_without_its_file_and_pins_it(tmp_path):
+    from sim2radar.experiment.sweep import PreregistrationMissing
+
+    pre = tmp_path / "preregistration.md"
+    over = {"preregistered": True, "preregistration": pre}
+    with pytest.raises(PreregistrationMissing, match=r"(?s)preregistration\.md.*cannot be read"
+                                                     r".*before the first run"):
+        setup_sweep("smoke", {"sim": "s", "real": "r"}, overrides=over)
+    pre.write_text("   \n")
+    with pytest.raises(PreregistrationMissing, match="is empty"):
+        setup_sweep("smoke", {"sim": "s", "real": "r"}, overrides=over)
+    pre.write_text("# Question\nDoes sim pre-training help at 5-25 %?\n")
+    setup = setup_sweep("smoke", {"sim": "s", "real": "r"}, overrides=over)
+    digest = hashlib.sha256(pre.read_bytes()).hexdigest()
+    assert setup.settings["preregistration"] == {"sha256": digest}
+    assert setup.preregistration["text"].startswith("# Question")
+    # the file's path is not a setting (another checkout), its content is
+    first = settings_fixed_at(None, setup.settings, name="t", sweep_dir=tmp_path)
+    old = {"settings": setup.settings, "settings_fixed_at": first}
+    moved = tmp_path / "elsewhere.md"
+    moved.write_text(pre.read_text())
+    again = setup_sweep("smoke", {"sim": "s", "real": "r"},
+                        overrides={**over, "preregistration": moved})
+    assert settings_fixed_at(old, again.settings, name="t", sweep_dir=tmp_path) == first
+    pre.write_text("# Question\nDoes sim pre-training help at 50-100 %?\n")   # edited later
+    edited = setup_sweep("smoke", {"sim": "s", "real": "r"}, overrides=over)
+    with pytest.raises(SweepSettingsChanged, match="preregistration.sha256"):
+        settings_fixed_at(old, edited.settings, name="t", sweep_dir=tmp_path)
+
+
+def test_pretrainings_hold_out_the_sims_split_and_the_plan_names_their_conditions(tmp_path):
+    root = tmp_path / "d"
+    doms = {"real": open_domain(_write(root / "real", 2, {"train": 8, "val": 2, "test": 2},
+                                       100_000, proxy=True), "real"),
+            "sim": open_domain(_write(root / "sim", 1, {"train": 6, "val": 2}, 0), "sim")}
+    setup = setup_sweep("smoke", {"sim": "s", "real": "r"},
+                        overrides={"conditions": ["baseline", "sim-pretrain",
+                                                  "sim-pretrain-lowlr"]})
+    plan = _plan(setup, doms, tmp_path)
+    assert all(p.spec.holdout_split == "val" and p.conditions == ("sim-pretrain",
+                                                                    "sim-pretrain-lowlr")
+               for p in plan.pretrains)
+    low = [r for r in plan.runs if r.spec.condition == "sim-pretrain-lowlr"]
+    sim = {(r.spec.fraction, r.spec.trial): r for r in plan.runs
+           if r.spec.condition == "sim-pretrain"}
+    for r in low:       # the same pre-training, another run
+        twin = sim[(r.spec.fraction, r.spec.trial)]
+        assert r.pretrain_key == twin.pretrain_key and r.key != twin.key

@@ -88,6 +88,30 @@ def test_every_cell_runs_once_and_the_outputs_are_written(first):
     html = (d / "dashboard.html").read_text()
     assert "<html" in html.lower()
     assert json.loads((d / "progress.json").read_text())["finished"] == 8
+    # every pre-training checked before fine-tuning: trained on the sim set less its val split
+    # (10 of 12 frames), checked on those 2 held-out frames and on the 4 real val frames
+    pre = pq.read_table(d / "pretrainings.parquet")
+    get_schema("experiment_pretrain").validate(pre)
+    pre_rows = pre.to_pylist()
+    assert sorted(r["pretrain_key"] for r in pre_rows) == sorted(
+        {r["pretrain_key"] for r in rows if r["pretrain_key"]})
+    for r in pre_rows:
+        assert (r["n_sim_frames"], r["n_heldout_frames"], r["n_real_val_frames"]) == (10, 2, 4)
+        assert r["holdout_split"] == "val" and r["conditions"] == ["sim-pretrain"]
+        assert r["status"] == "ok" and len(r["history_loss"]) == r["epochs"] >= 1
+        for col in ("train", "heldout", "zero_shot"):
+            assert 0.0 <= r[f"{col}_ap_3d_r40_iou03"] <= 100.0
+        check = json.loads((d / "pretrain" / r["pretrain_key"] / "check.json").read_text())
+        assert check["sim_ap"] == r["heldout_ap_3d_r40_iou03"]
+        done = json.loads((d / "pretrain" / r["pretrain_key"] / "done.json").read_text())
+        assert done["frames"] == 10
+    st = ArtifactStore(first["store"])
+    assert all(st.exists("experiment_pretrain", r["pretrain_key"]) for r in pre_rows)
+    assert len(stats["pretrainings"]["rows"]) == 4 and stats["pretrainings"]["summary"][0][
+        "condition"] == "sim-pretrain"
+    (pooled,) = stats["pooled"]          # the smoke grid's fractions (50, 100 %): the smaller
+    assert pooled["primary"] and pooled["fractions"] == [0.5] and pooled["n_pairs"] == 2
+    assert "## Primary endpoint" in md and "## Pre-trainings" in md
 
 
 def test_prefect_artifacts_are_published(first):
@@ -119,7 +143,38 @@ def test_a_rerun_trains_nothing(first, data, monkeypatch):
                            out=first["out"], store=first["store"])
     assert again["counts"] == {"ok": 0, "skipped": 8, "failed": 0}
     assert calls == []                                     # pre-trainings found finished too
+    pre = pq.read_table(first["dir"] / "pretrainings.parquet").to_pylist()
+    assert {r["status"] for r in pre} == {"skipped"} and len(pre) == 4
     assert again["stats"]["cells"] == first["summary"]["stats"]["cells"]
+
+
+def test_the_diagnosis_arms_run_the_control_and_the_lower_encoder_lr(data, prefect_server):
+    """ref-pretrain pre-trains on its own dataset (the reference radar on the sim worlds);
+    sim-pretrain-lowlr loads the sim pre-training and fine-tunes its encoder at 0.1 x lr."""
+    from sim2radar.flows.run_experiment import run_experiment
+
+    ref = _write(data["root"] / "ref", 3, {"train": 8, "val": 2, "test": 2}, 0)
+    out, store = data["root"] / "diag", data["root"] / "diag-store"
+    s = run_experiment(data["sim"], data["real"], profile="smoke", name="d", out=out,
+                       store=store, datasets={"ref": ref},
+                       overrides={"trials": 1, "fractions": [1.0], "conditions": [
+                           "baseline", "sim-pretrain-lowlr", "ref-pretrain"]})
+    assert s["counts"] == {"ok": 3, "skipped": 0, "failed": 0}
+    rows = {r["condition"]: r for r in pq.read_table(out / "d" / "runs.parquet").to_pylist()}
+    pre = {r["sim_role"]: r for r in pq.read_table(out / "d" /
+                                                   "pretrainings.parquet").to_pylist()}
+    assert pre["ref"]["conditions"] == ["ref-pretrain"]
+    assert pre["sim"]["conditions"] == ["sim-pretrain-lowlr"]
+    assert rows["ref-pretrain"]["pretrain_key"] == pre["ref"]["pretrain_key"]
+    cfg = json.loads((out / "d" / "runs" / rows["sim-pretrain-lowlr"]["run_key"] /
+                      "config.json").read_text())
+    assert cfg["optimization"]["encoder_lr_scale"] == 0.1
+    base = json.loads((out / "d" / "runs" / rows["baseline"]["run_key"] /
+                       "config.json").read_text())
+    assert base["optimization"]["encoder_lr_scale"] == 1.0
+    stats = s["stats"]
+    assert [p["condition"] for p in stats["pooled"]] == ["sim-pretrain-lowlr", "ref-pretrain"]
+    assert not any(p["primary"] for p in stats["pooled"])   # sim-pretrain is not in this sweep
 
 
 def test_a_sweep_refuses_changed_settings_but_not_changed_execution(first, data):

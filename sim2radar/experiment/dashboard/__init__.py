@@ -10,7 +10,8 @@ Modules:
 
 - :mod:`~.data` — reading the sweep folder (its files are listed there), the runs table, the
   statistics and the page's JSON document; pure Python.
-- :mod:`~.figures` — the Plotly figures (AP, difference to the baseline, learning curves);
+- :mod:`~.figures` — the Plotly figures (AP, difference to the baseline, learning curves, the
+  pre-trainings' checks and loss curves);
   :mod:`~.labels` — names, colours and numbers as the page shows them.
 - :mod:`~.page` — the page: the Jinja2 template ``dashboard.html.j2`` and the static
   ``dashboard.js`` and ``dashboard.css`` (package data in ``sim2radar/experiment/page/``, read
@@ -26,7 +27,13 @@ Plot traces carry ``meta = {"role": ..., "condition": ...}``; the count rule the
 checks: the AP figure has exactly one ``"mean"`` trace and one ``"trials"`` trace per condition
 of :func:`dashboard_data`'s ``conditions`` (empty where a condition has no finished run yet).
 The difference figure adds, per non-baseline condition, an ``"mde"`` trace (the minimum
-detectable effect per fraction) and one ``"paper-delta"`` trace (the paper's Table 1 Δ).
+detectable effect per fraction) and one ``"paper-delta"`` trace (the paper's Table 1 Δ); its
+error bars are the simultaneous interval the Holm verdict agrees with.
+
+The page leads with the pre-registered primary endpoint (the Δ pooled over the low-data
+fractions, one test) above the per-fraction comparisons (secondary, Holm-adjusted), and shows
+what every pre-training learned before fine-tuning (held-out sim AP, zero-shot real AP, the
+pre-registered thresholds, the loss curves) from ``pretrainings.parquet``.
 
 Every number leads back to its run: the runs table has each run's folder relative to the sweep
 (``run_folder``), the trial points' hover names it, and the page filters and groups the runs

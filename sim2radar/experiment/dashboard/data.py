@@ -7,17 +7,21 @@ page's JSON document (pure).
 
 What the sweep folder holds (written by ``flows/run_experiment.py`` and ``sim2radar demo``)::
 
-    runs.parquet      one ``experiment_runs`` row per training run (storage/schemas.py)
-    sweep.json        profile, conditions, fractions, trials, metric, datasets (+ domain),
-                      provenance (versions, code, configs)          optional: banner "unknown"
-    stats.json        sim2radar.experiment.stats.sweep_stats output  optional: recomputed
+    runs.parquet          one ``experiment_runs`` row per training run (storage/schemas.py)
+    sweep.json            profile, conditions, fractions, trials, metric, datasets (+ domain),
+                          provenance (versions, code, configs)       optional: banner "unknown"
+    stats.json            sim2radar.experiment.stats.sweep_statistics output (per-fraction
+                          comparisons, the pooled primary endpoint, the pre-training table)
+                                                                     optional: recomputed
+    pretrainings.parquet  one ``experiment_pretrain`` row per pre-training, with its
+                          learnability check (storage/schemas.py)    optional: none shown
     generation.json   {"datasets": [{name, role, scenes_ok, ...}]}   optional
     gap/gap.json      sim2radar gap's report, PNGs beside it          optional
     progress.json     {"total_runs", "finished", "failed", "running", "updated_at"}  optional
 
-``runs.parquet`` is read with pyarrow and checked against the columns the page reads
-(:data:`RUNS_COLUMNS`): the library does not import the store (``sim2radar.storage``), whose
-layer is above it.
+``runs.parquet`` and ``pretrainings.parquet`` are read with pyarrow and checked against the
+columns the page reads (:data:`RUNS_COLUMNS`, :data:`PRETRAIN_COLUMNS`): the library does not
+import the store (``sim2radar.storage``), whose layer is above it.
 """
 
 from __future__ import annotations
@@ -31,8 +35,15 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
-from sim2radar.experiment.dashboard.figures import ap_figure, curves_figure, delta_figure
-from sim2radar.experiment.dashboard.labels import colour, metric_label, num
+from sim2radar.experiment.dashboard.figures import (
+    ap_figure,
+    curves_figure,
+    delta_figure,
+    pretrain_check_figure,
+    pretrain_loss_figure,
+)
+from sim2radar.experiment.dashboard.labels import colour, metric_label, num, pct
+from sim2radar.experiment.learnability import pretraining_table
 from sim2radar.experiment.profiles import BASELINE, CONDITIONS
 from sim2radar.experiment.report import (
     UNDECLARED,
@@ -41,11 +52,17 @@ from sim2radar.experiment.report import (
     domain_kind,
     results_table_rows,
 )
-from sim2radar.experiment.stats import AP_METRICS, DEFAULT_METRIC, sweep_stats
+from sim2radar.experiment.stats import (
+    AP_METRICS,
+    DEFAULT_METRIC,
+    DEGENERATE,
+    sweep_statistics,
+)
 from sim2radar.fileio import jsonable
 
 __all__ = [
     "FILES",
+    "PRETRAIN_COLUMNS",
     "RUNS_COLUMNS",
     "SweepData",
     "SweepFolderError",
@@ -57,7 +74,8 @@ __all__ = [
 
 #: files of a sweep folder the dashboard reads, by role
 FILES = {"runs": "runs.parquet", "sweep": "sweep.json", "stats": "stats.json",
-         "generation": "generation.json", "gap": "gap/gap.json", "progress": "progress.json"}
+         "pretrainings": "pretrainings.parquet", "generation": "generation.json",
+         "gap": "gap/gap.json", "progress": "progress.json"}
 #: PNG file signature (PNG spec, §5.2)
 _PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 
@@ -76,9 +94,12 @@ class SweepData:
     folder : Path — the sweep folder.
     runs : list of dict — ``experiment_runs`` rows, in file order (empty: no run finished yet).
     sweep : dict or None — ``sweep.json``.
-    stats : dict or None — the statistics (:func:`~sim2radar.experiment.stats.sweep_stats`'s
-        structure): ``stats.json`` when it matches the runs, else recomputed from ``runs``.
+    stats : dict or None — the statistics
+        (:func:`~sim2radar.experiment.stats.sweep_statistics`' structure): ``stats.json`` when
+        it matches the runs, else recomputed from ``runs`` and ``pretrainings``.
     stats_source : str — where ``stats`` came from, one line for the page.
+    pretrainings : list of dict — ``experiment_pretrain`` rows of ``pretrainings.parquet``, in
+        file order (empty: no such file).
     generation : dict or None — ``generation.json``.
     gap : dict or None — ``gap/gap.json``.
     gap_images : dict[str, str] — figure name -> ``data:image/png;base64,...`` of the PNGs
@@ -92,6 +113,7 @@ class SweepData:
     sweep: dict[str, Any] | None = None
     stats: dict[str, Any] | None = None
     stats_source: str = ""
+    pretrainings: list[dict[str, Any]] = dataclasses.field(default_factory=list)
     generation: dict[str, Any] | None = None
     gap: dict[str, Any] | None = None
     gap_images: dict[str, str] = dataclasses.field(default_factory=dict)
@@ -152,14 +174,30 @@ RUNS_COLUMNS: dict[str, str] = {
 #: columns that identify a run and its outcome: never null (non-nullable in experiment_runs)
 _RUN_IDENTITY = ("condition", "fraction", "trial", "status")
 _RUNS_FIX = "rerun `sim2radar sweep` with the same name to rewrite it"
+#: the ``pretrainings.parquet`` columns the dashboard reads (an ``experiment_pretrain`` table,
+#: storage/schemas.py), with the kind of value each holds; as :data:`RUNS_COLUMNS`
+PRETRAIN_COLUMNS: dict[str, str] = {
+    "pretrain_id": "text", "sim_role": "text", "conditions": "texts", "trial": "integer",
+    "fraction": "number", "seed": "integer", "n_sim_frames": "integer",
+    "n_heldout_frames": "integer", "n_real_val_frames": "integer",
+    **{f"{where}_ap_{m}_r40_iou03": "number" for where in ("train", "heldout", "zero_shot")
+       for m in ("3d", "bev")},
+    "epochs": "integer", "steps": "integer", "history_epoch": "integers",
+    "history_loss": "numbers", "wall_time_s": "number", "status": "text", "error": "text",
+}
+#: columns that identify a pre-training and its outcome: never null (experiment_pretrain)
+_PRETRAIN_IDENTITY = ("pretrain_id", "sim_role", "conditions", "status")
+_PRETRAIN_FIX = ("rerun `sim2radar sweep` with the same name to rewrite it, or delete it (the "
+                 "page then shows no pre-training)")
 
 
 def _holds(arrow_type: Any, kind: str) -> bool:
     """Whether a column of ``arrow_type`` holds values of ``kind`` (:data:`RUNS_COLUMNS`'s
-    kinds); a column of nulls only holds any kind."""
+    kinds; ``texts``/``integers``/``numbers``: lists of them); a column of nulls only holds
+    any kind."""
     import pyarrow as pa
 
-    if kind in ("integers", "numbers"):
+    if kind in ("texts", "integers", "numbers"):
         return ((pa.types.is_list(arrow_type) or pa.types.is_large_list(arrow_type))
                 and _holds(arrow_type.value_type, kind[:-1]))
     if pa.types.is_null(arrow_type):
@@ -171,30 +209,47 @@ def _holds(arrow_type: Any, kind: str) -> bool:
     return pa.types.is_integer(arrow_type) or pa.types.is_floating(arrow_type)
 
 
-def _read_runs(folder: Path) -> list[dict[str, Any]]:
-    """The rows of ``runs.parquet``, checked against :data:`RUNS_COLUMNS`."""
+def _read_table(path: Path, columns: Mapping[str, str], identity: Sequence[str], what: str,
+                fix: str) -> list[dict[str, Any]]:
+    """The rows of the Parquet file ``path``, checked against ``columns`` (name -> kind, see
+    :func:`_holds`) with no null in the ``identity`` columns; ``what`` names the table
+    (``experiment_runs``) and ``fix`` the remedy in the error message."""
     import pyarrow.parquet as pq
 
-    path = folder / FILES["runs"]
     try:
         table = pq.read_table(path)
     except Exception as exc:  # pyarrow raises ArrowInvalid / OSError for a damaged file
-        raise SweepFolderError(f"{path}: not a readable Parquet file ({exc}); "
-                               f"{_RUNS_FIX}") from None
-    missing = [c for c in RUNS_COLUMNS if c not in table.column_names]
+        raise SweepFolderError(f"{path}: not a readable Parquet file ({exc}); {fix}") from None
+    missing = [c for c in columns if c not in table.column_names]
     if missing:
         raise SweepFolderError(f"{path}: column(s) {missing} missing, so it is not a sweep's "
-                               "experiment_runs table (storage/schemas.py) or was written by "
-                               f"another version; {_RUNS_FIX}")
-    for name, kind in RUNS_COLUMNS.items():
+                               f"{what} table (storage/schemas.py) or was written by another "
+                               f"version; {fix}")
+    for name, kind in columns.items():
         column = table.column(name)
         if not _holds(column.type, kind):
             raise SweepFolderError(f"{path}: column {name!r} has type {column.type}, not "
-                                   f"{kind}; {_RUNS_FIX}")
-        if name in _RUN_IDENTITY and column.null_count:
+                                   f"{kind}; {fix}")
+        if name in identity and column.null_count:
             raise SweepFolderError(f"{path}: column {name!r} has {column.null_count} null "
-                                   f"value(s); {_RUNS_FIX}")
+                                   f"value(s); {fix}")
     return table.to_pylist()
+
+
+def _read_runs(folder: Path) -> list[dict[str, Any]]:
+    """The rows of ``runs.parquet``, checked against :data:`RUNS_COLUMNS`."""
+    return _read_table(folder / FILES["runs"], RUNS_COLUMNS, _RUN_IDENTITY, "experiment_runs",
+                       _RUNS_FIX)
+
+
+def _read_pretrainings(folder: Path) -> list[dict[str, Any]]:
+    """The rows of ``pretrainings.parquet``, checked against :data:`PRETRAIN_COLUMNS`; none
+    without the file (a sweep without pre-training, or written before the file existed)."""
+    path = folder / FILES["pretrainings"]
+    if not path.is_file():
+        return []
+    return _read_table(path, PRETRAIN_COLUMNS, _PRETRAIN_IDENTITY, "experiment_pretrain",
+                       _PRETRAIN_FIX)
 
 
 def _png_data_uri(path: Path) -> str | None:
@@ -224,6 +279,74 @@ def _conditions(sweep: Mapping[str, Any] | None, runs: Sequence[Mapping[str, Any
     return [BASELINE, *(c for c in conds if c != BASELINE)] if BASELINE in conds else conds
 
 
+def _pretrained(conds: Sequence[str]) -> list[str]:
+    """The conditions of ``conds`` that load a pre-trained encoder (a registered condition
+    with a ``sim_role``), in order: those the pre-training table summarises (as
+    :func:`~sim2radar.experiment.stats.sweep_statistics` does)."""
+    return [c for c in conds if c in CONDITIONS and CONDITIONS[c].sim_role]
+
+
+def _numbers(value: Any) -> bool:
+    """Whether ``value`` is a list of finite numbers."""
+    return isinstance(value, list) and all(num(v) is not None for v in value)
+
+
+def _statistics_doc(sweep: Mapping[str, Any] | None, folder: Path) -> dict[str, Any]:
+    """``sweep.json`` as :func:`~sim2radar.experiment.stats.sweep_statistics` reads it: its
+    ``metric`` checked (default :data:`DEFAULT_METRIC`), its ``profile`` a dict whose
+    ``fractions``, ``primary_fractions`` and ``learnability_thresholds`` (condition -> held-out
+    sim AP [%]) hold numbers; ``{"metric": ..., "profile": {}}`` without ``sweep.json``.
+
+    Raises
+    ------
+    SweepFolderError — a field of another kind, naming ``sweep.json`` and the fix.
+    """
+    path = folder / FILES["sweep"]
+    doc = dict(sweep or {})
+    metric = str(doc.get("metric") or DEFAULT_METRIC)
+    if metric not in AP_METRICS:
+        raise SweepFolderError(f"{path}: field 'metric' is {metric!r}, not one of "
+                               f"{list(AP_METRICS)}; {_FIXES['sweep']}")
+    profile = doc.get("profile")
+    profile = dict(profile) if isinstance(profile, Mapping) else {}
+    for where, holder in (("", doc), ("profile.", profile)):
+        for key in ("fractions", "primary_fractions"):
+            if holder.get(key) is not None and not _numbers(holder[key]):
+                raise SweepFolderError(f"{path}: field '{where}{key}' is not a list of numbers; "
+                                       f"{_FIXES['sweep']}")
+    thresholds = profile.get("learnability_thresholds")
+    if thresholds is not None and not (isinstance(thresholds, Mapping) and
+                                       _numbers(list(thresholds.values()))):
+        raise SweepFolderError(f"{path}: field 'profile.learnability_thresholds' is not an "
+                               "object of numbers (condition -> held-out sim AP [%]); "
+                               f"{_FIXES['sweep']}")
+    if profile.get("primary_condition") is not None and not isinstance(
+            profile["primary_condition"], str):
+        raise SweepFolderError(f"{path}: field 'profile.primary_condition' is not a condition "
+                               f"name; {_FIXES['sweep']}")
+    return {**doc, "metric": metric, "profile": profile}
+
+
+def _check_stats(stats: Mapping[str, Any], path: Path) -> None:
+    """``stats.json`` holds the lists the page reads; ``pooled`` (the primary endpoint) and
+    ``pretrainings`` (the pre-training table) are optional (a file written before them)."""
+    _require(stats, ("cells", "comparisons", "conditions", "fractions"), path, "stats")
+    if "pooled" in stats:
+        _require(stats, ("pooled",), path, "stats")
+    if "primary" in stats:
+        _require(stats, ("primary",), path, "stats", dict)
+    if "pretrainings" in stats:
+        _require(stats, ("pretrainings",), path, "stats", dict)
+        _require(stats["pretrainings"], ("rows", "summary"), path, "stats")
+
+
+def _pretrainings_stale(stats: Mapping[str, Any], rows: Sequence[Mapping[str, Any]]) -> bool:
+    """Whether ``stats`` lacks the pre-training table of ``rows`` (none, or one of another
+    number of pre-trainings: written before the latest finished)."""
+    table = stats.get("pretrainings")
+    return not isinstance(table, Mapping) or len(table.get("rows") or []) != len(rows)
+
+
 def load_sweep(folder: str | os.PathLike, *, require_runs: bool = True) -> SweepData:
     """Read a sweep folder (see the module docstring for its files).
 
@@ -236,8 +359,12 @@ def load_sweep(folder: str | os.PathLike, *, require_runs: bool = True) -> Sweep
     Returns
     -------
     SweepData — with ``stats`` from ``stats.json`` when it counts the same runs as
-    ``runs.parquet``, otherwise computed from the runs (a sweep still running has no
-    ``stats.json``; one that was resumed may have a stale one).
+    ``runs.parquet``, otherwise computed from the runs and the pre-trainings
+    (:func:`~sim2radar.experiment.stats.sweep_statistics`: a sweep still running has no
+    ``stats.json``; one that was resumed may have a stale one). A ``stats.json`` without a
+    pre-training table, or with one of another number of pre-trainings than
+    ``pretrainings.parquet``, gets the table of the file's rows
+    (:func:`~sim2radar.experiment.learnability.pretraining_table`).
 
     Raises
     ------
@@ -265,24 +392,28 @@ def load_sweep(folder: str | os.PathLike, *, require_runs: bool = True) -> Sweep
         warnings.append(f"{folder / FILES['sweep']} not found: the datasets, their domain and "
                         "the provenance are unknown")
 
+    pretrainings = _read_pretrainings(folder)
+    conds = _conditions(sweep, runs)
     stats = _read_json(folder, "stats")
     stats_source = f"{FILES['stats']}"
     if stats is not None:
-        _require(stats, ("cells", "comparisons", "conditions", "fractions"),
-                 folder / FILES["stats"], "stats")
+        _check_stats(stats, folder / FILES["stats"])
         if not _stats_matches(stats, runs):
             stats = None
             stats_source = (f"computed from {FILES['runs']} ({FILES['stats']} counts other runs: "
                             "written before the latest runs finished)")
+        elif pretrainings and _pretrainings_stale(stats, pretrainings):
+            profile = _statistics_doc(sweep, folder)["profile"]
+            stats["pretrainings"] = pretraining_table(
+                pretrainings, profile.get("learnability_thresholds"), _pretrained(conds))
+            stats_source += (f" (pre-training table from {FILES['pretrainings']}: "
+                             f"{FILES['stats']} has none or another number of pre-trainings)")
     else:
         stats_source = f"computed from {FILES['runs']} ({FILES['stats']} not written yet)"
     if stats is None:
-        metric = str((sweep or {}).get("metric") or DEFAULT_METRIC)
-        if metric not in AP_METRICS:
-            raise SweepFolderError(f"{folder / FILES['sweep']}: field 'metric' is {metric!r}, "
-                                   f"not one of {list(AP_METRICS)}; {_FIXES['sweep']}")
         try:
-            stats = sweep_stats(runs, metric, conditions=_conditions(sweep, runs))
+            stats = sweep_statistics(_statistics_doc(sweep, folder), runs, pretrainings,
+                                     conditions=conds)
         except ValueError as exc:
             raise SweepFolderError(f"{runs_path}: {exc}") from None
 
@@ -312,7 +443,8 @@ def load_sweep(folder: str | os.PathLike, *, require_runs: bool = True) -> Sweep
             else:
                 images[str(name)] = uri
     return SweepData(folder=folder, runs=runs, sweep=sweep, stats=stats,
-                     stats_source=stats_source, generation=generation, gap=gap,
+                     stats_source=stats_source, pretrainings=pretrainings,
+                     generation=generation, gap=gap,
                      gap_images=images, progress=progress, warnings=warnings)
 
 
@@ -443,21 +575,226 @@ def _progress(data: SweepData, conds: Sequence[str]) -> dict[str, Any]:
 _TEXT_SUMMARY_COLUMNS = ("condition", "real data", "verdict")
 
 
+def _level(stats: Mapping[str, Any]) -> str:
+    """The confidence level of the statistics' intervals: ``95 %``."""
+    return f"{100 * (1 - float(stats.get('alpha', 0.05))):g} %"
+
+
+def _interval_headings(stats: Mapping[str, Any]) -> dict[str, str]:
+    """Table 1's interval columns (:func:`~sim2radar.experiment.report.results_table_rows`'
+    keys) -> the page's headings, which say which interval is which."""
+    level = _level(stats)
+    return {f"{level} CI": f"{level} CI (unadjusted)",
+            "simultaneous CI": f"simultaneous {level} CI (Holm family)"}
+
+
+def _interval_note(stats: Mapping[str, Any]) -> str:
+    """The line under Table 1: which interval the Holm verdict agrees with."""
+    level = _level(stats)
+    note = (f"Per-fraction comparisons (secondary): p and the verdict are Holm-adjusted across "
+            f"each condition's fractions. The simultaneous {level} CI (the 1 − alpha/m "
+            "Student-t interval, Bonferroni over the condition's m fractions) is the interval "
+            "the verdict agrees with: where it excludes 0 the verdict is a gain or loss (Holm "
+            "may also call a fraction whose simultaneous interval still touches 0). The "
+            f"unadjusted {level} CI is each fraction's own interval: it may exclude 0 beside "
+            "\"no detectable difference\".")
+    if not any("t_ci_simultaneous" in c for c in stats.get("comparisons", [])):
+        note += (f" This {FILES['stats']} was written before the simultaneous interval "
+                 "existed: its column shows dashes.")
+    return note
+
+
 def _summary_table(stats: Mapping[str, Any]) -> dict[str, Any]:
     """Table 1 (paper) as strings: one row per (non-baseline condition, fraction), with the
     MDE beside Δ, P(improved) beside k/n
-    (:func:`~sim2radar.experiment.report.results_table_rows`); ``numeric`` flags the
+    (:func:`~sim2radar.experiment.report.results_table_rows`), its interval columns headed
+    ``95 % CI (unadjusted)`` and ``simultaneous 95 % CI (Holm family)``; ``numeric`` flags the
     right-aligned columns; ``sentences`` says what the sweep could and could not have detected
-    (:func:`~sim2radar.experiment.report.detectability_sentences`)."""
+    (:func:`~sim2radar.experiment.report.detectability_sentences`); ``interval_note`` which
+    interval the Holm verdict agrees with (None without a row)."""
     rows = results_table_rows(stats)
     sentences = detectability_sentences(stats)
     if not rows:
-        return {"columns": [], "rows": [], "numeric": [], "sentences": sentences}
+        return {"columns": [], "rows": [], "numeric": [], "sentences": sentences,
+                "interval_note": None}
     cols = list(rows[0])
-    return {"columns": cols, "rows": [[condition_label(r[c]) if c == "condition" else r[c]
-                                       for c in cols] for r in rows],
+    headings = _interval_headings(stats)
+    return {"columns": [headings.get(c, c) for c in cols],
+            "rows": [[condition_label(r[c]) if c == "condition" else r[c] for c in cols]
+                     for r in rows],
             "numeric": [c not in _TEXT_SUMMARY_COLUMNS for c in cols],
-            "sentences": sentences}
+            "sentences": sentences, "interval_note": _interval_note(stats)}
+
+
+def _signed(v: Any, digits: int = 1) -> str:
+    """A signed number with a typographic minus (``+1.2``, ``−0.8``); ``—`` for none."""
+    f = num(v)
+    return "—" if f is None else format(f, f"+.{digits}f").replace("-", "\u2212")
+
+
+def _p_text(v: Any) -> str:
+    f = num(v)
+    return "—" if f is None else "<0.001" if f < 0.001 else f"{f:.3f}"
+
+
+def _pooled_mde(row: Mapping[str, Any]) -> str:
+    """The pooled endpoint's MDE [AP points], or a dash with the short reason there is none."""
+    mde = num(row.get("mde"))
+    if mde is not None:
+        return f"{mde:.1f}"
+    if int(row.get("n_pairs") or 0) < 2:
+        return "— (< 2 trials)"
+    return "— (sd 0)" if row.get("verdict") == DEGENERATE else "—"
+
+
+def _pooled_delta(row: Mapping[str, Any]) -> str:
+    """Δ with its interval: ``+1.2 [−0.8, +3.2]``."""
+    lo, hi = (list(row.get("t_ci") or []) + [None, None])[:2]
+    ci = "" if num(lo) is None or num(hi) is None else f" [{_signed(lo)}, {_signed(hi)}]"
+    return _signed(row.get("mean_diff")) + ci
+
+
+def _primary_sentence(stats: Mapping[str, Any], pooled: Sequence[Mapping[str, Any]]) -> str:
+    """One line with the verdict of the pre-registered primary endpoint, e.g. "Primary
+    endpoint (pre-registered): Sim Pretrain vs Baseline pooled over 5 %, 10 %, 25 %: Δ +1.2 AP
+    [−0.8, +3.2] (95 % CI, 5 trials), MDE 2.9 AP at 80 % power, no detectable difference."."""
+    primary = stats.get("primary") if isinstance(stats.get("primary"), Mapping) else {}
+    fracs = [float(f) for f in (primary.get("fractions") or pooled[0].get("fractions") or [])]
+    where = f"pooled over {', '.join(pct(f) for f in fracs)}"
+    row = next((r for r in pooled if r.get("primary")), None)
+    if row is None:
+        name = primary.get("condition")
+        why = (f"its condition, {condition_label(str(name))}, is not in this sweep" if name
+               else "the profile declares no primary condition")
+        return (f"Primary endpoint (pre-registered): none to report ({why}); the pooled "
+                f"differences ({where}) below are diagnostics.")
+    head = (f"Primary endpoint (pre-registered): {condition_label(str(row['condition']))} vs "
+            f"{condition_label(BASELINE)} {where}: ")
+    if num(row.get("mean_diff")) is None:
+        return head + (f"no trial has finished both conditions at every one of these fractions "
+                       f"yet ({row.get('verdict', 'insufficient trials')}).")
+    n = int(row.get("n_pairs") or 0)
+    delta = f"Δ {_signed(row['mean_diff'])} AP"
+    lo, hi = (list(row.get("t_ci") or []) + [None, None])[:2]
+    if num(lo) is not None and num(hi) is not None:
+        delta += f" [{_signed(lo)}, {_signed(hi)}] ({_level(stats)} CI, {n} trials)"
+    else:
+        delta += f" ({n} trial{'s' if n != 1 else ''}, no interval)"
+    power = float((stats.get("power") or {}).get("power", 0.8))
+    mde = num(row.get("mde"))
+    mde_text = (f"MDE {mde:.1f} AP at {100 * power:g} % power" if mde is not None
+                else f"no MDE ({row.get('mde_note') or 'fewer than 2 trials'})")
+    return head + f"{delta}, {mde_text}, {row.get('verdict', '')}."
+
+
+def _primary(stats: Mapping[str, Any]) -> dict[str, Any]:
+    """The pooled (primary) endpoint for the page: ``sentence`` (the primary verdict, one
+    line), ``note`` (how it is computed), ``columns``, ``rows`` (one per non-baseline
+    condition, the primary first: condition label, ``primary``/``diagnostic``, trials,
+    baseline and condition mean AP, Δ with its interval, MDE, p, d_z, k/n, verdict) and
+    ``numeric`` (right-aligned columns). Empty rows and None texts for statistics without a
+    ``pooled`` endpoint (a ``stats.json`` written before it)."""
+    pooled = [r for r in stats.get("pooled") or [] if isinstance(r, Mapping)]
+    if not pooled:
+        return {"sentence": None, "note": None, "columns": [], "rows": [], "numeric": []}
+    level = _level(stats)
+    pooled = sorted(pooled, key=lambda r: not r.get("primary"))
+    columns = ["condition", "role", "trials", condition_label(BASELINE), "condition AP",
+               f"Δ [{level} CI]", "MDE", "p", "d_z", "k/n", "verdict"]
+    rows = [[condition_label(str(r.get("condition"))),
+             "primary" if r.get("primary") else "diagnostic", int(r.get("n_pairs") or 0),
+             _fmt(num(r.get("baseline_mean"))), _fmt(num(r.get("condition_mean"))),
+             _pooled_delta(r), _pooled_mde(r), _p_text(r.get("p")), _fmt(num(r.get("d_z")),
+                                                                         ".2f"),
+             f"{r.get('k_improved', 0)}/{r.get('n_pairs', 0)}", str(r.get("verdict", ""))]
+            for r in pooled]
+    alpha = float(stats.get("alpha", 0.05))
+    note = (f"Per trial, the mean of its paired differences (condition minus baseline) at the "
+            f"pooled fractions, for the trials complete at all of them; then their mean with "
+            f"its {level} Student-t interval and the paired t-test at alpha = {alpha:g}: one "
+            "pre-registered test, no family adjustment. The other rows are diagnostics at the "
+            "same unadjusted level, not further tests of the primary question.")
+    return {"sentence": _primary_sentence(stats, pooled), "note": note, "columns": columns,
+            "rows": rows, "numeric": [c not in ("condition", "role", "verdict")
+                                      for c in columns]}
+
+
+def _mean_sd(spread: Any) -> str:
+    """``{"mean", "std"}`` as ``12.3 ± 1.2`` (``12.3`` without a std; ``—`` without a mean)."""
+    spread = spread if isinstance(spread, Mapping) else {}
+    mean, sd = num(spread.get("mean")), num(spread.get("std"))
+    if mean is None:
+        return "—"
+    return f"{mean:.1f}" if sd is None else f"{mean:.1f} ± {sd:.1f}"
+
+
+#: the pre-training summary table: (heading, right-aligned)
+_PRETRAIN_SUMMARY_COLUMNS = (("condition", False), ("dataset", False),
+                             ("pre-trainings", True), ("failed", True), ("train AP", True),
+                             ("held-out sim AP", True), ("zero-shot real AP", True),
+                             ("threshold (held-out)", False))
+#: the table of every pre-training: (heading, right-aligned)
+_PRETRAIN_ROW_COLUMNS = (("pre-training", False), ("dataset", False), ("conditions", False),
+                         ("trial", True), ("real fraction", True), ("sim frames", True),
+                         ("held-out frames", True), ("real val frames", True),
+                         ("train AP", True), ("held-out sim AP", True),
+                         ("zero-shot real AP", True), ("final loss", True),
+                         ("threshold", False), ("status", False), ("error", False))
+
+
+def _pretrain_summary_row(s: Mapping[str, Any]) -> list[Any]:
+    thr = num(s.get("threshold"))
+    return [condition_label(str(s.get("condition"))), str(s.get("role") or "—"),
+            s.get("n"), s.get("n_failed"), _mean_sd(s.get("train")),
+            _mean_sd(s.get("heldout")), _mean_sd(s.get("zero_shot")),
+            "—" if thr is None else f"{thr:.1f} (met {s.get('n_met')}/{s.get('n')})"]
+
+
+def _pretrain_row(r: Mapping[str, Any]) -> list[Any]:
+    met = ", ".join(f"{condition_label(str(c))}: {'met' if v else 'not met'}"
+                    for c, v in (r.get("met") or {}).items() if v is not None) or "—"
+    fraction = num(r.get("fraction"))
+    return [str(r.get("id")), str(r.get("role") or "—"),
+            ", ".join(condition_label(str(c)) for c in r.get("conditions") or []) or "—",
+            "shared" if r.get("trial") is None else r.get("trial"),
+            "—" if fraction is None else pct(fraction), r.get("n_sim_frames"),
+            r.get("n_heldout_frames"), r.get("n_real_val_frames"), _fmt(num(r.get("train"))),
+            _fmt(num(r.get("heldout"))), _fmt(num(r.get("zero_shot"))),
+            _fmt(num(r.get("final_loss")), ".3f"), met, str(r.get("status") or "—"),
+            str(r.get("error") or "")]
+
+
+def _pretrainings(stats: Mapping[str, Any], rows: Sequence[Mapping[str, Any]],
+                  conds: Sequence[str]) -> dict[str, Any]:
+    """The pre-trainings for the page, from the statistics' pre-training table
+    (:func:`~sim2radar.experiment.learnability.pretraining_table`) and the
+    ``experiment_pretrain`` rows (the loss curves): ``n``, ``n_failed``, ``note`` (what the
+    checks measure), ``summary`` and ``table`` (``columns``, ``rows`` of strings and numbers,
+    ``numeric``), ``figures`` (``check``: :func:`~.figures.pretrain_check_figure`, ``loss``:
+    :func:`~.figures.pretrain_loss_figure`; None without a pre-training)."""
+    table = stats.get("pretrainings")
+    table = table if isinstance(table, Mapping) else {}
+    found = [r for r in table.get("rows") or [] if isinstance(r, Mapping)]
+    summary = [s for s in table.get("summary") or [] if isinstance(s, Mapping)]
+    has_any = bool(found or rows)
+    return {
+        "n": len(found),
+        "n_failed": sum(r.get("status") == "failed" for r in found),
+        "note": ("3D AP (R40, IoU 0.3, %) of each pre-trained detector (encoder and head, no "
+                 "fine-tuning) on its own simulated training frames, on the held-out simulated "
+                 "split (worlds it never saw) and zero-shot on the real validation split. A "
+                 "threshold is the pre-registered held-out sim AP a condition's pre-trainings "
+                 "were expected to reach: reported, never used to select or drop a run."),
+        "summary": {"columns": [c for c, _ in _PRETRAIN_SUMMARY_COLUMNS],
+                    "rows": [_pretrain_summary_row(s) for s in summary],
+                    "numeric": [n for _, n in _PRETRAIN_SUMMARY_COLUMNS]},
+        "table": {"columns": [c for c, _ in _PRETRAIN_ROW_COLUMNS],
+                  "rows": [_pretrain_row(r) for r in found],
+                  "numeric": [n for _, n in _PRETRAIN_ROW_COLUMNS]},
+        "figures": {"check": pretrain_check_figure({**table, "rows": found}, conds)
+                    if has_any else None,
+                    "loss": pretrain_loss_figure(rows, conds) if has_any else None},
+    }
 
 
 def _fmt(v: Any, spec: str = ",.1f") -> str:
@@ -651,9 +988,21 @@ def dashboard_data(sweep: SweepData) -> dict[str, Any]:
     ``progress`` (``finished``, ``total``, ``ok``, ``skipped``, ``failed``, ``running``,
     ``updated_at``, ``state``), ``conditions`` (``[{"name", "label", "color"}]``),
     ``fractions``, ``figures`` (Plotly ``{"data", "layout"}`` of ``ap``, ``delta``, ``curves``;
-    trace ``meta.role`` ``mean``/``trials``, ``delta``/``delta-trials``, ``loss``/``val_ap``),
-    ``summary`` (Table 1: ``columns``, ``rows`` of strings with the MDE and P(improved) per
-    cell, ``numeric``, ``sentences``: what the sweep could and could not detect), ``notes``,
+    trace ``meta.role`` ``mean``/``trials``, ``delta``/``delta-trials``, ``loss``/``val_ap``;
+    the ``delta`` error bars are the simultaneous interval the Holm verdict agrees with),
+    ``primary`` (the pre-registered primary endpoint, the Δ pooled over the low-data
+    fractions: ``sentence``, one line with the primary verdict; ``note``; ``columns``,
+    ``rows``, one per non-baseline condition, the primary first, then the diagnostics;
+    ``numeric``; empty rows and None texts without ``pooled`` in the statistics),
+    ``summary`` (Table 1, secondary: ``columns`` with ``95 % CI (unadjusted)`` and
+    ``simultaneous 95 % CI (Holm family)``, ``rows`` of strings with the MDE and P(improved)
+    per cell, ``numeric``, ``sentences``: what the sweep could and could not detect,
+    ``interval_note``: which interval the Holm verdict agrees with),
+    ``pretrainings`` (``n``, ``n_failed``, ``note``, ``summary`` per condition and ``table``
+    per pre-training, each ``{"columns", "rows", "numeric"}``; ``figures``: ``check`` (trace
+    ``meta.role`` ``pretrain_check``, ``meta.measure`` ``heldout``/``zero_shot``/
+    ``threshold``) and ``loss`` (``pretrain_loss``, one trace per pre-training that did not
+    fail), None without a pre-training), ``notes``,
     ``stats_source``, ``runs`` (``columns`` ``[{"key", "label", "type"}]``, ``rows``: one
     list per run with its ``run_folder`` relative to the sweep; ``status_column``,
     ``metric_column``, ``group_columns``: indices of condition, fraction, trial),
@@ -689,7 +1038,9 @@ def dashboard_data(sweep: SweepData) -> dict[str, Any]:
         "figures": {"ap": ap_figure(stats, conds, metric, folders),
                     "delta": delta_figure(stats, conds, metric),
                     "curves": curves_figure(sweep.runs, conds)},
+        "primary": _primary(stats),
         "summary": _summary_table(stats),
+        "pretrainings": _pretrainings(stats, sweep.pretrainings, conds),
         "notes": [str(n) for n in stats.get("notes", [])],
         "stats_source": sweep.stats_source,
         "runs": _runs_table(sweep.runs, metric, sweep.folder.name),

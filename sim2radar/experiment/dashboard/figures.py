@@ -1,14 +1,20 @@
 """The dashboard's Plotly figures, as plain JSON (``{"data": [...], "layout": {...}}``) for the
 page's ``Plotly.react``; pure functions of the statistics
-(:func:`~sim2radar.experiment.stats.sweep_stats`) and the ``experiment_runs`` rows.
+(:func:`~sim2radar.experiment.stats.sweep_statistics`), the ``experiment_runs`` rows and the
+``experiment_pretrain`` rows.
 
     ap_figure(stats, conds, metric, folders)   AP vs real-data fraction (paper Figure 4)
-    delta_figure(stats, conds, metric)         paired difference to the baseline, with the MDE
+    delta_figure(stats, conds, metric)         paired difference to the baseline, with its
+                                               simultaneous interval and the MDE
     curves_figure(runs, conds)                 learning curves (loss, validation AP) per run
+    pretrain_loss_figure(rows, conds)          the pre-trainings' loss curves
+    pretrain_check_figure(table, conds)        the pre-trainings' checks: held-out sim AP and
+                                               zero-shot real AP, with the thresholds
 
 Every trace carries ``meta = {"role": ..., "condition": ...}``: ``mean``/``trials`` (AP),
-``delta``/``delta-trials``/``mde``/``paper-delta`` (difference), ``loss``/``val_ap`` (curves);
-the page and its tests find traces by it.
+``delta``/``delta-trials``/``mde``/``paper-delta`` (difference), ``loss``/``val_ap`` (curves),
+``pretrain_loss`` (pre-training loss), ``pretrain_check`` (the checks; ``meta.measure``
+``heldout``, ``zero_shot`` or ``threshold``); the page and its tests find traces by it.
 """
 
 from __future__ import annotations
@@ -24,7 +30,8 @@ from sim2radar.experiment.profiles import BASELINE
 from sim2radar.experiment.report import condition_label
 from sim2radar.experiment.stats import paper_delta
 
-__all__ = ["ap_figure", "curves_figure", "delta_figure"]
+__all__ = ["ap_figure", "curves_figure", "delta_figure", "pretrain_check_figure",
+           "pretrain_loss_figure"]
 
 #: multiplicative x offset between conditions on the log fraction axis (keeps error bars apart)
 DODGE = 0.035
@@ -106,15 +113,36 @@ def ap_figure(stats: Mapping[str, Any], conds: Sequence[str], metric: str,
     return _fig_json(fig)
 
 
+def _interval(comp: Mapping[str, Any], key: str) -> tuple[float | None, float | None]:
+    """``comp[key]`` as (lo, hi), None for an absent or undefined bound."""
+    lo, hi = (list(comp.get(key) or []) + [None, None])[:2]
+    return num(lo), num(hi)
+
+
+def _ci_text(lo: float | None, hi: float | None) -> str:
+    return "n/a" if lo is None or hi is None else f"[{lo:+.2f}, {hi:+.2f}]"
+
+
 def delta_figure(stats: Mapping[str, Any], conds: Sequence[str], metric: str,
                   ) -> dict[str, Any]:
     """Paired difference to the baseline per fraction: per non-baseline condition a ``delta``
-    trace (mean difference with its Student-t interval), a ``delta-trials`` trace and an
-    ``mde`` trace (the minimum detectable effect at 80 % power: a true Δ below it is more
-    likely than not to be missed); one ``paper-delta`` trace (the paper's Table 1 Δ)."""
+    trace (mean difference with an error bar), a ``delta-trials`` trace and an ``mde`` trace
+    (the minimum detectable effect at 80 % power: a true Δ below it is more likely than not to
+    be missed); one ``paper-delta`` trace (the paper's Table 1 Δ).
+
+    The error bar is the comparison's simultaneous ``1 - alpha`` interval
+    (``t_ci_simultaneous``: the ``1 - alpha / m`` Student-t interval over the condition's m
+    fractions, the one the Holm verdict agrees with); a ``stats.json`` written before it
+    existed gets the unadjusted ``t_ci``, and the axis title and hover say which is drawn. The
+    hover gives both.
+    """
     import plotly.graph_objects as go
 
     level = f"{100 * (1 - float(stats.get('alpha', 0.05))):g} %"
+    comparisons = list(stats.get("comparisons", []))
+    simultaneous = any("t_ci_simultaneous" in c for c in comparisons)
+    bars = (f"simultaneous {level} CI, Holm family" if simultaneous
+            else f"{level} t-interval, unadjusted")
     power = float((stats.get("power") or {}).get("power", 0.8))
     fractions = [float(f) for f in stats.get("fractions", [])]
     others = [c for c in conds if c != BASELINE]
@@ -122,7 +150,7 @@ def delta_figure(stats: Mapping[str, Any], conds: Sequence[str], metric: str,
     fig.add_hline(y=0, line={"color": "#444", "width": 1, "dash": "dot"})
     for i, cond in enumerate(others):
         color, label, dx = colour(cond, conds), condition_label(cond), _dodge(i, len(others))
-        comps = [c for c in stats.get("comparisons", []) if c["condition"] == cond]
+        comps = [c for c in comparisons if c["condition"] == cond]
         xs, ys, up, down, info = [], [], [], [], []
         tx, ty, tinfo = [], [], []
         mx, my, minfo = [], [], []
@@ -140,14 +168,14 @@ def delta_figure(stats: Mapping[str, Any], conds: Sequence[str], metric: str,
             m = comp.get("mean_diff")
             if m is None:
                 continue
-            lo, hi = (comp.get("t_ci") or [None, None])[:2]
-            b_lo, b_hi = (comp.get("bootstrap_ci") or [None, None])[:2]
+            lo, hi = _interval(comp, "t_ci_simultaneous" if simultaneous else "t_ci")
             xs.append(100 * f * dx)
             ys.append(m)
             up.append(hi - m if hi is not None else 0.0)
             down.append(m - lo if lo is not None else 0.0)
-            ci = "n/a" if lo is None else f"[{lo:+.2f}, {hi:+.2f}]"
-            boot = "n/a" if b_lo is None else f"[{b_lo:+.2f}, {b_hi:+.2f}]"
+            ci = _ci_text(lo, hi)
+            unadjusted = _ci_text(*_interval(comp, "t_ci"))
+            boot = _ci_text(*_interval(comp, "bootstrap_ci"))
             p = comp.get("p_holm")
             share = comp.get("p_improved")
             s_lo, s_hi = (comp.get("p_improved_ci") or [None, None])[:2]
@@ -156,7 +184,8 @@ def delta_figure(stats: Mapping[str, Any], conds: Sequence[str], metric: str,
                          comp.get("verdict", ""),
                          "n/a" if mde is None else f"{mde:.2f}",
                          "n/a" if share is None else
-                         f"{100 * share:.0f} % [{100 * s_lo:.0f}, {100 * s_hi:.0f}]"])
+                         f"{100 * share:.0f} % [{100 * s_lo:.0f}, {100 * s_hi:.0f}]",
+                         unadjusted])
         fig.add_trace(go.Scatter(
             x=xs, y=ys, mode="lines+markers", name=f"{label} − {condition_label(BASELINE)}",
             legendgroup=cond, line={"color": color, "width": 2.5},
@@ -165,7 +194,9 @@ def delta_figure(stats: Mapping[str, Any], conds: Sequence[str], metric: str,
                      "visible": True, "thickness": 1.5, "width": 5},
             customdata=info, meta={"role": "delta", "condition": cond},
             hovertemplate=(f"<b>{html.escape(label)}</b> %{{customdata[0]}}<br>"
-                           f"Δ %{{y:+.2f}}, {level} t-interval %{{customdata[1]}}<br>"
+                           f"Δ %{{y:+.2f}}, {bars} %{{customdata[1]}}<br>"
+                           + (f"unadjusted {level} t-interval %{{customdata[8]}}<br>"
+                              if simultaneous else "") +
                            f"MDE ({100 * power:g} % power) %{{customdata[6]}}<br>"
                            "bootstrap (reference) %{customdata[2]}<br>"
                            "p (Holm) %{customdata[3]}, improved in %{customdata[4]} "
@@ -192,11 +223,11 @@ def delta_figure(stats: Mapping[str, Any], conds: Sequence[str], metric: str,
             meta={"role": "paper-delta", "condition": None},
             hovertemplate="paper Table 1: Δ %{y:+.1f} at %{x:g} %<extra></extra>"))
     fig.update_layout(
-        template=PLOTLY_TEMPLATE, height=420, margin={"l": 60, "r": 20, "t": 50, "b": 55},
-        title={"text": f"Δ {metric_label(metric)} vs baseline, paired by trial "
-                       f"(mean with its {level} t-interval; dashed: MDE at "
-                       f"{100 * power:g} % power)"},
-        xaxis=_fraction_axis(fractions), yaxis={"title": {"text": "Δ AP [points]"}},
+        template=PLOTLY_TEMPLATE, height=430, margin={"l": 60, "r": 20, "t": 65, "b": 55},
+        title={"text": f"Δ {metric_label(metric)} vs baseline, paired by trial<br><sup>mean; "
+                       f"bars: {bars}; dashed: MDE at {100 * power:g} % power</sup>"},
+        xaxis=_fraction_axis(fractions),
+        yaxis={"title": {"text": f"Δ AP [points] (bars: {bars})"}},
         legend={"orientation": "h", "y": -0.2}, uirevision="keep")
     if not others:
         _empty_note(fig, "no condition besides the baseline in this sweep")
@@ -271,3 +302,124 @@ def curves_figure(runs: Sequence[Mapping[str, Any]], conds: Sequence[str]) -> di
     if not n_curves:
         _empty_note(fig, "no learning curve yet")
     return _fig_json(fig)
+
+
+def _palette(conds: Sequence[str], more: Sequence[str]) -> list[str]:
+    """``conds`` then the conditions of ``more`` not among them (so :func:`colour` knows
+    every condition a pre-training names)."""
+    return list(dict.fromkeys([*conds, *more]))
+
+
+def pretrain_loss_figure(rows: Sequence[Mapping[str, Any]], conds: Sequence[str],
+                         ) -> dict[str, Any]:
+    """The pre-trainings' loss curves: one ``pretrain_loss`` trace per pre-training that did
+    not fail and has a loss history (``experiment_pretrain`` rows: mean training loss per
+    epoch against the epoch), coloured by the first condition that loads it, grouped in the
+    legend by the dataset role it trained on (one legend entry per role)."""
+    import plotly.graph_objects as go
+
+    palette = _palette(conds, [str(c) for r in rows for c in (r.get("conditions") or [])])
+    fig = go.Figure()
+    shown: set[str] = set()
+    for r in sorted(rows, key=lambda r: (str(r.get("sim_role")), str(r.get("pretrain_id")))):
+        epochs, loss = list(r.get("history_epoch") or []), list(r.get("history_loss") or [])
+        if r.get("status") == "failed" or not (epochs and loss):
+            continue
+        role = str(r.get("sim_role"))
+        names = [str(c) for c in (r.get("conditions") or [])]
+        first = names[0] if names else BASELINE
+        labels = ", ".join(condition_label(c) for c in names) or "no condition"
+        what = (f"{html.escape(str(r.get('pretrain_id')))} ({html.escape(role)} data; "
+                f"{html.escape(labels)})")
+        fig.add_trace(go.Scatter(
+            x=[int(e) for e in epochs], y=[num(v) for v in loss],
+            mode="lines+markers" if len(epochs) < 3 else "lines",
+            name=f"pre-trained on {role} ({labels})", legendgroup=role,
+            showlegend=role not in shown, line={"color": colour(first, palette), "width": 1.4},
+            marker={"size": 4}, opacity=0.8,
+            meta={"role": "pretrain_loss", "condition": first, "sim_role": role,
+                  "pretrain_id": r.get("pretrain_id")},
+            hovertemplate=f"{what}<br>epoch %{{x}}: loss %{{y:.4f}}<extra></extra>"))
+        shown.add(role)
+    fig.update_layout(
+        template=PLOTLY_TEMPLATE, height=360, margin={"l": 60, "r": 20, "t": 50, "b": 55},
+        title={"text": "pre-training loss (mean per epoch), one curve per pre-training"},
+        xaxis={"title": {"text": "epoch"}, "rangemode": "tozero"},
+        yaxis={"title": {"text": "training loss"}},
+        legend={"orientation": "h", "y": -0.25}, uirevision="keep")
+    if not fig.data:
+        _empty_note(fig, "no pre-training loss curve yet")
+    return _fig_json(fig)
+
+
+#: the checks of :func:`pretrain_check_figure`: (key in a pre-training table row, legend name,
+#: marker symbol, x offset from the condition's tick)
+_CHECKS = (("heldout", "held-out sim AP", "circle", -0.15),
+           ("zero_shot", "zero-shot real AP", "diamond-open", 0.15))
+
+
+def pretrain_check_figure(table: Mapping[str, Any], conds: Sequence[str]) -> dict[str, Any]:
+    """The pre-trainings' checks per condition (a strip plot): every pre-training's held-out
+    sim AP (filled circles, left of the condition's tick) and zero-shot real AP (open
+    diamonds, right), each a ``pretrain_check`` trace with ``meta.measure`` ``heldout`` /
+    ``zero_shot``; where the profile declares a learnability threshold for the condition, a
+    dashed ``threshold`` line across its held-out points at that AP.
+
+    Parameters
+    ----------
+    table : :func:`~sim2radar.experiment.learnability.pretraining_table`'s dict (APs in %).
+    conds : the dashboard's conditions (colours).
+    """
+    import plotly.graph_objects as go
+
+    rows = [r for r in table.get("rows", []) if r.get("status") != "failed"]
+    thresholds = table.get("thresholds") or {}
+    names = [str(s["condition"]) for s in table.get("summary", [])] or list(
+        dict.fromkeys(str(c) for r in rows for c in r.get("conditions") or []))
+    palette = _palette(conds, names)
+    fig = go.Figure()
+    for i, cond in enumerate(names):
+        color, label = colour(cond, palette), condition_label(cond)
+        mine = [r for r in rows if cond in (r.get("conditions") or [])]
+        for key, what, symbol, offset in _CHECKS:
+            pts = [r for r in mine if num(r.get(key)) is not None]
+            spread = [0.08 * (2 * k / (len(pts) - 1) - 1) if len(pts) > 1 else 0.0
+                      for k in range(len(pts))]
+            fig.add_trace(go.Scatter(
+                x=[i + offset + dx for dx in spread], y=[num(r[key]) for r in pts],
+                mode="markers", name=f"{label}: {what}", legendgroup=cond,
+                marker={"color": color, "size": 10, "symbol": symbol, "line": {"width": 1.5}},
+                customdata=[[str(r.get("id")), r.get("trial"), _met(r, cond)] for r in pts],
+                meta={"role": "pretrain_check", "condition": cond, "measure": key},
+                hovertemplate=(f"<b>{html.escape(label)}</b> %{{customdata[0]}} (trial "
+                               f"%{{customdata[1]}})<br>{what} %{{y:.2f}}"
+                               + ("<br>threshold %{customdata[2]}" if key == "heldout"
+                                  else "") + "<extra></extra>")))
+        thr = num(thresholds.get(cond))
+        if thr is not None:
+            centre = i + _CHECKS[0][3]  # across the held-out points only: its threshold
+            fig.add_trace(go.Scatter(
+                x=[centre - 0.17, centre + 0.17], y=[thr, thr], mode="lines",
+                name=f"{label}: threshold {thr:g} (held-out sim AP)", legendgroup=cond,
+                line={"color": color, "width": 2, "dash": "dash"},
+                meta={"role": "pretrain_check", "condition": cond, "measure": "threshold"},
+                hovertemplate=(f"{html.escape(label)}: pre-registered learnability threshold "
+                               f"{thr:g} on the held-out sim AP<extra></extra>")))
+    fig.update_layout(
+        template=PLOTLY_TEMPLATE, height=380, margin={"l": 60, "r": 20, "t": 50, "b": 55},
+        title={"text": "what each pre-training learned before fine-tuning: 3D AP R40 @ IoU 0.3 "
+                       "(dashed: learnability threshold)"},
+        xaxis={"tickvals": list(range(len(names))),
+               "ticktext": [condition_label(c) for c in names],
+               "range": [-0.6, max(len(names), 1) - 0.4], "zeroline": False},
+        yaxis={"title": {"text": "AP [%]"}, "rangemode": "tozero"},
+        legend={"orientation": "h", "y": -0.2}, uirevision="keep")
+    if not any(t.y for t in fig.data if t.meta["measure"] != "threshold"):
+        _empty_note(fig, "no pre-training checked yet")
+    return _fig_json(fig)
+
+
+def _met(row: Mapping[str, Any], cond: str) -> str:
+    """``met`` / ``not met`` / ``none declared`` of a pre-training row for ``cond``."""
+    met = (row.get("met") or {}).get(cond)
+    return "none declared" if met is None else "met" if met else "not met"

@@ -41,7 +41,7 @@ function table(columns, rows, numeric) {  // numeric: (column index) -> right-al
   return "<table><thead>" + head + "</thead><tbody>" + body + "</tbody></table>";
 }
 function plot(id, fig) {
-  if (!fig) { $(id).innerHTML = ""; return; }
+  if (!fig) { Plotly.purge($(id)); $(id).innerHTML = ""; return; }  // purge: no stale state
   Plotly.react($(id), fig.data, fig.layout, CONFIG);
 }
 function compare(a, b, type) {
@@ -220,6 +220,38 @@ function renderProvenance(p) {
     esc(p.intensity_match) + "</pre></details>";
   $("provenance").innerHTML = out;
 }
+// the pre-registered primary endpoint: hidden without a pooled endpoint (an older stats.json)
+function renderPrimary(p) {
+  const rows = p && p.rows ? p.rows : [];
+  $("primary-section").style.display = rows.length ? "block" : "none";
+  $("primary-sentence").textContent = rows.length ? p.sentence || "" : "";
+  $("primary-table").innerHTML = rows.length ? table(p.columns, rows,
+    (i) => (p.numeric || [])[i]) : "";
+  $("primary-note").textContent = rows.length ? p.note || "" : "";
+}
+// the pre-trainings' checks and loss curves; "No pre-training recorded." without any
+function renderPretrainings(p) {
+  const has = !!(p && p.figures && p.figures.check);
+  $("pretrain-empty").style.display = has ? "none" : "block";
+  for (const id of ["pretrain-note", "pretrain-summary", "pretrain-check-card",
+    "pretrain-loss-card", "pretrain-details"]) $(id).style.display = has ? "" : "none";
+  if (!has) {
+    $("pretrain-summary").innerHTML = "";
+    $("pretrain-rows").innerHTML = "";
+    plot("plot-pretrain-check", null);
+    plot("plot-pretrain-loss", null);
+    return;
+  }
+  $("pretrain-note").textContent = p.note || "";
+  $("pretrain-summary").innerHTML = p.summary.rows.length ? table(p.summary.columns,
+    p.summary.rows, (i) => p.summary.numeric[i]) : "";
+  plot("plot-pretrain-check", p.figures.check);
+  plot("plot-pretrain-loss", p.figures.loss);
+  $("pretrain-details-summary").textContent = "Every pre-training (" + p.n + ", " +
+    p.n_failed + " failed)";
+  $("pretrain-rows").innerHTML = table(p.table.columns, p.table.rows,
+    (i) => p.table.numeric[i]);
+}
 function render(d) {
   state.data = d;
   document.title = "sim2radar sweep " + d.name;
@@ -232,6 +264,7 @@ function render(d) {
   const err = $("error");
   err.style.display = d.error ? "block" : "none"; err.textContent = d.error || "";
   renderProgress(d.progress);
+  renderPrimary(d.primary);
   plot("plot-ap", d.figures.ap);
   plot("plot-delta", d.figures.delta);
   plot("plot-curves", d.figures.curves);
@@ -240,6 +273,8 @@ function render(d) {
   const sentences = d.summary.sentences || [];
   $("power-summary").innerHTML = sentences.map((x) => "<p>" + esc(x) + "</p>").join("");
   $("power-summary").style.display = sentences.length ? "block" : "none";
+  $("summary-note").textContent = d.summary.interval_note || "";
+  renderPretrainings(d.pretrainings);
   $("notes").innerHTML = d.notes.map((n) => "<li>" + esc(n) + "</li>").join("");
   $("stats-source").textContent = "statistics: " + d.stats_source;
   renderControls();
