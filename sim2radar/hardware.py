@@ -12,10 +12,16 @@ from __future__ import annotations
 import functools
 import logging
 import os
+import threading
 
 import numpy as np
 
 log = logging.getLogger(__name__)
+#: held while the Mitsuba variant is chosen: worlds on a thread pool reach it at once, and a
+#: second thread must not see Mitsuba half-initialised by the first (``functools.cache`` does
+#: not lock: a ``--workers 2`` run failed a world with "module 'mitsuba' has no attribute
+#: 'variants'")
+_VARIANT_LOCK = threading.Lock()
 
 #: Mitsuba variants in order of preference. ``*_ad_rgb`` keeps Dr.Jit's JIT (and AD, unused).
 MITSUBA_VARIANTS: tuple[str, ...] = ("cuda_ad_rgb", "llvm_ad_rgb", "scalar_rgb")
@@ -37,7 +43,6 @@ def _variant_works(mi, variant: str) -> bool:
         return False
 
 
-@functools.cache
 def mitsuba_variant(prefer: str | None = None) -> str:
     """Select, activate and return the fastest working Mitsuba variant.
 
@@ -52,6 +57,12 @@ def mitsuba_variant(prefer: str | None = None) -> str:
     str
         The active variant, e.g. ``"llvm_ad_rgb"``.
     """
+    with _VARIANT_LOCK:
+        return _choose_variant(prefer)
+
+
+@functools.cache
+def _choose_variant(prefer: str | None) -> str:
     try:
         import mitsuba as mi
     except ImportError as exc:  # pragma: no cover - mitsuba is a hard dependency
@@ -85,6 +96,11 @@ def mitsuba_variant(prefer: str | None = None) -> str:
                 log.info("mitsuba variant: %s", variant)
             return variant
     raise RuntimeError("no Mitsuba variant works on this machine")
+
+
+# the cache's own handles, as on a functools.cache function (tests read whether it is set)
+mitsuba_variant.cache_info = _choose_variant.cache_info      # type: ignore[attr-defined]
+mitsuba_variant.cache_clear = _choose_variant.cache_clear    # type: ignore[attr-defined]
 
 
 def _apply_drjit_threads() -> None:

@@ -23,6 +23,25 @@ def test_variant_is_a_working_llvm_or_cuda_one_and_thread_cap_applies():
     assert threads == "1"
 
 
+def test_threads_choosing_the_variant_at_once_all_get_it():
+    """Worlds on a thread pool reach mitsuba_variant() together; each must get the working
+    variant (a --workers 2 run once failed a world on a half-initialised Mitsuba)."""
+    proc = _run("import threading\n"
+                "from sim2radar.hardware import mitsuba_variant\n"
+                "gate, out = threading.Barrier(6), []\n"
+                "def go():\n"
+                "    gate.wait()\n"
+                "    try: out.append(mitsuba_variant())\n"
+                "    except Exception as e: out.append(repr(e))\n"
+                "ts = [threading.Thread(target=go) for _ in range(6)]\n"
+                "[t.start() for t in ts]; [t.join() for t in ts]\n"
+                "print(' '.join(out), mitsuba_variant.cache_info().currsize)\n")
+    assert proc.returncode == 0, proc.stderr
+    *variants, cached = proc.stdout.split()
+    assert len(variants) == 6 and set(variants) <= {"cuda_ad_rgb", "llvm_ad_rgb"}
+    assert len(set(variants)) == 1 and cached == "1"
+
+
 def test_bad_overrides_name_the_variable():
     proc = _run("from sim2radar.hardware import mitsuba_variant; mitsuba_variant()",
                 SIM2RADAR_MITSUBA_VARIANT="nope_rgb")
