@@ -43,6 +43,25 @@ def _variant_works(mi, variant: str) -> bool:
         return False
 
 
+#: Dr.Jit's JIT state is shared by a process's threads: while one thread records a symbolic
+#: loop (Mitsuba's render, the tracer's bounce loop), another's ``dr.eval`` of a scattered array
+#: is refused ("Variable r4060 remains dirty despite an attempt to evaluate it", a reference
+#: frame of a ``--workers 2`` run). The Dr.Jit work of the renderer, the ray tracer and the
+#: reconstruction's scene is done one thread at a time (:func:`drjit_serial`); each launch
+#: already uses every core through Dr.Jit's own thread pool, and the threads' other work (NumPy,
+#: torch, the store) still overlaps.
+DRJIT_LOCK = threading.RLock()
+
+
+def drjit_serial(fn):
+    """Decorator: call ``fn`` holding :data:`DRJIT_LOCK` (re-entrant)."""
+    @functools.wraps(fn)
+    def serial(*args, **kwargs):
+        with DRJIT_LOCK:
+            return fn(*args, **kwargs)
+    return serial
+
+
 def mitsuba_variant(prefer: str | None = None) -> str:
     """Select, activate and return the fastest working Mitsuba variant.
 

@@ -36,7 +36,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from sim2radar.hardware import to_drjit
+from sim2radar.hardware import drjit_serial, to_drjit
 from sim2radar.mesh import MaterialMesh
 from sim2radar.radar.binning import Accumulator, TraceResult, array_geometry
 from sim2radar.radar.config import RadarConfig, load_radar_config
@@ -93,6 +93,7 @@ class RadarScene(BounceLoop):
     >>> paths = scene.trace_paths(radar, pose, seed=0)        # the reference radar's input
     """
 
+    @drjit_serial
     def __init__(self, meshes: Sequence[MaterialMesh]) -> None:
         from sim2radar.hardware import mitsuba_variant
 
@@ -163,6 +164,7 @@ class RadarScene(BounceLoop):
         return simulate_scene_frame(self, radar, pose, return_cube=return_cube, seed=seed,
                                     velocity_mps=velocity_mps)
 
+    @drjit_serial
     def trace(
         self, radar: RadarConfig, pose: np.ndarray | None = None, *, seed: int | None = None
     ) -> TraceResult:
@@ -278,6 +280,7 @@ class RadarScene(BounceLoop):
             seconds={"rays": t1 - t0, "trace": t2 - t1, "readback": t3 - t2},
         )
 
+    @drjit_serial
     def trace_paths(
         self,
         radar: RadarConfig,
@@ -403,6 +406,7 @@ class RadarScene(BounceLoop):
         return paths
 
     # ------------------------------------------------------------------------------------
+    @drjit_serial
     def first_hit_distance(self, origins_m: np.ndarray, directions: np.ndarray) -> np.ndarray:
         """Distance along each ray to the first surface (a visibility query).
 
@@ -432,6 +436,7 @@ class RadarScene(BounceLoop):
         t = dr.select(pi.is_valid(), pi.t, dr.inf)
         return np.asarray(t.numpy(), dtype=np.float64)
 
+    @drjit_serial
     def intersect_only(
         self, radar: RadarConfig, pose: np.ndarray | None = None, *, seed: int | None = None
     ) -> dict[str, float]:

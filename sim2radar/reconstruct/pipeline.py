@@ -29,6 +29,7 @@ from pydantic import BaseModel, ConfigDict, Field, create_model, field_validator
 
 from sim2radar.camera import CameraIntrinsics
 from sim2radar.configio import config_path, read_yaml_mapping
+from sim2radar.hardware import drjit_serial
 from sim2radar.mesh import MaterialMesh, save_ply
 from sim2radar.reconstruct.backproject import (
     gravity_up,
@@ -314,6 +315,7 @@ class LabeledScene:
         (out / "scene.xml").write_text(mitsuba_xml(entries))
         return path
 
+    @drjit_serial
     def to_mitsuba_dict(self, camera_to_target: np.ndarray | None = None) -> dict:
         """A Mitsuba scene dict with one in-memory ``mi.Mesh`` per segment (needs mitsuba; the
         variant comes from :func:`sim2radar.hardware.mitsuba_variant`). Each shape carries its

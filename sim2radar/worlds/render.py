@@ -23,7 +23,7 @@ import numpy as np
 
 from sim2radar.boxes import boxes_to_frame
 from sim2radar.camera import CameraIntrinsics
-from sim2radar.hardware import mitsuba_variant, to_drjit
+from sim2radar.hardware import drjit_serial, mitsuba_variant, to_drjit
 from sim2radar.vocab import material_id, semantic_id
 from sim2radar.worlds.appearance import texture_image
 from sim2radar.worlds.config import RigConfig, radar_view
@@ -144,6 +144,7 @@ def _mi_mesh(mi, dr, name: str, vertices: np.ndarray, faces: np.ndarray, bsdf, s
     return m
 
 
+@drjit_serial
 def _build_scene(world: World):
     mitsuba_variant()
     import drjit as dr
@@ -173,6 +174,7 @@ def _build_scene(world: World):
     return scene, lut, sem, mat, door
 
 
+@drjit_serial
 def cast_rays(world: World, origins: np.ndarray, directions: np.ndarray) -> dict[str, np.ndarray]:
     """Cast rays into the world's Mitsuba scene.
 
@@ -346,6 +348,7 @@ def render_frame(
     )
 
 
+@drjit_serial
 def _render_rgb(world: World, scene, cam_to_world: np.ndarray, k: CameraIntrinsics,
                 rig: RigConfig, frame_index: int) -> np.ndarray:
     import mitsuba as mi
