@@ -177,7 +177,10 @@ def learnability(out: Path, sim_train: Path, sim_heldout: Path, real: Path, tag:
     sim, held = with_intensity(sim, match), with_intensity(held, match)
     epochs = max(1, math.ceil(STUDY_PRETRAIN_STEPS * profile.batch_size / len(sim)))
     t0 = time.perf_counter()
-    ckpt = pretrain_encoder(cfg, sim, out / f"pretrain_{tag}", seed=0, epochs=epochs)
+    # the folder is keyed by the training data's digest: pretrain_encoder reuses a finished
+    # folder, and a rerun on regenerated frames must train anew
+    ckpt = pretrain_encoder(cfg, sim, out / f"pretrain_{tag}_{sim_d.key[:12]}", seed=0,
+                            epochs=epochs)
     train_s = time.perf_counter() - t0
     check = check_pretraining(ckpt, held, real_val)
     train_check = check_pretraining(ckpt, sim, [])
