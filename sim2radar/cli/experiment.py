@@ -22,8 +22,8 @@ import typer
 
 from sim2radar.cli._app import app, exit_unless_writable, exit_unless_writable_outputs
 
-__all__ = ["sweep", "sweep_report", "run_sweep", "sweep_datasets", "condition_overrides",
-           "print_sweep_summary", "print_plan"]
+__all__ = ["sweep", "sweep_report", "publish_sweep", "run_sweep", "sweep_datasets",
+           "condition_overrides", "print_sweep_summary", "print_plan", "PUBLISHED_FILES"]
 
 
 def _fractions(text: str | None) -> list[float] | None:
@@ -304,11 +304,48 @@ def sweep(
         raise typer.Exit(1)
 
 
+#: a sweep folder's raw files a published study keeps (small; the checkpoints stay behind)
+PUBLISHED_FILES = ("sweep.json", "plan.json", "runs.parquet", "pretrainings.parquet",
+                   "stats.json", "progress.json", "preregistration.md")
+
+
+def publish_sweep(folder: Path, dest: Path) -> list[str]:
+    """Copy a sweep's raw files (:data:`PUBLISHED_FILES`) into ``dest`` (e.g.
+    ``docs/results/<study>``). A pre-registration already in ``dest`` must be the one the sweep
+    ran under (the same bytes): it was committed before the first run and is never replaced.
+
+    Raises
+    ------
+    ValueError — the sweep's pre-registration differs from the one in ``dest``.
+    """
+    import shutil
+
+    dest.mkdir(parents=True, exist_ok=True)
+    copied = []
+    for name in PUBLISHED_FILES:
+        src = folder / name
+        if not src.is_file() or src.resolve() == (dest / name).resolve():
+            continue
+        if name == "preregistration.md" and (dest / name).is_file():
+            if (dest / name).read_bytes() != src.read_bytes():
+                raise ValueError(f"{dest / name} differs from the pre-registration the sweep "
+                                 f"ran under ({src}); a published pre-registration is never "
+                                 "replaced: publish into another folder")
+            continue
+        shutil.copyfile(src, dest / name)
+        copied.append(name)
+    return copied
+
+
 @app.command("sweep-report")
 def sweep_report(
     folder: Path = typer.Argument(..., help="A sweep folder, or a published one "
                                   "(docs/results/<study>/): sweep.json, runs.parquet and, when "
                                   "recorded, pretrainings.parquet."),
+    publish: Path | None = typer.Option(
+        None, "--publish", help="First copy the sweep's raw files (sweep.json, plan.json, "
+        "runs.parquet, pretrainings.parquet, stats.json, the pre-registration) into this folder, "
+        "e.g. docs/results/<study>, and write the report there."),
 ) -> None:
     """Rebuild a sweep's stats.json, results.md and dashboard.html from its raw files (a
     finished sweep, or one published under docs/results/<study>/). Trains nothing."""
@@ -322,8 +359,13 @@ def sweep_report(
             if not p.is_file():
                 raise FileNotFoundError(f"{p}: not found; a sweep folder holds sweep.json and "
                                         "runs.parquet (publish them with the sweep)")
-        doc = json.loads(doc_path.read_text())
-        rows = pq.read_table(runs_path).to_pylist()
+        if publish is not None:
+            exit_unless_writable_outputs({"--publish": publish.parent})
+            copied = publish_sweep(folder, publish)
+            typer.echo(f"published {', '.join(copied) or 'nothing new'} to {publish}")
+            folder = publish
+        doc = json.loads((folder / "sweep.json").read_text())
+        rows = pq.read_table(folder / "runs.parquet").to_pylist()
         pre_path = folder / "pretrainings.parquet"
         pre = pq.read_table(pre_path).to_pylist() if pre_path.is_file() else []
         exit_unless_writable_outputs({"FOLDER": folder})

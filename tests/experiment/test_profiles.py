@@ -17,6 +17,7 @@ from sim2radar.experiment.profiles import (
     load_profile,
 )
 
+REPO = Path(__file__).resolve().parents[2]
 PROFILE_DIR = Path(__file__).resolve().parents[2] / "configs" / "experiment"
 DETECT_DIR = PROFILE_DIR.parent / "detect"
 
@@ -68,6 +69,27 @@ def test_study_profile_is_the_papers_protocol_on_a_small_model_with_its_design_r
     header = (PROFILE_DIR / "study.yaml").read_text().split("description:")[0]
     assert "DESIGN RECORD" in header and "PENDING" not in header
     assert "Decision:" in header and "MDE" in header and "sd" in header
+
+
+def test_diagnosis_profile_is_the_studys_protocol_preregistered_with_every_arm():
+    """The diagnosis (issue #30) keeps the study's protocol and model, runs the low-data
+    fractions with the positive control, the ladder and the fine-tuning variant, and points at
+    its pre-registration in the repository."""
+    diag, study = load_profile("diagnosis"), load_profile("study")
+    same = ("pretrain_epochs", "finetune_epochs", "batch_size", "lr", "min_steps",
+            "eval_split", "intensity_matching", "pretrain_per_trial", "detector_overrides")
+    assert {k: getattr(diag, k) for k in same} == {k: getattr(study, k) for k in same}
+    assert diag.fractions == diag.primary == (0.05, 0.10, 0.25)
+    assert set(diag.all_conditions) == {"baseline", "sim-pretrain", "sim-gt-pretrain",
+                                        "ref-pretrain", "sim-pretrain-lowlr"}
+    assert diag.primary_condition == "sim-pretrain" and diag.preregistered
+    assert diag.preregistration == REPO / "docs" / "results" / "diagnosis" / "preregistration.md"
+    text = diag.preregistration.read_text()
+    for part in ("## Question", "## Conditions", "## Trials", "## Endpoints",
+                 "## Decision rules", "What would count as transfer"):
+        assert part in text
+    assert set(diag.learnability_thresholds) == {c for c in diag.all_conditions
+                                                 if c != "baseline"}
 
 
 def _write(tmp_path: Path, name: str = "mine.yaml", **fields) -> Path:

@@ -279,6 +279,41 @@ def test_a_frame_broken_before_or_during_a_sweep_trains_nothing_on_it(data, pref
     assert again["counts"] == {"ok": 4, "skipped": 0, "failed": 0}
 
 
+def test_a_published_sweep_rebuilds_its_report_from_its_raw_files(first, tmp_path):
+    """sweep-report --publish copies the raw files (no checkpoints) and rebuilds results.md,
+    stats.json and the dashboard from them: the same statistics and tables as the sweep's."""
+    from typer.testing import CliRunner
+
+    from sim2radar.cli import app
+
+    dest = tmp_path / "docs" / "results" / "t"
+    res = CliRunner().invoke(app, ["sweep-report", str(first["dir"]), "--publish", str(dest)])
+    assert res.exit_code == 0, res.output
+    names = sorted(p.name for p in dest.iterdir())
+    assert {"sweep.json", "plan.json", "runs.parquet", "pretrainings.parquet", "stats.json",
+            "results.md", "dashboard.html"} <= set(names)
+    assert not (dest / "runs").exists() and not (dest / "pretrain").exists()
+    ours = json.loads((first["dir"] / "stats.json").read_text())
+    again = json.loads((dest / "stats.json").read_text())
+    assert again["cells"] == ours["cells"] and again["pooled"] == ours["pooled"]
+    assert again["pretrainings"] == ours["pretrainings"]
+    md = (dest / "results.md").read_text()
+    assert md.split("## Runs")[0] == (first["dir"] / "results.md").read_text().split(
+        "## Runs")[0]
+    # rebuilt in place, from the published folder alone
+    (dest / "results.md").unlink()
+    assert CliRunner().invoke(app, ["sweep-report", str(dest)]).exit_code == 0
+    assert (dest / "results.md").read_text() == md
+    # a published pre-registration is never replaced by another
+    (first["dir"] / "preregistration.md").write_text("# the sweep's\n")
+    (dest / "preregistration.md").write_text("# another\n")
+    res = CliRunner().invoke(app, ["sweep-report", str(first["dir"]), "--publish", str(dest)])
+    assert res.exit_code == 2 and "never replaced" in res.output
+    (first["dir"] / "preregistration.md").unlink()
+    res = CliRunner().invoke(app, ["sweep-report", str(tmp_path / "none")])
+    assert res.exit_code == 2 and "sweep.json: not found" in res.output
+
+
 def test_bad_inputs_exit_2_with_one_line(data, tmp_path):
     from typer.testing import CliRunner
 
