@@ -1,6 +1,6 @@
 """The capture factory's stages as cached steps: a capture scene (one RGB view) -> depth ->
-segments -> materials -> meshes + door boxes -> radar poses -> radar frames, each step keyed by
-content and skipped when its artifact exists. :mod:`sim2radar.flows.capture_dataset` runs every step as
+segments -> materials -> meshes + door boxes [-> fused with the scene's other views] -> radar
+poses -> radar frames, each step keyed by content and skipped when its artifact exists. :mod:`sim2radar.flows.capture_dataset` runs every step as
 a Prefect task; ``--no-prefect`` runs the same :func:`process_capture_scene` with plain calls.
 
 The science is in the library (:mod:`sim2radar.reconstruct.pipeline` stage functions,
@@ -11,6 +11,12 @@ Artifacts per scene (keys: :func:`sim2radar.storage.reconstruction.stage_keys`):
 the same keys ``sim2radar reconstruct``'s flow gives the same image), and one
 ``dataset_frames`` per radar pose. Manifest rows: one per scene (``<scene>``) and one per frame
 (``<scene>_f003``).
+
+Views. A scene with ``views/`` and ``poses.txt`` (:func:`sim2radar.factory.captures.scene_views`)
+has each of its first ``reconstruction.fusion.frames`` views reconstructed by the same cached
+steps (keyed by the view's own image), and its radar poses and frames use the scene fused with
+them (:func:`sim2radar.reconstruct.fusion.fuse_views`, in the scene's level frame). The fusion is
+not stored: it is cheap, and the frames' keys name the views' reconstructions and poses.
 """
 
 from __future__ import annotations
@@ -30,6 +36,7 @@ from sim2radar.factory.captures import (
     radar_mount,
     read_radar_yaml,
     sample_radar_poses,
+    scene_views,
 )
 from sim2radar.factory.seeds import frame_seed, pose_seed, scene_seed
 from sim2radar.storage import content_key, meshes_from_table
@@ -73,10 +80,34 @@ def _source(scene: CaptureScene, spec: CaptureSpec) -> tuple[FrameSource, dict[s
     return src, {**inputs, **keys}
 
 
-def _radar_scene(st, keys: dict):
+def _geometry(st, keys: dict) -> tuple[Any, np.ndarray, dict]:
+    """The scene's radar geometry: a :class:`~sim2radar.radar.RadarScene` of its meshes, its
+    door boxes (level frame) and its reconstruction record, fused with its views
+    (``keys["views"]``) when it has them."""
     from sim2radar.radar import RadarScene
+    from sim2radar.storage.reconstruction import read_reconstruction
 
-    return RadarScene(meshes_from_table(st.read("scene_meshes", keys["scene_meshes"])))
+    meshes = meshes_from_table(st.read("scene_meshes", keys["scene_meshes"]))
+    rec = read_reconstruction(st, keys["reconstruction"])
+    boxes = np.asarray(rec["door_boxes"], np.float32).reshape(-1, 7)
+    if keys.get("views"):
+        from sim2radar.reconstruct.fusion import EarlierView, fuse_views
+
+        level_from_cam = np.asarray(rec["camera_to_target"], np.float64)
+        views = []
+        for v in keys["views"]:
+            vrec = read_reconstruction(st, v["reconstruction"])
+            # view level <- view camera, scene camera <- view camera, scene level <- scene camera
+            current_from_view = (level_from_cam @ np.asarray(v["scene_from_view"], np.float64)
+                                 @ np.linalg.inv(vrec["camera_to_target"]))
+            views.append(EarlierView(meshes_from_table(st.read("scene_meshes",
+                                                               v["scene_meshes"])),
+                                     vrec["door_boxes"], current_from_view))
+        fused = fuse_views(meshes, boxes, views, rec["intrinsics"], level_from_cam)
+        meshes, boxes = fused.meshes, fused.door_boxes
+        rec = {**rec, "fusion": {"views": fused.views, "triangles_added": fused.triangles_added,
+                                 "boxes_added": fused.boxes_added}}
+    return RadarScene(meshes), boxes, rec
 
 
 def poses_stage(scene: CaptureScene, spec: CaptureSpec, store: str, keys: dict) -> dict:
@@ -85,13 +116,12 @@ def poses_stage(scene: CaptureScene, spec: CaptureSpec, store: str, keys: dict) 
     list, "candidates", "rejected", "wanted", "seconds"}`` (deterministic, so not stored: every
     pose is kept in its frame's ``radar_to_world``)."""
     from sim2radar.factory.labels import scene_ray_caster
-    from sim2radar.storage.reconstruction import read_reconstruction
 
     t0, st = time.perf_counter(), open_store(store)
-    rec = read_reconstruction(st, keys["reconstruction"])
+    radar_scene, _, rec = _geometry(st, keys)
     radar_yaml = read_radar_yaml(scene.radar)
     mount = radar_mount(rec["level_from_camera"], radar_yaml["radar_from_camera"])
-    caster = scene_ray_caster(_radar_scene(st, keys))
+    caster = scene_ray_caster(radar_scene)
     hfov = float(np.degrees(rec["intrinsics"].hfov_rad))
     poses, info = sample_radar_poses(mount, caster, spec.poses, hfov_deg=hfov,
                                      seed=pose_seed(spec.seed, scene_seed(keys["image"])),
@@ -114,16 +144,28 @@ def capture_frame_key(keys: dict, scene_id: str, frame_index: int, spec: Capture
     """Content key of one capture frame's ``dataset_frames`` artifact: the scene's
     reconstruction keys, its id (the frame carries it: two folders holding the same images
     are two scenes), the frame index, and everything its pose, radar and labels depend on
-    (pose sampling, radar.yaml, radar, run seed, label rule)."""
+    (pose sampling, radar.yaml, radar, run seed, label rule) and, for a scene fused with its
+    views, each view's reconstruction keys and pose."""
+    inputs = {"scene_meshes": keys["scene_meshes"], "reconstruction": keys["reconstruction"],
+              "radar_yaml": radar_yaml_digest}
+    if keys.get("views"):
+        inputs["views"] = _views_digest(keys["views"])
     return content_key(
         stage="dataset_frames", stage_version=DATASET_STAGE_VERSION,
-        inputs={"scene_meshes": keys["scene_meshes"], "reconstruction": keys["reconstruction"],
-                "radar_yaml": radar_yaml_digest},
+        inputs=inputs,
         config={"source": "capture", "scene": scene_id, "frame_index": int(frame_index),
                 "poses": spec.poses.model_dump(mode="json"), "radar": spec.radar.to_dict(),
                 "seed": spec.seed, "class_name": spec.class_name,
                 "labels": spec.labels.model_dump()},
     )
+
+
+def _views_digest(views: list[dict]) -> str:
+    import json
+
+    from sim2radar.storage.keys import bytes_digest
+
+    return bytes_digest(json.dumps(views, sort_keys=True).encode())
 
 
 def _radar_yaml_digest(scene: CaptureScene) -> str:
@@ -139,12 +181,10 @@ def simulate_stage(scene: CaptureScene, spec: CaptureSpec, store: str, keys: dic
     """Radar frames at ``poses`` (frame numbers ``indices``) -> ``dataset_frames``; a cached
     frame is read back (``skipped``), a failing frame is recorded ``failed`` and the others
     go on."""
-    from sim2radar.storage.reconstruction import read_reconstruction
-
     st = open_store(store)
     yaml_digest = _radar_yaml_digest(scene)
     sseed = scene_seed(keys["image"])
-    radar_scene = rec = None
+    radar_scene = boxes = None
     out = []
     for k, pose in zip(indices, poses, strict=True):
         fo = Outcome(f"{scene.scene_id}_f{int(k):03d}", "skipped", index=int(k))
@@ -157,9 +197,8 @@ def simulate_stage(scene: CaptureScene, spec: CaptureSpec, store: str, keys: dic
                 df = read_dataset_frame(st, key)
             else:
                 if radar_scene is None:
-                    radar_scene = _radar_scene(st, keys)
-                    rec = read_reconstruction(st, keys["reconstruction"])
-                df = capture_frame(radar_scene, rec["door_boxes"], np.asarray(pose), spec,
+                    radar_scene, boxes, _ = _geometry(st, keys)
+                df = capture_frame(radar_scene, boxes, np.asarray(pose), spec,
                                    scene_id=scene.scene_id, frame_index=k,
                                    radar_seed=frame_seed(spec.seed, sseed, k), scene_seed=-1)
                 st.write("dataset_frames", key, dataset_frame_to_table(df),
@@ -230,6 +269,19 @@ def process_capture_scene(scene: CaptureScene, spec: CaptureSpec, store: str, *,
         for name, res in reconstruction_steps(src, spec.reconstruction, store, step).items():
             out.timings_s[name] = res.seconds
             computed |= res.status == "ok"
+        views = []
+        for view, scene_from_view in scene_views(scene, spec.reconstruction.fusion.frames):
+            vsrc, vkeys = _source(view, spec)
+            for name, res in reconstruction_steps(vsrc, spec.reconstruction, store,
+                                                  step).items():
+                out.timings_s[name] = out.timings_s.get(name, 0.0) + res.seconds
+                computed |= res.status == "ok"
+            views.append({"view": view.scene_id, "scene_meshes": vkeys["scene_meshes"],
+                          "reconstruction": vkeys["reconstruction"],
+                          "scene_from_view": np.asarray(scene_from_view).tolist()})
+        if views:
+            keys = {**keys, "views": views}
+            out.artifacts.update({f"views/{v['view']}": v["reconstruction"] for v in views})
         current[0] = "simulate"
         cached = None if force else _cached_frames(scene, spec, store, keys)
         if cached is not None:

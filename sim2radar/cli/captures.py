@@ -91,6 +91,8 @@ def worlds_captures(
     height: int = typer.Option(240, help="Image height [px]."),
     spp: int = typer.Option(16, help="RGB samples per pixel."),
     no_lidar: bool = typer.Option(False, "--no-lidar", help="Write no lidar.npy."),
+    views: int = typer.Option(0, "--views", min=0, help="Earlier views per scene (views/ + "
+                              "poses.txt), fused into its reconstruction."),
 ) -> None:
     """Write a sample capture folder rendered from procedural worlds (RGB + intrinsics with
     the rig calibration + LiDAR; no ground truth), the layout `generate --captures` reads."""
@@ -101,7 +103,7 @@ def worlds_captures(
         raise typer.Exit(2)
     folders = write_capture_folder(out, range(first_seed, first_seed + worlds),
                                    rig={"width": width, "height": height, "spp": spp},
-                                   lidar=not no_lidar)
+                                   lidar=not no_lidar, views=views)
     typer.echo(f"wrote {len(folders)} capture scene(s) to {out}")
 
 

@@ -14,7 +14,22 @@ Capture folder layout (one scene = one RGB view, as in the paper: 5 views -> 270
                                #   z forward) [m]; needed by the default (LiDAR) depth backend
         radar.yaml             # optional: radar_from_camera (4x4, camera (OpenCV) -> radar
                                #   (x fwd, y left, z up)); poses: [[x_m, y_m, yaw_deg], ...]
+        views/                 # optional: other views of the same scene, fused into its
+          a/rgb.png            #   reconstruction for the radar's field of view (one folder
+          a/lidar.npy          #   each: rgb.*, optional intrinsics.yaml (else the scene's)
+          b/...                #   and lidar.npy)
+        poses.txt              # with views/: each view's camera -> world pose, one line each:
+                               #   NAME r00 r01 r02 t0 r10 ... t2 0 0 0 1 (4x4 row-major, [m]);
+                               #   NAME "." is the scene's own view, others views/NAME
       corridor_b/ ...
+
+Views. A camera sees about ±33°, the radar ±60°: the scene's own image alone leaves the radar
+nothing to see outside the camera's view. With ``views/`` and ``poses.txt`` the scene's
+reconstruction is fused with the first ``reconstruction.fusion.frames`` views listed in
+``poses.txt`` (each reconstructed from its own image and depth, moved by the poses and kept
+where the scene's own camera does not look: :func:`sim2radar.reconstruct.fusion.fuse_views`),
+as the procedural path fuses a rig's previous frames. Without them a scene is its one image
+(the paper's pipeline).
 
 Frames. A reconstruction is in its **level frame** (x forward, y left, z up, origin at the
 camera; :meth:`~sim2radar.reconstruct.LabeledScene.meshes_in`). The radar's mount on the rig is
@@ -66,8 +81,10 @@ __all__ = [
     "sample_radar_poses",
     "free_space_mask",
     "capture_frame",
+    "read_poses_txt",
     "read_radar_yaml",
     "rigid_transform",
+    "scene_views",
     "write_capture_folder",
 ]
 
@@ -230,6 +247,9 @@ class CaptureScene:
     intrinsics: str | None
     lidar: str | None = None
     radar: str | None = None
+    #: ``poses.txt`` (None: absent) and the folders of ``views/`` (sorted)
+    poses: str | None = None
+    views: tuple[str, ...] = ()
 
 
 def _image_in(folder: Path) -> Path | None:
@@ -305,13 +325,18 @@ def find_captures(root: str | os.PathLike, *, warn: bool = True) -> list[Capture
             continue
         lidar = folder / "lidar.npy"
         radar = folder / "radar.yaml"
+        poses = folder / "poses.txt"
+        views = folder / "views"
         scene = CaptureScene(
             scene_id=folder.name, folder=str(folder),
             image=None if image is None else str(image),
             intrinsics=str(k) if k.is_file() else (str(shared_k) if shared_k.is_file() else None),
             lidar=str(lidar) if lidar.is_file() else None,
             radar=str(radar) if radar.is_file() else (
-                str(shared_radar) if shared_radar.is_file() else None))
+                str(shared_radar) if shared_radar.is_file() else None),
+            poses=str(poses) if poses.is_file() else None,
+            views=tuple(str(v) for v in sorted(views.iterdir()) if v.is_dir()
+                        and not v.name.startswith(".")) if views.is_dir() else ())
         scenes.append(scene)
         if warn:
             _note_outside_links([folder] + [None if f is None else Path(f) for f in (
@@ -387,6 +412,82 @@ def rigid_transform(value: Any, where: str, field: str) -> np.ndarray:
     else:
         return m
     raise ValueError(f"{where}: {field} is not a rigid transform: {why}; {fix}")
+
+
+def read_poses_txt(path: str | os.PathLike) -> dict[str, np.ndarray]:
+    """A scene's ``poses.txt``: view name -> (4, 4) camera (OpenCV) -> world rigid transform
+    [m], in file order. One view per line, ``NAME`` then the 16 numbers of the matrix row by
+    row; blank lines and ``#`` comments are skipped; ``NAME`` ``.`` is the scene's own view.
+
+    Raises
+    ------
+    ValueError naming the file, the line and the fix: a line without 17 fields, numbers that
+    do not parse, a matrix that is not rigid (:func:`rigid_transform`), a name given twice.
+    """
+    out: dict[str, np.ndarray] = {}
+    fix = ("one view per line: NAME then the camera -> world 4x4 matrix's 16 numbers row by "
+           "row, e.g. '. 1 0 0 0 0 1 0 0 0 0 1 0 0 0 0 1'")
+    for n, raw in enumerate(Path(path).read_text(encoding="utf-8").splitlines(), start=1):
+        line = raw.split("#", 1)[0].strip()
+        if not line:
+            continue
+        fields = line.split()
+        where = f"{path}, line {n}"
+        if len(fields) != 17:
+            raise ValueError(f"{where}: {len(fields)} fields, expected 17; {fix}")
+        name = fields[0]
+        if name in out:
+            raise ValueError(f"{where}: view {name!r} is given twice; give each view once")
+        try:
+            values = [float(v) for v in fields[1:]]
+        except ValueError:
+            raise ValueError(f"{where}: the matrix holds a value that is not a number "
+                             f"({' '.join(fields[1:])!r}); {fix}") from None
+        out[name] = rigid_transform(np.reshape(values, (4, 4)), where,
+                                    f"the pose of view {name!r}")
+    return out
+
+
+def scene_views(scene: CaptureScene, k: int) -> list[tuple[CaptureScene, np.ndarray]]:
+    """The views to fuse into ``scene``'s reconstruction: the first ``k`` views of its
+    ``poses.txt`` other than ``.``, each as a :class:`CaptureScene` (its folder under
+    ``views/``; intrinsics its own, else the scene's) with ``scene camera <- view camera``
+    (4, 4) [m]. Empty for ``k`` 0 or a scene without ``poses.txt`` and ``views/``.
+
+    Raises
+    ------
+    ValueError naming the file and the fix: ``views/`` without ``poses.txt`` (or the reverse),
+    no pose for the scene's own view (``.``), a pose naming no folder of ``views/``.
+    """
+    if k <= 0 or (scene.poses is None and not scene.views):
+        return []
+    if scene.poses is None:
+        raise ValueError(f"{scene.folder}/views: {len(scene.views)} view(s) but no poses.txt; "
+                         "give each view's camera -> world pose in poses.txt (or remove "
+                         "views/)")
+    poses = read_poses_txt(scene.poses)
+    if "." not in poses:
+        raise ValueError(f"{scene.poses}: no pose for the scene's own view; add a line "
+                         "'. r00 ... 1' (NAME '.' is the scene's rgb image)")
+    folders = {Path(v).name: Path(v) for v in scene.views}
+    unknown = [name for name in poses if name != "." and name not in folders]
+    if unknown:
+        raise ValueError(f"{scene.poses}: view(s) {unknown} have no folder under "
+                         f"{scene.folder}/views (found: {sorted(folders)})")
+    world_from_scene = poses["."]
+    out = []
+    for name in [n for n in poses if n != "."][:k]:
+        folder = folders[name]
+        image = _image_in(folder)
+        own_k = folder / "intrinsics.yaml"
+        lidar = folder / "lidar.npy"
+        view = CaptureScene(
+            scene_id=f"{scene.scene_id}/{name}", folder=str(folder),
+            image=None if image is None else str(image),
+            intrinsics=str(own_k) if own_k.is_file() else scene.intrinsics,
+            lidar=str(lidar) if lidar.is_file() else None)
+        out.append((view, np.linalg.inv(world_from_scene) @ poses[name]))
+    return out
 
 
 def read_radar_yaml(path: str | os.PathLike | None) -> dict:
@@ -560,15 +661,20 @@ def capture_frame(radar_scene, door_boxes_level: np.ndarray, pose: np.ndarray, s
 # ---------------------------------------------------------------------------------------------
 # A capture folder from procedural worlds (tests, the README's example)
 # ---------------------------------------------------------------------------------------------
+#: frames of the trajectory a multi-view capture scene is drawn from (``write_capture_folder``)
+VIEW_TRAJECTORY_FRAMES = 8
+
+
 def write_capture_folder(out_dir: str | os.PathLike, seeds, *, world=None, rig=None,
-                         trajectory_seed: int = 0, lidar: bool = True) -> list[Path]:
+                         trajectory_seed: int = 0, lidar: bool = True,
+                         views: int = 0) -> list[Path]:
     """Write one capture scene per world seed, laid out as a lab's capture folder: the first
     frame of each world's trajectory as ``rgb.png``, ``intrinsics.yaml`` (with the rig
     calibration ``camera_height_m`` and ``up_cam``) and, with ``lidar``, ``lidar.npy``. No
-    ground truth goes into the folder. Returns the scene folders."""
-    import cv2
-    import yaml
-
+    ground truth goes into the folder. With ``views`` > 0 the scene's image is frame ``views``
+    of a trajectory of at least :data:`VIEW_TRAJECTORY_FRAMES` frames (about 2 m apart, as a
+    walking capture) and frames ``views - 1 .. 0`` go to ``views/v1 ..`` (most recent first)
+    with every frame's camera -> world pose in ``poses.txt``. Returns the scene folders."""
     from sim2radar.worlds import generate_world, render_frame, trajectory
     from sim2radar.worlds.config import make_rig_config, make_world_config
 
@@ -579,21 +685,38 @@ def write_capture_folder(out_dir: str | os.PathLike, seeds, *, world=None, rig=N
     out = []
     for seed in seeds:
         w = generate_world(int(seed), world_cfg)
-        frame = render_frame(w, trajectory(w, 1, seed=trajectory_seed)[0], rig_cfg, rgb=True,
-                             lidar=lidar)
+        n = int(views) + 1 if not views else max(int(views) + 1, VIEW_TRAJECTORY_FRAMES)
+        poses = trajectory(w, n, seed=trajectory_seed)
         folder = Path(out_dir) / f"scene_{int(seed):03d}"
-        folder.mkdir(parents=True, exist_ok=True)
-        cv2.imwrite(str(folder / "rgb.png"), cv2.cvtColor(frame.rgb, cv2.COLOR_RGB2BGR))
-        k = frame.intrinsics
-        doc = {"fx": float(k.fx), "fy": float(k.fy), "cx": float(k.cx), "cy": float(k.cy),
-               "width": int(k.width), "height": int(k.height)}
-        rig_cal = frame.rig_calibration
-        if "camera_height_m" in rig_cal:
-            doc["camera_height_m"] = float(rig_cal["camera_height_m"])
-        if "up_cam" in rig_cal:
-            doc["up_cam"] = [float(x) for x in rig_cal["up_cam"]]
-        (folder / "intrinsics.yaml").write_text(yaml.safe_dump(doc, sort_keys=False))
-        if lidar and frame.lidar_points is not None:
-            np.save(folder / "lidar.npy", np.asarray(frame.lidar_points, np.float32))
+        lines = []
+        for j in range(int(views), -1, -1):           # the scene's own view first
+            frame = render_frame(w, poses[j], rig_cfg, rgb=True, lidar=lidar)
+            name = "." if j == int(views) else f"v{int(views) - j}"
+            _write_view(folder if name == "." else folder / "views" / name, frame, lidar)
+            m = np.asarray(frame.camera_to_world, np.float64)
+            lines.append(name + " " + " ".join(f"{v:.9g}" for v in m.ravel()))
+        if views:
+            (folder / "poses.txt").write_text(
+                "# view, then its camera (OpenCV) -> world 4x4, row by row [m]\n"
+                + "\n".join(lines) + "\n")
         out.append(folder)
     return out
+
+
+def _write_view(folder: Path, frame, lidar: bool) -> None:
+    import cv2
+    import yaml
+
+    folder.mkdir(parents=True, exist_ok=True)
+    cv2.imwrite(str(folder / "rgb.png"), cv2.cvtColor(frame.rgb, cv2.COLOR_RGB2BGR))
+    k = frame.intrinsics
+    doc = {"fx": float(k.fx), "fy": float(k.fy), "cx": float(k.cx), "cy": float(k.cy),
+           "width": int(k.width), "height": int(k.height)}
+    rig_cal = frame.rig_calibration
+    if "camera_height_m" in rig_cal:
+        doc["camera_height_m"] = float(rig_cal["camera_height_m"])
+    if "up_cam" in rig_cal:
+        doc["up_cam"] = [float(x) for x in rig_cal["up_cam"]]
+    (folder / "intrinsics.yaml").write_text(yaml.safe_dump(doc, sort_keys=False))
+    if lidar and frame.lidar_points is not None:
+        np.save(folder / "lidar.npy", np.asarray(frame.lidar_points, np.float32))

@@ -7,7 +7,8 @@ simulated radar sees nothing there (the paper's "effective coverage ~31°", arXi
 §7.3). A rig walking through a building has seen those parts a moment before: the previous
 ``k`` frames of the same scene (``FusionConfig.frames``, 1 by default), each reconstructed
 from its own image and depth, moved into the current frame by the rig's poses and added where
-the current camera does not look. Capture folders hold one image per scene: nothing to fuse.
+the current camera does not look. A capture scene is fused with the views under its
+``views/`` folder, posed by its ``poses.txt`` (:func:`sim2radar.factory.captures.scene_views`).
 
 :func:`fuse_views` takes the current view's meshes and door boxes and, for each earlier view,
 its meshes, boxes and the transform from its frame to the current one; it keeps

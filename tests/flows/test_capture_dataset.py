@@ -4,6 +4,7 @@ truth passed in) -> per-stage Prefect tasks -> radar dataset in OpenPCDet layout
 from __future__ import annotations
 
 import json
+import re
 import shutil
 
 import numpy as np
@@ -112,3 +113,91 @@ def test_staged_reconstruction_equals_the_one_call_pipeline(capture_folder, tmp_
     np.testing.assert_array_equal(staged["door_boxes"], direct.door_boxes)
     np.testing.assert_array_equal(staged["segment_id"], direct.segment_id)
     assert staged["segment_materials"] == [m.material for m in direct.segment_materials]
+
+
+def test_a_scenes_views_fill_the_radars_field_of_view(tmp_path):
+    """A capture scene with views/ and poses.txt: its reconstruction is fused with its earlier
+    view, so the radar's geometry reaches beyond the camera's ±33° and its frames hold points
+    there; the frames' keys name the views (a scene without them keeps its keys); the view's
+    reconstruction is cached like the scene's."""
+    from sim2radar.factory.captures import (
+        CaptureSpec,
+        find_captures,
+        scene_views,
+        write_capture_folder,
+    )
+    from sim2radar.tasks.capture import process_capture_scene
+    from sim2radar.tasks.dataset import read_dataset_frame
+
+    write_capture_folder(tmp_path / "cap", [4], rig={"width": 200, "height": 150, "spp": 4},
+                         views=1)
+    (scene,) = find_captures(tmp_path / "cap")
+    assert [v.split("/")[-1] for v in scene.views] == ["v1"] and scene.poses
+    (view, scene_from_view), = scene_views(scene, 1)
+    assert view.scene_id == "scene_004/v1" and view.intrinsics.endswith("v1/intrinsics.yaml")
+    # the earlier view's camera sits behind the scene's (OpenCV z forward): negative z
+    assert scene_from_view[2, 3] < -0.1
+
+    def run(k):
+        spec = CaptureSpec(radar="ti-mmwcas", reconstruction={"fusion": {"frames": k}},
+                           poses={"frames": 2})
+        out = process_capture_scene(scene, spec, str(tmp_path / "store"))
+        assert out.status in ("ok", "skipped"), out.error
+        keys = [f.artifacts["dataset_frames/reconstructed"] for f in out.parts]
+        frames = [read_dataset_frame(tmp_path / "store", k) for k in keys]
+        az = np.concatenate([np.degrees(np.arctan2(f.points[:, 1], f.points[:, 0]))
+                             for f in frames])
+        return out, keys, az
+
+    alone, keys0, az0 = run(0)
+    fused, keys1, az1 = run(1)
+    assert "views/scene_004/v1" in fused.artifacts and "views/scene_004/v1" not in alone.artifacts
+    assert set(keys0).isdisjoint(keys1)
+    # the points' azimuth (1-99 %): the camera's ±33° alone (the sampled poses turn up to
+    # ±20°), about ±55° with the earlier view (measured: +-30 -> +-55 deg, world 4, 2 m apart)
+    lo0, hi0 = np.percentile(az0, [1, 99])
+    lo1, hi1 = np.percentile(az1, [1, 99])
+    assert hi1 - lo1 > hi0 - lo0 + 20.0, ((lo0, hi0), (lo1, hi1))
+    assert np.sum(np.abs(az1) > 40.0) > np.sum(np.abs(az0) > 40.0) + 5
+    again = process_capture_scene(scene, CaptureSpec(
+        radar="ti-mmwcas", reconstruction={"fusion": {"frames": 1}}, poses={"frames": 2}),
+        str(tmp_path / "store"))
+    assert again.status == "skipped"               # scene, view and frames all cached
+
+
+def test_views_without_poses_or_with_a_bad_pose_fail_the_scene_naming_the_file(tmp_path):
+    from sim2radar.factory.captures import (
+        CaptureSpec,
+        find_captures,
+        read_poses_txt,
+        write_capture_folder,
+    )
+    from sim2radar.tasks.capture import process_capture_scene
+
+    (folder,) = write_capture_folder(tmp_path / "cap", [4], rig={"width": 80, "height": 60,
+                                                                 "spp": 1}, views=1)
+    poses = folder / "poses.txt"
+    good = poses.read_text()
+    assert list(read_poses_txt(poses)) == [".", "v1"]
+    spec = CaptureSpec(radar="ti-mmwcas", poses={"frames": 1})
+    cases = {
+        "": "views.*but no poses.txt",
+        good.replace("\nv1 ", "\nv9 "): r"view\(s\) \['v9'\] have no folder",
+        good.replace(". ", "v3 ", 1): "no pose for the scene's own view",
+        good + "v1 1 0 0 0 0 1 0 0 0 0 1 0 0 0 0 1\n": "given twice",
+        good + "x 1 0 0\n": r"line \d+: 4 fields, expected 17",
+        good.split("\nv1 ")[0] + "\nv1 2 0 0 0 0 1 0 0 0 0 1 0 0 0 0 1\n":
+            r"line 3: the pose of view 'v1' is not a rigid transform",
+        good.split("\nv1 ")[0] + "\nv1 1 0 0 0 0 1 0 0 0 0 1 0 0 0 0 one\n":
+            "not a number",
+    }
+    for text, match in cases.items():
+        if text:
+            poses.write_text(text)
+        else:
+            poses.unlink()
+        (scene,) = find_captures(tmp_path / "cap")
+        out = process_capture_scene(scene, spec, str(tmp_path / "store"))
+        assert out.status == "failed", text
+        assert re.search(match, out.error), (match, out.error)
+        assert "poses.txt" in out.error or "views" in out.error
