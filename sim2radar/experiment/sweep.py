@@ -433,7 +433,9 @@ def sweep_cost(setup: SweepSetup, domains: Mapping[str, Any], *,
     if not train_ids:
         raise ValueError(f"{real.root}/ImageSets/{profile.train_split}.txt lists no frame")
     pretrains, runs = plan_sweep(profile, train_ids, setup.conditions)
-    n_sim = {role: len(ds.ids()) for role, ds in domains.items() if role != "real"}
+    held = profile.pretrain_holdout_split     # held out of every pre-training
+    n_sim = {role: len(set(ds.ids()) - set(ds.ids([held]) if held else ()))
+             for role, ds in domains.items() if role != "real"}
     jobs = sweep_jobs(pretrains, runs, n_sim, profile.batch_size)
     measured = step_seconds is None
     if measured:

@@ -343,7 +343,8 @@ def test_plan_prints_the_grid_cost_and_creates_nothing(data, tmp_path):
     assert "expected wall time on 2 worker(s)" in res.output and "measured here" in res.output
     assert not (out / "p").exists()                       # nothing planned into the folder
     cost = json.loads((tmp_path / "c.json").read_text())
-    # smoke: 2 trials x 2 fractions -> 4 pre-trainings (1 epoch x ceil(12 / 4) steps) and 8
+    # smoke: 2 trials x 2 fractions -> 4 pre-trainings (1 epoch x ceil(10 / 4) steps: the 12
+    # sim frames less the 2 of its held-out val split) and 8
     # runs (2 epochs x ceil(4 or 8 / 4))
     assert cost["jobs"] == {"pretrain": {"jobs": 4, "steps": 12},
                             "finetune": {"jobs": 8, "steps": 24}}
