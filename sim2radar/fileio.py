@@ -18,7 +18,8 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["atomic_write", "atomic_write_with", "write_json", "jsonable", "abandoned_temp_files"]
+__all__ = ["atomic_write", "atomic_write_with", "write_json", "jsonable", "abandoned_temp_files",
+           "json_text"]
 
 _TEMP = re.compile(r"^\..+\.tmp(\d+)$")
 
@@ -93,3 +94,20 @@ def write_json(path: str | os.PathLike, doc: Any, *, sort_keys: bool = False) ->
     path.parent.mkdir(parents=True, exist_ok=True)
     text = json.dumps(jsonable(doc), indent=1, sort_keys=sort_keys) + "\n"
     return atomic_write(path, text.encode())
+
+
+def json_text(path: str | os.PathLike) -> str | None:
+    """The text of a JSON file, or of its gzip-compressed copy ``<path>.gz`` where only that
+    exists (a published sweep keeps its large JSON files compressed); None when neither does.
+
+    Raises OSError / UnicodeDecodeError for a file that cannot be read (gzip's BadGzipFile is an
+    OSError)."""
+    import gzip
+
+    path = Path(path)
+    if path.is_file():
+        return path.read_text(encoding="utf-8")
+    packed = path.with_name(path.name + ".gz")
+    if packed.is_file():
+        return gzip.decompress(packed.read_bytes()).decode("utf-8")
+    return None

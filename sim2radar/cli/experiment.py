@@ -304,6 +304,8 @@ def sweep(
         raise typer.Exit(1)
 
 
+#: a published JSON file larger than this is kept gzip-compressed (``name.json.gz``) [bytes]
+PUBLISH_GZIP_BYTES = 256 * 1024
 #: a sweep folder's raw files a published study keeps (small; the checkpoints stay behind)
 PUBLISHED_FILES = ("sweep.json", "plan.json", "runs.parquet", "pretrainings.parquet",
                    "stats.json", "progress.json", "preregistration.md")
@@ -318,6 +320,7 @@ def publish_sweep(folder: Path, dest: Path) -> list[str]:
     ------
     ValueError — the sweep's pre-registration differs from the one in ``dest``.
     """
+    import gzip
     import shutil
 
     dest.mkdir(parents=True, exist_ok=True)
@@ -332,8 +335,17 @@ def publish_sweep(folder: Path, dest: Path) -> list[str]:
                                  f"ran under ({src}); a published pre-registration is never "
                                  "replaced: publish into another folder")
             continue
-        shutil.copyfile(src, dest / name)
-        copied.append(name)
+        data = src.read_bytes()
+        if name.endswith(".json") and len(data) > PUBLISH_GZIP_BYTES:
+            # a paper-sized plan (and sweep.json with its intensity matches) is megabytes of
+            # repetitive JSON: kept compressed, byte-for-byte (mtime 0: the same file each time)
+            (dest / (name + ".gz")).write_bytes(gzip.compress(data, mtime=0))
+            (dest / name).unlink(missing_ok=True)
+            copied.append(name + ".gz")
+        else:
+            shutil.copyfile(src, dest / name)
+            (dest / (name + ".gz")).unlink(missing_ok=True)
+            copied.append(name)
     return copied
 
 
@@ -352,19 +364,21 @@ def sweep_report(
     import pyarrow.parquet as pq
 
     from sim2radar.experiment.sweep import write_results
+    from sim2radar.fileio import json_text
 
     try:
-        doc_path, runs_path = folder / "sweep.json", folder / "runs.parquet"
-        for p in (doc_path, runs_path):
-            if not p.is_file():
-                raise FileNotFoundError(f"{p}: not found; a sweep folder holds sweep.json and "
-                                        "runs.parquet (publish them with the sweep)")
+        for name in ("sweep.json", "runs.parquet"):
+            if json_text(folder / name) is None if name.endswith(".json") else \
+                    not (folder / name).is_file():
+                raise FileNotFoundError(f"{folder / name}: not found; a sweep folder holds "
+                                        "sweep.json and runs.parquet (publish them with the "
+                                        "sweep)")
         if publish is not None:
             exit_unless_writable_outputs({"--publish": publish.parent})
             copied = publish_sweep(folder, publish)
             typer.echo(f"published {', '.join(copied) or 'nothing new'} to {publish}")
             folder = publish
-        doc = json.loads((folder / "sweep.json").read_text())
+        doc = json.loads(json_text(folder / "sweep.json"))
         rows = pq.read_table(folder / "runs.parquet").to_pylist()
         pre_path = folder / "pretrainings.parquet"
         pre = pq.read_table(pre_path).to_pylist() if pre_path.is_file() else []

@@ -314,6 +314,31 @@ def test_a_published_sweep_rebuilds_its_report_from_its_raw_files(first, tmp_pat
     assert res.exit_code == 2 and "sweep.json: not found" in res.output
 
 
+def test_large_published_json_files_are_kept_compressed_and_still_read(first, tmp_path,
+                                                                      monkeypatch):
+    """A study's plan.json and sweep.json (one intensity match per pre-training) run to
+    megabytes: published above 256 KiB as name.json.gz, byte for byte, and read from there."""
+    import gzip
+
+    from typer.testing import CliRunner
+
+    import sim2radar.cli.experiment as cli_exp
+    from sim2radar.cli import app
+    from sim2radar.experiment.dashboard import dashboard_data, load_sweep
+
+    monkeypatch.setattr(cli_exp, "PUBLISH_GZIP_BYTES", 1000)
+    dest = tmp_path / "pub"
+    res = CliRunner().invoke(app, ["sweep-report", str(first["dir"]), "--publish", str(dest)])
+    assert res.exit_code == 0, res.output
+    for name in ("plan.json", "sweep.json"):
+        assert not (dest / name).exists()
+        assert gzip.decompress((dest / (name + ".gz")).read_bytes()) == \
+            (first["dir"] / name).read_bytes()
+    data = dashboard_data(load_sweep(dest))
+    assert data["name"] == "t" and data["banner"]["kind"] == "proxy"   # from sweep.json.gz
+    assert (dest / "results.md").read_text().startswith("# Sweep t")
+
+
 def test_bad_inputs_exit_2_with_one_line(data, tmp_path):
     from typer.testing import CliRunner
 

@@ -58,7 +58,7 @@ from sim2radar.experiment.stats import (
     DEGENERATE,
     sweep_statistics,
 )
-from sim2radar.fileio import jsonable
+from sim2radar.fileio import json_text, jsonable
 
 __all__ = [
     "FILES",
@@ -135,10 +135,11 @@ _FIXES = {
 
 def _read_json(folder: Path, role: str) -> dict[str, Any] | None:
     path = folder / FILES[role]
-    if not path.is_file():
-        return None
     try:
-        doc = json.loads(path.read_text(encoding="utf-8"))
+        text = json_text(path)          # or its .gz copy (a published sweep)
+        if text is None:
+            return None
+        doc = json.loads(text)
     except json.JSONDecodeError as exc:
         raise SweepFolderError(f"{path}: not valid JSON ({exc.msg} at line {exc.lineno}, "
                                f"column {exc.colno}); {_FIXES[role]}") from None
