@@ -191,23 +191,28 @@ def plan_cost(datasets: Mapping[str, str | os.PathLike | None], *, profile: Any 
         return sweep.sweep_cost(setup, domains, workers=workers, step_seconds=step_seconds)
 
 
-def force_runs(store: str, sweep_dir: str | os.PathLike, runs: Sequence[PlannedRun]) -> list[str]:
-    """Make the sweep redo ``runs`` (:meth:`SweepPlan.find_runs`): each one's stored row is
-    moved into the store's quarantine and its run folder (checkpoints) into
-    ``<sweep>/quarantine/runs/``, so it trains from scratch; nothing is deleted. Returns the
-    ids forced."""
+def force_runs(store: str, sweep_dir: str | os.PathLike,
+               runs: Sequence[PlannedRun | PlannedPretrain]) -> list[str]:
+    """Make the sweep redo ``runs`` (:meth:`SweepPlan.find_runs`: fine-tuning runs or
+    pre-trainings): each one's stored row is moved into the store's quarantine and its folder
+    (checkpoints, a pre-training's check) into ``<sweep>/quarantine/runs/`` or
+    ``quarantine/pretrain/``, so it trains from scratch; nothing is deleted. A forced
+    pre-training's fine-tuning runs keep their results (their key names the pre-training's
+    inputs, not its bytes); force them too to retrain them. Returns the ids forced."""
     st = open_store(store)
     stamp = datetime.now(UTC).strftime("%Y%m%dT%H%M%SZ")
-    for run in runs:
-        path = st.path("experiment_runs", run.key)
+    for job in runs:
+        kind = "pretrain" if isinstance(job, PlannedPretrain) else "runs"
+        stage = STAGES["pretrain"] if kind == "pretrain" else STAGES["finetune"]
+        path = st.path(stage, job.key)
         if st.fs.exists(path):
-            st.quarantine(path, f"--force-run {run.id}: redone on request")
-        folder = Path(sweep_dir) / "runs" / run.key
+            st.quarantine(path, f"--force-run {job.id}: redone on request")
+        folder = Path(sweep_dir) / kind / job.key
         if folder.exists():
-            dest = Path(sweep_dir) / "quarantine" / "runs" / f"{run.key}.{stamp}"
+            dest = Path(sweep_dir) / "quarantine" / kind / f"{job.key}.{stamp}"
             dest.parent.mkdir(parents=True, exist_ok=True)
             os.replace(folder, dest)
-            log.warning("sweep: %s forced; its run folder moved to %s", run.id, dest)
+            log.warning("sweep: %s forced; its folder moved to %s", job.id, dest)
     return [r.id for r in runs]
 
 
@@ -244,6 +249,7 @@ def run_pretraining(ctx: SweepContext, job: PlannedPretrain) -> PretrainResult:
     held-out sim split, zero-shot on the real validation split). ``done.json`` and ``check.json``
     in its folder mark it finished; its ``experiment_pretrain`` row goes into the store."""
     from sim2radar.detect.config import DetectConfig
+    from sim2radar.detect.train import checkpoint_loads, quarantine_file
     from sim2radar.experiment.data import with_intensity
     from sim2radar.experiment.learnability import PretrainingCheck, check_pretraining
     from sim2radar.experiment.runner import pretrain_encoder
@@ -260,6 +266,9 @@ def run_pretraining(ctx: SweepContext, job: PlannedPretrain) -> PretrainResult:
 
     out = Path(ctx.sweep_dir) / "pretrain" / job.key
     done, checked = out / "done.json", out / "check.json"
+    if checked.is_file() and not checkpoint_loads(out / "last.pt"):
+        # finished, but its checkpoint was damaged since (now in quarantine/): redo the rest
+        quarantine_file(checked, "its pre-training's last.pt does not load")
     claim = _claim(ctx, job.key, checked.is_file, out, f"pre-training {job.id}")
     status = "skipped" if claim is None else "ok"
     with claim or contextlib.nullcontext():     # None: finished, read back below

@@ -52,6 +52,8 @@ __all__ = [
     "evaluate_checkpoint",
     "load_checkpoint",
     "load_encoder_from",
+    "checkpoint_loads",
+    "quarantine_file",
     "predict_frames",
     "train",
     "validation_ap",
@@ -160,6 +162,53 @@ def _read_checkpoint(path: str | Path, map_location="cpu") -> dict[str, Any]:
     if not isinstance(ckpt, dict) or "model" not in ckpt:
         raise ValueError(f"{path}: not a sim2radar PointPillars checkpoint (no 'model' entry)")
     return ckpt
+
+
+def quarantine_file(path: Path, why: str) -> Path:
+    """Move a file that cannot be used into ``<its folder>/quarantine/`` (timestamped; nothing
+    is deleted), with one warning naming it and why; returns where it went."""
+    stamp = time.strftime("%Y%m%dT%H%M%S", time.gmtime())
+    dest = path.parent / "quarantine" / f"{path.name}.{stamp}"
+    dest.parent.mkdir(parents=True, exist_ok=True)
+    path.replace(dest)
+    log.warning("%s: %s; moved to %s", path, why, dest)
+    return dest
+
+
+def _loads(path: Path, map_location) -> dict[str, Any] | None:
+    """The checkpoint at ``path``, or None after quarantining it when it does not load
+    (truncated, not a zip, not a sim2radar checkpoint, refused objects)."""
+    try:
+        return _read_checkpoint(path, map_location=map_location)
+    except FileNotFoundError:
+        return None
+    except Exception as exc:  # noqa: BLE001 - torch raises RuntimeError/EOFError/zip errors
+        first = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        quarantine_file(path, f"checkpoint does not load ({type(exc).__name__}: {first})")
+        return None
+
+
+def _resume_checkpoint(out_dir: Path, map_location) -> dict[str, Any] | None:
+    """The checkpoint a run resumes from: ``last.pt``, or — when it does not load (a killed
+    write, a truncated copy) — the newest ``epoch_<n>.pt`` that does, each unloadable one moved
+    into ``quarantine/`` with a warning; None: start from scratch."""
+    candidates = [out_dir / "last.pt"] + sorted(
+        out_dir.glob("epoch_*.pt"), key=lambda p: -int(p.stem.split("_")[1]))
+    for i, path in enumerate(candidates):
+        ckpt = _loads(path, map_location)
+        if ckpt is not None:
+            if i:
+                log.warning("%s: resuming from %s (epoch %s)", out_dir, path.name,
+                            ckpt.get("epoch"))
+            return ckpt
+    return None
+
+
+def checkpoint_loads(path: str | Path) -> bool:
+    """Whether ``path`` loads as a sim2radar checkpoint; one that does not is moved into
+    ``quarantine/`` beside it (a finished pre-training whose ``last.pt`` was truncated heals:
+    its caller trains it again, resuming from its newest good ``epoch_<n>.pt``)."""
+    return _loads(Path(path), "cpu") is not None
 
 
 def load_checkpoint(path: str | Path, device=None) -> tuple[PointPillars, DetectConfig]:
@@ -376,8 +425,8 @@ def _train(config, train_ids, out_dir: Path, init_encoder_from, seed, *, data_di
 
     start_epoch, history = 0, []
     last = out_dir / "last.pt"
-    if resume and last.is_file():
-        ckpt = _read_checkpoint(last, map_location=dev)
+    ckpt = _resume_checkpoint(out_dir, dev) if resume else None
+    if ckpt is not None:
         saved = DetectConfig.model_validate(ckpt["config"])
         for section in ("model", "optimization", "augmentation"):
             if getattr(saved, section) != getattr(cfg, section):

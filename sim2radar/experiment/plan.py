@@ -546,20 +546,25 @@ class SweepPlan:
         """The runs that load ``pretrain``'s encoder."""
         return [r for r in self.runs if r.pretrain_id == pretrain.id]
 
-    def find_runs(self, wanted: Sequence[str]) -> list[PlannedRun]:
-        """The runs named in ``wanted`` (run ids such as ``sim-pretrain-f0.05-t2``, or keys),
-        once each in the order named.
+    def find_runs(self, wanted: Sequence[str]) -> list[PlannedRun | PlannedPretrain]:
+        """The runs and pre-trainings named in ``wanted`` (run ids such as
+        ``sim-pretrain-f0.05-t2``, pre-training ids such as ``pretrain-sim-t2-f0.05``, or
+        keys), once each in the order named.
 
         Raises
         ------
-        ValueError — for a name that is no run of this sweep, with an example of the ids.
+        ValueError — for a name that is no run or pre-training of this sweep, with examples.
         """
-        by_name = {r.id: r for r in self.runs} | {r.key: r for r in self.runs}
+        jobs = [*self.runs, *self.pretrains]
+        by_name = {j.id: j for j in jobs} | {j.key: j for j in jobs}
         unknown = [w for w in wanted if w not in by_name]
         if unknown:
-            raise ValueError(f"--force-run {unknown[0]!r}: no run of this sweep has that id or "
-                             f"key; run ids look like {self.runs[0].id!r} (results.md, the "
-                             "dashboard, runs.parquet's run_key)")
+            example = (f" and pre-training ids like {self.pretrains[0].id!r}"
+                       if self.pretrains else "")
+            raise ValueError(f"--force-run {unknown[0]!r}: no run or pre-training of this "
+                             f"sweep has that id or key; run ids look like {self.runs[0].id!r}"
+                             f"{example} (results.md, the dashboard, runs.parquet's run_key, "
+                             "pretrainings.parquet's pretrain_key)")
         return list({by_name[w].key: by_name[w] for w in wanted}.values())
 
     def to_dict(self) -> dict[str, Any]:

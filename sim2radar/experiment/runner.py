@@ -53,16 +53,22 @@ def _check_finite(history: Sequence[dict], what: str) -> None:
 def pretrain_encoder(cfg, frames: Sequence, out_dir: str | Path, *, seed: int, epochs: int,
                      device=None) -> Path:
     """Pre-train on (simulated) ``frames``; returns the checkpoint whose encoder the
-    fine-tuning runs load. Skips training when ``out_dir/done.json`` says it finished.
+    fine-tuning runs load. Skips training when ``out_dir/done.json`` says it finished and its
+    ``last.pt`` loads (one that does not is quarantined and the training resumes from the
+    newest good ``epoch_<n>.pt``, or restarts).
 
     Raises :class:`NonFiniteLoss` when the loss diverges.
     """
-    from sim2radar.detect.train import train
+    from sim2radar.detect.train import checkpoint_loads, quarantine_file, train
 
     out_dir = Path(out_dir)
     done = out_dir / "done.json"
     if done.is_file():
-        return out_dir / "last.pt"
+        if checkpoint_loads(out_dir / "last.pt"):
+            return out_dir / "last.pt"
+        # finished, but its checkpoint no longer loads (moved into quarantine/): train again,
+        # resuming from its newest good epoch checkpoint
+        quarantine_file(done, "its pre-training's last.pt does not load")
     res = train(cfg, out_dir=out_dir, frames=frames, seed=seed, epochs=epochs, resume=True,
                 device=device)
     _check_finite(res.history, f"pre-training in {out_dir}")

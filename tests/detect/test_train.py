@@ -95,6 +95,35 @@ def _state_after_epochs(cfg, frames, seed, n, out_dir, **kw):
     return saved[n - 1]
 
 
+def test_a_truncated_last_checkpoint_is_quarantined_and_the_run_resumes_from_an_epoch_one(
+        tmp_path):
+    """A killed copy or write leaves last.pt truncated: train(resume=True) moves it into
+    quarantine/, resumes from the newest epoch_<n>.pt that loads and ends exactly where an
+    uninterrupted run ends; with no good checkpoint at all it starts from scratch."""
+    frames = make_door_frames(4, seed=1, points_per_frame=400)
+    cfg = small_config(optimization=dict(batch_size=2, epochs=4),
+                       runtime=dict(checkpoint_every=1, keep_checkpoints=3))
+    full = train(cfg, out_dir=tmp_path / "full", frames=frames, seed=3)
+    run = tmp_path / "run"
+    first = train(cfg, out_dir=run, frames=frames, seed=3)      # keeps epoch_2, 3 and 4
+    for name in ("last.pt", "epoch_4.pt"):                      # truncated copies
+        (run / name).write_bytes((run / name).read_bytes()[:700])
+    (run / "epoch_3.pt").write_bytes(b"not a zip")
+    res = train(cfg, out_dir=run, frames=frames, seed=3, resume=True)
+    assert _losses(res.history) == _losses(full.history)
+    # resumed from epoch_2.pt: epochs 1-2 are the first run's own records (their timings too)
+    assert res.history[:2] == first.history[:2] and res.history[2:] != first.history[2:]
+    quarantined = sorted(p.name.split(".pt")[0] for p in (run / "quarantine").iterdir())
+    assert quarantined == ["epoch_3", "epoch_4", "last"]
+    torch.testing.assert_close(torch.load(res.checkpoint, weights_only=False)["model"],
+                               torch.load(full.checkpoint, weights_only=False)["model"])
+    # nothing loads: from scratch, the same run
+    for p in run.glob("*.pt"):
+        p.write_bytes(b"")
+    again = train(cfg, out_dir=run, frames=frames, seed=3, resume=True)
+    assert _losses(again.history) == _losses(full.history)
+
+
 def test_encoder_transfer_loads_encoder_only(tmp_path):
     frames = make_door_frames(4, seed=2, points_per_frame=500)
     cfg = small_config(optimization=dict(batch_size=2, epochs=1))

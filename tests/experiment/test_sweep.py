@@ -154,7 +154,10 @@ def test_the_plan_travels_as_json_and_pickles(domains, tmp_path):
     # --force-run names runs by id or key
     run = plan.runs[3]
     assert plan.find_runs([run.id, run.key, plan.runs[0].id]) == [run, plan.runs[0]]
-    with pytest.raises(ValueError, match=r"no run of this sweep.*look like 'baseline-f0\.5-t0'"):
+    pre = plan.pretrains[1]                                       # ... and pre-trainings
+    assert plan.find_runs([pre.id, run.id, pre.key]) == [pre, run]
+    with pytest.raises(ValueError, match=r"no run or pre-training of this sweep.*look like "
+                                         r"'baseline-f0\.5-t0' and pre-training ids like"):
         plan.find_runs(["baseline-f0.33-t9"])
 
 

@@ -574,5 +574,44 @@ def test_a_truncated_run_row_heals_and_force_run_redoes_a_run(data, prefect_serv
     assert len(list((tmp_path / "o/h/quarantine/runs").iterdir())) == 1  # old checkpoints kept
     redone = {r["run_key"]: r for r in pq.read_table(tmp_path / "o/h/runs.parquet").to_pylist()}
     assert redone[key]["steps"] == rows[key]["steps"]  # trained from scratch, all its steps
-    with pytest.raises(ValueError, match="no run of this sweep has that id"):
+    with pytest.raises(ValueError, match="no run or pre-training of this sweep has that id"):
         run_experiment(data["sim"], data["real"], **kw, force=["baseline-f0.33-t9"])
+
+
+def test_a_truncated_checkpoint_heals_and_force_run_redoes_a_pretraining(data, prefect_server,
+                                                                          tmp_path):
+    """Issue #33 probe 4: a pre-training whose last.pt was truncated after it finished is
+    quarantined and trained again (same check, same encoder for its runs) instead of failing
+    every run that loads it; a fine-tuning run's truncated last.pt resumes from its newest good
+    epoch checkpoint; --force-run takes pre-training ids."""
+    from sim2radar.flows.run_experiment import run_experiment
+
+    kw = dict(profile="smoke", name="c", out=tmp_path / "o", store=tmp_path / "store",
+              overrides={"trials": 1, "fractions": [1.0], "finetune_epochs": 3,
+                         "detector_overrides": {"runtime": {"checkpoint_every": 1,
+                                                            "keep_checkpoints": 3}}})
+    first = run_experiment(data["sim"], data["real"], **kw)
+    assert first["counts"] == {"ok": 2, "skipped": 0, "failed": 0}
+    sweep = tmp_path / "o" / "c"
+    (pre_dir,) = list((sweep / "pretrain").iterdir())
+    before = json.loads((pre_dir / "check.json").read_text())
+    ckpt = pre_dir / "last.pt"
+    ckpt.write_bytes(ckpt.read_bytes()[:1000])           # truncated after it finished
+    rows = {r["condition"]: r for r in pq.read_table(sweep / "runs.parquet").to_pylist()}
+    st = ArtifactStore(tmp_path / "store")
+    st.quarantine(st.path("experiment_runs", rows["sim-pretrain"]["run_key"]), "test")
+    run_dir = sweep / "runs" / rows["sim-pretrain"]["run_key"]
+    (run_dir / "last.pt").write_bytes((run_dir / "last.pt").read_bytes()[:500])
+    again = run_experiment(data["sim"], data["real"], **kw)
+    assert again["counts"] == {"ok": 1, "skipped": 1, "failed": 0}
+    assert (pre_dir / "quarantine").is_dir() and ckpt.is_file()
+    after = json.loads((pre_dir / "check.json").read_text())
+    assert after["sim_ap"] == before["sim_ap"] and after["train_ap"] == before["train_ap"]
+    healed = {r["condition"]: r for r in pq.read_table(sweep / "runs.parquet").to_pylist()}
+    assert healed["sim-pretrain"]["ap_3d_r40_iou03"] == pytest.approx(
+        rows["sim-pretrain"]["ap_3d_r40_iou03"])              # resumed: the same run
+    assert any(p.name.startswith("last.pt.") for p in (run_dir / "quarantine").iterdir())
+    pre_id = next(iter(pq.read_table(sweep / "pretrainings.parquet").to_pylist()))["pretrain_id"]
+    run_experiment(data["sim"], data["real"], **kw, force=[pre_id])
+    assert len(list((sweep / "quarantine" / "pretrain").iterdir())) == 1
+    assert json.loads((pre_dir / "check.json").read_text())["sim_ap"] == before["sim_ap"]
