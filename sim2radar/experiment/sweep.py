@@ -287,8 +287,20 @@ def settings_fixed_at(old: Mapping[str, Any] | None, settings: Mapping[str, Any]
     """
     if old is None:
         return _now()
+    if not isinstance(old, Mapping):
+        raise SweepSettingsChanged(
+            f"{sweep_dir}/sweep.json holds {type(old).__name__}, not the sweep's document; "
+            "delete the sweep folder (or restore its sweep.json) to start again")
     if "settings" not in old:
-        return str(old.get("created_at") or _now())
+        if "settings_digest" in old:        # written with settings, which are now gone
+            raise SweepSettingsChanged(
+                f"{sweep_dir}/sweep.json has a settings digest ({old['settings_digest']}) but "
+                "no settings: the file was edited; restore it, or start a new sweep name")
+        return str(old.get("created_at") or _now())   # a folder from before settings existed
+    if not isinstance(old["settings"], Mapping):
+        raise SweepSettingsChanged(
+            f"{sweep_dir}/sweep.json: field 'settings' is {old['settings']!r}, not the settings "
+            "document the sweep wrote; restore the file, or start a new sweep name")
     if protocol_digest(old["settings"]) == protocol_digest(settings):
         return str(old.get("settings_fixed_at") or old.get("created_at") or _now())
     changes = settings_changes(old["settings"], settings)

@@ -106,6 +106,18 @@ def test_a_sweeps_settings_are_fixed_by_its_first_preparation(tmp_path):
     assert settings_fixed_at(old, same.settings, name="t", sweep_dir=tmp_path) == first
 
 
+def test_a_damaged_sweep_json_is_refused_in_one_line_not_skipped(tmp_path):
+    """Issue #33 probe 6: a sweep.json of [], settings null or a string, or one whose settings
+    were deleted (but whose digest remains) is refused with one line; it never silently skips
+    the changed-settings check."""
+    settings = setup_sweep("smoke", {"sim": "s", "real": "r"}).settings
+    for doc, match in (([], "holds list"), ({"settings": None}, "field 'settings' is None"),
+                       ({"settings": "abc"}, "field 'settings' is 'abc'"),
+                       ({"settings_digest": "d", "created_at": "c"}, "settings digest.*edited")):
+        with pytest.raises(SweepSettingsChanged, match=match):
+            settings_fixed_at(doc, settings, name="t", sweep_dir=tmp_path)
+
+
 def test_the_plan_keys_every_job_from_its_key_inputs(domains, tmp_path):
     setup = setup_sweep("smoke", {"sim": "s", "real": "r"}, device="cpu")
     plan = _plan(setup, domains, tmp_path)
