@@ -52,6 +52,7 @@ __all__ = [
     "evaluate_checkpoint",
     "load_checkpoint",
     "load_encoder_from",
+    "UnsafeCheckpointError",
     "checkpoint_loads",
     "quarantine_file",
     "predict_frames",
@@ -148,6 +149,11 @@ def _versions() -> dict[str, str]:
     return out
 
 
+class UnsafeCheckpointError(ValueError):
+    """A checkpoint holding pickled objects other than tensors and plain data: it is refused,
+    never healed (quarantining it and training on would hide a tampered run folder)."""
+
+
 def _read_checkpoint(path: str | Path, map_location="cpu") -> dict[str, Any]:
     path = Path(path)
     if not path.is_file():
@@ -156,7 +162,12 @@ def _read_checkpoint(path: str | Path, map_location="cpu") -> dict[str, Any]:
         # tensors and plain data only: a pickled object could run code when loaded
         ckpt = torch.load(path, map_location=map_location, weights_only=True)
     except pickle.UnpicklingError as exc:
-        raise ValueError(f"{path}: refused to load: the file holds objects other than tensors "
+        if "global" not in str(exc).lower():  # garbage bytes ("Unsupported operand", "load key")
+            lines = [ln for ln in str(exc).splitlines() if ln.strip()] or [type(exc).__name__]
+            why = next((ln for ln in lines if "Unsupported" in ln or "load key" in ln), lines[0])
+            raise ValueError(f"{path}: not a readable checkpoint (damaged or not a torch file): "
+                             f"{why.strip()}") from None
+        raise UnsafeCheckpointError(f"{path}: refused to load: the file holds objects other than tensors "
                          "and plain data (a sim2radar checkpoint never does; it may be "
                          f"malicious): {str(exc).splitlines()[0]}") from None
     if not isinstance(ckpt, dict) or "model" not in ckpt:
@@ -177,9 +188,12 @@ def quarantine_file(path: Path, why: str) -> Path:
 
 def _loads(path: Path, map_location) -> dict[str, Any] | None:
     """The checkpoint at ``path``, or None after quarantining it when it does not load
-    (truncated, not a zip, not a sim2radar checkpoint, refused objects)."""
+    (truncated, not a zip, not a sim2radar checkpoint). One carrying code is not damage: it
+    raises :class:`UnsafeCheckpointError` and stays where it is for the user to look at."""
     try:
         return _read_checkpoint(path, map_location=map_location)
+    except UnsafeCheckpointError:
+        raise
     except FileNotFoundError:
         return None
     except Exception as exc:  # noqa: BLE001 - torch raises RuntimeError/EOFError/zip errors

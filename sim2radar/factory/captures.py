@@ -273,7 +273,12 @@ def _note_outside_links(paths, root: Path, said: set[str]) -> None:
     for p in paths:
         if p is None or not p.is_symlink() or str(p) in said:
             continue
-        target = p.resolve()
+        try:
+            target = p.resolve()
+        except (RuntimeError, OSError):  # a symlink loop: its scene fails alone, when read
+            said.add(str(p))
+            log.warning("capture folder %s: %s is a symlink loop; its scene will fail", root, p)
+            continue
         if target != inside and inside not in target.parents:
             said.add(str(p))
             log.warning("capture folder %s: %s is a symlink to %s, outside the capture folder; "

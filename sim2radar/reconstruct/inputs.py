@@ -24,11 +24,23 @@ def load_image(path: str | os.PathLike) -> np.ndarray:
 
     path = Path(path)
     if not path.is_file():
-        raise ReconstructionInputError(f"{path}: image not found")
+        raise ReconstructionInputError(f"{path}: {_why_missing(path)}")
     img = cv2.imread(str(path), cv2.IMREAD_COLOR)
     if img is None:
         raise ReconstructionInputError(f"{path}: not a readable image (PNG/JPEG/...)")
     return cv2.cvtColor(img, cv2.COLOR_BGR2RGB)
+
+
+def _why_missing(path: Path) -> str:
+    """Why ``path`` is not a readable file, in words a user can act on."""
+    if path.is_symlink():
+        try:
+            target = path.resolve(strict=True)
+        except (RuntimeError, OSError):
+            return (f"is a symlink that does not lead to a file ({os.readlink(path)!r}: a loop or "
+                    "a missing target); replace it with the image or a link to one")
+        return f"is a symlink to {target}, which is not a file"
+    return "image not found"
 
 
 def load_lidar(path: str | os.PathLike, *, drop_invalid: bool = True) -> tuple[np.ndarray, str]:

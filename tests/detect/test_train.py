@@ -392,6 +392,8 @@ def test_a_checkpoint_carrying_code_is_refused_without_running_it(tmp_path):
     with pytest.raises(ValueError, match="refused to load"):
         train(cfg, out_dir=run, resume=True)
     assert not marker.exists()
+    # refused, not healed: it stays where it is for the user to look at
+    assert (run / "last.pt").exists() and not (run / "quarantine").exists()
 
 
 def test_a_failed_run_leaves_no_empty_run_folder(tmp_path):

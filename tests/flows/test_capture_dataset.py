@@ -6,6 +6,7 @@ from __future__ import annotations
 import json
 import re
 import shutil
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -201,3 +202,24 @@ def test_views_without_poses_or_with_a_bad_pose_fail_the_scene_naming_the_file(t
         assert out.status == "failed", text
         assert re.search(match, out.error), (match, out.error)
         assert "poses.txt" in out.error or "views" in out.error
+
+
+def test_a_symlink_loop_fails_its_scene_alone_naming_the_file(tmp_path):
+    """A capture folder where one scene's rgb.png links to itself: finding scenes does not
+    abort, that scene fails naming the link, the other scene is unaffected."""
+    from sim2radar.factory.captures import CaptureSpec, find_captures, write_capture_folder
+    from sim2radar.tasks.capture import process_capture_scene
+
+    write_capture_folder(tmp_path / "cap", [4, 5], rig={"width": 80, "height": 60, "spp": 1})
+    scenes = find_captures(tmp_path / "cap")
+    assert len(scenes) == 2
+    rgb = Path(scenes[0].image)
+    rgb.unlink()
+    rgb.symlink_to(rgb.name)                       # rgb.png -> rgb.png
+    scenes = find_captures(tmp_path / "cap")       # does not raise
+    assert len(scenes) == 2
+    out = process_capture_scene(scenes[0], CaptureSpec(radar="ti-mmwcas", poses={"frames": 1}),
+                                str(tmp_path / "store"))
+    assert out.status == "failed"
+    assert "rgb.png" in out.error and "symlink" in out.error and "loop" in out.error
+    assert Path(scenes[1].image).is_file()
