@@ -73,6 +73,7 @@ def stage_table(outcomes: list[Outcome]) -> list[dict[str, Any]]:
                "points_per_frame": round(sum(pts) / len(pts), 1) if pts else None}
         for stage in steps.CAPTURE_STAGES + ("total",):
             row[f"{stage}_s"] = round(o.timings_s[stage], 3) if stage in o.timings_s else None
+        row["fallbacks"] = int(o.measured.get("fallbacks", 0))
         row["error"] = o.error
         rows.append(row)
     return rows

@@ -53,7 +53,8 @@ __all__ = ["generate_dataset_flow", "generate_dataset", "generate_dataset_job", 
 
 
 class DatasetFailures(RuntimeError):
-    """Raised by a ``strict`` run when a world or frame failed; ``.summary`` has the details."""
+    """Raised by a ``strict`` run when a world or frame failed or a material fell back;
+    ``.summary`` has the details."""
 
     def __init__(self, summary: dict[str, Any]) -> None:
         lines = []
@@ -63,7 +64,11 @@ class DatasetFailures(RuntimeError):
             lines.append(f"{w['id']}: {w['error']}")
             lines += [f"  {f['id']}: {f['error']}" for f in w["parts"]
                       if f["status"] == "failed"]
-        super().__init__(f"{summary['counts']['failed']} world(s) failed:\n" + "\n".join(lines))
+        fb = (summary.get("fallbacks") or {}).get("segments", 0)
+        head = f"{summary['counts']['failed']} world(s) failed"
+        if fb:
+            head += f", {fb} segment material(s) fell back to unknown"
+        super().__init__(f"{head}:\n" + "\n".join(lines))
         self.summary = summary
 
 
@@ -87,6 +92,7 @@ def world_table(outcomes: list[Outcome]) -> list[dict[str, Any]]:
         for stage in sorted({s for f in o.parts for s in f.timings_s}):
             row[f"{stage}_s"] = round(sum(f.timings_s.get(stage, 0.0) for f in o.parts), 3)
         row["total_s"] = round(o.timings_s.get("total", 0.0), 3)
+        row["fallbacks"] = int(o.measured.get("fallbacks", 0))
         row["error"] = o.error
         rows.append(row)
     return rows
@@ -177,7 +183,7 @@ def generate_dataset_flow(
         logger.info("exported to %s: %s", export_dir, summary["export"])
     logger.info("generate-dataset: worlds %s, frames %s into %s (dataset %s)",
                 summary["counts"], summary["frame_counts"], st.root, dataset)
-    if strict and summary["counts"]["failed"]:
+    if strict and (summary["counts"]["failed"] or summary["fallbacks"]["segments"]):
         raise DatasetFailures(summary)
     return summary
 

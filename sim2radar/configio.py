@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import importlib.resources
 import math
+import reprlib
 from pathlib import Path
 from typing import Any
 
@@ -74,6 +75,64 @@ def config_path(name_or_path: str | Path, kind: str, *, what: str = "config") ->
     return path
 
 
+#: The most values (scalars, lists, mappings) a YAML document may hold once its aliases
+#: (``*name`` of an ``&name`` anchor) are expanded: a 1 KB "billion laughs" document of nested
+#: aliases expands to ~10^9 and took 3-4 GB while error messages were built.
+MAX_YAML_VALUES = 200_000
+#: The largest YAML file read [bytes] (configs and scene files are kilobytes).
+MAX_YAML_BYTES = 16 * 1024 * 1024
+
+
+class YamlTooLargeError(yaml.YAMLError):
+    """A YAML document over :data:`MAX_YAML_BYTES` or whose aliases expand past
+    :data:`MAX_YAML_VALUES` values (a ``yaml.YAMLError``: callers report it as invalid YAML,
+    naming the file)."""
+
+
+def _expanded_values(doc: Any, limit: int) -> int:
+    """How many values ``doc`` holds with every alias expanded (shared lists and mappings
+    counted once per reference), stopping early past ``limit``; computed once per distinct
+    object, so a bomb costs a few microseconds, not its expansion."""
+    memo: dict[int, int] = {}
+
+    def size(x: Any) -> int:
+        if not isinstance(x, list | dict):
+            return 1
+        known = memo.get(id(x))
+        if known is not None:
+            return known
+        memo[id(x)] = limit + 1  # a cycle (a self-referencing anchor) counts as too large
+        items = list(x.keys()) + list(x.values()) if isinstance(x, dict) else x
+        total = 1
+        for item in items:
+            total += size(item)
+            if total > limit:
+                break
+        memo[id(x)] = total
+        return total
+
+    try:
+        return size(doc)
+    except RecursionError:
+        return limit + 1
+
+
+def load_yaml(text: str | bytes) -> Any:
+    """``yaml.safe_load`` with limits checked before anything uses the document: at most
+    :data:`MAX_YAML_BYTES` of text and :data:`MAX_YAML_VALUES` values once aliases are
+    expanded (:class:`YamlTooLargeError`, a ``yaml.YAMLError``, otherwise)."""
+    if len(text) > MAX_YAML_BYTES:
+        raise YamlTooLargeError(f"the file has {len(text)} bytes, more than the "
+                                f"{MAX_YAML_BYTES} a YAML config or scene file may have")
+    doc = yaml.safe_load(text)
+    if _expanded_values(doc, MAX_YAML_VALUES) > MAX_YAML_VALUES:
+        raise YamlTooLargeError(
+            f"its aliases (*name of an &name anchor) expand to more than {MAX_YAML_VALUES} "
+            "values (a 'billion laughs' document?) or refer to themselves; write the values "
+            "out instead of nesting aliases")
+    return doc
+
+
 def read_yaml_mapping(
     path: str | Path,
     *,
@@ -96,14 +155,30 @@ def read_yaml_mapping(
     if not path.is_file():
         raise (missing_error or error)(f"{path}: {what} not found")
     try:
-        doc = yaml.safe_load(path.read_text())
+        doc = load_yaml(path.read_text())
     except yaml.YAMLError as exc:
-        raise error(f"{path}: invalid YAML: {exc}") from None
+        raise error(f"{path}: invalid YAML: {short_text(exc)}") from None
     if doc is None:
         return {}
     if not isinstance(doc, dict):
         raise error(f"{path}: expected {expect} at the top level, got {type(doc).__name__}")
     return doc
+
+
+def short_text(value: Any, limit: int = 200) -> str:
+    """``str(value)`` cut to ``limit`` characters (error messages quote user values, which can
+    be huge)."""
+    text = str(value)
+    return text if len(text) <= limit else f"{text[:limit]}... ({len(text)} characters)"
+
+
+def short_repr(value: Any, limit: int = 80) -> str:
+    """``repr(value)`` of a user value for an error message, cut to ``limit`` characters; a
+    large list or mapping is described by its type and length, never rendered whole."""
+    if isinstance(value, list | tuple | dict | set) and len(value) > 20:
+        return f"<a {type(value).__name__} of {len(value)} items>"
+    text = reprlib.repr(value)
+    return text if len(text) <= limit else text[:limit] + "..."
 
 
 def whole_number(value: Any, path: str | Path, field: str, *, minimum: int | None = None,
@@ -119,10 +194,10 @@ def whole_number(value: Any, path: str | Path, field: str, *, minimum: int | Non
     ok = isinstance(value, int) or (isinstance(value, float) and value.is_integer())
     if isinstance(value, bool) or not ok:
         example = example if example is not None else max(minimum or 0, 1)
-        raise ValueError(f"{path}: {field}: must be a whole number, got {value!r}; "
+        raise ValueError(f"{path}: {field}: must be a whole number, got {short_repr(value)}; "
                          f"write e.g. '{field}: {example}'")
     if minimum is not None and value < minimum:
-        raise ValueError(f"{path}: {field}: must be >= {minimum}, got {value!r}")
+        raise ValueError(f"{path}: {field}: must be >= {minimum}, got {short_repr(value)}")
     return int(value)
 
 
@@ -138,6 +213,6 @@ def real_number(value: Any, path: str | Path, field: str, *, unit: str = "",
     ok = isinstance(value, int | float) and not isinstance(value, bool)
     if not ok or not math.isfinite(value):
         unit = f" [{unit}]" if unit else ""
-        raise ValueError(f"{path}: {field}: must be a number{unit}, got {value!r}; "
+        raise ValueError(f"{path}: {field}: must be a number{unit}, got {short_repr(value)}; "
                          f"write e.g. '{field}: {example}'")
     return float(value)

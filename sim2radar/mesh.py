@@ -29,6 +29,8 @@ from pathlib import Path
 import numpy as np
 import yaml
 
+from sim2radar.configio import load_yaml, short_text
+
 __all__ = ["MaterialMesh", "MeshFileError", "load_mesh", "load_scene", "save_ply", "box_mesh",
            "cylinder_arrays", "cylinder_mesh"]
 
@@ -410,9 +412,9 @@ def load_scene(path: str | Path) -> list[MaterialMesh]:
     if not path.is_file():
         raise MeshFileError(f"{path}: scene file not found")
     try:
-        doc = yaml.safe_load(path.read_text())
+        doc = load_yaml(path.read_text())
     except yaml.YAMLError as exc:
-        raise MeshFileError(f"{path}: invalid YAML: {exc}") from exc
+        raise MeshFileError(f"{path}: invalid YAML: {short_text(exc)}") from None
     if not isinstance(doc, dict) or not isinstance(doc.get("meshes"), list) or not doc["meshes"]:
         raise MeshFileError(
             f"{path}: expected a mapping with a non-empty 'meshes' list, "

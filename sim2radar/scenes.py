@@ -29,6 +29,7 @@ import glob
 import hashlib
 import logging
 import os
+import reprlib
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -36,6 +37,7 @@ import numpy as np
 import yaml
 
 from sim2radar.boxes import boxes_to_frame
+from sim2radar.configio import load_yaml, short_text
 from sim2radar.mesh import MaterialMesh, MeshFileError, load_scene
 
 __all__ = [
@@ -235,7 +237,7 @@ def load_scene_file(path: str | Path, *, validate_materials: bool = True) -> Sce
     """
     path = Path(path)
     meshes = load_scene(path)  # validates the file, the mesh entries and the mesh files
-    doc = yaml.safe_load(path.read_text())
+    doc = load_yaml(path.read_text())
     allowed = {"name", "meshes", "radar_poses", "boxes", "description"}
     unknown = set(doc) - allowed
     if unknown:
@@ -277,9 +279,9 @@ def scene_digest(path: str | Path) -> str:
     h = hashlib.sha256()
     h.update(b"scene-yaml\0" + raw)
     try:
-        doc = yaml.safe_load(raw)
+        doc = load_yaml(raw)
     except yaml.YAMLError as exc:
-        raise MeshFileError(f"{path}: invalid YAML: {exc}") from exc
+        raise MeshFileError(f"{path}: invalid YAML: {short_text(exc)}") from None
     entries = doc.get("meshes", []) if isinstance(doc, dict) else []
     for entry in entries if isinstance(entries, list) else []:
         if isinstance(entry, dict) and entry.get("file"):
@@ -293,15 +295,24 @@ def scene_digest(path: str | Path) -> str:
 
 
 def scene_id_for(scene_path: str | os.PathLike) -> str:
-    """The scene's id: the YAML ``name`` field if the file parses, else the file stem.
+    """The scene's id: the YAML ``name`` field if the file parses and the name can be an id
+    (:func:`sim2radar.storage.manifest.id_problem`: printable, no path separator, at most 120
+    characters; else one warning), otherwise the file stem.
 
     Never raises, so a broken scene still gets a manifest row under a stable id.
     """
+    from sim2radar.storage.manifest import id_problem
+
     path = Path(scene_path)
     try:
-        doc = yaml.safe_load(path.read_text())
+        doc = load_yaml(path.read_text())
         if isinstance(doc, dict) and isinstance(doc.get("name"), str) and doc["name"].strip():
-            return doc["name"].strip()
+            name = doc["name"].strip()
+            problem = id_problem(name)
+            if problem is None:
+                return name
+            log.warning("%s: name %s cannot be a scene id (%s); using the file name %r",
+                        path, reprlib.repr(name), problem, path.stem)
     except (OSError, yaml.YAMLError, UnicodeDecodeError):
         pass
     return path.stem

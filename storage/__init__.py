@@ -42,6 +42,7 @@ from sim2radar.storage.manifest import STATUSES, Manifest
 from sim2radar.storage.provenance import (
     PROVENANCE_KEY,
     build_provenance,
+    combine_provisional,
     model_file_hashes,
     package_versions,
 )
@@ -80,6 +81,7 @@ __all__ = [
     "schema_names",
     "PROVENANCE_KEY",
     "build_provenance",
+    "combine_provisional",
     "model_file_hashes",
     "package_versions",
     "ragged_column",

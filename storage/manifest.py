@@ -34,21 +34,50 @@ from sim2radar.storage.integrity import is_corrupt_file_error
 from sim2radar.storage.schemas import MANIFEST
 from sim2radar.vocab import STATUSES
 
-__all__ = ["MANIFESTS", "Manifest", "STATUSES", "check_dataset_name"]
+__all__ = ["MANIFESTS", "MAX_ID_LENGTH", "MAX_NAME_LENGTH", "Manifest", "STATUSES",
+           "check_dataset_name", "id_problem"]
 
 #: folder of the store root that holds one folder of row files per dataset
 MANIFESTS = "manifests"
 _DATASET_RE = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]*$")
 
 
+#: The longest dataset name, and the longest scene / frame id (a file name holds a frame id
+#: and a suffix; file systems stop at 255 bytes).
+MAX_NAME_LENGTH = 100
+MAX_ID_LENGTH = 120
+
+
 def check_dataset_name(dataset: str) -> str:
     """``dataset``, if it is a valid dataset name (one folder name: letters, digits, ``_ . -``,
-    not starting with a dot); ValueError otherwise."""
+    not starting with a dot, at most :data:`MAX_NAME_LENGTH` characters); ValueError
+    otherwise."""
     if not isinstance(dataset, str) or not _DATASET_RE.match(dataset):
         raise ValueError(
             f"dataset name must match {_DATASET_RE.pattern} (letters, digits, _ . -), got {dataset!r}"
         )
+    if len(dataset) > MAX_NAME_LENGTH:
+        raise ValueError(f"dataset name must be at most {MAX_NAME_LENGTH} characters, got "
+                         f"{len(dataset)} ({dataset[:40]!r}...)")
     return dataset
+
+
+def id_problem(name: str) -> str | None:
+    """Why ``name`` cannot be a scene or frame id (None when it can): ids become file names
+    and lines of OpenPCDet's ``ImageSets/*.txt``, so they must be printable (no newline, tab or
+    other control character), hold no path separator, not be ``.`` / ``..`` and be at most
+    :data:`MAX_ID_LENGTH` characters. Spaces and non-ASCII letters are fine."""
+    if not isinstance(name, str) or not name.strip():
+        return "an id must not be empty or blank"
+    if not name.isprintable():
+        return "an id must be printable: no newline, tab or other control character"
+    if "/" in name or "\\" in name or name in (".", ".."):
+        return "an id must not hold a path separator or be '.' / '..'"
+    if name != name.strip():
+        return "an id must not start or end with whitespace"
+    if len(name) > MAX_ID_LENGTH:
+        return f"an id must be at most {MAX_ID_LENGTH} characters, this one has {len(name)}"
+    return None
 
 
 def _row_name(scene_id: str) -> str:
@@ -94,10 +123,12 @@ class Manifest:
         artifacts: Mapping[str, str] | None = None,
         timings_s: Mapping[str, float] | None = None,
         source: str = "",
+        fallbacks: int = 0,
     ) -> dict[str, Any]:
         """Insert or replace the row of ``scene_id``; returns the row as a dict.
 
-        ``attempts`` counts how many runs recorded this scene (incremented here).
+        ``attempts`` counts how many runs recorded this scene (incremented here); ``fallbacks``
+        the segments whose material fell back in what the scene was made from.
         """
         if status not in STATUSES:
             raise ValueError(f"manifest status must be one of {STATUSES}, got {status!r}")
@@ -113,6 +144,7 @@ class Manifest:
             "source": str(source or ""),
             "attempts": (previous["attempts"] if previous else 0) + 1,
             "updated_utc": datetime.now(UTC),
+            "fallbacks": int(fallbacks),
         }
         table = pa.Table.from_pylist(
             [
@@ -145,6 +177,11 @@ class Manifest:
                 raise  # an I/O error (worth the store's retries), not a damaged file
             self.store.quarantine(path, f"manifest row not readable: {' '.join(str(exc).split())}")
             return None
+        if "fallbacks" not in table.column_names and table.column_names == [
+                n for n in MANIFEST.schema.names if n != "fallbacks"]:
+            # a v1 row (written before fallbacks were counted): none were recorded
+            table = table.append_column(MANIFEST.schema.field("fallbacks"),
+                                        pa.array([0] * table.num_rows, pa.int32()))
         MANIFEST.check_file_schema(table.schema, path)
         return table
 

@@ -23,7 +23,8 @@ from typing import Any
 
 from sim2radar.storage.keys import _normalise, file_digest
 
-__all__ = ["PROVENANCE_KEY", "package_versions", "build_provenance", "model_file_hashes"]
+__all__ = ["PROVENANCE_KEY", "package_versions", "build_provenance", "model_file_hashes",
+           "combine_provisional"]
 
 #: Parquet key-value metadata key holding the provenance JSON.
 PROVENANCE_KEY = b"sim2radar.provenance"
@@ -89,3 +90,14 @@ def build_provenance(
     doc["created_utc"] = datetime.now(UTC).strftime("%Y-%m-%dT%H:%M:%S.%fZ")
     doc["host"] = socket.gethostname()
     return doc
+
+
+def combine_provisional(records) -> dict[str, Any] | None:
+    """The ``provisional`` record of an artifact made from several inputs (e.g. a radar frame
+    from a scene fused with its views), from theirs (None: a result): fallbacks summed, the
+    first reason kept; None when no input was provisional."""
+    records = [r for r in records if r]
+    if not records:
+        return None
+    return {"fallbacks": sum(int(r.get("fallbacks", 0)) for r in records),
+            "reason": str(records[0].get("reason", ""))}

@@ -140,8 +140,10 @@ def reconstruction_keys(inputs: dict[str, str], config: dict,
 
 def write_scene_artifacts(store, scene, *, inputs: dict[str, str], config: dict,
                           camera_to_target: np.ndarray | None = None, seed: int | None = None,
-                          stage_version: int = 1) -> dict[str, str]:
-    """Write both artifacts of ``scene`` (skipping any that exist) and return stage -> key.
+                          stage_version: int = 1,
+                          provisional: dict | None = None) -> dict[str, str]:
+    """Write both artifacts of ``scene`` (skipping any that are cached) and return stage -> key;
+    ``provisional`` (its materials fell back, :meth:`ArtifactStore.write`) marks both.
 
     Parameters
     ----------
@@ -153,10 +155,11 @@ def write_scene_artifacts(store, scene, *, inputs: dict[str, str], config: dict,
     frame_cfg = None if camera_to_target is None else "target"
     tables = None
     for stage, key in keys.items():
-        if store.exists(stage, key):
+        if store.cached(stage, key):
             continue
         tables = tables or scene_to_tables(scene, camera_to_target)
         store.write(stage, key, tables[stage], stage_version=stage_version,
+                    provisional=provisional,
                     provenance={"inputs": inputs, "config": config, "seed": seed,
                                 "timings_s": dict(scene.timings_s),
                                 "extra": {"frame": frame_cfg or "level",

@@ -276,9 +276,9 @@ RADAR_POINTS = register_schema(
 MANIFEST = register_schema(
     ArtifactSchema(
         stage="manifest",
-        version=1,
+        version=2,
         row="one scene of a dataset",
-        description="per-dataset run record: status, error, artifact keys, timings",
+        description="per-dataset run record: status, error, artifact keys, timings, fallbacks",
         schema=pa.schema(
             [
                 field("scene_id", pa.string(), doc="scene identifier within the dataset"),
@@ -293,6 +293,10 @@ MANIFEST = register_schema(
                 field("source", pa.string(), doc="where the scene came from (file path / URI)"),
                 field("attempts", pa.int32(), doc="how many runs have processed this scene"),
                 field("updated_utc", pa.timestamp("ms", tz="UTC"), doc="last update"),
+                field("fallbacks", pa.int32(),
+                      doc="segments whose material fell back to unknown in the geometry this "
+                          "row was made from (its artifacts are provisional: the next run "
+                          "computes them again); 0 for v1 rows"),
             ]
         ),
     )

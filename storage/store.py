@@ -172,6 +172,25 @@ class ArtifactStore(FileRoot):
         verify is quarantined, not only the first)."""
         return all([self.exists(stage, key) for stage, key in keys.items()])
 
+    def provisional(self, stage: str, key: str) -> dict[str, Any] | None:
+        """The ``provisional`` record of an artifact written from a fallback (``{"fallbacks":
+        n, "reason": ...}``, see :meth:`write`), or None for a result (and for an artifact
+        that is not there)."""
+        if not self.exists(stage, key):
+            return None
+        return self.read_provenance(stage, key).get("provisional") or None
+
+    def cached(self, stage: str, key: str) -> bool:
+        """Whether a step may skip computing ``(stage, key)``: the artifact exists, verifies and
+        is a result, not a provisional stand-in written from a fallback (a VLM outage's
+        ``unknown`` materials and everything simulated from them are computed again)."""
+        return self.exists(stage, key) and not (
+            self.read_provenance(stage, key).get("provisional"))
+
+    def all_cached(self, keys: Mapping[str, str]) -> bool:
+        """``cached`` for every ``stage -> key`` (each one checked, like :meth:`all_exist`)."""
+        return all([self.cached(stage, key) for stage, key in keys.items()])
+
     def verify(self, stage: str, key: str, *, deep: bool = True) -> str | None:
         """What is wrong with a published artifact (None when it reads; ``deep`` decodes every
         page, otherwise only the footer is checked). Moves nothing."""
@@ -229,6 +248,7 @@ class ArtifactStore(FileRoot):
         *,
         provenance: Mapping[str, Any] | None = None,
         stage_version: int | None = None,
+        provisional: Mapping[str, Any] | None = None,
     ) -> str:
         """Validate ``table`` against the stage's declared schema and publish it atomically.
 
@@ -245,6 +265,11 @@ class ArtifactStore(FileRoot):
             added here.
         stage_version : int, optional
             The stage version that went into ``key`` (recorded for humans).
+        provisional : mapping, optional
+            ``{"fallbacks": n, "reason": str}`` when the artifact stands in for a result this
+            run could not get (a fallback, e.g. ``on_error: unknown`` materials) or was made
+            from one: it is stored (this run goes on with it) but :meth:`cached` says False, so
+            the next run computes it again instead of keeping the fallback for good.
 
         Returns
         -------
@@ -260,6 +285,9 @@ class ArtifactStore(FileRoot):
             key=key,
             provenance=provenance,
         )
+        if provisional:
+            doc["provisional"] = {"fallbacks": int(provisional.get("fallbacks", 0)),
+                                  "reason": str(provisional.get("reason", ""))}
         meta = dict(table.schema.metadata or {})
         meta[PROVENANCE_KEY] = json.dumps(doc, sort_keys=True).encode()
         meta[SCHEMA_KEY] = f"{stage}:{schema.version}".encode()

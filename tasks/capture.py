@@ -110,6 +110,16 @@ def _geometry(st, keys: dict) -> tuple[Any, np.ndarray, dict]:
     return RadarScene(meshes), boxes, rec
 
 
+def _geometry_provisional(st, keys: dict) -> dict | None:
+    """The ``provisional`` record of the scene's geometry: its reconstruction's and its
+    views' (materials that fell back), None when all are results."""
+    from sim2radar.storage import combine_provisional
+
+    return combine_provisional(
+        [st.provisional("reconstruction", keys["reconstruction"]),
+         *(st.provisional("reconstruction", v["reconstruction"]) for v in keys.get("views", ()))])
+
+
 def poses_stage(scene: CaptureScene, spec: CaptureSpec, store: str, keys: dict) -> dict:
     """Radar poses of the scene in its reconstructed free space
     (:func:`sim2radar.factory.captures.sample_radar_poses`); returns ``{"poses": (F, 4, 4)
@@ -193,7 +203,7 @@ def simulate_stage(scene: CaptureScene, spec: CaptureSpec, store: str, keys: dic
                              "reconstruction/scene_meshes": keys["scene_meshes"],
                              "reconstruction/reconstruction": keys["reconstruction"]})
         try:
-            if not force and st.exists("dataset_frames", key):
+            if not force and st.cached("dataset_frames", key):
                 df = read_dataset_frame(st, key)
             else:
                 if radar_scene is None:
@@ -201,8 +211,12 @@ def simulate_stage(scene: CaptureScene, spec: CaptureSpec, store: str, keys: dic
                 df = capture_frame(radar_scene, boxes, np.asarray(pose), spec,
                                    scene_id=scene.scene_id, frame_index=k,
                                    radar_seed=frame_seed(spec.seed, sseed, k), scene_seed=-1)
+                provisional = _geometry_provisional(st, keys)
+                if provisional:  # made from fallback materials: made again next run
+                    df.stats.setdefault("reconstruction", {}).update(
+                        provisional=provisional, material_fallbacks=provisional["fallbacks"])
                 st.write("dataset_frames", key, dataset_frame_to_table(df),
-                         stage_version=DATASET_STAGE_VERSION,
+                         stage_version=DATASET_STAGE_VERSION, provisional=provisional,
                          provenance={"inputs": {s: keys[s] for s in ("scene_meshes",
                                                                    "reconstruction")},
                                      "config": {"radar": spec.radar.to_dict(),
@@ -231,7 +245,7 @@ def _cached_frames(scene: CaptureScene, spec: CaptureSpec, store: str,
     n = spec.poses.frames if given is None else len(given)
     frame_keys = [capture_frame_key(keys, scene.scene_id, k, spec, yaml_digest)
                   for k in range(n)]
-    if not all(st.exists("dataset_frames", key) for key in frame_keys):
+    if not all(st.cached("dataset_frames", key) for key in frame_keys):
         return None
     return simulate_stage(scene, spec, store, keys, [None] * n, list(range(n)))
 
@@ -300,6 +314,9 @@ def process_capture_scene(scene: CaptureScene, spec: CaptureSpec, store: str, *,
         log.error("%s [%s] failed: %s: %s", scene.scene_id, current[0], type(exc).__name__, exc)
         out.status, out.error = "failed", f"[{current[0]}] {type(exc).__name__}: {exc}"
     out.timings_s["total"] = time.perf_counter() - t0
+    # segments whose material fell back (the scene's and its views'): its frames are provisional
+    out.measured["fallbacks"] = max((int(f.measured.get("fallbacks", 0)) for f in out.parts),
+                                    default=0)
     if out.status != "failed":
         computed |= any(f.status == "ok" for f in out.parts)
         n_failed = sum(f.status == "failed" for f in out.parts)

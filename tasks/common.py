@@ -23,6 +23,7 @@ __all__ = [
     "FRAME_ROW",
     "Outcome",
     "count_statuses",
+    "count_fallbacks",
     "record",
     "run_plain",
     "summarize",
@@ -119,16 +120,30 @@ def count_statuses(outcomes: Iterable[Outcome]) -> dict[str, int]:
     return {s: statuses.count(s) for s in STATUSES}
 
 
+def count_fallbacks(outcomes: Iterable[Outcome]) -> dict[str, int]:
+    """``{"segments": n, "frames": n, "scenes": n}``: segments whose material fell back to
+    ``unknown`` (a VLM outage, an unusable answer; :attr:`MaterialLabel.fallback`), frames and
+    scenes made from them. Their artifacts are provisional: the next run computes them again,
+    ``generate --strict`` fails on any."""
+    outcomes = list(outcomes)
+    return {"segments": sum(int(o.measured.get("fallbacks", 0)) for o in outcomes),
+            "frames": sum(int(p.measured.get("fallbacks", 0)) > 0
+                          for o in outcomes for p in o.parts),
+            "scenes": sum(int(o.measured.get("fallbacks", 0)) > 0 for o in outcomes)}
+
+
 def record(store: str | os.PathLike | ArtifactStore, dataset: str, outcome: Outcome) -> list[dict]:
     """Upsert the outcome's manifest row and one row per part (frame); returns the rows."""
     m = open_store(store).manifest(dataset)
     rows = [m.upsert(outcome.id, outcome.status, error=outcome.error,
                      artifacts=outcome.artifacts, timings_s=outcome.timings_s,
-                     source=outcome.source)]
+                     source=outcome.source,
+                     fallbacks=int(outcome.measured.get("fallbacks", 0)))]
     for p in outcome.parts:
         rows.append(m.upsert(p.id, p.status, error=p.error, artifacts=p.artifacts,
                              timings_s=p.timings_s, source=p.source or
-                             f"{outcome.source} frame={p.index}"))
+                             f"{outcome.source} frame={p.index}",
+                             fallbacks=int(p.measured.get("fallbacks", 0))))
     return rows
 
 
@@ -141,7 +156,8 @@ def summarize(store: str | os.PathLike | ArtifactStore, dataset: str,
     """
     st = open_store(store)
     summary: dict[str, Any] = {"store": st.root, "dataset": dataset,
-                               "counts": count_statuses(outcomes)}
+                               "counts": count_statuses(outcomes),
+                               "fallbacks": count_fallbacks(outcomes)}
     summary["outcomes"] = [o.to_dict() for o in outcomes]
     summary["manifest"] = st.join(MANIFESTS, dataset)
     summary.update(extra)

@@ -161,13 +161,18 @@ def _world_frame_source(frame, world_id: str, spec: DatasetSpec):
                        camera_to_target=cam_to_radar, ground_truth=frame, seed=frame.seed)
 
 
+def _stored_keys(frame, spec) -> dict[str, str]:
+    """The keys of a world frame's reconstruction in its rig's radar frame."""
+    cam_to_radar = np.linalg.inv(frame.radar_to_world) @ frame.camera_to_world
+    return _reconstruction_keys(frame, cam_to_radar, spec.reconstruction)
+
+
 def _stored_view(frame, store, spec) -> tuple[list, np.ndarray, dict, dict[str, str]]:
     """A world frame's reconstruction from the store, in its rig's radar frame: meshes, door
     boxes, the reconstruction record and its keys."""
     from sim2radar.storage.reconstruction import read_reconstruction
 
-    cam_to_radar = np.linalg.inv(frame.radar_to_world) @ frame.camera_to_world
-    rkeys = _reconstruction_keys(frame, cam_to_radar, spec.reconstruction)
+    rkeys = _stored_keys(frame, spec)
     meshes = meshes_from_table(store.read("scene_meshes", rkeys["scene_meshes"]))
     rec = read_reconstruction(store, rkeys["reconstruction"])
     return meshes, np.asarray(rec["door_boxes"], np.float32).reshape(-1, 7), rec, rkeys
@@ -180,9 +185,17 @@ def _reconstructed_frame(frame, world_id, world_scene, store, spec, radar_seed,
     ``earlier_frames`` (the previous frames of its trajectory, most recent first,
     ``reconstruction.fusion.frames`` of them; :func:`sim2radar.reconstruct.fusion.fuse_views`)."""
     from sim2radar.factory.pipeline import reconstructed_frame
+    from sim2radar.storage import combine_provisional
 
     meshes, boxes, rec, rkeys = _stored_view(frame, store, spec)
     info = {"fallbacks": rec["info"].get("fallbacks", []), "cached": not fresh}
+    own = store.provisional("reconstruction", rkeys["reconstruction"])
+    fused_in = [store.provisional("reconstruction",
+                                  _stored_keys(f, spec)["reconstruction"]) for f in earlier_frames]
+    provisional = combine_provisional([own, *fused_in])
+    if provisional:  # built on fallback materials: stored provisional, made again next run
+        info["provisional"] = provisional
+        info["material_fallbacks"] = int((own or {}).get("fallbacks", 0))
     if fresh:
         info["n_segments"] = len(rec["segment_labels"])
     if earlier_frames:
@@ -221,7 +234,7 @@ def _upstream_verifies(st: ArtifactStore, rkeys: dict[str, str], spec) -> bool:
     from sim2radar.reconstruct.pipeline import STAGE_VERSION
     from sim2radar.storage.reconstruction import stage_keys
 
-    if not st.all_exist(rkeys):
+    if not st.all_cached(rkeys):
         return False
     if "reconstruction" not in rkeys:
         return True
@@ -229,8 +242,8 @@ def _upstream_verifies(st: ArtifactStore, rkeys: dict[str, str], spec) -> bool:
     steps = stage_keys(inputs, spec.reconstruction.to_dict(), stage_version=STAGE_VERSION)
     # (stage_keys' own scene_meshes / reconstruction keys are for the camera frame; the
     # frame's, in the radar frame, are rkeys)
-    return st.all_exist({s: steps[s] for s in ("depth_maps", "segmentations",
-                                               "material_labels")})
+    return st.all_cached({s: steps[s] for s in ("depth_maps", "segmentations",
+                                                "material_labels")})
 
 
 class _WorldInputs:
@@ -267,8 +280,21 @@ class _WorldInputs:
         self._radar_scene = None
 
 
+def frame_provisional(df: DatasetFrame) -> dict | None:
+    """The ``provisional`` record of a dataset frame simulated from a reconstruction whose
+    materials fell back (its own or a view fused into it), else None."""
+    return (df.stats.get("reconstruction") or {}).get("provisional")
+
+
 def _fill_frame_outcome(fo: Outcome, df: DatasetFrame) -> None:
     from sim2radar.evaluate.dataset import frame_measures
+
+    provisional = frame_provisional(df)
+    if provisional:  # segments that fell back in the geometry this frame was simulated from
+        fo.measured["fallbacks"] = max(int(fo.measured.get("fallbacks", 0)),
+                                       int(provisional["fallbacks"]))
+        own = int((df.stats.get("reconstruction") or {}).get("material_fallbacks", 0))
+        fo.measured["own_fallbacks"] = max(int(fo.measured.get("own_fallbacks", 0)), own)
 
     for name, value in frame_measures(df, LABEL_IOU_THRESHOLD).items():
         if isinstance(value, dict):
@@ -352,13 +378,14 @@ def generate_world_dataset(
     # cached frames are read back; the others get their reconstruction steps (per frame) ...
     todo: dict[str, list[int]] = {g: [] for g in spec.geometries}
     fresh: dict[int, bool] = {}
+    stepped: set[int] = set()
     for k, fo in enumerate(frames_out):
         fo.artifacts.update({f"world/{s}": v for s, v in keys.items()})
         for geometry in spec.geometries:
             key = frame_key(keys, k, geometry, spec)
             fo.artifacts[f"dataset_frames/{geometry}"] = key
             try:
-                if not force and st.exists("dataset_frames", key):
+                if not force and st.cached("dataset_frames", key):
                     df = read_dataset_frame(st, key)
                     rkeys = df.stats.get("reconstruction_keys") or {}
                     if _upstream_verifies(st, rkeys, spec):
@@ -369,8 +396,10 @@ def generate_world_dataset(
                     # this frame's reconstruction and those fused into it
                     for i in (k, *_earlier_indices(k, spec)):
                         src = _world_frame_source(inputs.frames()[i], world_id, spec)
-                        if not st.all_exist(src.keys):
+                        # once per run: a provisional (fallback) one is asked again, not twice
+                        if i not in stepped and not st.all_cached(src.keys):
                             steps = reconstruction_steps(src, spec.reconstruction, st, run)
+                            stepped.add(i)
                             fresh[i] = fresh.get(i, False) or steps["scene"].status == "ok"
                 todo[geometry].append(k)
             except Exception as exc:  # noqa: BLE001 - one broken frame must not stop the rest
@@ -403,8 +432,10 @@ def generate_world_dataset(
     n_failed = sum(f.status == "failed" for f in frames_out)
     status = "failed" if n_failed else ("ok" if computed_any else "skipped")
     error = f"{n_failed} of {len(frames_out)} frame(s) failed" if n_failed else ""
+    # segments whose material fell back, over the world's frames' own reconstructions
+    measured = {"fallbacks": sum(int(f.measured.get("own_fallbacks", 0)) for f in frames_out)}
     return Outcome(world_id, status, error, keys, timings, world_source(seed), int(seed),
-                   parts=frames_out)
+                   measured=measured, parts=frames_out)
 
 
 def render_world(seed: int, n_frames: int, store, spec: DatasetSpec):
@@ -431,7 +462,8 @@ def simulate_world_frames(inputs: _WorldInputs, jobs: list[tuple[int, str, bool]
             df, rkeys = _simulate_world_frame(inputs, k, geometry, world_id, store, spec, fresh)
             store.write("dataset_frames", key, dataset_frame_to_table(df),
                         stage_version=DATASET_STAGE_VERSION,
-                        provenance=_provenance(spec, inputs.keys, df, geometry, rkeys))
+                        provenance=_provenance(spec, inputs.keys, df, geometry, rkeys),
+                        provisional=frame_provisional(df))
             out.append((k, df, rkeys, ""))
         except Exception as exc:  # noqa: BLE001 - one broken frame must not stop the rest
             out.append((k, None, {}, f"{type(exc).__name__}: {exc}"))

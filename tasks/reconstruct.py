@@ -96,6 +96,7 @@ def reconstruct_image(
     """
     from sim2radar.reconstruct import FrameInput, ReconstructionConfig, reconstruct
     from sim2radar.storage.reconstruction import reconstruction_keys, write_scene_artifacts
+    from sim2radar.tasks.steps import material_fallbacks
 
     t0 = time.perf_counter()
     st = open_store(store)
@@ -103,7 +104,7 @@ def reconstruct_image(
     cfg_dict = cfg.to_dict()
     rgb, k, pts, rig, note, inputs = _inputs(job)
     keys = reconstruction_keys(inputs, cfg_dict, stage_version=RECONSTRUCTION_STAGE_VERSION)
-    if not force and st.all_exist(keys):
+    if not force and st.all_cached(keys):  # a provisional (fallback) scene is made again
         return Outcome(job.name, "skipped", artifacts=keys, source=job.image,
                        timings_s={"total": time.perf_counter() - t0})
     if force:
@@ -112,8 +113,10 @@ def reconstruct_image(
     scene = reconstruct(FrameInput(rgb, k, pts, name=job.name, **rig), cfg, backends=backends)
     if note:
         scene.info["fallbacks"].append(note)
+    provisional = material_fallbacks(scene.segment_materials)
     written = write_scene_artifacts(st, scene, inputs=inputs, config=cfg_dict,
-                                    stage_version=RECONSTRUCTION_STAGE_VERSION)
+                                    stage_version=RECONSTRUCTION_STAGE_VERSION,
+                                    provisional=provisional)
     if out_dir:
         scene.write_scene(Path(out_dir) / "scenes" / job.name)
     if out_dir or sheet_dir:
@@ -127,7 +130,8 @@ def reconstruct_image(
     return Outcome(job.name, "ok", artifacts=written, timings_s=timings, source=job.image,
                    measured={"summary": jsonable({"segments": labels, "meshes": len(scene.meshes),
                                           "door_boxes": len(scene.door_boxes),
-                                          "fallbacks": scene.info["fallbacks"]})})
+                                          "fallbacks": scene.info["fallbacks"]}),
+                             "fallbacks": (provisional or {}).get("fallbacks", 0)})
 
 
 def reconstruct_images_plain(

@@ -10,6 +10,7 @@ same functions.
 from __future__ import annotations
 
 import dataclasses
+import logging
 import threading
 import time
 from collections.abc import Callable
@@ -19,9 +20,11 @@ import numpy as np
 
 from sim2radar.tasks.common import open_store
 
+log = logging.getLogger(__name__)
+
 __all__ = ["RECONSTRUCTION_STEPS", "FrameSource", "StageResult", "depth_stage",
            "segments_stage", "materials_stage", "scene_stage", "reconstruction_steps",
-           "call_step"]
+           "call_step", "material_fallbacks"]
 
 #: The reconstruction's steps, in order.
 RECONSTRUCTION_STEPS = ("depth", "segments", "materials", "scene")
@@ -94,13 +97,25 @@ def _backends(config, ground_truth=None) -> tuple:
 
 
 def _write(st, stage: str, table, src: FrameSource, config, inputs: dict,
-           seconds: float) -> None:
+           seconds: float, provisional: dict | None = None) -> None:
     from sim2radar.reconstruct.pipeline import STAGE_VERSION
 
     st.write(stage, src.keys[stage], table, stage_version=STAGE_VERSION,
              provenance={"inputs": inputs, "config": config.to_dict(), "seed": src.seed,
                          "timings_s": {stage: seconds},
-                         "extra": {"name": src.name, "origin": src.origin}})
+                         "extra": {"name": src.name, "origin": src.origin}},
+             provisional=provisional)
+
+
+def material_fallbacks(labels) -> dict | None:
+    """The ``provisional`` record of a frame's material labels (None: every label is an
+    answer): how many segments fell back to ``unknown`` (a failed VLM request, an unusable or
+    out-of-vocabulary answer) and the first one's reason."""
+    fell = [lab for lab in labels if getattr(lab, "fallback", False)]
+    if not fell:
+        return None
+    return {"fallbacks": len(fell), "reason": f"{len(fell)} of {len(labels)} segment "
+            f"material(s) fell back to unknown ({fell[0].reason})"}
 
 
 def depth_stage(src: FrameSource, config, store: str) -> StageResult:
@@ -109,7 +124,7 @@ def depth_stage(src: FrameSource, config, store: str) -> StageResult:
     from sim2radar.storage.reconstruction import depth_from_table, depth_to_table
 
     t0, st, key = time.perf_counter(), open_store(store), src.keys["depth_maps"]
-    if st.exists("depth_maps", key):
+    if st.cached("depth_maps", key):
         _, compute_s = depth_from_table(st.read("depth_maps", key))
         return StageResult("depth", "skipped", key, time.perf_counter() - t0, compute_s)
     frame, _ = src.frame(config)
@@ -130,7 +145,7 @@ def segments_stage(src: FrameSource, config, store: str) -> StageResult:
     )
 
     t0, st, key = time.perf_counter(), open_store(store), src.keys["segmentations"]
-    if st.exists("segmentations", key):
+    if st.cached("segmentations", key):
         _, compute_s = segments_from_table(st.read("segmentations", key))
         return StageResult("segments", "skipped", key, time.perf_counter() - t0, compute_s)
     frame, _ = src.frame(config)
@@ -154,7 +169,7 @@ def materials_stage(src: FrameSource, config, store: str) -> StageResult:
     )
 
     t0, st, key = time.perf_counter(), open_store(store), src.keys["material_labels"]
-    if st.exists("material_labels", key):
+    if st.cached("material_labels", key):  # a provisional (fallback) one: ask again
         _, _, compute_s = materials_from_table(st.read("material_labels", key))
         return StageResult("materials", "skipped", key, time.perf_counter() - t0, compute_s)
     frame, _ = src.frame(config)
@@ -164,8 +179,12 @@ def materials_stage(src: FrameSource, config, store: str) -> StageResult:
     labels, fallbacks = label_materials(frame, depth, seg, config,
                                         _backends(config, src.ground_truth)[2])
     seconds = time.perf_counter() - t1
+    provisional = material_fallbacks(labels)
+    if provisional:
+        log.warning("%s: %s; stored as provisional: the next run asks again",
+                    src.name, provisional["reason"])
     _write(st, "material_labels", materials_to_table(src.name, labels, fallbacks, seconds),
-           src, config, {"segmentations": src.keys["segmentations"]}, seconds)
+           src, config, {"segmentations": src.keys["segmentations"]}, seconds, provisional)
     return StageResult("materials", "ok", key, time.perf_counter() - t0, seconds)
 
 
@@ -183,7 +202,7 @@ def scene_stage(src: FrameSource, config, store: str) -> StageResult:
 
     t0, st = time.perf_counter(), open_store(store)
     key = src.keys["reconstruction"]
-    if st.exists("reconstruction", key) and st.exists("scene_meshes", src.keys["scene_meshes"]):
+    if st.cached("reconstruction", key) and st.cached("scene_meshes", src.keys["scene_meshes"]):
         compute_s = float(read_reconstruction(st, key)["timings_s"].get("total", 0.0))
         return StageResult("scene", "skipped", key, time.perf_counter() - t0, compute_s)
     frame, note = src.frame(config)
@@ -199,7 +218,9 @@ def scene_stage(src: FrameSource, config, store: str) -> StageResult:
     rec.timings_s["total"] = t_depth + t_seg + t_mat + seconds
     written = write_scene_artifacts(st, rec, inputs=src.inputs, config=config.to_dict(),
                                     camera_to_target=src.camera_to_target, seed=src.seed,
-                                    stage_version=STAGE_VERSION)
+                                    stage_version=STAGE_VERSION,
+                                    provisional=st.provisional("material_labels",
+                                                               src.keys["material_labels"]))
     if written["reconstruction"] != key:
         raise RuntimeError(f"{src.name}: the scene's keys {written} are not the step's "
                            f"{src.keys}; FrameSource.keys must come from stage_keys / "

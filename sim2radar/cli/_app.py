@@ -33,6 +33,20 @@ def exit_unless_writable(store: str, option: str = "--out") -> None:
         raise typer.Exit(2) from None
 
 
+def exit_unless_valid_dataset(dataset: str | None, option: str = "--dataset") -> None:
+    """Before any work: exit with status 2 and one line when ``dataset`` cannot name a
+    manifest (:func:`sim2radar.storage.manifest.check_dataset_name`: characters, length)."""
+    from sim2radar.storage.manifest import check_dataset_name
+
+    if dataset is None:
+        return
+    try:
+        check_dataset_name(dataset)
+    except ValueError as exc:
+        typer.secho(f"error: {option}: {exc}", fg="red", err=True)
+        raise typer.Exit(2) from None
+
+
 def exit_unless_writable_outputs(outputs: dict[str, object]) -> None:
     """:func:`exit_unless_writable` for each ``option -> folder`` given (None: not used), so a
     read-only export or picture folder stops the command before any work, not after it."""

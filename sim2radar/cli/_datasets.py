@@ -38,13 +38,19 @@ def _fmt(v: float, spec: str = ".1f") -> str:
 
 def finish_generate(summary: dict[str, Any], json_out: Path | None, strict: bool) -> None:
     """The end of a generate-style command: print the summary, write it as JSON if asked, and
-    exit with status 1 under ``--strict`` when a world or frame failed."""
+    exit with status 1 under ``--strict`` when a world or frame failed or a material fell
+    back."""
     print_generate_summary(summary)
     if json_out is not None:
         json_out.parent.mkdir(parents=True, exist_ok=True)
         json_out.write_text(json.dumps(summary, indent=1, default=str))
-    if strict and summary["counts"]["failed"]:
+    if strict and (summary["counts"]["failed"] or fallback_count(summary)):
         raise typer.Exit(1)
+
+
+def fallback_count(summary: dict[str, Any]) -> int:
+    """Segments whose material fell back in a run (0 for summaries without the count)."""
+    return int((summary.get("fallbacks") or {}).get("segments", 0))
 
 
 def print_generate_summary(summary: dict[str, Any]) -> None:
@@ -100,6 +106,13 @@ def print_generate_summary(summary: dict[str, Any]) -> None:
     if comp:
         console.print(f"reconstructed vs ground truth: points ratio {_fmt(comp['points_ratio'], '.2f')}, "
                       f"radar Chamfer {_fmt(comp['chamfer_m'], '.3f')} m")
+    fb = summary.get("fallbacks") or {}
+    if fb.get("segments"):
+        console.print(
+            f"[yellow]fallbacks:[/yellow] {fb['segments']} segment material(s) fell back to "
+            f"unknown (VLM failures) in {fb['scenes']} {summary.get('unit', 'worlds')}, "
+            f"{fb['frames']} frame(s); stored as provisional: the next run asks again "
+            "(--strict fails on them)")
     console.print(f"store:    {summary['store']}")
     console.print(f"manifest: {summary['manifest']}")
     for g, e in (summary.get("export") or {}).items():

@@ -13,6 +13,7 @@ from typing import Any
 import typer
 
 from sim2radar.cli.worlds import worlds_app
+from sim2radar.factory.spec import MAX_WORLDS
 
 __all__ = ["generate_from_captures", "run_captures", "print_stage_table"]
 
@@ -85,7 +86,7 @@ def print_stage_table(summary: dict[str, Any]) -> None:
 def worlds_captures(
     out: Path = typer.Option(Path("out/captures"), "--out", "-o",
                              help="Capture folder to write (one sub-folder per scene)."),
-    worlds: int = typer.Option(5, "--worlds", "-n", help="Scenes (one per world seed)."),
+    worlds: int = typer.Option(5, "--worlds", "-n", min=1, max=MAX_WORLDS, help="Scenes (one per world seed)."),
     first_seed: int = typer.Option(0, help="Seed of the first world."),
     width: int = typer.Option(320, help="Image width [px]."),
     height: int = typer.Option(240, help="Image height [px]."),

@@ -28,6 +28,7 @@ from typing import Any
 import typer
 
 from sim2radar.cli._app import app, exit_unless_writable
+from sim2radar.factory.spec import MAX_FRAMES_PER_WORLD, MAX_WORLDS
 
 __all__ = ["demo", "run_demo"]
 
@@ -141,8 +142,8 @@ def run_demo(
 @app.command()
 def demo(
     out: Path = typer.Option(Path("out"), "--out", "-o", help="Output folder."),
-    worlds: int = typer.Option(6, "--worlds", "-n", help="Simulated-domain worlds (seeds 0..)."),
-    frames: int = typer.Option(4, "--frames", "-m", help="Frames per simulated world."),
+    worlds: int = typer.Option(6, "--worlds", "-n", min=1, max=MAX_WORLDS, help="Simulated-domain worlds (seeds 0..)."),
+    frames: int = typer.Option(4, "--frames", "-m", min=1, max=MAX_FRAMES_PER_WORLD, help="Frames per simulated world."),
     reference_worlds: int = typer.Option(20, help="Proxy-real worlds (seeds from 100000)."),
     reference_frames: int = typer.Option(6, help="Frames per proxy-real world."),
     profile: str = typer.Option("demo", help="Experiment profile (demo, smoke, paper, YAML)."),

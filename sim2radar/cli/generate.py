@@ -17,14 +17,26 @@ from typing import Any
 
 import typer
 
-from sim2radar.cli._app import app, exit_unless_writable, exit_unless_writable_outputs
+from sim2radar.cli._app import (
+    app,
+    exit_unless_valid_dataset,
+    exit_unless_writable,
+    exit_unless_writable_outputs,
+)
 from sim2radar.cli._datasets import (
     finish_generate,
     preflight,
     print_generate_summary,
     progress_columns,
 )
-from sim2radar.factory.spec import DEFAULT_RADAR, DatasetSpec, as_spec, load_generate_config
+from sim2radar.factory.spec import (
+    DEFAULT_RADAR,
+    MAX_FRAMES_PER_WORLD,
+    MAX_WORLDS,
+    DatasetSpec,
+    as_spec,
+    load_generate_config,
+)
 
 __all__ = ["generate", "load_generate_config", "print_generate_summary", "run_generate"]
 
@@ -166,7 +178,8 @@ def generate(
                                         help="BEV PNGs [default: OUT/../bev for local stores]."),
     no_png: bool = typer.Option(False, "--no-png", help="Do not write BEV PNGs."),
     force: bool = typer.Option(False, help="Recompute dataset frames even when cached."),
-    strict: bool = typer.Option(False, help="Exit with status 1 if any world or frame failed."),
+    strict: bool = typer.Option(False, help="Exit with status 1 if any world or frame failed "
+                                "or any material fell back to unknown (a VLM outage)."),
     workers: int = typer.Option(1, help="Worlds processed concurrently (threads, or processes "
                                 "with --dask local)."),
     dask: str | None = typer.Option(
@@ -185,18 +198,23 @@ def generate(
     ground-truth geometry), simulate the radar, store points + door boxes, export.
 
     A second run with the same inputs recomputes nothing. Failed worlds/frames are recorded in
-    the manifest; the others finish. Exit status: 0, or 1 with --strict when anything failed;
-    2 for bad arguments or configs.
+    the manifest; the others finish. A material that fell back to ``unknown`` (VLM
+    ``on_error: unknown``) is counted in the summary and manifest and its frames are made again
+    by the next run. Exit status: 0, or 1 with --strict when anything failed or fell back; 2
+    for bad arguments or configs.
     """
     from sim2radar.cli.simulate import _default_png_dir, _prefect_env
 
     exit_unless_writable(out)
+    exit_unless_valid_dataset(dataset)
     exit_unless_writable_outputs({"--export-openpcdet": export_openpcdet,
                                   "--png-dir": None if no_png else png_dir,
                                   "--json": None if json_out is None else json_out.parent})
-    for option, value in (("--frames", frames), ("--worlds", worlds)):
-        if value is not None and value < 1:
-            typer.secho(f"error: {option} must be >= 1, got {value}", fg="red", err=True)
+    for option, value, most in (("--frames", frames, MAX_FRAMES_PER_WORLD),
+                                ("--worlds", worlds, MAX_WORLDS)):
+        if value is not None and not 1 <= value <= most:
+            typer.secho(f"error: {option} must be between 1 and {most}, got {value}",
+                        fg="red", err=True)
             raise typer.Exit(2)
     if captures is not None:
         from sim2radar.cli.captures import generate_from_captures

@@ -16,7 +16,13 @@ from pathlib import Path
 
 import typer
 
-from sim2radar.cli._app import app, exit_unless_writable, exit_unless_writable_outputs
+from sim2radar.cli._app import (
+    app,
+    exit_unless_valid_dataset,
+    exit_unless_writable,
+    exit_unless_writable_outputs,
+)
+from sim2radar.factory.spec import MAX_FRAMES_PER_WORLD, MAX_WORLDS
 
 __all__ = ["reference"]
 
@@ -24,9 +30,10 @@ __all__ = ["reference"]
 @app.command()
 def reference(
     worlds: int | None = typer.Option(
-        None, "--worlds", "-n",
+        None, "--worlds", "-n", min=1, max=MAX_WORLDS,
         help="Worlds of --frames frames each [default: sized like the paper, 371/92/155]."),
-    frames: int = typer.Option(10, "--frames", "-m", help="Frames per world."),
+    frames: int = typer.Option(10, "--frames", "-m", min=1, max=MAX_FRAMES_PER_WORLD,
+                               help="Frames per world."),
     out: str = typer.Option("out/store", "--out", "-o", help="Artifact store (folder or URI)."),
     export_openpcdet: Path | None = typer.Option(
         None, "--export-openpcdet", help="Write the dataset in OpenPCDet's layout here."),
@@ -55,6 +62,7 @@ def reference(
     from sim2radar.factory.reference import DOMAIN_LABEL
 
     exit_unless_writable(out)
+    exit_unless_valid_dataset(dataset)
     exit_unless_writable_outputs({"--export-openpcdet": export_openpcdet,
                                   "--png-dir": None if no_png else png_dir,
                                   "--json": None if json_out is None else json_out.parent})

@@ -15,7 +15,12 @@ from typing import Any
 
 import typer
 
-from sim2radar.cli._app import app, exit_unless_writable, quiet_recorded_failures
+from sim2radar.cli._app import (
+    app,
+    exit_unless_valid_dataset,
+    exit_unless_writable,
+    quiet_recorded_failures,
+)
 from sim2radar.configio import DEFAULT_RADAR
 
 
@@ -146,6 +151,7 @@ def simulate(
     from sim2radar.radar import RadarConfigError, load_radar_config
 
     exit_unless_writable(out)
+    exit_unless_valid_dataset(dataset)
     try:
         load_radar_config(radar)
     except RadarConfigError as exc:

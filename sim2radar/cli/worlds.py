@@ -12,6 +12,7 @@ from pathlib import Path
 import typer
 
 from sim2radar.cli._app import app, exit_unless_writable
+from sim2radar.factory.spec import MAX_FRAMES_PER_WORLD, MAX_WORLDS
 
 worlds_app = typer.Typer(help="Procedural indoor worlds rendered by Mitsuba.", no_args_is_help=True)
 app.add_typer(worlds_app, name="worlds")
@@ -42,7 +43,7 @@ def preview(
     seed: int = typer.Option(0, "--seed", min=0, help="World seed."),
     out: Path = typer.Option(Path("world_preview.png"), "--out", help="Contact-sheet PNG."),
     frame: int = typer.Option(0, "--frame", min=0, help="Frame index along the trajectory."),
-    frames: int = typer.Option(6, "--frames", min=1, help="Trajectory length the frame is from."),
+    frames: int = typer.Option(6, "--frames", min=1, max=MAX_FRAMES_PER_WORLD, help="Trajectory length the frame is from."),
     config: Path | None = typer.Option(None, "--config", help="YAML with world:/rig: sections."),
     width: int | None = typer.Option(None, help="Image width [px] (default 640)."),
     height: int | None = typer.Option(None, help="Image height [px] (default 480)."),
@@ -70,8 +71,8 @@ def preview(
 
 @worlds_app.command("generate")
 def generate(
-    worlds: int = typer.Option(2, "--worlds", min=1, help="Number of worlds (seeds)."),
-    frames: int = typer.Option(4, "--frames", min=1, help="Frames per world."),
+    worlds: int = typer.Option(2, "--worlds", min=1, max=MAX_WORLDS, help="Number of worlds (seeds)."),
+    frames: int = typer.Option(4, "--frames", min=1, max=MAX_FRAMES_PER_WORLD, help="Frames per world."),
     out: str = typer.Option("out/store", "--out", help="Artifact store root (path or URI)."),
     dataset: str = typer.Option("worlds", "--dataset", help="Manifest name."),
     first_seed: int = typer.Option(0, "--first-seed", min=0, help="Seed of the first world."),

@@ -68,6 +68,7 @@ from sim2radar.factory.labels import (
     radar_visibility,
     scene_ray_caster,
 )
+from sim2radar.storage.manifest import MAX_ID_LENGTH, id_problem
 
 __all__ = [
     "CaptureScene",
@@ -305,7 +306,7 @@ def find_captures(root: str | os.PathLike, *, warn: bool = True) -> list[Capture
                          "per scene (rgb.png, intrinsics.yaml, optional lidar.npy)")
     shared_k = root / "intrinsics.yaml"
     shared_radar = root / "radar.yaml"
-    scenes, hidden, said = [], [], set()
+    scenes, hidden, bad_names, said = [], [], [], set()
     for entry in sorted(root.iterdir()):
         if entry.is_symlink() and not entry.exists():
             if warn:
@@ -328,6 +329,13 @@ def find_captures(root: str | os.PathLike, *, warn: bool = True) -> list[Capture
         k = folder / "intrinsics.yaml"
         if image is None and not k.is_file():
             continue
+        problem = id_problem(entry.name)
+        if problem is not None:  # its name would break the dataset's file names and ImageSets
+            bad_names.append(entry.name)
+            if warn:
+                log.warning("capture folder %s: skipped folder %r: its name is the scene id, "
+                            "and %s; rename the folder", root, entry.name, problem)
+            continue
         lidar = folder / "lidar.npy"
         radar = folder / "radar.yaml"
         poses = folder / "poses.txt"
@@ -349,6 +357,9 @@ def find_captures(root: str | os.PathLike, *, warn: bool = True) -> list[Capture
     if not scenes:
         also = (f"; skipped hidden folder(s) {hidden}: rename them without the leading dot"
                 if hidden else "")
+        also += (f"; skipped folder(s) {bad_names} whose names cannot be scene ids: rename "
+                 "them (printable, no newline, at most "
+                 f"{MAX_ID_LENGTH} characters)" if bad_names else "")
         raise ValueError(f"{root}: no scene folders (each needs rgb.png or image.png/.jpg and "
                          f"intrinsics.yaml, here or shared at the top){also}")
     return scenes

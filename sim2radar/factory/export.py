@@ -18,6 +18,7 @@ from sim2radar.datasets.splits import split_groups
 from sim2radar.evaluate.fidelity import label_quality
 from sim2radar.factory.frames import DatasetFrame
 from sim2radar.factory.labels import DEFAULT_POINT_CLOUD_RANGE_M, boxes_in_point_cloud_range
+from sim2radar.storage.manifest import id_problem
 
 __all__ = ["export_frames", "point_geometry"]
 
@@ -52,6 +53,10 @@ def export_frames(frames: Iterable[DatasetFrame], export_dir: str | os.PathLike,
     geometry_parts: list[tuple[np.ndarray | None, np.ndarray, float | None]] = []
     label_pairs: list[tuple[np.ndarray, np.ndarray]] = []   # frames that know the true doors
     for df in frames:
+        problem = id_problem(df.frame_id)
+        if problem is not None:  # would break ImageSets/*.txt or a file name
+            raise ValueError(f"frame id {df.frame_id!r} cannot be exported: {problem}; rename "
+                             "its scene folder")
         geometry_parts.append((df.surface_offset_m,
                                np.linalg.norm(np.asarray(df.points)[:, :3], axis=1),
                                (df.stats.get("radar") or {}).get("max_range_m")))

@@ -25,7 +25,9 @@ from sim2radar.configio import (
     DEFAULT_RADAR,
     bundled_configs,
     config_path,
+    load_yaml,
     looks_like_path,
+    short_text,
     whole_number,
 )
 from sim2radar.factory.labels import (
@@ -37,10 +39,18 @@ from sim2radar.factory.labels import (
 
 __all__ = ["GEOMETRIES", "DEFAULT_RADAR", "DatasetSpec", "as_spec", "resolve_radar",
            "resolve_reconstruction", "dataset_metadata",
-           "GENERATE_CONFIG_KEYS", "load_generate_config", "label_range"]
+           "GENERATE_CONFIG_KEYS", "load_generate_config", "label_range",
+           "MAX_FRAMES_PER_WORLD", "MAX_WORLDS"]
 
 #: Geometry modes: radar simulated on the world's meshes, or on meshes reconstructed from RGB.
 GEOMETRIES = ("ground_truth", "reconstructed")
+
+
+#: The most frames along one world's trajectory (a world's rendered frames are held in memory
+#: together: ~3 MB each at 640 x 480) and the most worlds one run takes (one task and one
+#: manifest row each): bounds checked before any work.
+MAX_FRAMES_PER_WORLD = 1000
+MAX_WORLDS = 100_000
 
 
 class DatasetSpec(BaseModel):
@@ -83,7 +93,7 @@ class DatasetSpec(BaseModel):
     model_config = ConfigDict(frozen=True, extra="forbid", arbitrary_types_allowed=True,
                               populate_by_name=True)
 
-    frames_per_world: int = Field(4, ge=1)
+    frames_per_world: int = Field(4, ge=1, le=MAX_FRAMES_PER_WORLD)
     geometries: tuple[str, ...] | str = Field(("reconstructed",), alias="geometry")
     radar: Any = DEFAULT_RADAR
     reconstruction: Any = None
@@ -290,9 +300,9 @@ def load_generate_config(path: str | Path) -> dict[str, Any]:
     if not path.is_file():
         raise ValueError(f"{path}: config file not found")
     try:
-        doc = yaml.safe_load(path.read_text()) or {}
+        doc = load_yaml(path.read_text()) or {}
     except yaml.YAMLError as exc:
-        raise ValueError(f"{path}: invalid YAML: {exc}") from None
+        raise ValueError(f"{path}: invalid YAML: {short_text(exc)}") from None
     if not isinstance(doc, dict):
         raise ValueError(f"{path}: expected a mapping of settings")
     unknown = sorted(set(doc) - GENERATE_CONFIG_KEYS)

@@ -27,7 +27,7 @@ from typing import Any, Literal
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
-from sim2radar.configio import DEFAULT_RADAR, read_yaml_mapping
+from sim2radar.configio import DEFAULT_RADAR, read_yaml_mapping, short_repr, short_text
 from sim2radar.constants import SPEED_OF_LIGHT_M_S
 from sim2radar.em import get_material
 
@@ -511,6 +511,11 @@ class SignalChainConfig(_Frozen):
         return value
 
 
+#: The largest ADC cube of one frame [bytes] (complex64, virtual channels x chirps x samples):
+#: checked when a config is read, before a frame allocates it (TI's cascade at 128 chirps: 50 MB).
+MAX_ADC_CUBE_BYTES = 2 * 2**30
+
+
 class RadarConfig(_Frozen):
     """A validated FMCW MIMO radar description (all lengths [m], frequencies [Hz], angles [deg]).
 
@@ -583,6 +588,13 @@ class RadarConfig(_Frozen):
             raise ValueError("bandwidth_hz must be smaller than start_frequency_hz")
         if self.fidelity not in FIDELITIES:
             raise ValueError(f"fidelity must be one of {FIDELITIES}, got {self.fidelity!r}")
+        cube = self.n_tx * self.n_rx * self.n_chirps * self.adc_samples * 8  # complex64
+        if cube > MAX_ADC_CUBE_BYTES:
+            raise ValueError(
+                f"n_chirps ({self.n_chirps}) x virtual channels ({self.n_tx} TX x {self.n_rx} "
+                f"RX) x adc_samples ({self.adc_samples}) makes a {cube / 2**30:.1f} GiB ADC cube "
+                f"per frame, more than the {MAX_ADC_CUBE_BYTES / 2**30:.0f} GiB bound; lower "
+                "n_chirps (TI's cascade uses 64-256)")
         return self
 
     # -- derived values -----------------------------------------------------------------
@@ -806,8 +818,8 @@ def _format_validation_error(source: str, exc: ValidationError) -> str:
     for err in exc.errors():
         loc = ".".join(str(p) for p in err["loc"]) or "(root)"
         value = err.get("input")
-        shown = "" if isinstance(value, dict) else f" (got {value!r})"
-        lines.append(f"  field '{loc}': {err['msg']}{shown}")
+        shown = "" if isinstance(value, dict) else f" (got {short_repr(value)})"
+        lines.append(f"  field '{loc}': {short_text(err['msg'])}{shown}")
     return "\n".join(lines)
 
 

@@ -15,16 +15,81 @@ import numpy as np
 
 from sim2radar.reconstruct.types import ReconstructionInputError, up_from_pitch_roll
 
-__all__ = ["load_image", "load_lidar", "load_rig_calibration"]
+__all__ = ["MAX_IMAGE_PIXELS", "image_size", "load_image", "load_lidar", "load_rig_calibration",
+           "max_image_pixels"]
+
+
+#: The most pixels an input image may have (default 25 MP: a 6000 x 4000 camera); above it the
+#: image is refused from its header, before it is decoded (a 1 MB PNG can declare 20000 x
+#: 20000 = 1.2 GB of RGB, and the reconstruction's per-pixel arrays are ~20x that). Set
+#: ``SIM2RADAR_MAX_IMAGE_PIXELS`` to change it.
+MAX_IMAGE_PIXELS = 25_000_000
+
+
+def max_image_pixels() -> int:
+    """:data:`MAX_IMAGE_PIXELS`, or ``$SIM2RADAR_MAX_IMAGE_PIXELS`` when set."""
+    raw = os.environ.get("SIM2RADAR_MAX_IMAGE_PIXELS", "").strip()
+    if not raw:
+        return MAX_IMAGE_PIXELS
+    try:
+        value = int(float(raw))
+    except ValueError:
+        raise ReconstructionInputError(f"$SIM2RADAR_MAX_IMAGE_PIXELS={raw!r} is not a number "
+                                       "of pixels; set e.g. 25000000 or unset it") from None
+    return value
+
+
+def image_size(path: str | os.PathLike) -> tuple[int, int] | None:
+    """``(width, height)`` of a PNG, JPEG or BMP file read from its header (a few hundred
+    bytes, nothing decoded); None for another format or a header that does not parse."""
+    import struct
+
+    with open(path, "rb") as fh:
+        head = fh.read(32)
+        if head[:8] == b"\x89PNG\r\n\x1a\n" and head[12:16] == b"IHDR":
+            return struct.unpack(">II", head[16:24])
+        if head[:2] == b"BM" and len(head) >= 26:
+            w, h = struct.unpack("<ii", head[18:26])
+            return abs(w), abs(h)
+        if head[:2] != b"\xff\xd8":
+            return None
+        fh.seek(2)
+        while True:  # JPEG: walk the segments to the first start-of-frame marker
+            marker = fh.read(2)
+            if len(marker) < 2 or marker[0] != 0xFF:
+                return None
+            kind = marker[1]
+            if kind in (0xD8, 0x01) or 0xD0 <= kind <= 0xD7:
+                continue
+            size = fh.read(2)
+            if len(size) < 2:
+                return None
+            (length,) = struct.unpack(">H", size)
+            if 0xC0 <= kind <= 0xCF and kind not in (0xC4, 0xC8, 0xCC):
+                sof = fh.read(5)
+                if len(sof) < 5:
+                    return None
+                h, w = struct.unpack(">HH", sof[1:5])
+                return w, h
+            fh.seek(length - 2, 1)
 
 
 def load_image(path: str | os.PathLike) -> np.ndarray:
-    """Read an image file (PNG, JPEG, ...) as (H, W, 3) uint8 RGB."""
+    """Read an image file (PNG, JPEG, ...) as (H, W, 3) uint8 RGB; one over
+    :func:`max_image_pixels` is refused from its header, before decoding."""
     import cv2
 
     path = Path(path)
     if not path.is_file():
         raise ReconstructionInputError(f"{path}: {_why_missing(path)}")
+    size = image_size(path)
+    limit = max_image_pixels()
+    if size is not None and size[0] * size[1] > limit:
+        raise ReconstructionInputError(
+            f"{path}: the image is {size[0]} x {size[1]} = {size[0] * size[1] / 1e6:.0f} MP, more "
+            f"than the {limit / 1e6:.0f} MP an input may have (decoding and reconstructing it "
+            "needs ~60 bytes per pixel: ~{:.0f} GB); downscale it (and its intrinsics), or raise "
+            "$SIM2RADAR_MAX_IMAGE_PIXELS".format(size[0] * size[1] * 60 / 1e9))
     img = cv2.imread(str(path), cv2.IMREAD_COLOR)
     if img is None:
         raise ReconstructionInputError(f"{path}: not a readable image (PNG/JPEG/...)")

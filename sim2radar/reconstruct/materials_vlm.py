@@ -672,18 +672,18 @@ class VlmMaterials:
                 raise VlmError(f"{name}: segment {index}: {exc}") from None
             self._fallback()
             log.warning("%s: segment %d: VLM failed, labelled unknown: %s", name, index, exc)
-            return MaterialLabel("unknown", 0.0, f"VLM request failed: {exc}")
+            return MaterialLabel("unknown", 0.0, f"VLM request failed: {exc}", fallback=True)
         except AnswerError as exc:
             self._fallback()
             log.warning("%s: segment %d: unusable VLM response: %s", name, index, exc)
-            return MaterialLabel("unknown", 0.0, f"invalid VLM response: {exc}")
+            return MaterialLabel("unknown", 0.0, f"invalid VLM response: {exc}", fallback=True)
         try:
             answer = parse_answer(text)
         except AnswerError as exc:
             self._fallback()
             log.warning("%s: segment %d: VLM answer rejected, labelled unknown: %s",
                         name, index, exc)
-            return MaterialLabel("unknown", 0.0, f"invalid VLM answer: {exc}")
+            return MaterialLabel("unknown", 0.0, f"invalid VLM answer: {exc}", fallback=True)
         if self.cache is not None:
             self.cache.put(key, answer, self.config.model, self.config.prompt_version)
         return answer

@@ -445,7 +445,8 @@ def segment_image(frame: FrameInput, depth: DepthResult, backend) -> Segments:
 
 def label_materials(frame: FrameInput, depth: DepthResult, segments: Segments,
                     config: ReconstructionConfig, backend) -> tuple[list[MaterialLabel], list[str]]:
-    """Stage 3: one material label per segment; out-of-vocabulary answers become ``unknown``.
+    """Stage 3: one material label per segment; out-of-vocabulary answers become ``unknown``
+    (marked ``fallback``, like the VLM's failed requests and unusable answers).
 
     Returns the labels and the fallbacks recorded on the way.
     """
@@ -459,7 +460,8 @@ def label_materials(frame: FrameInput, depth: DepthResult, segments: Segments,
     for i, lab in enumerate(labels):
         if lab.material not in MATERIAL_CLASSES:
             fallbacks.append(f"segment {i}: material {lab.material!r} not in vocabulary -> unknown")
-            labels[i] = MaterialLabel("unknown", 0.0, f"out of vocabulary: {lab.material!r}")
+            labels[i] = MaterialLabel("unknown", 0.0, f"out of vocabulary: {lab.material!r}",
+                                      fallback=True)
     return labels, fallbacks
 
 

@@ -202,11 +202,18 @@ class Segments:
 @dataclasses.dataclass(frozen=True)
 class MaterialLabel:
     """Stage 3 output for one segment: a material from ``vocab.MATERIAL_CLASSES``, a confidence
-    in [0, 1], and the reason (the VLM's reasoning, the rule that fired, or why it fell back)."""
+    in [0, 1], and the reason (the VLM's reasoning, the rule that fired, or why it fell back).
+
+    ``fallback`` marks a label that stands in for an answer the backend could not get (a VLM
+    request that failed, an unusable or out-of-vocabulary answer): the run goes on with it, but
+    its artifacts are stored as provisional and the next run asks again
+    (:meth:`sim2radar.storage.ArtifactStore.cached`).
+    """
 
     material: str
     confidence: float
     reason: str = ""
+    fallback: bool = False
 
 
 class DepthBackend(Protocol):

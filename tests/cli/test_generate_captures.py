@@ -139,3 +139,153 @@ def test_bad_radar_yaml_fails_its_scene_in_one_line_while_the_others_finish(one_
     assert len(hidden) == 1 and "rename it without the leading dot" in hidden[0], output
     linked = [ln for ln in lines if f"{caps / 'linked'} is a symlink to {src}" in ln]
     assert len(linked) == 1 and "following it" in linked[0], output
+
+
+def test_a_vlm_outage_is_never_cached_as_a_result(one_scene, tmp_path):
+    """Issue #33, probe 1: with on_error: unknown a server answering garbage labels every
+    segment unknown; the run finishes (exit 0; --strict exit 1), counts the fallbacks in the
+    summary and the manifest, and stores them as provisional: a rerun against the same server,
+    healthy again, asks again, gets the right materials and simulates the frames again
+    (fallbacks N -> 0); a third run makes no request."""
+    import yaml
+
+    from sim2radar.storage import ArtifactStore
+    from sim2radar.storage.reconstruction import materials_from_table
+    from tests.reconstruct._vlm_server import VlmTestServer
+
+    store = tmp_path / "store"
+    gen = tmp_path / "gen.yaml"
+    gen.write_text("poses: {frames: 2, forward_m: [0.0, 1.0]}\nseed: 2\n")
+
+    def run(*extra):
+        res = CliRunner().invoke(app, ["generate", "--captures", str(one_scene), "--no-prefect",
+                                       "--config", str(gen), "--reconstruction", str(cfg),
+                                       "--out", str(store), "--no-png", "--json",
+                                       str(tmp_path / "s.json"), *extra],
+                                 env={"COLUMNS": "400"})
+        return res, json.loads((tmp_path / "s.json").read_text())
+
+    with VlmTestServer("garbage") as srv:
+        cfg = tmp_path / "vlm.yaml"
+        cfg.write_text(yaml.safe_dump({"materials": {"name": "vlm", "options": {
+            "base_url": srv.base_url, "model": "test-vlm", "on_error": "unknown",
+            "max_retries": 0}}}))
+        res, summary = run()
+        assert res.exit_code == 0, res.output
+        asked = srv.n_requests
+        assert asked > 0
+        fb = summary["fallbacks"]
+        assert fb["segments"] == asked and fb["scenes"] == 1 and fb["frames"] == 2, fb
+        assert "fell back to unknown" in res.output
+        st = ArtifactStore(store)
+        rows = {r["scene_id"]: r for r in st.manifest("captures").rows()}
+        assert rows["scene_004"]["fallbacks"] == asked
+        assert rows["scene_004_f000"]["fallbacks"] == asked
+        mkey = summary["outcomes"][0]["artifacts"]["material_labels"]
+        labels, _, _ = materials_from_table(st.read("material_labels", mkey))
+        assert {m.material for m in labels} == {"unknown"}
+        assert st.provisional("material_labels", mkey)["fallbacks"] == asked
+        assert not st.cached("material_labels", mkey)
+
+        res, _ = run("--strict")               # --strict fails on fallbacks; asked again
+        assert res.exit_code == 1, res.output
+        assert srv.n_requests == 2 * asked
+
+        srv.mode = "json"                      # healthy again: right materials, new frames
+        res, summary = run("--strict")
+        assert res.exit_code == 0, res.output
+        assert srv.n_requests == 3 * asked
+        assert summary["fallbacks"] == {"segments": 0, "frames": 0, "scenes": 0}
+        assert summary["counts"]["ok"] == 1 and summary["frame_counts"]["ok"] == 2
+        labels, _, _ = materials_from_table(st.read("material_labels", mkey))
+        assert "unknown" not in {m.material for m in labels}, labels
+        assert st.cached("material_labels", mkey) and st.provisional("material_labels",
+                                                                     mkey) is None
+        rows = {r["scene_id"]: r for r in st.manifest("captures").rows()}
+        assert rows["scene_004"]["fallbacks"] == 0 and rows["scene_004_f001"]["fallbacks"] == 0
+        for f in summary["outcomes"][0]["parts"]:
+            assert st.cached("dataset_frames", f["artifacts"]["dataset_frames/reconstructed"])
+
+        res, summary = run()                   # a result now: nothing asked, nothing made
+        assert res.exit_code == 0 and srv.n_requests == 3 * asked
+        assert summary["counts"]["skipped"] == 1 and summary["frame_counts"]["skipped"] == 2
+
+
+def test_a_vlm_outage_in_procedural_worlds_is_asked_again(tmp_path):
+    """The same through procedural `generate` (reconstructed geometry, frames fused with the
+    earlier frame): the world and its frames count the fallbacks, the rerun against the
+    healthy server asks again and re-simulates the frames."""
+    import yaml
+
+    from tests.reconstruct._vlm_server import VlmTestServer
+
+    gen = tmp_path / "gen.yaml"
+    gen.write_text("geometry: reconstructed\nrig: {width: 160, height: 120, spp: 2}\n")
+    with VlmTestServer("oov") as srv:
+        cfg = tmp_path / "vlm.yaml"
+        cfg.write_text(yaml.safe_dump({"materials": {"name": "vlm", "options": {
+            "base_url": srv.base_url, "model": "test-vlm", "on_error": "unknown"}},
+            "fusion": {"frames": 1}}))
+
+        def run():
+            res = CliRunner().invoke(app, [
+                "generate", "--worlds", "1", "--frames", "2", "--no-prefect", "--no-png",
+                "--config", str(gen), "--reconstruction", str(cfg),
+                "--out", str(tmp_path / "store"), "--json", str(tmp_path / "s.json")],
+                env={"COLUMNS": "400"})
+            assert res.exit_code == 0, res.output
+            return json.loads((tmp_path / "s.json").read_text())
+
+        summary = run()
+        asked = srv.n_requests
+        assert asked > 0 and summary["fallbacks"]["segments"] == asked
+        assert summary["fallbacks"]["frames"] == 2 and summary["fallbacks"]["scenes"] == 1
+        srv.mode = "json"
+        summary = run()
+        assert srv.n_requests == 2 * asked
+        assert summary["fallbacks"]["segments"] == 0
+        assert summary["frame_counts"]["ok"] == 2
+        summary = run()
+        assert srv.n_requests == 2 * asked and summary["frame_counts"]["skipped"] == 2
+
+
+def test_names_that_would_break_the_layout_are_refused_where_they_enter(one_scene, tmp_path):
+    """Issue #33, probe 2 and 6: a scene folder whose name holds a newline is skipped with one
+    line naming it and the rule (its id would split ImageSets lines); a folder named with
+    spaces and unicode still works; a 300-character --dataset is refused before any work."""
+    import shutil
+
+    from sim2radar.factory.captures import find_captures
+
+    caps = tmp_path / "caps"
+    caps.mkdir()
+    shutil.copytree(one_scene / "scene_004", caps / "Büro 3")
+    shutil.copytree(one_scene / "scene_004", caps / "bad\nname")
+    shutil.copytree(one_scene / "scene_004", caps / ("x" * 130))
+    scenes = find_captures(caps, warn=False)
+    assert [s.scene_id for s in scenes] == ["Büro 3"]
+    export = tmp_path / "opcd"
+    res = CliRunner().invoke(app, ["generate", "--captures", str(caps), "--no-prefect",
+                                   "--frames", "1", "--no-png", "--out", str(tmp_path / "store"),
+                                   "--export-openpcdet", str(export)], env={"COLUMNS": "400"})
+    assert res.exit_code == 0, res.output
+    lines = [x for f in (export / "ImageSets").glob("*.txt") for x in f.read_text().splitlines()]
+    assert lines == ["Büro 3_f000"]
+    assert (export / "points" / "Büro 3_f000.npy").is_file()
+    res = CliRunner().invoke(app, ["generate", "--captures", str(caps), "--no-prefect",
+                                   "--dataset", "d" * 300, "--out", str(tmp_path / "store2")],
+                             env={"COLUMNS": "400"})
+    assert res.exit_code == 2, res.output
+    assert "at most 100 characters" in res.output and "Traceback" not in res.output
+    assert not (tmp_path / "store2" / "depth_maps").exists()
+
+
+def test_an_id_rule_names_what_is_wrong():
+    from sim2radar.storage.manifest import id_problem
+
+    for ok in ("scene_004", "Büro 3", "a.b-c", "x" * 120):
+        assert id_problem(ok) is None, ok
+    for bad, words in (("a\nb", "printable"), ("a\tb", "printable"), ("a/b", "separator"),
+                       ("..", "separator"), ("", "empty"), (" a", "whitespace"),
+                       ("x" * 121, "at most 120")):
+        assert words in id_problem(bad), bad

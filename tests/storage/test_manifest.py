@@ -54,3 +54,30 @@ def test_csv_export(manifest, tmp_path):
     text = open(manifest.write_csv(str(tmp_path / "m.csv"))).read()
     assert text.splitlines()[0].startswith("scene_id,status,error,artifacts")
     assert '"{""radar_points"": ""abababababababababab""}"' in text
+
+
+def test_rows_written_before_fallbacks_were_counted_read_as_zero(tmp_path):
+    """A manifest row file of schema v1 (no ``fallbacks`` column) still reads, with 0, beside
+    v2 rows; a row with a changed column is still refused."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    from sim2radar.storage.schemas import MANIFEST, SchemaError
+
+    m = ArtifactStore(tmp_path / "store").manifest("demo")
+    m.upsert("new", "ok", fallbacks=3)
+    m.upsert("old", "ok", artifacts={"radar_points": "ab" * 10})
+    path = m._path("old")
+    v1 = pq.read_table(path).drop_columns(["fallbacks"])
+    v1 = v1.replace_schema_metadata({b"sim2radar.schema": b"manifest:1"})
+    pq.write_table(v1, path)
+    rows = {r["scene_id"]: r for r in m.rows()}
+    assert rows["old"]["fallbacks"] == 0 and rows["new"]["fallbacks"] == 3
+    assert m.get("old")["artifacts"] == {"radar_points": "ab" * 10}
+    assert m.upsert("old", "ok")["attempts"] == 2          # and it is upgraded on its next write
+    bad = v1.set_column(v1.schema.get_field_index("attempts"), "attempts",
+                        pa.array(["x"], pa.string()))
+    pq.write_table(bad, path)
+    with pytest.raises(SchemaError, match="stored columns differ"):
+        m.get("old")
+    assert "fallbacks" in MANIFEST.schema.names
