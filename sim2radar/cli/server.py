@@ -18,6 +18,15 @@ instead (:func:`ensure_server`), reused by every later command:
   process now, or another Prefect version, is replaced by a fresh server;
 * ``sim2radar server stop`` (:func:`stop_server`) ends it; ``status`` / ``start`` report it.
 
+One server per home, never forked. The record names its home and a random token; the server
+runs Prefect's app behind :mod:`sim2radar.cli._prefect_app`, started in the home folder with
+the token in its environment, and answers both on ``GET /sim2radar/server``. A record is
+trusted only when its process runs that app in that home with that token and the server
+answers them: a record copied with a ``PREFECT_HOME`` names another home and is ignored (the
+copy gets its own server; ``server stop`` there stops nothing of the original's). A record
+deleted or truncated while the server runs is recovered from the live process
+(:func:`find_live_server`) instead of starting a second server on the same database.
+
 A killed command therefore leaves no process of its own behind: the managed server is the only
 one, and the next command reuses it. ``SIM2RADAR_PREFECT_SERVER=ephemeral`` restores
 Prefect's own per-command server (and its problems); a ``PREFECT_API_URL`` in the environment
@@ -45,8 +54,8 @@ import typer
 
 from sim2radar.cli._app import app
 
-__all__ = ["MODE_ENV", "ServerError", "ServerState", "ensure_server", "prefect_home",
-           "read_state", "server_status", "stop_server", "use_managed_server"]
+__all__ = ["MODE_ENV", "ServerError", "ServerState", "ensure_server", "find_live_server",
+           "prefect_home", "read_state", "server_status", "stop_server", "use_managed_server"]
 
 MODE_ENV = "SIM2RADAR_PREFECT_SERVER"  # "managed" (default) or "ephemeral"
 STATE_FILE = "sim2radar-server.json"
@@ -55,7 +64,8 @@ LOG_FILE = "sim2radar-server.log"
 HOST = "127.0.0.1"  # loopback only: the API has no authentication
 STARTUP_TIMEOUT_S = 120.0  # a fresh database migrates first (~10 s idle, more on busy cores)
 STOP_TIMEOUT_S = 15.0  # SIGTERM -> graceful uvicorn shutdown; SIGKILL after this
-_APP = "prefect.server.api.server:create_app"
+_APP = "sim2radar.cli._prefect_app:create_app"  # Prefect's app + GET /sim2radar/server
+_LEGACY_APP = "prefect.server.api.server:create_app"  # servers started by sim2radar < 0.4
 
 
 class ServerError(RuntimeError):
@@ -73,6 +83,8 @@ class ServerState:
     prefect_version : the Prefect version that started it (another one restarts it)
     started_at : start time [s since the epoch]
     home : the ``PREFECT_HOME`` it serves
+    token : a random token the server answers on ``GET /sim2radar/server`` with its home (""
+        for a server started before tokens: trusted by its process alone)
     """
 
     pid: int
@@ -80,6 +92,7 @@ class ServerState:
     prefect_version: str
     started_at: float
     home: str
+    token: str = ""
 
     @property
     def api_url(self) -> str:
@@ -124,13 +137,19 @@ def _locked(home: Path) -> Iterator[None]:
 
 
 def read_state(home: str | os.PathLike) -> ServerState | None:
-    """The server record of ``home``, or None (no record, or an unreadable one)."""
+    """The server record of ``home``, or None: no record, an unreadable one (truncated), or one
+    that names another home (a ``PREFECT_HOME`` copied with its record: the copy gets its own
+    server, and ``server stop`` there never stops the original's)."""
     try:
         doc = json.loads((Path(home) / STATE_FILE).read_text())
-        return ServerState(int(doc["pid"]), int(doc["port"]), str(doc["prefect_version"]),
-                           float(doc["started_at"]), str(doc["home"]))
-    except (OSError, ValueError, KeyError, TypeError):
+        state = ServerState(int(doc["pid"]), int(doc["port"]), str(doc["prefect_version"]),
+                            float(doc["started_at"]), str(doc["home"]),
+                            str(doc.get("token") or ""))
+    except (OSError, ValueError, KeyError, TypeError, AttributeError):
         return None
+    if Path(state.home).expanduser().resolve() != Path(home).expanduser().resolve():
+        return None
+    return state
 
 
 def _write_state(home: Path, state: ServerState) -> None:
@@ -166,15 +185,108 @@ def _alive(pid: int) -> bool:
         return True
 
 
+def _process(pid: int) -> tuple[list[bytes], Path, dict[bytes, bytes]] | None:
+    """``(command line, working folder, environment)`` of ``pid`` (Linux ``/proc``; None when
+    it cannot be read)."""
+    proc = Path(f"/proc/{pid}")
+    try:
+        args = (proc / "cmdline").read_bytes().split(b"\0")
+        cwd = Path(os.readlink(proc / "cwd")).resolve()
+        env = dict(item.split(b"=", 1) for item in (proc / "environ").read_bytes().split(b"\0")
+                   if b"=" in item)
+    except OSError:
+        return None
+    return args, cwd, env
+
+
 def _is_ours(state: ServerState) -> bool:
-    """Whether the record's process is still the server it started (not a reused pid)."""
+    """Whether the record's process is still the server it started for its home: the pid
+    runs our server app on the recorded port, in the recorded home, with the recorded token
+    (not a reused pid, not the server of a home whose record was copied here)."""
+    from sim2radar.cli._prefect_app import TOKEN_ENV
+
     if not _alive(state.pid):
         return False
+    seen = _process(state.pid)
+    if seen is None:
+        return not Path("/proc").is_dir()  # no /proc: trust the pid and the health check
+    args, cwd, env = seen
+    app_ok = _APP.encode() in args or (not state.token and _LEGACY_APP.encode() in args)
+    return (app_ok and str(state.port).encode() in args
+            and cwd == Path(state.home).expanduser().resolve()
+            and env.get(TOKEN_ENV.encode(), b"").decode() == state.token)
+
+
+def _identity(port: int, timeout_s: float = 2.0) -> dict | None:
+    """What the server on ``port`` answers on ``GET /sim2radar/server`` (None: no answer)."""
+    from sim2radar.cli._prefect_app import IDENTITY_PATH
+
+    conn = http.client.HTTPConnection(HOST, port, timeout=timeout_s)
     try:
-        args = Path(f"/proc/{state.pid}/cmdline").read_bytes().split(b"\0")
-    except OSError:
-        return True  # no /proc: trust the pid and the health check
-    return _APP.encode() in args and str(state.port).encode() in args
+        conn.request("GET", IDENTITY_PATH)
+        resp = conn.getresponse()
+        return json.loads(resp.read()) if resp.status == 200 else None
+    except (OSError, http.client.HTTPException, ValueError):
+        return None
+    finally:
+        conn.close()
+
+
+def _answers_as(state: ServerState) -> bool:
+    """Whether the server on the record's port is the recorded one: healthy and, for a
+    server with a token, answering that token and home."""
+    if not state.token:
+        return _healthy(state.port)
+    who = _identity(state.port)
+    return (who is not None and who.get("token") == state.token
+            and Path(str(who.get("home", ""))).resolve() == Path(state.home).resolve()
+            and _healthy(state.port))
+
+
+def _current(home: Path) -> ServerState | None:
+    """``home``'s record when its process is the server; else the live server found without
+    it (:func:`find_live_server`); else the record as it is (a dead server's, to replace), or
+    None."""
+    state = read_state(home)
+    if state is not None and _is_ours(state):
+        return state
+    return find_live_server(home) or state
+
+
+def find_live_server(home: str | os.PathLike) -> ServerState | None:
+    """The managed server running for ``home`` found without its record (deleted or
+    truncated while it ran): a process of this package's server app whose working folder is
+    ``home`` (servers start there); its port, token and version come from its command line and
+    environment (Linux ``/proc``; None elsewhere or when none runs)."""
+    home = Path(home).expanduser().resolve()
+    proc = Path("/proc")
+    if not proc.is_dir():
+        return None
+    from sim2radar.cli._prefect_app import TOKEN_ENV
+
+    for entry in proc.iterdir():
+        if not entry.name.isdigit() or int(entry.name) == os.getpid():
+            continue
+        seen = _process(int(entry.name))
+        if seen is None:
+            continue
+        args, cwd, env = seen
+        if (_APP.encode() not in args and _LEGACY_APP.encode() not in args) or cwd != home:
+            continue
+        try:
+            port = int(args[args.index(b"--port") + 1])
+        except (ValueError, IndexError):
+            continue
+        token = env.get(TOKEN_ENV.encode(), b"").decode()
+        version = env.get(b"SIM2RADAR_PREFECT_VERSION", b"").decode() or _prefect_version()
+        try:
+            started = entry.stat().st_mtime
+        except OSError:
+            continue
+        state = ServerState(int(entry.name), port, version, started, str(home), token)
+        if _is_ours(state):
+            return state
+    return None
 
 
 def _healthy(port: int, timeout_s: float = 2.0) -> bool:
@@ -193,7 +305,7 @@ def _wait_healthy(state: ServerState, timeout_s: float) -> bool:
     """Poll the health endpoint until it answers, the process dies or ``timeout_s`` passes."""
     deadline = time.monotonic() + timeout_s
     while True:
-        if _healthy(state.port):
+        if _answers_as(state):
             return True
         if not _is_ours(state) or time.monotonic() > deadline:
             return False
@@ -236,7 +348,13 @@ def _spawn(home: Path, port: int) -> ServerState:
     ``/ui-settings`` answers Prefect's default ``http://127.0.0.1:4200/api`` and the UI on any
     other port shows "Oops. Something went wrong." (issue #24).
     """
-    env = {**os.environ, "PREFECT_HOME": str(home), "PREFECT__SERVER_FINAL": "1"}
+    import secrets
+
+    from sim2radar.cli._prefect_app import TOKEN_ENV
+
+    token = secrets.token_hex(16)
+    env = {**os.environ, "PREFECT_HOME": str(home), "PREFECT__SERVER_FINAL": "1",
+           TOKEN_ENV: token, "SIM2RADAR_PREFECT_VERSION": _prefect_version()}
     env.pop("PREFECT_API_URL", None)
     # both names of the setting: Prefect reads PREFECT_SERVER_UI_API_URL first
     env.update({"PREFECT_UI_API_URL": _api_url(port), "PREFECT_SERVER_UI_API_URL": _api_url(port),
@@ -252,7 +370,7 @@ def _spawn(home: Path, port: int) -> ServerState:
                                 stderr=subprocess.STDOUT, start_new_session=True)
     # the server outlives this process on purpose; no Popen warning about it at exit
     proc.returncode = 0
-    return ServerState(proc.pid, port, _prefect_version(), time.time(), str(home))
+    return ServerState(proc.pid, port, _prefect_version(), time.time(), str(home), token)
 
 
 def ensure_server(home: str | os.PathLike | None = None, *,
@@ -268,7 +386,11 @@ def ensure_server(home: str | os.PathLike | None = None, *,
     """
     home = Path(home).expanduser().resolve() if home is not None else prefect_home()
     with _locked(home):
-        state = read_state(home)
+        state = _current(home)
+        if state is not None and read_state(home) != state:  # recovered: write it back
+            _write_state(home, state)
+            print(f"sim2radar: recovered the record of the running Prefect server "
+                  f"(pid {state.pid}, port {state.port}) in {home}", file=sys.stderr)
         if state is not None:
             if state.prefect_version != _prefect_version() and _is_ours(state):
                 _terminate(state.pid)  # started by another Prefect: its schema may differ
@@ -294,10 +416,10 @@ def ensure_server(home: str | os.PathLike | None = None, *,
 def server_status(home: str | os.PathLike | None = None) -> tuple[ServerState | None, bool]:
     """``(state, healthy)`` of ``home``'s managed server; state None when none runs."""
     home = Path(home).expanduser().resolve() if home is not None else prefect_home()
-    state = read_state(home)
+    state = _current(home)
     if state is None or not _is_ours(state):
         return None, False
-    return state, _healthy(state.port)
+    return state, _answers_as(state)
 
 
 def stop_server(home: str | os.PathLike | None = None, *,
@@ -308,7 +430,7 @@ def stop_server(home: str | os.PathLike | None = None, *,
     if not home.is_dir():
         return None
     with _locked(home):  # waits for a server being started to be recorded
-        state = read_state(home)
+        state = _current(home)
         running = state is not None and _is_ours(state)
         if running:
             _terminate(state.pid, timeout_s)

@@ -210,3 +210,51 @@ def test_the_users_own_prefect_settings_win(tmp_path, monkeypatch):
     with pytest.raises(typer.Exit) as info:
         srv.use_managed_server()
     assert info.value.exit_code == 2
+
+
+def test_a_copied_or_lost_record_never_forks_the_server(tmp_path):
+    """Issue #33, probe 5: a PREFECT_HOME copied with its record does not reach (or stop) the
+    original's server; a record with the right pid and port but another token is not the
+    server; a record deleted or truncated while the server runs is recovered from the live
+    process, and no second server starts on the database."""
+    import shutil
+
+    home, copy = (tmp_path / "a").resolve(), (tmp_path / "b").resolve()
+    try:
+        state, started = srv.ensure_server(home)
+        assert started and len(state.token) == 32
+        assert srv._identity(state.port)["token"] == state.token
+        shutil.copytree(home, copy, ignore=shutil.ignore_patterns("*.lock"))
+        assert srv.read_state(copy) is None                 # names /a: not the copy's record
+        assert srv.server_status(copy) == (None, False)
+        assert srv.stop_server(copy) is None
+        assert srv.server_status(home) == (state, True)
+        forged = {**json.loads((home / srv.STATE_FILE).read_text()), "home": str(copy)}
+        (copy / srv.STATE_FILE).write_text(json.dumps(forged))
+        assert srv.server_status(copy) == (None, False)     # runs in /a, not in /b
+        assert srv.stop_server(copy) is None
+        wrong = {**json.loads((home / srv.STATE_FILE).read_text()), "token": "0" * 32}
+        (home / srv.STATE_FILE).write_text(json.dumps(wrong))
+        assert srv.read_state(home).token == "0" * 32
+        found, healthy = srv.server_status(home)             # found as the live server
+        assert healthy and (found.pid, found.port, found.token) == (state.pid, state.port,
+                                                                    state.token)
+        for damage in ("wrong token", "truncate", "delete"):
+            if damage == "truncate":
+                (home / srv.STATE_FILE).write_text('{"pid": ')
+            elif damage == "delete":
+                (home / srv.STATE_FILE).unlink()
+            else:
+                (home / srv.STATE_FILE).write_text(json.dumps(wrong))
+            again, started = srv.ensure_server(home)
+            assert not started and again.pid == state.pid and again.token == state.token
+            assert srv.read_state(home) == again              # the record is written back
+        (home / srv.STATE_FILE).unlink()
+        stopped = srv.stop_server(home)                      # a lost record still stops it
+        assert stopped is not None and stopped.pid == state.pid
+        assert _settled(home, set()) == {}
+    finally:
+        for h in (home, copy):
+            srv.stop_server(h)
+            for pid in _processes_of(h):
+                os.kill(pid, signal.SIGKILL)
