@@ -1,6 +1,8 @@
 """The shared Typer application that every command module registers on, and the helpers every
 command shares (the store check, quiet consoles for recorded failures)."""
 
+from __future__ import annotations
+
 import contextlib
 import logging
 from collections.abc import Iterable
@@ -90,3 +92,87 @@ def quiet_recorded_failures(task_names: Iterable[str], verbose: bool = False):
     finally:
         for handler in handlers:
             handler.removeFilter(quiet)
+
+
+class ServerWatch:
+    """Whether the Prefect API this process reports to stopped answering: a daemon thread
+    asks ``{PREFECT_API_URL}/health`` every ``interval_s`` and sets :attr:`gone` after two
+    failures in a row. From then on Prefect's console output (its client's retries, the
+    events worker's reconnects, the API log handler's errors) is dropped: the command says in
+    one line that the server went away and finishes the run without it."""
+
+    def __init__(self, api_url: str | None, interval_s: float = 1.0) -> None:
+        import threading
+
+        self.api_url = api_url
+        self.interval_s = interval_s
+        self.gone = threading.Event()
+        self.why = ""
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._poll, name="sim2radar-server-watch",
+                                        daemon=True)
+
+    def _answers(self) -> str:
+        import urllib.error
+        import urllib.request
+
+        try:
+            with urllib.request.urlopen(f"{self.api_url}/health", timeout=2.0) as resp:
+                return "" if resp.status == 200 else f"HTTP {resp.status}"
+        except (OSError, urllib.error.URLError) as exc:
+            return str(getattr(exc, "reason", exc))
+
+    def _poll(self) -> None:
+        misses = 0
+        while not self._stop.wait(self.interval_s):
+            why = self._answers()
+            misses = misses + 1 if why else 0
+            if misses >= 2:
+                self.why = why
+                _silence_prefect()
+                self.gone.set()
+                return
+
+    def say_gone(self) -> None:
+        """The one line a command prints when the server went away."""
+        typer.secho(f"warning: the Prefect server ({self.api_url}) went away during the run "
+                    f"({self.why}); finishing it without Prefect", fg="yellow", err=True)
+
+    def __enter__(self) -> ServerWatch:
+        if self.api_url:
+            self._thread.start()
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self._stop.set()
+
+
+def _silence_prefect() -> None:
+    """Drop Prefect's console records and API log handlers (the server is gone: every record
+    would be another connection error)."""
+    from prefect.logging.handlers import APILogHandler, PrefectConsoleHandler
+
+    def not_prefect(record: logging.LogRecord) -> bool:
+        return not record.name.startswith("prefect")
+
+    loggers = [logging.getLogger()] + [lg for lg in list(logging.root.manager.loggerDict.values())
+                                       if isinstance(lg, logging.Logger)]
+    for lg in loggers:
+        for h in list(lg.handlers):
+            if isinstance(h, APILogHandler):
+                lg.removeHandler(h)
+            elif isinstance(h, PrefectConsoleHandler) or lg.name.startswith("prefect"):
+                h.addFilter(not_prefect)  # e.g. prefect._internal's own stream handler
+        if lg.name.startswith("prefect"):
+            lg.setLevel(logging.CRITICAL + 1)
+
+
+def exit_now(code: int) -> None:
+    """Exit with ``code`` without Prefect's exit handlers: after the server went away, its
+    events worker would spend minutes retrying every event it still holds."""
+    import os
+    import sys
+
+    sys.stdout.flush()
+    sys.stderr.flush()
+    os._exit(code)

@@ -44,8 +44,13 @@ def finish_generate(summary: dict[str, Any], json_out: Path | None, strict: bool
     if json_out is not None:
         json_out.parent.mkdir(parents=True, exist_ok=True)
         json_out.write_text(json.dumps(summary, indent=1, default=str))
-    if strict and (summary["counts"]["failed"] or fallback_count(summary)):
-        raise typer.Exit(1)
+    code = 1 if strict and (summary["counts"]["failed"] or fallback_count(summary)) else 0
+    if summary.get("prefect_server_went_away"):
+        from sim2radar.cli._app import exit_now
+
+        exit_now(code)
+    if code:
+        raise typer.Exit(code)
 
 
 def fallback_count(summary: dict[str, Any]) -> int:

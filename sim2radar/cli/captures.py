@@ -43,18 +43,33 @@ def run_captures(captures: Path, *, store: str, dataset: str, settings: dict[str
             progress.update(bar, advance=1,
                             description=f"{outcome.id}: {outcome.status} ({pts} pts)")
 
+        import os
         from contextlib import nullcontext
 
-        from sim2radar.cli._app import quiet_recorded_failures
+        from sim2radar.cli._app import ServerWatch, quiet_recorded_failures
         from sim2radar.flows._steps import STEP_NAMES
 
         quiet = (quiet_recorded_failures(["capture-scene", *STEP_NAMES], verbose)
                  if use_prefect else nullcontext())
-        with quiet:
+        summary = None
+        with quiet, ServerWatch(os.environ.get("PREFECT_API_URL") if use_prefect
+                                else None) as watch:
+            try:
+                summary = capture_dataset(captures, store, dataset, export_dir=export_dir,
+                                          force=force, workers=workers,
+                                          dask_address=dask_address, use_prefect=use_prefect,
+                                          on_scene=on_scene, retry_failed=retry_failed,
+                                          **settings)
+            except Exception:
+                if not watch.gone.is_set():
+                    raise
+        if watch.gone.is_set():  # the work done is in the store; the rest runs here
+            watch.say_gone()
+            progress.update(bar, completed=0, description="without Prefect")
             summary = capture_dataset(captures, store, dataset, export_dir=export_dir,
-                                      force=force, workers=workers, dask_address=dask_address,
-                                      use_prefect=use_prefect, on_scene=on_scene,
-                                      retry_failed=retry_failed, **settings)
+                                      force=force, workers=workers, use_prefect=False,
+                                      on_scene=on_scene, retry_failed=retry_failed, **settings)
+            summary["prefect_server_went_away"] = watch.why or True
     summary["pngs"] = []
     if png_dir is not None:
         from sim2radar.factory.captures import CaptureSpec

@@ -12,6 +12,7 @@ win over it.
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 from typing import Any
 
@@ -110,11 +111,13 @@ def run_generate(
             from sim2radar.flows.runners import task_runner
 
             runner = task_runner(workers, dask_address)
-            from sim2radar.cli._app import quiet_recorded_failures
+            from sim2radar.cli._app import ServerWatch, quiet_recorded_failures
             from sim2radar.flows._steps import STEP_NAMES
 
+            summary = None
             with progress_callback(on_world), \
-                    quiet_recorded_failures(["generate-world-dataset", *STEP_NAMES], verbose):
+                    quiet_recorded_failures(["generate-world-dataset", *STEP_NAMES], verbose), \
+                    ServerWatch(os.environ.get("PREFECT_API_URL")) as watch:
                 try:
                     summary = generate_dataset_flow.with_options(
                         task_runner=runner, name=flow_name)(
@@ -122,6 +125,16 @@ def run_generate(
                         export_dir=export_dir, force=force, strict=strict, **extras)
                 except DatasetFailures as exc:  # strict: the run is marked failed in Prefect
                     summary = exc.summary
+                except Exception:
+                    if not watch.gone.is_set():
+                        raise
+            if watch.gone.is_set():  # the work done is in the store; the rest runs here
+                watch.say_gone()
+                progress.update(bar, completed=0, description="without Prefect")
+                summary = generate_dataset_plain(seeds, spec, store, dataset,
+                                                 export_dir=export_dir, force=force,
+                                                 on_world=on_world, **extras)
+                summary["prefect_server_went_away"] = watch.why or True
         else:
             summary = generate_dataset_plain(seeds, spec, store, dataset, export_dir=export_dir,
                                              force=force, on_world=on_world, **extras)

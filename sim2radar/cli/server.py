@@ -64,6 +64,7 @@ LOG_FILE = "sim2radar-server.log"
 HOST = "127.0.0.1"  # loopback only: the API has no authentication
 STARTUP_TIMEOUT_S = 120.0  # a fresh database migrates first (~10 s idle, more on busy cores)
 STOP_TIMEOUT_S = 15.0  # SIGTERM -> graceful uvicorn shutdown; SIGKILL after this
+CLIENT_RETRIES = 3  # PREFECT_CLIENT_MAX_RETRIES for the managed server (unless set)
 _APP = "sim2radar.cli._prefect_app:create_app"  # Prefect's app + GET /sim2radar/server
 _LEGACY_APP = "prefect.server.api.server:create_app"  # servers started by sim2radar < 0.4
 
@@ -482,6 +483,9 @@ def use_managed_server() -> None:
                     f"{MODE_ENV}=ephemeral uses Prefect's temporary server)", fg="red", err=True)
         raise typer.Exit(1) from None
     os.environ["PREFECT_API_URL"] = state.api_url
+    # a loopback server either answers or is gone: 3 retries (2 + 4 + 8 s), not Prefect's 5
+    # (62 s per request) before a run notices and finishes without it
+    os.environ.setdefault("PREFECT_CLIENT_MAX_RETRIES", str(CLIENT_RETRIES))
     if started:
         typer.secho(f"started the local Prefect server {state.ui_url} (pid {state.pid}, "
                     f"PREFECT_HOME {home}); later commands reuse it, `sim2radar server stop` "

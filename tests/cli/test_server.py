@@ -258,3 +258,42 @@ def test_a_copied_or_lost_record_never_forks_the_server(tmp_path):
             srv.stop_server(h)
             for pid in _processes_of(h):
                 os.kill(pid, signal.SIGKILL)
+
+
+def test_a_server_killed_mid_run_lets_the_run_finish_without_it(tmp_path):
+    """Issue #33, probe 5: the managed server dies (SIGKILL) while `generate` runs; the run
+    finishes its work without Prefect, writes its export (the same frames as a run that never
+    used Prefect) and exits 0 with one line saying the server went away — no tracebacks, no
+    minutes of retries at exit."""
+    home, store = (tmp_path / "prefect").resolve(), tmp_path / "store"
+    args = ["generate", *TINY, "--worlds", "6", "--frames", "2", "--out", str(store),
+            "--export-openpcdet", str(tmp_path / "exp")]
+    try:
+        state, _ = srv.ensure_server(home)
+        run = subprocess.Popen([*CLI, *args], cwd=REPO, env=_env(home), text=True,
+                               stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+        deadline = time.monotonic() + 240
+        while not list((store / "dataset_frames").glob("*.parquet")):
+            assert run.poll() is None and time.monotonic() < deadline, run.communicate()
+            time.sleep(0.2)
+        os.kill(state.pid, signal.SIGKILL)
+        t_kill = time.monotonic()
+        out, err = run.communicate(timeout=400)
+        assert run.returncode == 0, out[-2000:] + err[-3000:]
+        assert time.monotonic() - t_kill < 180
+        assert err.count("went away during the run") == 1, err[-3000:]
+        assert "Traceback" not in out + err and "EventsWorker" not in err
+        assert "frames: " in out and " 0 failed" in out
+        plain = subprocess.run([*CLI, *args[:-4], "--out", str(tmp_path / "plain"),
+                                "--export-openpcdet", str(tmp_path / "exp_plain"),
+                                "--no-prefect"], cwd=REPO, env=_env(home), capture_output=True,
+                               text=True, timeout=400)
+        assert plain.returncode == 0, plain.stderr[-2000:]
+        ours = sorted((tmp_path / "exp" / "points").glob("*.npy"))
+        assert len(ours) == 12
+        for f in ours:
+            assert f.read_bytes() == (tmp_path / "exp_plain" / "points" / f.name).read_bytes()
+    finally:
+        srv.stop_server(home)
+        for pid in _processes_of(home):
+            os.kill(pid, signal.SIGKILL)
