@@ -301,7 +301,7 @@ def scene_id_for(scene_path: str | os.PathLike) -> str:
 
     Never raises, so a broken scene still gets a manifest row under a stable id.
     """
-    from sim2radar.storage.manifest import id_problem
+    from sim2radar.vocab import id_problem
 
     path = Path(scene_path)
     try:

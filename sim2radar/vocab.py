@@ -60,3 +60,26 @@ def material_id(name: str) -> int:
 #: What became of one unit of work (a manifest row, a sweep's run): computed, found cached
 #: (nothing recomputed) or failed with its error.
 STATUSES: tuple[str, ...] = ("ok", "skipped", "failed")
+
+
+#: The longest scene or frame id (a file name holds a frame id and a suffix; file systems stop
+#: at 255 bytes).
+MAX_ID_LENGTH = 120
+
+
+def id_problem(name: str) -> str | None:
+    """Why ``name`` cannot be a scene or frame id (None when it can): ids become file names
+    and lines of OpenPCDet's ``ImageSets/*.txt``, so they must be printable (no newline, tab or
+    other control character), hold no path separator, not be ``.`` / ``..`` and be at most
+    :data:`MAX_ID_LENGTH` characters. Spaces and non-ASCII letters are fine."""
+    if not isinstance(name, str) or not name.strip():
+        return "an id must not be empty or blank"
+    if not name.isprintable():
+        return "an id must be printable: no newline, tab or other control character"
+    if "/" in name or "\\" in name or name in (".", ".."):
+        return "an id must not hold a path separator or be '.' / '..'"
+    if name != name.strip():
+        return "an id must not start or end with whitespace"
+    if len(name) > MAX_ID_LENGTH:
+        return f"an id must be at most {MAX_ID_LENGTH} characters, this one has {len(name)}"
+    return None

@@ -32,7 +32,7 @@ import pyarrow.parquet as pq
 from sim2radar.storage._files import FileRoot
 from sim2radar.storage.integrity import is_corrupt_file_error
 from sim2radar.storage.schemas import MANIFEST
-from sim2radar.vocab import STATUSES
+from sim2radar.vocab import MAX_ID_LENGTH, STATUSES, id_problem
 
 __all__ = ["MANIFESTS", "MAX_ID_LENGTH", "MAX_NAME_LENGTH", "Manifest", "STATUSES",
            "check_dataset_name", "id_problem"]
@@ -42,10 +42,8 @@ MANIFESTS = "manifests"
 _DATASET_RE = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]*$")
 
 
-#: The longest dataset name, and the longest scene / frame id (a file name holds a frame id
-#: and a suffix; file systems stop at 255 bytes).
+#: The longest dataset name (one folder of the store).
 MAX_NAME_LENGTH = 100
-MAX_ID_LENGTH = 120
 
 
 def check_dataset_name(dataset: str) -> str:
@@ -60,24 +58,6 @@ def check_dataset_name(dataset: str) -> str:
         raise ValueError(f"dataset name must be at most {MAX_NAME_LENGTH} characters, got "
                          f"{len(dataset)} ({dataset[:40]!r}...)")
     return dataset
-
-
-def id_problem(name: str) -> str | None:
-    """Why ``name`` cannot be a scene or frame id (None when it can): ids become file names
-    and lines of OpenPCDet's ``ImageSets/*.txt``, so they must be printable (no newline, tab or
-    other control character), hold no path separator, not be ``.`` / ``..`` and be at most
-    :data:`MAX_ID_LENGTH` characters. Spaces and non-ASCII letters are fine."""
-    if not isinstance(name, str) or not name.strip():
-        return "an id must not be empty or blank"
-    if not name.isprintable():
-        return "an id must be printable: no newline, tab or other control character"
-    if "/" in name or "\\" in name or name in (".", ".."):
-        return "an id must not hold a path separator or be '.' / '..'"
-    if name != name.strip():
-        return "an id must not start or end with whitespace"
-    if len(name) > MAX_ID_LENGTH:
-        return f"an id must be at most {MAX_ID_LENGTH} characters, this one has {len(name)}"
-    return None
 
 
 def _row_name(scene_id: str) -> str:

@@ -68,7 +68,7 @@ from sim2radar.factory.labels import (
     radar_visibility,
     scene_ray_caster,
 )
-from sim2radar.storage.manifest import MAX_ID_LENGTH, id_problem
+from sim2radar.vocab import MAX_ID_LENGTH, id_problem
 
 __all__ = [
     "CaptureScene",

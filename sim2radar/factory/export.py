@@ -18,7 +18,7 @@ from sim2radar.datasets.splits import split_groups
 from sim2radar.evaluate.fidelity import label_quality
 from sim2radar.factory.frames import DatasetFrame
 from sim2radar.factory.labels import DEFAULT_POINT_CLOUD_RANGE_M, boxes_in_point_cloud_range
-from sim2radar.storage.manifest import id_problem
+from sim2radar.vocab import id_problem
 
 __all__ = ["export_frames", "point_geometry"]
 

@@ -281,7 +281,7 @@ def test_names_that_would_break_the_layout_are_refused_where_they_enter(one_scen
 
 
 def test_an_id_rule_names_what_is_wrong():
-    from sim2radar.storage.manifest import id_problem
+    from sim2radar.vocab import id_problem
 
     for ok in ("scene_004", "Büro 3", "a.b-c", "x" * 120):
         assert id_problem(ok) is None, ok

@@ -62,5 +62,7 @@ def test_unwritable_output_folder_is_one_line_exit_2_before_any_work(command, un
 def test_generate_zero_frames_or_worlds_names_the_option(option, tmp_path):
     res = CliRunner().invoke(app, ["generate", option, "0", "--no-prefect", "--out",
                                    str(tmp_path / "store")], env={"COLUMNS": "400"})
-    assert res.exit_code == 2 and res.output.strip() == f"error: {option} must be >= 1, got 0"
+    text = res.output.strip()
+    assert res.exit_code == 2 and text.startswith(f"error: {option} must be between 1 and ")
+    assert text.endswith(", got 0")
     assert not (tmp_path / "store").exists()
