@@ -996,3 +996,41 @@ def test_the_columns_the_page_reads_are_the_run_tables_columns():
         assert _holds(schema.field(name).type, kind), (name, kind, schema.field(name).type)
     for name in _RUN_IDENTITY:
         assert not schema.field(name).nullable, name
+
+
+def test_many_tabs_at_once_closed_tabs_and_ctrl_c_mid_request(sweep_dir, capsys):
+    """Issue #33, probe 7: 200 concurrent page loads are all answered and the page is rendered
+    once (not per request); a client that hangs up mid-answer prints nothing; stopping while a
+    request is still being answered returns at once."""
+    import socket
+    import threading
+    from concurrent.futures import ThreadPoolExecutor
+
+    with serve_dashboard(sweep_dir, poll_s=0.5) as server:
+        t0 = time.perf_counter()
+        with ThreadPoolExecutor(200) as pool:
+            statuses = list(pool.map(lambda _: _get(server.url)[0], range(200)))
+        assert statuses == [200] * 200, statuses.count(200)
+        assert server.renders == 1
+        assert time.perf_counter() - t0 < 90
+        for _ in range(20):  # ask for the page, then hang up before reading it
+            with socket.create_connection((server.host, server.port)) as s:
+                s.sendall(b"GET / HTTP/1.1\r\nHost: 127.0.0.1\r\n\r\n")
+                s.setsockopt(socket.SOL_SOCKET, socket.SO_LINGER, b"\x01\0\0\0\0\0\0\0")
+        time.sleep(0.5)
+        slow = threading.Event()
+        real = server.page_bytes
+
+        def slow_page() -> bytes:
+            slow.set()
+            time.sleep(5.0)
+            return real()
+
+        server.page_bytes = slow_page
+        threading.Thread(target=lambda: _get(server.url), daemon=True).start()
+        assert slow.wait(5.0)
+        t0 = time.perf_counter()
+        server.stop()
+        assert time.perf_counter() - t0 < 2.0
+    err = capsys.readouterr().err
+    assert "Traceback" not in err and "BrokenPipe" not in err and "ConnectionReset" not in err

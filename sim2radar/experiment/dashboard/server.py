@@ -68,6 +68,24 @@ def allowed_host(header: str | None, bind_host: str = "127.0.0.1") -> bool:
     return name is not None and name in (*LOOPBACK_HOST_NAMES, bind.lower())
 
 
+class _HTTPServer(ThreadingHTTPServer):
+    """A threading HTTP server for many browser tabs at once: a listen backlog of 128 (the
+    default 5 left page loads unanswered under 200 concurrent clients), request threads that
+    never hold up exit (daemon, not joined on close: Ctrl-C stops at once even while a request
+    is in flight), and a client that goes away mid-answer is not an error."""
+
+    request_queue_size = 128
+    daemon_threads = True
+    block_on_close = False
+
+    def handle_error(self, request, client_address) -> None:
+        import sys
+
+        if isinstance(sys.exc_info()[1], ConnectionError):  # BrokenPipe, ConnectionReset
+            return
+        super().handle_error(request, client_address)
+
+
 class DashboardServer:
     """The live dashboard of one sweep folder on a loopback address.
 
@@ -109,7 +127,7 @@ class DashboardServer:
                            f"http://127.0.0.1:{server.port}/\n")
                     self._send(403, "text/plain; charset=utf-8", why.encode("utf-8"))
                 elif path in ("/", "/index.html"):
-                    self._send(200, "text/html; charset=utf-8", server.page().encode("utf-8"))
+                    self._send(200, "text/html; charset=utf-8", server.page_bytes())
                 elif path == "/data.json":
                     status, body = server.data_json()
                     self._send(status, "application/json", body)
@@ -117,18 +135,23 @@ class DashboardServer:
                     self._send(404, "text/plain; charset=utf-8", b"not found\n")
 
             def _send(self, status: int, ctype: str, body: bytes) -> None:
-                self.send_response(status)
-                self.send_header("Content-Type", ctype)
-                self.send_header("Content-Length", str(len(body)))
-                self.send_header("Cache-Control", "no-store")
-                self.end_headers()
-                self.wfile.write(body)
+                try:
+                    self.send_response(status)
+                    self.send_header("Content-Type", ctype)
+                    self.send_header("Content-Length", str(len(body)))
+                    self.send_header("Cache-Control", "no-store")
+                    self.end_headers()
+                    self.wfile.write(body)
+                except ConnectionError:  # the client closed the tab: nothing to answer
+                    self.close_connection = True
 
             def log_message(self, format: str, *args: Any) -> None:  # noqa: A002
                 pass  # quiet: the CLI prints the URL, not every poll
 
-        self._httpd = ThreadingHTTPServer((host, int(port)), Handler)
-        self._httpd.daemon_threads = True
+        self._page_cache: tuple[bytes, bytes] | None = None  # (data body, rendered page)
+        self._render_lock = threading.Lock()
+        self.renders = 0  # pages rendered (one per change of the folder, not per request)
+        self._httpd = _HTTPServer((host, int(port)), Handler)
 
     @property
     def host(self) -> str:
@@ -174,10 +197,22 @@ class DashboardServer:
 
     def page(self) -> str:
         """The live page with the folder's current data (or its last readable state)."""
+        return self.page_bytes().decode("utf-8")
+
+    def page_bytes(self) -> bytes:
+        """:meth:`page` as UTF-8, rendered once per change of the folder (the page is
+        megabytes: rendering it per request made 200 page loads take minutes)."""
         status, body = self.data_json()
-        data = json.loads(body) if status == 200 else (
-            self._last_good or error_data(self.folder, json.loads(body)["error"]))
-        return render_html(data, live=True, poll_s=self.poll_s)
+        with self._render_lock:  # concurrent first loads wait for one render
+            cached = self._page_cache
+            if cached is not None and cached[0] == body:
+                return cached[1]
+            data = json.loads(body) if status == 200 else (
+                self._last_good or error_data(self.folder, json.loads(body)["error"]))
+            html = render_html(data, live=True, poll_s=self.poll_s).encode("utf-8")
+            self._page_cache = (body, html)
+            self.renders += 1
+            return html
 
     def start(self) -> DashboardServer:
         """Serve in a daemon thread (no-op when already serving)."""
