@@ -8,18 +8,22 @@ file system). The Parquet artifact store publishes the same way (:mod:`sim2radar
 
 from __future__ import annotations
 
+import contextlib
 import json
 import math
 import os
 import re
-from collections.abc import Callable, Mapping
+import socket
+import sys
+import time
+from collections.abc import Callable, Iterator, Mapping
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 __all__ = ["atomic_write", "atomic_write_with", "write_json", "jsonable", "abandoned_temp_files",
-           "json_text"]
+           "json_text", "FolderBusyError", "WRITER_LOCK", "writer_lock"]
 
 _TEMP = re.compile(r"^\..+\.tmp(\d+)$")
 
@@ -111,3 +115,41 @@ def json_text(path: str | os.PathLike) -> str | None:
     if packed.is_file():
         return gzip.decompress(packed.read_bytes()).decode("utf-8")
     return None
+
+
+#: The lock file a writer holds in a folder it writes (an OpenPCDet export).
+WRITER_LOCK = ".sim2radar-writer.lock"
+
+
+class FolderBusyError(RuntimeError):
+    """Another live process holds the folder's writer lock (:func:`writer_lock`)."""
+
+
+@contextlib.contextmanager
+def writer_lock(folder: str | os.PathLike, what: str = "folder") -> Iterator[Path]:
+    """Hold ``folder``'s writer lock (an exclusive ``fcntl`` lock on ``folder/.sim2radar-writer
+    .lock``, created with the folder) while the block runs: a second run writing the same
+    folder is refused at once with :class:`FolderBusyError` naming the first (its pid, host,
+    start time and command), instead of both writing it and the last one winning. The lock
+    goes with its process: a killed run leaves nothing to clean up."""
+    import fcntl
+
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    fh = open(folder / WRITER_LOCK, "a+")  # noqa: SIM115 - held for the block
+    try:
+        try:
+            fcntl.flock(fh, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            fh.seek(0)
+            owner = fh.read().strip() or "a process that did not say who it is"
+            raise FolderBusyError(f"{folder}: another run is writing this {what} ({owner}); "
+                                  f"wait for it to finish, or choose another {what}") from None
+        fh.seek(0)
+        fh.truncate()
+        fh.write(f"pid {os.getpid()} on {socket.gethostname()} since "
+                 f"{time.strftime('%Y-%m-%d %H:%M:%S')}: {' '.join(sys.argv)[:300]}\n")
+        fh.flush()
+        yield folder
+    finally:
+        fh.close()  # releases the lock

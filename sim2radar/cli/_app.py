@@ -176,3 +176,24 @@ def exit_now(code: int) -> None:
     sys.stdout.flush()
     sys.stderr.flush()
     os._exit(code)
+
+
+@contextlib.contextmanager
+def export_folder_lock(folder):
+    """Hold ``folder``'s writer lock while a command exports to it (None: nothing to lock);
+    a folder another run is writing exits with status 2 and one line naming that run."""
+    from sim2radar.fileio import FolderBusyError, writer_lock
+
+    if folder is None:
+        yield
+        return
+    try:
+        lock = writer_lock(folder, "export folder")
+        lock.__enter__()
+    except FolderBusyError as exc:
+        typer.secho(f"error: --export-openpcdet: {exc}", fg="red", err=True)
+        raise typer.Exit(2) from None
+    try:
+        yield
+    finally:
+        lock.__exit__(None, None, None)

@@ -29,12 +29,14 @@ def run_captures(captures: Path, *, store: str, dataset: str, settings: dict[str
         _prefect_env(verbose)
     from rich.progress import Progress
 
+    from sim2radar.cli._app import export_folder_lock
     from sim2radar.cli._datasets import progress_columns
     from sim2radar.factory.captures import find_captures
     from sim2radar.flows.capture_dataset import capture_dataset
 
     n_scenes = len(find_captures(captures, warn=False))  # the flow warns once
-    with Progress(*progress_columns(), disable=not show_progress, transient=False) as progress:
+    with export_folder_lock(export_dir), \
+            Progress(*progress_columns(), disable=not show_progress, transient=False) as progress:
         bar = progress.add_task("starting" + (" Prefect" if use_prefect else ""), total=n_scenes)
 
         def on_scene(outcome) -> None:

@@ -23,6 +23,7 @@ from sim2radar.cli._app import (
     exit_unless_valid_dataset,
     exit_unless_writable,
     exit_unless_writable_outputs,
+    export_folder_lock,
 )
 from sim2radar.cli._datasets import (
     finish_generate,
@@ -41,7 +42,17 @@ from sim2radar.factory.spec import (
 
 __all__ = ["generate", "load_generate_config", "print_generate_summary", "run_generate"]
 
-def run_generate(
+
+def run_generate(seeds: list[int], spec: DatasetSpec | dict, *, export_dir: str | None = None,
+                 **options: Any) -> dict[str, Any]:
+    """:func:`_run_generate` (its options) holding the export folder's writer lock
+    (:func:`sim2radar.fileio.writer_lock`): a second run exporting to the same folder is
+    refused while this one runs."""
+    with export_folder_lock(export_dir):
+        return _run_generate(seeds, spec, export_dir=export_dir, **options)
+
+
+def _run_generate(
     seeds: list[int],
     spec: DatasetSpec | dict,
     *,

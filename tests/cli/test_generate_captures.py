@@ -289,3 +289,32 @@ def test_an_id_rule_names_what_is_wrong():
                        ("..", "separator"), ("", "empty"), (" a", "whitespace"),
                        ("x" * 121, "at most 120")):
         assert words in id_problem(bad), bad
+
+
+def test_a_second_run_exporting_to_the_same_folder_is_refused_naming_the_first(one_scene,
+                                                                                 tmp_path):
+    """Issue #33, probe 7: two runs sharing one --export-openpcdet folder no longer both write
+    it (the last writer won while the first reported its frames): while one holds the folder,
+    another is refused before any work, naming it; afterwards the folder is free again."""
+    from sim2radar.datasets import OpenPCDetDataset
+    from sim2radar.fileio import FolderBusyError, writer_lock
+
+    export = tmp_path / "opcd"
+    args = ["--no-prefect", "--frames", "1", "--no-png", "--out", str(tmp_path / "store"),
+            "--export-openpcdet", str(export)]
+    with writer_lock(export, "export folder"):
+        with pytest.raises(FolderBusyError, match=r"another run is writing this export folder "
+                                                  rf"\(pid {os.getpid()} on "):
+            with writer_lock(export, "export folder"):
+                pass
+        for run in (["generate", "--captures", str(one_scene)],
+                    ["generate", "--worlds", "1", "--geometry", "ground_truth"]):
+            res = CliRunner().invoke(app, [*run, *args], env={"COLUMNS": "400"})
+            assert res.exit_code == 2, res.output
+            assert "another run is writing this export folder" in res.output
+            assert f"pid {os.getpid()}" in res.output
+    assert not (tmp_path / "store" / "manifests").exists()
+    res = CliRunner().invoke(app, ["generate", "--captures", str(one_scene), *args],
+                             env={"COLUMNS": "400"})
+    assert res.exit_code == 0, res.output
+    assert len(OpenPCDetDataset(export).split_ids("train")) == 1
