@@ -220,13 +220,16 @@ def force_runs(store: str, sweep_dir: str | os.PathLike,
 def _claim(ctx: SweepContext, key: str, done, out: Path, what: str):
     """Claim a run for this process (:mod:`sim2radar.experiment.claims`), waiting while another
     live process trains it; None once it is finished (by anyone)."""
-    from sim2radar.experiment.claims import wait_and_claim
+    from sim2radar.experiment.claims import STALE_AFTER_S, wait_and_claim
 
     return wait_and_claim(
         Path(ctx.sweep_dir) / "claims", key, done,
         note=lambda: {"resume": (out / "last.pt").is_file()},
-        on_wait=lambda holder: log.info("%s is being trained by pid %s on %s; waiting for it",
-                                        what, holder.get("pid"), holder.get("host")))
+        on_wait=lambda holder: log.warning(
+            "%s is claimed by pid %s on %s (%s); waiting for it to finish, or for its claim to "
+            "go stale (no heartbeat for %.0f s: a process on another host cannot be asked "
+            "whether it is alive)", what, holder.get("pid"), holder.get("host"),
+            Path(ctx.sweep_dir) / "claims" / f"{key}.json", STALE_AFTER_S))
 
 
 def _pretrain_ids(ctx: SweepContext, job: PlannedPretrain) -> tuple[list[str], list[str]]:

@@ -109,3 +109,29 @@ def test_waiting_for_a_live_holder_can_time_out(tmp_path):
                        on_wait=seen.append)
     assert seen and seen[0]["pid"] == os.getpid()
     held.release()
+
+
+def test_a_sweep_waiting_on_another_hosts_claim_says_so(tmp_path, caplog):
+    """Issue #33, probe 7: a fresh claim from another host held a sweep up to 2 minutes with no
+    message; now one warning names the holder, the claim file and why it waits."""
+    import logging
+    from types import SimpleNamespace
+
+    from sim2radar.tasks.experiment import _claim
+
+    (tmp_path / "claims").mkdir()
+    (tmp_path / "claims" / "k.json").write_text(
+        json.dumps({"host": "elsewhere.example", "pid": 4242, "token": "x"}))
+    finished = threading.Event()
+    threading.Timer(0.5, finished.set).start()
+    logger = logging.getLogger("sim2radar.tasks.experiment")
+    logger.addHandler(caplog.handler)
+    try:
+        assert _claim(SimpleNamespace(sweep_dir=str(tmp_path)), "k", finished.is_set,
+                      tmp_path / "runs" / "k", "run baseline-f0.05-t0") is None
+    finally:
+        logger.removeHandler(caplog.handler)
+    said = [r.getMessage() for r in caplog.records if "is claimed by" in r.getMessage()]
+    assert len(said) == 1
+    assert "pid 4242 on elsewhere.example" in said[0] and "k.json" in said[0]
+    assert "stale" in said[0] and "another host" in said[0]
