@@ -20,7 +20,9 @@ again (they have no artifact, so they are computed again) or pass ``manifest.fai
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
+import os
 import re
 from collections.abc import Mapping
 from datetime import UTC, datetime
@@ -58,6 +60,20 @@ def check_dataset_name(dataset: str) -> str:
         raise ValueError(f"dataset name must be at most {MAX_NAME_LENGTH} characters, got "
                          f"{len(dataset)} ({dataset[:40]!r}...)")
     return dataset
+
+
+@contextlib.contextmanager
+def _file_lock(path: str):
+    """Hold an exclusive ``fcntl`` lock on the local file ``path`` (created with its folder)."""
+    import fcntl
+
+    os.makedirs(os.path.dirname(path), exist_ok=True)
+    with open(path, "a") as fh:
+        fcntl.flock(fh, fcntl.LOCK_EX)
+        try:
+            yield
+        finally:
+            fcntl.flock(fh, fcntl.LOCK_UN)
 
 
 def _row_name(scene_id: str) -> str:
@@ -114,6 +130,21 @@ class Manifest:
             raise ValueError(f"manifest status must be one of {STATUSES}, got {status!r}")
         if not isinstance(scene_id, str) or not scene_id:
             raise ValueError("manifest scene_id must be a non-empty string")
+        with self._row_lock():
+            return self._upsert(scene_id, status, error, artifacts, timings_s, source, fallbacks)
+
+    def _row_lock(self):
+        """An exclusive lock on this dataset's rows while one is read and written again (a
+        local store: ``fcntl`` on ``<folder>/.lock``; two runs recording one scene lost an
+        ``attempts`` update); remote stores have none (their writers are not on this host)."""
+        import contextlib
+
+        if not getattr(self.store, "is_local", False):
+            return contextlib.nullcontext()
+        return _file_lock(self.store.join(MANIFESTS, self.dataset, ".lock"))
+
+    def _upsert(self, scene_id, status, error, artifacts, timings_s, source,
+                fallbacks) -> dict[str, Any]:
         previous = self.get(scene_id)
         row = {
             "scene_id": scene_id,

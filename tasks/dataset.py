@@ -347,13 +347,42 @@ def generate_world_dataset(
     raises (the caller records it); a failing frame is recorded in its outcome and does not
     raise.
     """
+    spec = as_spec(spec)
+    st = open_store(store)
+    n_frames = spec.frames_per_world if n_frames is None else int(n_frames)
+    with world_claim(st, seed, spec, n_frames):
+        return _generate_world(seed, spec, st, force, keep_frames, n_frames, run)
+
+
+def world_claim(st: ArtifactStore, seed: int, spec: DatasetSpec, n_frames: int):
+    """One process at a time makes a world of a given spec in a local store (two runs on one
+    store computed every world twice): a claim (:mod:`sim2radar.experiment.claims`) under
+    ``<store>/claims/generate/``, waited for while another live process holds it — the waiter
+    then finds that world's frames cached. A remote store has no claims (a no-op)."""
+    import contextlib
+
+    if not st.is_local:
+        return contextlib.nullcontext()
+    from sim2radar.experiment.claims import wait_and_claim
+
+    key = content_key(stage="generate_world", stage_version=1, inputs={},
+                      config={"seed": int(seed), "n_frames": int(n_frames),
+                              "spec": spec.to_dict()})
+    return wait_and_claim(
+        Path(st.root) / "claims" / "generate", key, lambda: False,
+        on_wait=lambda holder: log.warning(
+            "world seed %d is being made by pid %s on %s for the same settings; waiting for "
+            "it (its frames are then read back, not computed again)", int(seed),
+            holder.get("pid"), holder.get("host")))
+
+
+def _generate_world(seed: int, spec: DatasetSpec, st: ArtifactStore, force: bool,
+                    keep_frames: bool, n_frames: int, run: Callable[..., Any]) -> Outcome:
+    """The body of :func:`generate_world_dataset`, under its world's claim."""
     from sim2radar.storage.worlds import world_id_for
 
     t_start = time.perf_counter()
-    spec = as_spec(spec)
-    st = open_store(store)
     world_id = world_id_for(seed)
-    n_frames = spec.frames_per_world if n_frames is None else int(n_frames)
     wo = run("render", render_world, int(seed), n_frames, st, spec)
     keys = dict(wo.artifacts)
     inputs = _WorldInputs(st, keys, spec.material_override)

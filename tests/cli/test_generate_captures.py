@@ -318,3 +318,27 @@ def test_a_second_run_exporting_to_the_same_folder_is_refused_naming_the_first(o
                              env={"COLUMNS": "400"})
     assert res.exit_code == 0, res.output
     assert len(OpenPCDetDataset(export).split_ids("train")) == 1
+
+
+def test_two_generates_on_one_store_make_each_world_once(tmp_path):
+    """Issue #33, probe 7: two `generate`s started together on one store computed every world
+    twice; with per-world claims one makes it and the other reads it back (the same frames)."""
+    import subprocess
+    import sys
+
+    args = ["generate", "--worlds", "2", "--frames", "1", "--geometry", "ground_truth",
+            "--width", "80", "--height", "60", "--spp", "2", "--no-prefect", "--no-png",
+            "--out", str(tmp_path / "store")]
+    code = "import sys; from sim2radar.cli import main; sys.argv[0] = 'sim2radar'; main()"
+    procs = [subprocess.Popen([sys.executable, "-c", code, *args, "--json",
+                               str(tmp_path / f"s{i}.json")], stdout=subprocess.PIPE,
+                              stderr=subprocess.STDOUT, text=True) for i in range(2)]
+    outs = [p.communicate(timeout=400)[0] for p in procs]
+    assert [p.returncode for p in procs] == [0, 0], outs
+    summaries = [json.loads((tmp_path / f"s{i}.json").read_text()) for i in range(2)]
+    computed = sum(s["counts"]["ok"] for s in summaries)
+    assert computed == 2, [s["counts"] for s in summaries]
+    assert sum(s["counts"]["skipped"] for s in summaries) == 2
+    keys = [sorted(f["artifacts"]["dataset_frames/ground_truth"] for o in s["outcomes"]
+                   for f in o["parts"]) for s in summaries]
+    assert keys[0] == keys[1]

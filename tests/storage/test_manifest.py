@@ -81,3 +81,19 @@ def test_rows_written_before_fallbacks_were_counted_read_as_zero(tmp_path):
     with pytest.raises(SchemaError, match="stored columns differ"):
         m.get("old")
     assert "fallbacks" in MANIFEST.schema.names
+
+
+def test_two_processes_recording_one_scene_lose_no_attempt(tmp_path):
+    """Issue #33, probe 7: two runs recording the same scene at once lost an ``attempts``
+    update (read, then write); the dataset's row lock makes every upsert count."""
+    import subprocess
+    import sys
+
+    code = ("import sys; from sim2radar.storage import ArtifactStore\n"
+            "m = ArtifactStore(sys.argv[1]).manifest('demo')\n"
+            "for _ in range(25): m.upsert('world_000001', 'ok')\n")
+    procs = [subprocess.Popen([sys.executable, "-c", code, str(tmp_path / "store")])
+             for _ in range(3)]
+    assert [p.wait(timeout=120) for p in procs] == [0, 0, 0]
+    row = ArtifactStore(tmp_path / "store").manifest("demo").get("world_000001")
+    assert row["attempts"] == 75
