@@ -106,9 +106,26 @@ class DomainDataset:
     def frames(self, ids: Sequence[str], num_point_features: int,
                class_names: Sequence[str]) -> list[Frame]:
         """Load frames, keeping the first ``num_point_features`` point columns (x y z
-        intensity of files that also carry Doppler) and boxes of ``class_names``."""
+        intensity of files that also carry Doppler) and boxes of ``class_names``.
+
+        Raises
+        ------
+        DatasetError — a label whose class differs from one of ``class_names`` only in case
+        (``Door`` for ``door``: it would be dropped silently and every run would train on no
+        box), naming the file, the label and the classes.
+        """
         ds = OpenPCDetDataset(self.root, num_point_features, drop_extra_columns=True)
-        return [f.select(class_names) for f in ds.frames(ids)]
+        frames = ds.frames(ids)
+        wanted = {c.lower(): c for c in class_names}
+        for f in frames:
+            for name in f.names:
+                if name not in class_names and name.lower() in wanted:
+                    raise DatasetError(
+                        f"{self.root}/labels/{f.frame_id}.txt: label class {name!r} is not "
+                        f"{wanted[name.lower()]!r}: the detector's classes {list(class_names)} "
+                        "match exactly; rename the labels (sim2radar import matches classes "
+                        "without case)")
+        return [f.select(class_names) for f in frames]
 
     def describe(self) -> dict:
         """JSON-able summary for provenance and the dashboard."""

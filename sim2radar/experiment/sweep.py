@@ -340,6 +340,10 @@ def _intensity_matches(profile: ExperimentProfile, domains: Mapping[str, Any], p
     held_out_splits = [s for s in dict.fromkeys((profile.val_split, profile.eval_split))
                        if real.splits.get(s)]
     real_train = real.frames(real.splits[profile.train_split], nfeat, classes)
+    if not any(len(f.names) for f in real_train):
+        raise ValueError(f"{real.root}: its {profile.train_split!r} split holds no label of "
+                         f"the detector's classes {list(classes)}: every run would train on no "
+                         "box; check the class names in labels/*.txt")
     held_out = real.frames(real.ids(held_out_splits), nfeat, classes)
     sims = {role: ds.frames(ds.ids(), nfeat, classes) for role, ds in domains.items()
             if role != "real"}

@@ -256,3 +256,28 @@ def test_pretrainings_hold_out_the_sims_split_and_the_plan_names_their_condition
     for r in low:       # the same pre-training, another run
         twin = sim[(r.spec.fraction, r.spec.trial)]
         assert r.pretrain_key == twin.pretrain_key and r.key != twin.key
+
+
+def test_labels_differing_only_in_case_or_no_label_at_all_are_refused_up_front(domains,
+                                                                                tmp_path):
+    """Issue #34, bring-your-own data: labels written ``Door`` passed every check and then all
+    runs failed; now the plan refuses them naming the label file, and a real train split with
+    no label of the detector's classes too."""
+    import shutil
+
+    from sim2radar.datasets.openpcdet import DatasetError
+
+    setup = setup_sweep("smoke", {"sim": "s", "real": "r"})
+    real = tmp_path / "real"
+    shutil.copytree(domains["real"].root, real)
+    label = sorted((real / "labels").glob("*.txt"))[0]
+    label.write_text(label.read_text().replace(" door", " Door"))
+    mixed = {**domains, "real": open_domain(real, "real")}
+    with pytest.raises(DatasetError, match=rf"{label.name}: label class 'Door' is not 'door'"):
+        _plan(setup, mixed, tmp_path / "p1")
+    for f in (real / "labels").glob("*.txt"):
+        f.write_text(f.read_text().replace(" Door", " window").replace(" door", " window"))
+    none = {**domains, "real": open_domain(real, "real")}
+    with pytest.raises(ValueError, match=r"its 'train' split holds no label of the detector's "
+                                         r"classes \['door'\]"):
+        _plan(setup, none, tmp_path / "p2")
