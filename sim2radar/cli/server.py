@@ -54,8 +54,9 @@ import typer
 
 from sim2radar.cli._app import app
 
-__all__ = ["MODE_ENV", "ServerError", "ServerState", "ensure_server", "find_live_server",
-           "prefect_home", "read_state", "server_status", "stop_server", "use_managed_server"]
+__all__ = ["MANAGED_PROFILE", "MODE_ENV", "ServerError", "ServerState", "ensure_server",
+           "find_live_server", "point_profile_at", "prefect_home", "read_state",
+           "server_status", "stop_server", "use_managed_server"]
 
 MODE_ENV = "SIM2RADAR_PREFECT_SERVER"  # "managed" (default) or "ephemeral"
 STATE_FILE = "sim2radar-server.json"
@@ -65,6 +66,7 @@ HOST = "127.0.0.1"  # loopback only: the API has no authentication
 STARTUP_TIMEOUT_S = 120.0  # a fresh database migrates first (~10 s idle, more on busy cores)
 STOP_TIMEOUT_S = 15.0  # SIGTERM -> graceful uvicorn shutdown; SIGKILL after this
 CLIENT_RETRIES = 3  # PREFECT_CLIENT_MAX_RETRIES for the managed server (unless set)
+MANAGED_PROFILE = "sim2radar-managed"  # the Prefect profile naming the managed server
 _APP = "sim2radar.cli._prefect_app:create_app"  # Prefect's app + GET /sim2radar/server
 _LEGACY_APP = "prefect.server.api.server:create_app"  # servers started by sim2radar < 0.4
 
@@ -400,6 +402,7 @@ def ensure_server(home: str | os.PathLike | None = None, *,
                 # waited), or hung (replaced)
                 age_s = max(0.0, time.time() - state.started_at)
                 if _wait_healthy(state, max(5.0, timeout_s - age_s)):
+                    point_profile_at(home, state)
                     return state, False
                 _terminate(state.pid)
             _clear_state(home)
@@ -407,6 +410,7 @@ def ensure_server(home: str | os.PathLike | None = None, *,
             state = _spawn(home, _free_port())
             _write_state(home, state)  # before waiting: a killed starter leaves a known pid
             if _wait_healthy(state, timeout_s):
+                point_profile_at(home, state)
                 return state, True
             _terminate(state.pid)  # exited (e.g. the port was taken meanwhile) or timed out
             _clear_state(home)
@@ -436,24 +440,86 @@ def stop_server(home: str | os.PathLike | None = None, *,
         if running:
             _terminate(state.pid, timeout_s)
         _clear_state(home)
+        point_profile_at(home, None)
     return state if running else None
 
 
 # --- the CLI's choice -------------------------------------------------------------------
 
 
-def _profile_api_url(home: Path) -> str | None:
-    """``PREFECT_API_URL`` of the active profile in Prefect's ``profiles.toml``, if any."""
+def _profiles_path(home: Path) -> Path:
+    return Path(os.environ.get("PREFECT_PROFILES_PATH") or home / "profiles.toml").expanduser()
+
+
+def _read_profiles(home: Path) -> dict:
     import tomllib
 
-    path = Path(os.environ.get("PREFECT_PROFILES_PATH") or home / "profiles.toml").expanduser()
     try:
-        doc = tomllib.loads(path.read_text())
+        return tomllib.loads(_profiles_path(home).read_text())
     except (OSError, ValueError):
-        return None
+        return {}
+
+
+def _profile_api_url(home: Path) -> str | None:
+    """``PREFECT_API_URL`` of the active profile in Prefect's ``profiles.toml``, if any (not
+    the one :func:`point_profile_at` wrote for the managed server: that one is ours)."""
+    doc = _read_profiles(home)
     name = os.environ.get("PREFECT_PROFILE") or doc.get("active") or "ephemeral"
+    if name == MANAGED_PROFILE:
+        return None
     profile = (doc.get("profiles") or {}).get(name) or {}
     return profile.get("PREFECT_API_URL") or None
+
+
+def _toml(value) -> str:
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, int | float):
+        return repr(value)
+    return json.dumps(str(value))  # a TOML basic string (JSON escapes are TOML escapes)
+
+
+def _write_profiles(home: Path, doc: dict) -> None:
+    from sim2radar.fileio import atomic_write
+
+    lines = [f"active = {_toml(doc['active'])}"] if doc.get("active") else []
+    for name, table in (doc.get("profiles") or {}).items():
+        lines += ["", f"[profiles.{json.dumps(name)}]"]
+        lines += [f"{key} = {_toml(value)}" for key, value in (table or {}).items()]
+    atomic_write(_profiles_path(home), ("\n".join(lines) + "\n").encode())
+
+
+def point_profile_at(home: Path, state: ServerState | None) -> None:
+    """Make the ``prefect`` CLI run with this ``PREFECT_HOME`` talk to the managed server:
+    the profile ``sim2radar-managed`` in ``PREFECT_HOME/profiles.toml`` holds its
+    ``PREFECT_API_URL`` and is active (``prefect server status`` finds it, ``prefect flow-run
+    ls`` lists its runs instead of starting a second server on the database). A user's active
+    profile with its own ``PREFECT_API_URL`` is left alone. ``state`` None (the server
+    stopped): the profile is removed and Prefect's default (``ephemeral``) is active again.
+    Other profiles are kept."""
+    doc = _read_profiles(home)
+    profiles = dict(doc.get("profiles") or {})
+    active = doc.get("active")
+    if state is None:
+        if MANAGED_PROFILE not in profiles:
+            return
+        profiles.pop(MANAGED_PROFILE)
+        new = {"active": "ephemeral" if active in (None, MANAGED_PROFILE) else active,
+               "profiles": profiles}
+    else:
+        ours = {"PREFECT_API_URL": state.api_url}
+        if active == MANAGED_PROFILE and profiles.get(MANAGED_PROFILE) == ours:
+            return
+        if active and active != MANAGED_PROFILE and (profiles.get(active) or {}).get(
+                "PREFECT_API_URL"):
+            return  # the user's own server
+        profiles[MANAGED_PROFILE] = ours
+        new = {"active": MANAGED_PROFILE, "profiles": profiles}
+    try:
+        _write_profiles(home, new)
+    except OSError as exc:  # a read-only home: the CLI still works, the prefect CLI does not
+        print(f"sim2radar: could not write {_profiles_path(home)} ({exc.strerror or exc}); "
+              "the prefect CLI will not find the managed server", file=sys.stderr)
 
 
 def use_managed_server() -> None:

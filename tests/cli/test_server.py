@@ -297,3 +297,40 @@ def test_a_server_killed_mid_run_lets_the_run_finish_without_it(tmp_path):
         srv.stop_server(home)
         for pid in _processes_of(home):
             os.kill(pid, signal.SIGKILL)
+
+
+def test_the_prefect_cli_talks_to_the_managed_server(tmp_path):
+    """Issue #34, item 3: in the same PREFECT_HOME, `prefect server status` finds the managed
+    server and `prefect flow-run ls` lists its runs instead of starting a second server on the
+    database (a profile sim2radar-managed, active); stopping it restores Prefect's default; a
+    user's own active profile with its PREFECT_API_URL is never replaced."""
+    import tomllib
+
+    home = (tmp_path / "prefect").resolve()
+    prefect = [sys.executable, "-m", "prefect"]
+    try:
+        state, _ = srv.ensure_server(home)
+        doc = tomllib.loads((home / "profiles.toml").read_text())
+        assert doc["active"] == srv.MANAGED_PROFILE
+        assert doc["profiles"][srv.MANAGED_PROFILE] == {"PREFECT_API_URL": state.api_url}
+        env = _env(home)
+        status = subprocess.run([*prefect, "server", "status"], env=env, capture_output=True,
+                                text=True, timeout=120)
+        assert status.returncode == 0, status.stdout + status.stderr
+        assert str(state.port) in status.stdout + status.stderr
+        runs = subprocess.run([*prefect, "flow-run", "ls"], env=env, capture_output=True,
+                              text=True, timeout=120)
+        assert runs.returncode == 0, runs.stdout + runs.stderr
+        assert set(_processes_of(home)) == {state.pid}           # no second server
+    finally:
+        srv.stop_server(home)
+        for pid in _processes_of(home):
+            os.kill(pid, signal.SIGKILL)
+    doc = tomllib.loads((home / "profiles.toml").read_text())
+    assert doc["active"] == "ephemeral" and srv.MANAGED_PROFILE not in doc.get("profiles", {})
+    (home / "profiles.toml").write_text('active = "mine"\n\n[profiles.mine]\n'
+                                        'PREFECT_API_URL = "http://127.0.0.1:4200/api"\n'
+                                        'PREFECT_LOGGING_LEVEL = "INFO"\n')
+    srv.point_profile_at(home, srv.ServerState(1, 5, "3.8.8", 0.0, str(home), "t"))
+    doc = tomllib.loads((home / "profiles.toml").read_text())
+    assert doc["active"] == "mine" and set(doc["profiles"]) == {"mine"}
