@@ -9,6 +9,7 @@ Prefect state goes to ``./.prefect`` unless ``PREFECT_HOME`` or ``PREFECT_API_UR
 from __future__ import annotations
 
 import json
+import logging
 import os
 from pathlib import Path
 from typing import Any
@@ -33,7 +34,14 @@ def _prefect_env(verbose: bool) -> None:
     if not os.environ.get("PREFECT_HOME") and not os.environ.get("PREFECT_API_URL"):
         os.environ["PREFECT_HOME"] = str(Path.cwd() / ".prefect")
     os.environ.setdefault("PREFECT_SERVER_ANALYTICS_ENABLED", "false")
-    os.environ.setdefault("PREFECT_LOGGING_LEVEL", "INFO" if verbose else "WARNING")
+    # INFO goes to the API (the UI's run logs, sim2radar's own lines included); the console
+    # shows warnings and errors unless --verbose
+    os.environ.setdefault("PREFECT_LOGGING_LEVEL", "INFO")
+    os.environ.setdefault("PREFECT_LOGGING_HANDLERS_CONSOLE_LEVEL",
+                          "INFO" if verbose else "WARNING")
+    os.environ.setdefault("PREFECT_LOGGING_EXTRA_LOGGERS", "sim2radar")
+    os.environ.setdefault("PREFECT_LOGGING_TO_API_WHEN_MISSING_FLOW", "ignore")
+    logging.getLogger("sim2radar").setLevel(logging.INFO)
     use_managed_server()
 
 

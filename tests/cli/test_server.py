@@ -19,6 +19,7 @@ import signal
 import subprocess
 import sys
 import time
+import urllib.request
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
@@ -334,3 +335,30 @@ def test_the_prefect_cli_talks_to_the_managed_server(tmp_path):
     srv.point_profile_at(home, srv.ServerState(1, 5, "3.8.8", 0.0, str(home), "t"))
     doc = tomllib.loads((home / "profiles.toml").read_text())
     assert doc["active"] == "mine" and set(doc["profiles"]) == {"mine"}
+
+
+def test_cli_runs_send_info_logs_to_the_ui_while_the_console_stays_quiet(tmp_path):
+    """Issue #34, item 2: the CLI's quiet console used to silence the API log handler too (no
+    run logs in the UI); now INFO lines — Prefect's and sim2radar's own — reach the server and
+    the console shows none of them."""
+    home = (tmp_path / "prefect").resolve()
+    try:
+        env = {k: v for k, v in _env(home).items() if not k.startswith("PREFECT_LOGGING")}
+        run = subprocess.run([*CLI, "generate", *TINY, "--frames", "1", "--out",
+                              str(tmp_path / "store")], cwd=REPO, env=env, capture_output=True,
+                             text=True, timeout=300)
+        assert run.returncode == 0, run.stderr[-3000:]
+        assert "INFO" not in run.stdout + run.stderr
+        state, _ = srv.server_status(home)
+        req = urllib.request.Request(state.api_url + "/logs/filter",
+                                     data=json.dumps({"limit": 200}).encode(),
+                                     headers={"Content-Type": "application/json"})
+        with urllib.request.urlopen(req, timeout=30) as resp:
+            logs = json.loads(resp.read())
+        names = {(log["level"], log["name"].split(".")[0]) for log in logs}
+        assert (20, "prefect") in names and (20, "sim2radar") in names, names
+        assert all(log["flow_run_id"] for log in logs)
+    finally:
+        srv.stop_server(home)
+        for pid in _processes_of(home):
+            os.kill(pid, signal.SIGKILL)
