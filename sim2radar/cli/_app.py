@@ -14,6 +14,8 @@ app = typer.Typer(
     help="sim2radar: RGB -> material-labelled 3D scene -> simulated mmWave radar point clouds.",
     no_args_is_help=True,
     add_completion=False,
+    # help texts are plain text: "[default 4]" and "[px]" are not Rich markup tags to drop
+    rich_markup_mode=None,
 )
 
 

@@ -15,8 +15,9 @@ import typer
 
 from sim2radar.cli._app import app
 
-models_app = typer.Typer(help="The model files and VLM server a reconstruction config names.",
-                         no_args_is_help=True)
+models_app = typer.Typer(
+    rich_markup_mode=None, help="The model files and VLM server a reconstruction config names.",
+    no_args_is_help=True)
 app.add_typer(models_app, name="models")
 
 

@@ -561,6 +561,7 @@ def use_managed_server() -> None:
 # --- sim2radar server ... ---------------------------------------------------------------
 
 server_app = typer.Typer(
+    rich_markup_mode=None,
     help="The local Prefect server that commands report to (one per PREFECT_HOME).",
     no_args_is_help=True,
 )

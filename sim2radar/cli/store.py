@@ -19,7 +19,8 @@ import typer
 
 from sim2radar.cli._app import app
 
-store_app = typer.Typer(help="Check and heal an artifact store.", no_args_is_help=True)
+store_app = typer.Typer(
+    rich_markup_mode=None, help="Check and heal an artifact store.", no_args_is_help=True)
 app.add_typer(store_app, name="store")
 
 

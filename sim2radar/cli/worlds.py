@@ -14,7 +14,8 @@ import typer
 from sim2radar.cli._app import app, exit_unless_writable
 from sim2radar.factory.spec import MAX_FRAMES_PER_WORLD, MAX_WORLDS
 
-worlds_app = typer.Typer(help="Procedural indoor worlds rendered by Mitsuba.", no_args_is_help=True)
+worlds_app = typer.Typer(
+    rich_markup_mode=None, help="Procedural indoor worlds rendered by Mitsuba.", no_args_is_help=True)
 app.add_typer(worlds_app, name="worlds")
 
 

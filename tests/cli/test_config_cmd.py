@@ -1,0 +1,29 @@
+"""`sim2radar config list|show|copy` (issue #34, installed-package polish): a newcomer starts
+from a bundled config; a copied experiment profile still finds its detector config."""
+
+from __future__ import annotations
+
+from typer.testing import CliRunner
+
+from sim2radar.cli import app
+
+
+def test_list_show_and_copy_a_bundled_config_that_works_from_elsewhere(tmp_path):
+    from sim2radar.experiment.profiles import load_profile
+
+    runner = CliRunner()
+    res = runner.invoke(app, ["config", "list"])
+    assert res.exit_code == 0 and "experiment/demo" in res.output and "radar/ti-mmwcas" in res.output
+    res = runner.invoke(app, ["config", "show", "generate/default"])
+    assert res.exit_code == 0 and "nightly job" in res.output and "rig:" in res.output
+    res = runner.invoke(app, ["config", "copy", "experiment/demo", str(tmp_path)])
+    assert res.exit_code == 0, res.output
+    copy = tmp_path / "demo.yaml"
+    profile = load_profile(copy)
+    assert profile.detector.is_file() and profile.detector.name.endswith("_cpu_small.yaml")
+    res = runner.invoke(app, ["config", "copy", "experiment/demo", str(copy)])
+    assert res.exit_code == 2 and "exists" in res.output
+    res = runner.invoke(app, ["config", "show", "nope"])
+    assert res.exit_code == 2 and "config list" in res.output
+    res = runner.invoke(app, ["config", "show", "ti-mmwcas"])   # a bare name of one kind
+    assert res.exit_code == 0 and "adc_samples" in res.output
