@@ -126,6 +126,20 @@ def _autocast(device: torch.device, dtype: torch.dtype | None):
     return torch.autocast(device.type, dtype=dtype)
 
 
+_SAID: set = set()
+_SAID_LOCK = threading.Lock()
+
+
+def _first_time(what) -> bool:
+    """True the first time ``what`` is asked about in this process (a warning a sweep would
+    otherwise print once per run)."""
+    with _SAID_LOCK:
+        if what in _SAID:
+            return False
+        _SAID.add(what)
+        return True
+
+
 def _resolve_device(cfg: DetectConfig, device) -> torch.device:
     from sim2radar.hardware import torch_device
 
@@ -427,7 +441,8 @@ def _train(config, train_ids, out_dir: Path, init_encoder_from, seed, *, data_di
         max_momentum=opt_cfg.moms[0], div_factor=opt_cfg.div_factor,
         final_div_factor=opt_cfg.final_div_factor,
     )
-    if (1 - mcfg.bn_momentum) ** total_steps > 0.05:
+    if (1 - mcfg.bn_momentum) ** total_steps > 0.05 and \
+            _first_time(("bn", total_steps, mcfg.bn_momentum)):  # once per process (a sweep)
         log.warning(
             "BatchNorm running statistics will not settle in %d steps with model.bn_momentum="
             "%g (eval-mode scores will be too low); use more epochs or bn_momentum >= %.2f",

@@ -421,3 +421,25 @@ def test_a_failed_run_leaves_no_empty_run_folder(tmp_path):
     with pytest.raises(RuntimeError, match="interrupted"):
         train(cfg, out_dir=tmp_path / "late", frames=frames, on_epoch_end=fail_in_epoch_2)
     assert (tmp_path / "late" / "last.pt").is_file()
+
+
+def test_the_batchnorm_warning_is_said_once_per_process(tmp_path, caplog):
+    """Issue #34: a sweep printed the same BatchNorm warning once per run (8 times in the
+    smoke profile); now once per process and setting."""
+    import logging
+
+    from sim2radar.detect import train as train_mod
+
+    root = tmp_path / "data"
+    write_synthetic_dataset(root, n_train=2, n_val=1, n_test=1, seed=5, points_per_frame=300)
+    cfg = small_config(data=dict(root=root), optimization=dict(batch_size=2, epochs=1))
+    logger = logging.getLogger("sim2radar.detect.train")
+    logger.addHandler(caplog.handler)
+    train_mod._SAID.clear()
+    try:
+        for i in range(3):
+            train(cfg, out_dir=tmp_path / f"run{i}")
+    finally:
+        logger.removeHandler(caplog.handler)
+    said = {id(r) for r in caplog.records if "will not settle" in r.getMessage()}
+    assert len(said) == 1       # (caplog may see a record twice: through root and our handler)
