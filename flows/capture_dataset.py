@@ -31,6 +31,7 @@ from prefect.cache_policies import NO_CACHE
 from sim2radar.configio import DEFAULT_RADAR
 from sim2radar.factory.captures import CaptureScene, CaptureSpec, find_captures
 from sim2radar.flows import _progress
+from sim2radar.flows._states import finish, relay, run_flow
 from sim2radar.flows._steps import gather, run_as_tasks
 from sim2radar.flows.runners import ThreadRunner
 from sim2radar.storage import ArtifactStore
@@ -113,7 +114,8 @@ def capture_dataset_flow(
         table=summary["stage_table"], key=_progress.artifact_key("captures", dataset, "scenes"),
         description=f"capture dataset {dataset}: scenes {summary['counts']} (seconds per step "
                     "in this run; cached steps take milliseconds)")
-    return summary
+    return finish(summary, failed=summary["counts"]["failed"], total=len(scenes),
+                  unit="scenes")
 
 
 def _finish(st, dataset: str, spec: CaptureSpec, outcomes: list[Outcome],
@@ -184,9 +186,9 @@ def capture_dataset(
     else:
         runner = task_runner(workers, dask_address)
         with progress_callback(on_scene or (lambda _o: None)):
-            summary = capture_dataset_flow.with_options(task_runner=runner)(
-                scenes=scenes, spec=spec, store=os.fspath(store), dataset=dataset,
-                export_dir=export, force=force)
+            summary = run_flow(capture_dataset_flow.with_options(task_runner=runner),
+                               scenes=scenes, spec=spec, store=os.fspath(store),
+                               dataset=dataset, export_dir=export, force=force)
     if whole_export is not None:
         from sim2radar.tasks.dataset import outcomes_from_manifest
 
@@ -227,8 +229,8 @@ def capture_dataset_job(
     # run the package's copy (a deployment loads this file as a top-level module, whose
     # objects Dask workers could not import by reference): see flows/generate_dataset.py
     package = importlib.import_module("sim2radar.flows.capture_dataset")
-    return package.capture_dataset(
+    return relay(package.capture_dataset(
         captures, store, dataset, export_dir=export_dir, force=force, workers=workers,
         dask_address=dask_address, retry_failed=retry_failed, radar=radar,
         reconstruction=reconstruction, poses=poses or {}, labels=labels or {}, seed=seed,
-        class_name=class_name)
+        class_name=class_name), "scenes")

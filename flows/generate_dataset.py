@@ -37,6 +37,7 @@ from prefect.cache_policies import NO_CACHE
 
 from sim2radar.factory.spec import DatasetSpec, as_spec
 from sim2radar.flows import _progress
+from sim2radar.flows._states import finish, relay, run_flow
 from sim2radar.flows._steps import gather, run_as_tasks
 from sim2radar.flows.runners import ThreadRunner, task_runner
 from sim2radar.storage import ArtifactStore
@@ -185,7 +186,9 @@ def generate_dataset_flow(
                 summary["counts"], summary["frame_counts"], st.root, dataset)
     if strict and (summary["counts"]["failed"] or summary["fallbacks"]["segments"]):
         raise DatasetFailures(summary)
-    return summary
+    fc = summary["frame_counts"]
+    return finish(summary, failed=summary["counts"]["failed"], total=len(seeds), unit="worlds",
+                  detail=f" ({fc['failed']} of {sum(fc.values())} frames)")
 
 
 def generate_dataset(
@@ -219,11 +222,10 @@ def generate_dataset(
     if not seed_list:
         raise ValueError("no worlds to generate: n_worlds must be >= 1")
     runner = task_runner(workers, dask_address)
-    return generate_dataset_flow.with_options(task_runner=runner)(
-        seeds=seed_list, spec=spec, store=os.fspath(store), dataset=dataset,
-        export_dir=None if export_dir is None else os.fspath(export_dir), force=force,
-        strict=strict,
-    )
+    return run_flow(generate_dataset_flow.with_options(task_runner=runner),
+                    seeds=seed_list, spec=spec, store=os.fspath(store), dataset=dataset,
+                    export_dir=None if export_dir is None else os.fspath(export_dir),
+                    force=force, strict=strict)
 
 
 @flow(name="generate-dataset-job", log_prints=False)
@@ -253,7 +255,7 @@ def generate_dataset_job(
     # objects from that copy would pickle by reference to a module Dask's scheduler and workers
     # cannot import. Run the package's copy of the flow instead (the same code).
     package = importlib.import_module("sim2radar.flows.generate_dataset")
-    return package.generate_dataset(
+    return relay(package.generate_dataset(
         spec, n_worlds=n_worlds, store=store, dataset=dataset, export_dir=export_dir,
         first_seed=first_seed, force=force, strict=strict, workers=workers,
-        dask_address=dask_address)
+        dask_address=dask_address), "worlds")

@@ -91,6 +91,7 @@ def reference_dataset(
     speed_mps : the rig's walking speed range [m/s] (min, max; drawn per frame).
     Other parameters as :func:`sim2radar.flows.generate_dataset.generate_dataset`.
     """
+    from sim2radar.flows._states import run_flow
     from sim2radar.flows.generate_dataset import generate_dataset_flow
     from sim2radar.flows.runners import task_runner
 
@@ -98,7 +99,8 @@ def reference_dataset(
     plan = args.pop("plan")
     spec = reference_spec(frames_per_world, radar, world, rig, seed, labels, speed_mps)
     runner = task_runner(workers, dask_address)
-    summary = generate_dataset_flow.with_options(task_runner=runner, name="reference-dataset")(
+    summary = run_flow(
+        generate_dataset_flow.with_options(task_runner=runner, name="reference-dataset"),
         spec=spec.to_dict(), store=os.fspath(store), dataset=dataset,
         export_dir=None if export_dir is None else os.fspath(export_dir), force=force,
         strict=strict, **args,
@@ -125,9 +127,11 @@ def reference_dataset_job(
 ) -> dict[str, Any]:
     """Deployment entry point (``deploy/prefect.yaml``): :func:`reference_dataset` as a
     subflow (the package's copy, so Dask workers can import it)."""
+    from sim2radar.flows._states import relay
+
     package = importlib.import_module("sim2radar.flows.reference_dataset")
-    return package.reference_dataset(
+    return relay(package.reference_dataset(
         store=store, dataset=dataset, export_dir=export_dir, first_seed=first_seed,
         worlds=worlds, frames_per_world=frames_per_world, radar=radar, seed=seed,
         speed_mps=tuple(speed_mps), force=force,
-        strict=strict, workers=workers, dask_address=dask_address)
+        strict=strict, workers=workers, dask_address=dask_address), "worlds")

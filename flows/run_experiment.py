@@ -46,6 +46,7 @@ from prefect.futures import as_completed
 from sim2radar.experiment.plan import PlannedPretrain, PretrainResult
 from sim2radar.fileio import write_json
 from sim2radar.flows import _progress
+from sim2radar.flows._states import finish, relay, run_flow
 from sim2radar.flows.runners import task_runner
 from sim2radar.tasks.experiment import (
     failed_pretrain_row,
@@ -69,7 +70,9 @@ def run_experiment_flow(plan_path: str) -> dict[str, Any]:
     """Run a prepared sweep — the ``plan.json`` :func:`sim2radar.tasks.experiment.prepare_sweep`
     wrote (its ``plan_path``; a paper-sized plan is over Prefect's 512 KiB limit on a flow run's
     parameters, its path is not): every pre-training and fine-tuning task, the tables,
-    statistics, artifacts and dashboard."""
+    statistics, artifacts and dashboard. It ends Failed in Prefect when any run or
+    pre-training failed (the summary rides on the state: :func:`~sim2radar.flows._states.
+    run_flow` returns it)."""
     from prefect.artifacts import (
         create_markdown_artifact,
         create_progress_artifact,
@@ -157,7 +160,10 @@ def run_experiment_flow(plan_path: str) -> dict[str, Any]:
                              description=f"sweep {name}: results")
     logger.info("sweep %s: %s runs; results %s; dashboard %s", name, summary["counts"],
                 summary["results_md"], summary["dashboard"])
-    return {k: v for k, v in summary.items() if k not in ("markdown", "table_rows")}
+    out = {k: v for k, v in summary.items() if k not in ("markdown", "table_rows")}
+    n_runs = sum(summary["counts"].values())
+    return finish(out, failed=summary["counts"]["failed"], total=n_runs, unit="runs",
+                  detail=f" (sweep {name})")
 
 
 def _ap(v: float | None) -> str:
@@ -211,7 +217,8 @@ def run_experiment(
                          name=name, out=out, store=store, ablations=ablations,
                          overrides=overrides, device=device, force=force or ())
     runner = task_runner(int(workers or plan.concurrent_runs), dask_address)
-    return run_experiment_flow.with_options(task_runner=runner)(plan_path=plan.plan_path)
+    return run_flow(run_experiment_flow.with_options(task_runner=runner),
+                    plan_path=plan.plan_path)
 
 
 @flow(name="run-experiment-job", log_prints=False)
@@ -231,6 +238,6 @@ def run_experiment_job(
     (the package's copy, so Dask workers can import it); ``datasets``: the ablations' datasets
     by role (``{"sim-gt": ..., "sim-one-material": ...}``)."""
     package = importlib.import_module("sim2radar.flows.run_experiment")
-    return package.run_experiment(sim, real, profile=profile, name=name, out=out, store=store,
-                                  datasets=datasets, ablations=ablations, workers=workers,
-                                  dask_address=dask_address)
+    return relay(package.run_experiment(sim, real, profile=profile, name=name, out=out,
+                                        store=store, datasets=datasets, ablations=ablations,
+                                        workers=workers, dask_address=dask_address), "runs")

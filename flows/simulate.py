@@ -33,6 +33,7 @@ from prefect import flow, get_run_logger
 
 from sim2radar.configio import DEFAULT_RADAR
 from sim2radar.flows import _progress
+from sim2radar.flows._states import finish, relay, run_flow
 from sim2radar.flows._steps import gather
 from sim2radar.flows.runners import ThreadRunner, task_runner
 from sim2radar.scenes import expand_scenes
@@ -126,7 +127,7 @@ def simulate_flow(
     logger.info("simulate-radar: %s into %s (dataset %s)", counts, st.root, dataset)
     if strict and counts["failed"]:
         raise SceneFailures(summary)
-    return summary
+    return finish(summary, failed=counts["failed"], total=len(scenes), unit="scenes")
 
 
 def run_simulation(
@@ -144,7 +145,8 @@ def run_simulation(
 ) -> dict[str, Any]:
     """Run :func:`simulate_flow` with a chosen task runner (see the module docstring)."""
     runner = task_runner(workers, dask_address)
-    return simulate_flow.with_options(task_runner=runner)(
+    return run_flow(
+        simulate_flow.with_options(task_runner=runner),
         scenes=[str(s) for s in scenes],
         radar=str(radar),
         store=os.fspath(store),
@@ -175,7 +177,7 @@ def simulate_dataset(
     # from that copy would pickle by reference to a module Dask's scheduler and workers cannot
     # import. Run the package's copy of the flow instead (the same code).
     package = importlib.import_module("sim2radar.flows.simulate")
-    return package.run_simulation(
+    return relay(package.run_simulation(
         expand_scenes(scenes),
         radar=radar,
         store=store,
@@ -185,4 +187,4 @@ def simulate_dataset(
         strict=strict,
         workers=workers,
         dask_address=dask_address,
-    )
+    ), "scenes")

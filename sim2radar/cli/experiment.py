@@ -156,9 +156,11 @@ def run_sweep(sim: str, real: str, *, profile: str, name: str, out: str, store: 
             progress.update(bar, advance=1, description=f"{row['condition']} "
                             f"{100 * row['fraction']:g}% t{row['trial']}: {shown}")
 
-        with progress_callback(on_run):
-            return run_experiment_flow.with_options(task_runner=runner)(
-                plan_path=plan.plan_path)
+        from sim2radar.flows._states import run_flow
+
+        with progress_callback(on_run):   # failed runs: Failed in Prefect, summary here
+            return run_flow(run_experiment_flow.with_options(task_runner=runner),
+                            plan_path=plan.plan_path)
 
 
 def print_sweep_summary(summary: dict[str, Any]) -> None:

@@ -114,6 +114,7 @@ def _run_generate(
                             description=f"{outcome.id}: {outcome.status} ({pts} pts)")
 
         if use_prefect:
+            from sim2radar.flows._states import run_flow
             from sim2radar.flows.generate_dataset import (
                 DatasetFailures,
                 generate_dataset_flow,
@@ -130,8 +131,8 @@ def _run_generate(
                     quiet_recorded_failures(["generate-world-dataset", *STEP_NAMES], verbose), \
                     ServerWatch(os.environ.get("PREFECT_API_URL")) as watch:
                 try:
-                    summary = generate_dataset_flow.with_options(
-                        task_runner=runner, name=flow_name)(
+                    summary = run_flow(  # failed worlds: Failed in Prefect, summary here
+                        generate_dataset_flow.with_options(task_runner=runner, name=flow_name),
                         seeds=seeds, spec=spec, store=store, dataset=dataset,
                         export_dir=export_dir, force=force, strict=strict, **extras)
                 except DatasetFailures as exc:  # strict: the run is marked failed in Prefect

@@ -256,6 +256,7 @@ def test_a_frame_broken_before_or_during_a_sweep_trains_nothing_on_it(data, pref
     runs with "changed while the sweep ran" instead of training on altered data, and the
     rerun after the fix finishes them."""
     from sim2radar.datasets import DatasetError
+    from sim2radar.flows._states import run_flow
     from sim2radar.flows.run_experiment import run_experiment_flow
     from sim2radar.tasks.experiment import prepare_sweep
 
@@ -268,7 +269,9 @@ def test_a_frame_broken_before_or_during_a_sweep_trains_nothing_on_it(data, pref
     victim.write_bytes(b"not a numpy file")
     with pytest.raises(DatasetError, match=f"{victim.name}: not a NumPy .npy array"):
         prepare_sweep({"sim": data["sim"], "real": real}, **kw)
-    s = run_experiment_flow(plan_path=plan.plan_path)
+    state = run_experiment_flow(plan_path=plan.plan_path, return_state=True)
+    assert state.is_failed() and state.message == "4 of 4 runs failed (sweep broken)"
+    s = run_flow(run_experiment_flow, plan_path=plan.plan_path)   # the summary, all the same
     rows = pq.read_table(tmp_path / "o" / "broken" / "runs.parquet").to_pylist()
     assert s["counts"]["failed"] == len(rows) == 4 and s["counts"]["ok"] == 0
     assert all("changed while the sweep ran" in r["error"] and r["ap_3d_r40_iou03"] is None

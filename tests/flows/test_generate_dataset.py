@@ -279,3 +279,21 @@ def test_reconstruction_fused_with_the_previous_frame_covers_more_azimuth(run, m
         return float(np.mean(az > 40.0))
 
     assert wide(alone) < 0.05 < wide(fused[1])
+
+
+def test_a_flow_whose_work_failed_ends_failed_in_prefect_with_its_summary(run, prefect_server):
+    """Issue #34, item 2: a generate whose world failed was Completed in Prefect (alerts on
+    Failed never fired); now the flow run is Failed, its message counts what failed, and the
+    caller still gets the summary (non-strict: no exception)."""
+    from sim2radar.flows._states import run_flow
+    from sim2radar.flows.generate_dataset import generate_dataset, generate_dataset_flow
+
+    kw = dict(seeds=[SEED, BROKEN_SEED], spec=_spec(), store=str(run["root"] / "store"),
+              dataset="flow-states")
+    state = generate_dataset_flow(**kw, return_state=True)
+    assert state.is_failed()
+    assert state.message.startswith("1 of 2 worlds failed (")
+    summary = run_flow(generate_dataset_flow, **kw)
+    assert summary["counts"]["failed"] == 1 and summary["counts"]["skipped"] == 1
+    assert generate_dataset(_spec(), seeds=[SEED], store=run["root"] / "store",
+                            dataset="flow-ok")["counts"]["failed"] == 0

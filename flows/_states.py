@@ -1,0 +1,42 @@
+"""Run states that tell the truth: a flow whose work failed ends **Failed** in Prefect (an
+automation or alert on Failed fires; the message counts what failed), while its caller still
+gets the summary of what finished.
+
+    return finish(summary, failed=n_failed, total=n, unit="worlds")   # in a flow body
+    summary = run_flow(my_flow, **params)                              # in its caller
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+__all__ = ["finish", "relay", "run_flow"]
+
+
+def finish(summary: dict[str, Any], *, failed: int, total: int, unit: str,
+           detail: str = "") -> Any:
+    """What a flow returns: ``summary`` when nothing failed, else a Failed state carrying it,
+    with the message ``"<failed> of <total> <unit> failed<detail>"``."""
+    if not failed:
+        return summary
+    from prefect.states import Failed
+
+    return Failed(message=f"{failed} of {total} {unit} failed{detail}", data=summary)
+
+
+def relay(summary: dict[str, Any], unit: str) -> Any:
+    """:func:`finish` for a deployment's job flow around a subflow's summary (its
+    ``counts``): the job ends Failed too when the subflow's work failed."""
+    counts = summary.get("counts") or {}
+    return finish(summary, failed=int(counts.get("failed", 0)),
+                  total=sum(int(v) for v in counts.values()), unit=unit)
+
+
+def run_flow(flow: Any, **params: Any) -> Any:
+    """Call ``flow`` and return its summary whatever its final state (Completed, or Failed
+    carrying a summary); an exception the flow raised is raised here."""
+    state = flow(**params, return_state=True)
+    result = state.result(raise_on_failure=False)
+    if isinstance(result, BaseException):
+        raise result
+    return result
