@@ -199,3 +199,16 @@ def export_folder_lock(folder):
         yield
     finally:
         lock.__exit__(None, None, None)
+
+
+def console():
+    """The Rich console of a command's tables: the terminal's width, or — piped into a file or
+    another program, where Rich would assume 80 columns and cut wide tables — 200 columns
+    (``COLUMNS`` wins when set)."""
+    import os
+    import sys
+
+    from rich.console import Console
+
+    piped = not sys.stdout.isatty() and not os.environ.get("COLUMNS")
+    return Console(width=200 if piped else None)

@@ -11,6 +11,8 @@ from typing import Any
 
 import typer
 
+from sim2radar.cli._app import console as _console
+
 __all__ = ["finish_generate", "preflight", "print_generate_summary", "progress_columns"]
 
 
@@ -60,11 +62,10 @@ def fallback_count(summary: dict[str, Any]) -> int:
 
 def print_generate_summary(summary: dict[str, Any]) -> None:
     """Human summary: counts, per-geometry table, seconds per stage, where things went."""
-    from rich.console import Console
     from rich.markup import escape
     from rich.table import Table
 
-    console = Console()
+    console = _console()
     c, fc = summary["counts"], summary["frame_counts"]
     console.print(
         f"[bold]{summary.get('unit', 'worlds')}: {c['ok']} computed, {c['skipped']} cached, "

@@ -12,6 +12,7 @@ from typing import Any
 
 import typer
 
+from sim2radar.cli._app import console as _console
 from sim2radar.cli.worlds import worlds_app
 from sim2radar.factory.spec import MAX_WORLDS
 
@@ -84,7 +85,6 @@ def run_captures(captures: Path, *, store: str, dataset: str, settings: dict[str
 
 def print_stage_table(summary: dict[str, Any]) -> None:
     """Seconds per step and scene (this run's wall time; a cached step takes milliseconds)."""
-    from rich.console import Console
     from rich.table import Table
 
     rows = summary.get("stage_table") or []
@@ -96,7 +96,7 @@ def print_stage_table(summary: dict[str, Any]) -> None:
         table.add_column(c, justify="left" if c in ("scene", "status") else "right")
     for r in rows:
         table.add_row(*("-" if r[c] is None else str(r[c]) for c in cols))
-    Console().print(table)
+    _console().print(table)
 
 
 @worlds_app.command("captures")

@@ -21,6 +21,7 @@ from typing import Any
 import typer
 
 from sim2radar.cli._app import app, exit_unless_writable, exit_unless_writable_outputs
+from sim2radar.cli._app import console as _console
 
 __all__ = ["sweep", "sweep_report", "publish_sweep", "run_sweep", "sweep_datasets",
            "condition_overrides", "print_sweep_summary", "print_plan", "PUBLISHED_FILES"]
@@ -62,10 +63,9 @@ def _step_seconds(text: str | None) -> dict[str, float] | None:
 
 def print_plan(cost: dict[str, Any]) -> None:
     """The grid's jobs, steps, seconds per step and expected wall times."""
-    from rich.console import Console
     from rich.table import Table
 
-    console = Console()
+    console = _console()
     how = "measured here" if cost["measured"] else "given"
     table = Table(title=f"sweep plan: profile {cost['profile']}, device {cost['device']}, "
                   f"mixed precision {cost['precision']['finetune']}")
@@ -165,10 +165,9 @@ def run_sweep(sim: str, real: str, *, profile: str, name: str, out: str, store: 
 
 def print_sweep_summary(summary: dict[str, Any]) -> None:
     """Counts, the results table and where things went."""
-    from rich.console import Console
     from rich.table import Table
 
-    console = Console()
+    console = _console()
     c = summary["counts"]
     console.print(f"[bold]sweep {summary['name']}: runs {c['ok']} computed, {c['skipped']} "
                   f"cached, {c['failed']} failed[/bold]")

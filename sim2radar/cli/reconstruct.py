@@ -16,6 +16,7 @@ from pathlib import Path
 import typer
 
 from sim2radar.cli._app import app, exit_unless_writable
+from sim2radar.cli._app import console as _console
 
 
 @app.command("reconstruct")
@@ -47,7 +48,6 @@ def reconstruct_cmd(
     1 when a frame failed, 2 for bad arguments (intrinsics, config, store).
     """
     import numpy as np
-    from rich.console import Console
 
     from sim2radar.camera import CameraIntrinsics
     from sim2radar.reconstruct import ReconstructionConfig, build_backends
@@ -56,7 +56,7 @@ def reconstruct_cmd(
     from sim2radar.tasks.reconstruct import ImageJob, reconstruct_images_plain
 
     exit_unless_writable(str(out))
-    console = Console()
+    console = _console()
     for option, check in (  # one intrinsics file for every image: a bad one is a bad argument
             ("--intrinsics", lambda: (CameraIntrinsics.from_yaml(intrinsics),
                                       load_rig_calibration(intrinsics))),

@@ -22,6 +22,7 @@ from sim2radar.cli._app import (
     exit_unless_writable,
     quiet_recorded_failures,
 )
+from sim2radar.cli._app import console as _console
 from sim2radar.configio import DEFAULT_RADAR
 
 
@@ -105,9 +106,8 @@ def run_scenes(
 
 def print_summary(summary: dict[str, Any], png_dir: Path | None) -> None:
     """Human summary: per scene status, points per frame, where artifacts and pictures went."""
-    from rich.console import Console
 
-    console = Console()
+    console = _console()
     counts = summary["counts"]
     console.print(
         f"[bold]{counts['ok']} computed, {counts['skipped']} cached (skipped), "

@@ -27,3 +27,17 @@ def test_list_show_and_copy_a_bundled_config_that_works_from_elsewhere(tmp_path)
     assert res.exit_code == 2 and "config list" in res.output
     res = runner.invoke(app, ["config", "show", "ti-mmwcas"])   # a bare name of one kind
     assert res.exit_code == 0 and "adc_samples" in res.output
+
+
+def test_tables_are_not_cut_at_80_columns_when_piped(monkeypatch):
+    """Issue #34 polish: piped into a file, Rich assumed 80 columns and cut wide tables."""
+    import io
+    import sys
+
+    from sim2radar.cli._app import console
+
+    monkeypatch.delenv("COLUMNS", raising=False)
+    monkeypatch.setattr(sys, "stdout", io.StringIO())
+    assert console().width == 200
+    monkeypatch.setenv("COLUMNS", "123")
+    assert console().width == 123
