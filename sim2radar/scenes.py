@@ -318,8 +318,18 @@ def scene_id_for(scene_path: str | os.PathLike) -> str:
     return path.stem
 
 
+def bundled_scene(name: str) -> Path | None:
+    """The scene file bundled with the package for a bare name: ``demo`` (the corridor demo)
+    or a file stem under ``sim2radar/data/demo/`` (``corridor``); None for anything else."""
+    if "/" in name or "\\" in name or name.endswith((".yaml", ".yml")):
+        return None
+    path = DEMO_DIR / ("corridor.yaml" if name == "demo" else f"{name}.yaml")
+    return path if path.is_file() else None
+
+
 def expand_scenes(scenes: Sequence[str | os.PathLike]) -> list[str]:
-    """Scene paths from files, folders (every ``*.yaml`` inside, recursively) and globs.
+    """Scene paths from files, folders (every ``*.yaml`` inside, recursively), globs and the
+    bundled scenes' names (``demo``: :func:`bundled_scene`).
 
     A glob that matches nothing is logged and ignored (e.g. an empty ``scenes/`` folder on a
     nightly schedule); nothing found at all is an error.
@@ -337,6 +347,8 @@ def expand_scenes(scenes: Sequence[str | os.PathLike]) -> list[str]:
             if not found:
                 raise FileNotFoundError(f"scene folder {text!r} holds no *.yaml scene file")
             out.extend(found)
+        elif not Path(text).exists() and bundled_scene(text) is not None:
+            out.append(str(bundled_scene(text)))  # "demo", "corridor": the bundled scene
         else:
             out.append(text)  # a missing file is recorded as a failed scene by the flow
     if not out:

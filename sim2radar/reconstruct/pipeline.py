@@ -28,7 +28,7 @@ import yaml
 from pydantic import BaseModel, ConfigDict, Field, create_model, field_validator
 
 from sim2radar.camera import CameraIntrinsics
-from sim2radar.configio import config_path, read_yaml_mapping
+from sim2radar.configio import config_path, looks_like_path, read_yaml_mapping
 from sim2radar.hardware import drjit_serial
 from sim2radar.mesh import MaterialMesh, save_ply
 from sim2radar.reconstruct.backproject import (
@@ -184,8 +184,21 @@ class ReconstructionConfig(BaseModel):
 
     @classmethod
     def from_yaml(cls, path: str | Path) -> ReconstructionConfig:
-        """Load a YAML config; relative ``*path*`` options resolve against the file's folder."""
+        """Load a YAML config; relative ``*path*`` options resolve against the file's folder —
+        for a bundled config named without a path (``production``), against the working folder
+        (your ``models/``, not the installed package's)."""
+        bundled = not looks_like_path(path)
         path = config_path(path, "reconstruct", what="reconstruction config")
+        # a bundled file names the checkout's folders (../../models/x.onnx from
+        # configs/reconstruct/): the same path from the working folder (models/x.onnx)
+        root = path.parent.parent.parent.resolve()
+
+        def where(v: str) -> str:
+            target = (path.parent / v).resolve()
+            if bundled and target.is_relative_to(root):
+                target = Path.cwd() / target.relative_to(root)
+            return str(target)
+
         doc = read_yaml_mapping(path, what="reconstruction config",
                                 missing_error=FileNotFoundError,
                                 expect="a mapping (depth, segments, materials, ...)")
@@ -198,7 +211,7 @@ class ReconstructionConfig(BaseModel):
                 for k, v in list(opts.items()):
                     if isinstance(v, str) and k.endswith("path") and not Path(v).is_absolute() \
                             and "://" not in v:
-                        opts[k] = str((path.parent / v).resolve())
+                        opts[k] = where(v)
         try:
             return cls.model_validate(doc)
         except Exception as exc:

@@ -41,3 +41,35 @@ def test_tables_are_not_cut_at_80_columns_when_piped(monkeypatch):
     assert console().width == 200
     monkeypatch.setenv("COLUMNS", "123")
     assert console().width == 123
+
+
+def test_bundled_scene_names_resolve_for_simulate(tmp_path, monkeypatch):
+    """Issue #34 polish: `simulate demo` found no scene outside the checkout; a bare name of a
+    bundled scene resolves to the package's file, a real file or folder still wins."""
+    from sim2radar.scenes import DEMO_DIR, expand_scenes
+
+    monkeypatch.chdir(tmp_path)
+    assert expand_scenes(["demo"]) == [str(DEMO_DIR / "corridor.yaml")]
+    assert expand_scenes(["corridor"]) == [str(DEMO_DIR / "corridor.yaml")]
+    (tmp_path / "demo").mkdir()
+    (tmp_path / "demo" / "mine.yaml").write_text("meshes: []\n")
+    assert expand_scenes(["demo"]) == [str(tmp_path / "demo" / "mine.yaml")] or \
+        expand_scenes(["demo"]) == ["demo/mine.yaml"]
+    assert expand_scenes(["nothing.yaml"]) == ["nothing.yaml"]   # failed later, by the flow
+
+
+def test_a_bundled_production_config_looks_for_models_in_the_working_folder(tmp_path,
+                                                                              monkeypatch):
+    """Issue #34 polish: `models check production` looked for model files inside
+    site-packages; a bundled config named without a path resolves its relative model paths
+    against the working folder (a YAML path still against its own folder)."""
+    from sim2radar.reconstruct import ReconstructionConfig
+
+    monkeypatch.chdir(tmp_path)
+    cfg = ReconstructionConfig.from_yaml("production")
+    assert cfg.depth.options["model_path"].startswith(str(tmp_path / "models"))
+    (tmp_path / "cfg").mkdir()
+    (tmp_path / "cfg" / "p.yaml").write_text(
+        "depth: {name: moge, options: {model_path: m/d.onnx}}\n")
+    cfg = ReconstructionConfig.from_yaml(tmp_path / "cfg" / "p.yaml")
+    assert cfg.depth.options["model_path"] == str(tmp_path / "cfg" / "m" / "d.onnx")
