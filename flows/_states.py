@@ -10,18 +10,33 @@ from __future__ import annotations
 
 from typing import Any
 
-__all__ = ["finish", "relay", "run_flow"]
+__all__ = ["WorkFailed", "finish", "relay", "run_flow"]
+
+
+class WorkFailed(RuntimeError):
+    """What a flow whose work failed ends with: its message counts the failures,
+    ``.summary`` holds what finished. Calling such a flow directly raises it; :func:`run_flow`
+    returns the summary instead."""
+
+    def __init__(self, message: str, summary: dict[str, Any]) -> None:
+        super().__init__(message)
+        self.summary = summary
+
+    def __reduce__(self):  # pickles (Prefect may persist a state's data)
+        return (type(self), (str(self), self.summary))
 
 
 def finish(summary: dict[str, Any], *, failed: int, total: int, unit: str,
            detail: str = "") -> Any:
-    """What a flow returns: ``summary`` when nothing failed, else a Failed state carrying it,
-    with the message ``"<failed> of <total> <unit> failed<detail>"``."""
+    """What a flow returns: ``summary`` when nothing failed, else a Failed state whose
+    :class:`WorkFailed` carries it, with the message ``"<failed> of <total> <unit>
+    failed<detail>"``."""
     if not failed:
         return summary
     from prefect.states import Failed
 
-    return Failed(message=f"{failed} of {total} {unit} failed{detail}", data=summary)
+    message = f"{failed} of {total} {unit} failed{detail}"
+    return Failed(message=message, data=WorkFailed(message, summary))
 
 
 def relay(summary: dict[str, Any], unit: str) -> Any:
@@ -37,6 +52,8 @@ def run_flow(flow: Any, **params: Any) -> Any:
     carrying a summary); an exception the flow raised is raised here."""
     state = flow(**params, return_state=True)
     result = state.result(raise_on_failure=False)
+    if isinstance(result, WorkFailed):
+        return result.summary
     if isinstance(result, BaseException):
         raise result
     return result

@@ -117,7 +117,8 @@ def json_text(path: str | os.PathLike) -> str | None:
     return None
 
 
-#: The lock file a writer holds in a folder it writes (an OpenPCDet export).
+#: The suffix of the lock file a writer holds beside a folder it writes (an OpenPCDet export):
+#: ``.<folder name>.sim2radar-writer.lock``.
 WRITER_LOCK = ".sim2radar-writer.lock"
 
 
@@ -127,16 +128,17 @@ class FolderBusyError(RuntimeError):
 
 @contextlib.contextmanager
 def writer_lock(folder: str | os.PathLike, what: str = "folder") -> Iterator[Path]:
-    """Hold ``folder``'s writer lock (an exclusive ``fcntl`` lock on ``folder/.sim2radar-writer
-    .lock``, created with the folder) while the block runs: a second run writing the same
-    folder is refused at once with :class:`FolderBusyError` naming the first (its pid, host,
-    start time and command), instead of both writing it and the last one winning. The lock
-    goes with its process: a killed run leaves nothing to clean up."""
+    """Hold ``folder``'s writer lock (an exclusive ``fcntl`` lock on ``.<folder name>
+    .sim2radar-writer.lock`` beside it, so the folder's own files stay exactly the dataset's)
+    while the block runs: a second run writing the same folder is refused at once with
+    :class:`FolderBusyError` naming the first (its pid, host, start time and command), instead
+    of both writing it and the last one winning. The lock goes with its process: a killed run
+    leaves nothing to clean up (the small file stays; the next writer takes it)."""
     import fcntl
 
-    folder = Path(folder)
-    folder.mkdir(parents=True, exist_ok=True)
-    fh = open(folder / WRITER_LOCK, "a+")  # noqa: SIM115 - held for the block
+    folder = Path(folder).absolute()
+    folder.parent.mkdir(parents=True, exist_ok=True)
+    fh = open(folder.parent / f".{folder.name}{WRITER_LOCK}", "a+")  # noqa: SIM115
     try:
         try:
             fcntl.flock(fh, fcntl.LOCK_EX | fcntl.LOCK_NB)

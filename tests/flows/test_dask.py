@@ -159,8 +159,10 @@ def test_simulate_flow_on_dask_matches_threads(cluster, prefect_server, tmp_path
     # own; what reaches the workers must still unpickle there)
     before = _parquet_mtimes(dask_root)
     job = load_flow_from_entrypoint(f"{REPO}/flows/simulate.py:simulate_dataset")
-    again = job(scenes=[str(s) for s in scenes], store=str(dask_root), dataset="d",
-                dask_address=cluster.scheduler_address)
+    from sim2radar.flows._states import run_flow
+
+    again = run_flow(job, scenes=[str(s) for s in scenes], store=str(dask_root), dataset="d",
+                     dask_address=cluster.scheduler_address)   # Failed (a scene failed)
     assert again["counts"] == {"ok": 0, "skipped": 1, "failed": 1}
     assert _parquet_mtimes(dask_root) == before
     rows = {r["scene_id"]: r for r in ArtifactStore(dask_root).manifest("d").rows()}
