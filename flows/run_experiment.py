@@ -93,9 +93,18 @@ def run_experiment_flow(plan_path: str) -> dict[str, Any]:
     rows: dict[str, dict] = {}
     pretrainings: dict[str, dict] = {}
 
+    def write_progress() -> None:
+        failed = sum(r["status"] == "failed" for r in rows.values())
+        write_json(sweep_dir / "progress.json", {
+            "total_runs": total, "finished": len(rows), "failed": failed,
+            "total_pretrainings": len(plan.pretrains),
+            "pretrainings_finished": len(pretrainings),
+            "updated_at": datetime.now(UTC).isoformat(timespec="seconds")})
+
     def record_pretraining(row: dict) -> None:
         pretrainings[row["pretrain_key"]] = row
         write_pretrainings_table(sweep_dir, list(pretrainings.values()))
+        write_progress()   # the live page shows pre-trainings finishing before any run
         if row["status"] == "failed":
             logger.error("%s FAILED: %s", row["pretrain_id"], row["error"])
         else:
@@ -107,10 +116,7 @@ def run_experiment_flow(plan_path: str) -> dict[str, Any]:
         rows[row["run_key"]] = row
         ordered = sorted(rows.values(), key=_order)
         write_runs_table(sweep_dir, ordered)
-        failed = sum(r["status"] == "failed" for r in ordered)
-        write_json(sweep_dir / "progress.json", {
-            "total_runs": total, "finished": len(ordered), "failed": failed,
-            "updated_at": datetime.now(UTC).isoformat(timespec="seconds")})
+        write_progress()
         update_progress_artifact(progress_id, 100.0 * len(ordered) / max(total, 1))
         _progress.notify("run_experiment", row)
         if row["status"] == "failed":

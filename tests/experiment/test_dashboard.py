@@ -1034,3 +1034,20 @@ def test_many_tabs_at_once_closed_tabs_and_ctrl_c_mid_request(sweep_dir, capsys)
         assert time.perf_counter() - t0 < 2.0
     err = capsys.readouterr().err
     assert "Traceback" not in err and "BrokenPipe" not in err and "ConnectionReset" not in err
+
+
+def test_pre_trainings_finishing_before_any_run_show_in_the_progress(tmp_path):
+    """Issue #34, item 5: at minute 7 the live page said "0 of 30 (not started)" while 10 of 15
+    pre-trainings had finished; now progress counts them and says "pre-training"."""
+    folder = tmp_path / "s"
+    make_sweep(folder, ran=(), extras=False)
+    write_pretrainings(folder, [pretrain_row(0, heldout=30.0, zero_shot=5.0, train=60.0,
+                                             loss=(3.0, 2.0))])
+    (folder / "progress.json").write_text(json.dumps({
+        "total_runs": 12, "finished": 0, "failed": 0, "total_pretrainings": 3,
+        "pretrainings_finished": 1, "updated_at": "2026-11-20T10:00:00+00:00"}))
+    p = dashboard_data(load_sweep(folder, require_runs=False))["progress"]
+    assert (p["state"], p["finished"]) == ("pre-training", 0)
+    assert (p["pretrainings_finished"], p["pretrainings_total"]) == (1, 3)
+    page = render_html(dashboard_data(load_sweep(folder, require_runs=False)))
+    assert '"pretrainings_finished":1' in page and "pre-trainings finished" in page

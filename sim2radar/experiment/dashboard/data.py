@@ -17,7 +17,8 @@ What the sweep folder holds (written by ``flows/run_experiment.py`` and ``sim2ra
                           learnability check (storage/schemas.py)    optional: none shown
     generation.json   {"datasets": [{name, role, scenes_ok, ...}]}   optional
     gap/gap.json      sim2radar gap's report, PNGs beside it          optional
-    progress.json     {"total_runs", "finished", "failed", "running", "updated_at"}  optional
+    progress.json     {"total_runs", "finished", "failed", "total_pretrainings",
+                      "pretrainings_finished", "running", "updated_at"}  optional
 
 ``runs.parquet`` and ``pretrainings.parquet`` are read with pyarrow and checked against the
 columns the page reads (:data:`RUNS_COLUMNS`, :data:`PRETRAIN_COLUMNS`): the library does not
@@ -564,9 +565,14 @@ def _progress(data: SweepData, conds: Sequence[str]) -> dict[str, Any]:
     finished = len(data.runs)
     total = max(int(total), finished) if total is not None else finished
     running = prog.get("running") or []
+    n_pre = prog.get("total_pretrainings")
+    n_pre = int(n_pre) if n_pre is not None else int(sweep.get("n_pretrains") or 0)
+    pre_done = max(len(data.pretrainings), int(prog.get("pretrainings_finished") or 0))
     state = ("no run planned" if total == 0 else "complete" if finished >= total
-             else "not started" if finished == 0 else "running")
+             else "running" if finished else "pre-training" if pre_done < n_pre
+             else "running" if pre_done else "not started")
     return {"finished": finished, "total": total, "ok": counts["ok"],
+            "pretrainings_finished": pre_done, "pretrainings_total": max(n_pre, pre_done),
             "skipped": counts["skipped"], "failed": counts["failed"],
             "running": [r if isinstance(r, str) else json.dumps(jsonable(r)) for r in running],
             "updated_at": prog.get("updated_at"), "state": state}
@@ -986,7 +992,8 @@ def dashboard_data(sweep: SweepData) -> dict[str, Any]:
     dict with keys ``name``, ``folder``, ``metric``, ``metric_label``, ``created_at``,
     ``profile``, ``banner`` (``{"kind": "proxy" | "measured" | "undeclared" | "declared" |
     "unknown", "text"}``),
-    ``progress`` (``finished``, ``total``, ``ok``, ``skipped``, ``failed``, ``running``,
+    ``progress`` (``finished``, ``total``, ``ok``, ``skipped``, ``failed``,
+    ``pretrainings_finished``, ``pretrainings_total``, ``running``,
     ``updated_at``, ``state``), ``conditions`` (``[{"name", "label", "color"}]``),
     ``fractions``, ``figures`` (Plotly ``{"data", "layout"}`` of ``ap``, ``delta``, ``curves``;
     trace ``meta.role`` ``mean``/``trials``, ``delta``/``delta-trials``, ``loss``/``val_ap``;

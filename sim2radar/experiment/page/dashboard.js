@@ -162,8 +162,10 @@ function renderProgress(p) {
     "<span>failed: <b id=count-failed" + (p.failed ? " style='color:#c0392b'" : "") + ">" +
     p.failed + "</b></span>" + (p.updated_at ? "<span class=muted>progress.json " +
     esc(p.updated_at) + "</span>" : "");
-  $("run-running").innerHTML = p.running.length ? "running: " + p.running.map(esc).join(", ")
-    : "";
+  $("run-running").innerHTML = (p.pretrainings_total ? "<span id=pretrain-progress>" +
+    "pre-trainings finished: <b>" + p.pretrainings_finished + "</b> of " +
+    p.pretrainings_total + "</span> " : "") +
+    (p.running.length ? "running: " + p.running.map(esc).join(", ") : "");
 }
 function renderDatasets(d) {
   let out = "";
