@@ -24,7 +24,7 @@ from typing import Any
 from sim2radar.storage.keys import _normalise, file_digest
 
 __all__ = ["PROVENANCE_KEY", "package_versions", "build_provenance", "model_file_hashes",
-           "combine_provisional"]
+           "combine_provisional", "git_commit"]
 
 #: Parquet key-value metadata key holding the provenance JSON.
 PROVENANCE_KEY = b"sim2radar.provenance"
@@ -101,3 +101,24 @@ def combine_provisional(records) -> dict[str, Any] | None:
         return None
     return {"fallbacks": sum(int(r.get("fallbacks", 0)) for r in records),
             "reason": str(records[0].get("reason", ""))}
+
+
+@functools.cache
+def git_commit() -> str | None:
+    """The git commit of the sim2radar checkout this code runs from, with ``-dirty`` when
+    tracked files differ from it; None for an installed package (no checkout) or without git.
+    Provenance only: never part of a content key."""
+    import subprocess
+
+    repo = Path(__file__).resolve().parents[1]
+    if not (repo / ".git").exists():
+        return None
+    try:
+        head = subprocess.run(["git", "-C", str(repo), "rev-parse", "HEAD"], capture_output=True,
+                              text=True, timeout=10, check=True).stdout.strip()
+        dirty = subprocess.run(["git", "-C", str(repo), "status", "--porcelain",
+                                "--untracked-files=no"], capture_output=True, text=True,
+                               timeout=10, check=True).stdout.strip()
+    except (OSError, subprocess.SubprocessError):
+        return None
+    return head + ("-dirty" if dirty else "")

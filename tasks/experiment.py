@@ -54,7 +54,7 @@ from sim2radar.experiment.plan import (
 )
 from sim2radar.fileio import atomic_write, atomic_write_with, write_json
 from sim2radar.storage import content_key, get_schema
-from sim2radar.storage.provenance import package_versions
+from sim2radar.storage.provenance import git_commit, package_versions
 from sim2radar.storage.store import CorruptArtifactError
 from sim2radar.tasks.common import open_store
 
@@ -151,7 +151,8 @@ def prepare_sweep(datasets: Mapping[str, str | os.PathLike | None], *, profile: 
     plan = sweep.build_plan(
         setup, domains, name=name, sweep_dir=str(sweep_dir.resolve()), store=st.root_uri,
         fixed_at=fixed_at, key_of=_key_of,
-        provenance={"versions": package_versions(), "code": _code_version()})
+        provenance={"versions": package_versions(), "code": _code_version(),
+                    "git": git_commit()})
     write_json(sweep_dir / "sweep.json", plan.sweep)
     if setup.preregistration is not None:   # the copy the results link (same digest: settings)
         atomic_write(sweep_dir / sweep.PREREGISTRATION_FILE,

@@ -1051,3 +1051,24 @@ def test_pre_trainings_finishing_before_any_run_show_in_the_progress(tmp_path):
     assert (p["pretrainings_finished"], p["pretrainings_total"]) == (1, 3)
     page = render_html(dashboard_data(load_sweep(folder, require_runs=False)))
     assert '"pretrainings_finished":1' in page and "pre-trainings finished" in page
+
+
+def test_provenance_names_the_datasets_used_and_the_git_commit(tmp_path):
+    """Issue #34, item 5: provenance showed the detector config's placeholder data.root;
+    now it shows the sweep's datasets (path, content key, domain) in its place, and the git
+    commit the sweep ran from (a checkout: this one)."""
+    from sim2radar.storage.provenance import git_commit
+
+    folder = make_sweep(tmp_path / "s")
+    doc = json.loads((folder / "sweep.json").read_text())
+    doc["provenance"]["configs"]["finetune"]["data"] = {"root": "../../data/ifr"}
+    doc["provenance"]["git"] = git_commit()
+    (folder / "sweep.json").write_text(json.dumps(doc))
+    prov = dashboard_data(load_sweep(folder))["provenance"]
+    assert "../../data/ifr" not in prov["configs"]["finetune"]
+    assert "/data/real" in prov["configs"]["finetune"]
+    assert prov["datasets"]["real"] == {"path": "/data/real", "key": "r" * 16,
+                                        "domain": PROXY}
+    commit = git_commit()
+    assert commit is None or re.fullmatch(r"[0-9a-f]{40}(-dirty)?", commit)
+    assert prov["git"] == commit

@@ -959,6 +959,17 @@ def _gap(data: SweepData) -> dict[str, Any] | None:
     return jsonable({"rows": rows, "facts": facts, "figures": figures})
 
 
+def _with_datasets(config: Any, sweep: Mapping[str, Any]) -> Any:
+    """A detector config as the sweep used it: its ``data.root`` is the config file's
+    placeholder (each run reads the sweep's datasets), so it shows the datasets instead."""
+    if not isinstance(config, Mapping) or not isinstance(config.get("data"), Mapping):
+        return config
+    roots = {role: d.get("path") for role, d in (sweep.get("datasets") or {}).items()
+             if isinstance(d, Mapping)}
+    return {**config, "data": {**config["data"], "root": f"(not used: the sweep's datasets "
+                                                         f"{roots})"}}
+
+
 def _provenance(sweep: Mapping[str, Any] | None) -> dict[str, Any] | None:
     if sweep is None:
         return None
@@ -972,8 +983,12 @@ def _provenance(sweep: Mapping[str, Any] | None) -> dict[str, Any] | None:
         "versions": prov.get("versions") or {},
         "code": code if isinstance(code, Mapping) else ({"code": code} if code else {}),
         "git": git if isinstance(git, str) else (json.dumps(jsonable(git)) if git else None),
-        "configs": {k: json.dumps(jsonable(v), indent=1) for k, v in
-                    (prov.get("configs") or {}).items()},
+        "configs": {k: json.dumps(jsonable(_with_datasets(v, sweep)), indent=1)
+                    for k, v in (prov.get("configs") or {}).items()},
+        "datasets": {role: {"path": d.get("path"), "key": d.get("key"),
+                            "domain": d.get("domain")}
+                     for role, d in (sweep.get("datasets") or {}).items()
+                     if isinstance(d, Mapping)},
         "profile": json.dumps(jsonable(sweep.get("profile") or {}), indent=1),
         "intensity_match": json.dumps(jsonable(sweep.get("intensity_match")), indent=1)
         if sweep.get("intensity_match") else None,

@@ -210,6 +210,9 @@ function renderProvenance(p) {
     ", before any run; a rerun with changed settings is refused</p>";
   const code = Object.entries(p.code || {});
   if (code.length) out += "<h3>Code</h3>" + table(["", ""], code, null);
+  const ds = Object.entries(p.datasets || {});
+  if (ds.length) out += "<h3>Datasets</h3>" + table(["role", "path", "content key", "domain"],
+    ds.map(([role, d]) => [role, d.path || "—", d.key || "—", d.domain || "—"]), null);
   out += "<h3>Package versions</h3>" + table(["package", "version"],
     Object.entries(p.versions || {}), null);
   for (const [name, text] of Object.entries(p.configs || {})) {
