@@ -300,8 +300,17 @@ def test_learning_curves_have_a_loss_and_a_val_trace_per_finished_run(sweep_dir)
     r = next(t for t in loss if t["meta"]["run_key"].startswith("baseline-0.1-0-"))
     # x is the optimiser step at each epoch's end (10 steps per epoch here)
     assert r["x"] == [10, 20, 30, 40] and r["y"] == pytest.approx([2.0, 1.0, 2 / 3, 0.5])
-    # one legend entry per condition
-    assert sum(bool(t.get("showlegend", True)) for t in loss + val) == 2
+    # grouped: per condition and fraction a mean line in a min-max band, one legend entry
+    # per condition; every trace names its condition and fraction for the table's filters
+    means = _traces(curves, "loss_mean")
+    assert len(means) == len({(t["meta"]["condition"], t["meta"]["fraction"]) for t in loss})
+    assert sum(bool(t.get("showlegend", True)) for t in curves["data"]) == 2
+    cell = [t for t in loss if t["meta"]["condition"] == "baseline"
+            and t["meta"]["fraction"] == 0.1]
+    mean = next(t for t in means if t["meta"]["condition"] == "baseline"
+                and t["meta"]["fraction"] == 0.1)
+    assert mean["y"][0] == pytest.approx(np.mean([t["y"][0] for t in cell]))
+    assert len(_traces(curves, "loss_band")) == 2 * len(means)
 
 
 def test_runs_table_has_every_run_and_the_metric_first_among_the_aps(sweep_dir):

@@ -165,6 +165,11 @@ def test_runs_filter_group_and_download_offline(tmp_path, page):
     page.select_option("#filter-fraction", "0.5")
     assert rows.count() == 3 and page.locator("#runs-table tbody tr.failed").count() == 1
     assert page.locator("#runs-shown").inner_text() == "3 of 18 runs shown"
+    # the learning curves follow the filters: only sim-pretrain at 50 % stays visible
+    shown = page.evaluate("""() => document.getElementById('plot-curves').data
+        .filter(t => t.meta && t.meta.condition !== undefined && t.visible !== false)
+        .map(t => [t.meta.condition, t.meta.fraction])""")
+    assert shown and all(c == "sim-pretrain" and f == 0.5 for c, f in shown)
     # condition shown by its label, each run with its folder
     texts = page.evaluate("""() => Array.from(document.querySelectorAll(
         '#runs-table tbody tr.run')).map(r => r.textContent)""")

@@ -6,7 +6,8 @@ page's ``Plotly.react``; pure functions of the statistics
     ap_figure(stats, conds, metric, folders)   AP vs real-data fraction (paper Figure 4)
     delta_figure(stats, conds, metric)         paired difference to the baseline, with its
                                                simultaneous interval and the MDE
-    curves_figure(runs, conds)                 learning curves (loss, validation AP) per run
+    curves_figure(runs, conds)                 learning curves: mean and band per condition and
+                                               fraction, each run faint behind
     pretrain_loss_figure(rows, conds)          the pre-trainings' loss curves
     pretrain_check_figure(table, conds)        the pre-trainings' checks: held-out sim AP and
                                                zero-shot real AP, with the thresholds
@@ -251,49 +252,91 @@ def _trial_markers(tx, ty, tinfo, cond: str, label: str, color: str, *, name: st
                        f"<br>{value}<extra></extra>"))
 
 
+def _rgba(hex_colour: str, alpha: float) -> str:
+    """``#rrggbb`` as ``rgba(r, g, b, alpha)`` (a band's fill)."""
+    h = hex_colour.lstrip("#")
+    if len(h) != 6:
+        return hex_colour
+    r, g, b = (int(h[i:i + 2], 16) for i in (0, 2, 4))
+    return f"rgba({r}, {g}, {b}, {alpha})"
+
+
 def curves_figure(runs: Sequence[Mapping[str, Any]], conds: Sequence[str]) -> dict[str, Any]:
-    """Learning curves: per run a ``loss`` trace (training loss per epoch) and a ``val_ap``
-    trace (validation AP), coloured by condition, against the optimiser step at the end of
-    each epoch (``epoch x steps / epochs``): runs of different fractions have different
-    epoch lengths, so steps put them on one axis."""
+    """Learning curves, grouped: per condition and fraction the mean over its trials (a
+    ``loss_mean`` / ``val_ap_mean`` line, one legend entry per condition) inside the band of
+    its trials (min to max, ``*_band``), and each run's own curve faint behind them (``loss``
+    / ``val_ap``: a diverged run stays visible). Every trace's ``meta`` names its condition
+    and fraction (and a run's trial), so the page shows only what the runs table's filters
+    let through. x is the optimiser step at the end of each epoch (``epoch x steps /
+    epochs``): runs of different fractions have different epoch lengths."""
     import plotly.graph_objects as go
     from plotly.subplots import make_subplots
 
     fig = make_subplots(rows=1, cols=2, horizontal_spacing=0.08,
                         subplot_titles=("training loss (mean per epoch)",
                                         "validation 3D AP R40 @ IoU 0.3 [%]"))
-    shown: set[str] = set()
-    n_curves = 0
     ordered = sorted(runs, key=lambda r: (conds.index(r["condition"]) if r.get("condition")
                                           in conds else len(conds), r.get("fraction") or 0,
                                           r.get("trial") or 0))
+    groups: dict[tuple[str, float], dict[str, dict[int, list[float]]]] = {}
+    n_curves = 0
     for r in ordered:
-        cond = str(r.get("condition"))
+        cond, fraction = str(r.get("condition")), float(r.get("fraction") or 0)
         epochs, loss = r.get("history_epoch") or [], r.get("history_loss") or []
         v_ep, v_ap = r.get("history_val_epoch") or [], r.get("history_val_ap") or []
         if not (epochs and loss) and not (v_ep and v_ap):
             continue
         color, label = colour(cond, conds), condition_label(cond)
-        run = (f"{html.escape(label)} {pct(float(r.get('fraction') or 0))}, "
+        run = (f"{html.escape(label)} {pct(fraction)}, "
                f"trial {r.get('trial')} (seed {r.get('seed')})")
         n_ep, n_steps = int(r.get("epochs") or 0), int(r.get("steps") or 0)
         per_epoch = n_steps / n_ep if n_ep > 0 and n_steps > 0 else 1.0
         epochs = [round(e * per_epoch) for e in epochs]
         v_ep = [round(e * per_epoch) for e in v_ep]
+        cell = groups.setdefault((cond, fraction), {"loss": {}, "val_ap": {}})
         for col, (x, y, role, fmt) in enumerate(((epochs, loss, "loss", ".4f"),
                                                  (v_ep, v_ap, "val_ap", ".2f")), start=1):
             if not (x and y):
                 continue
-            legend = cond not in shown  # one legend entry per condition
-            shown.add(cond)
+            for xi, yi in zip(x, y, strict=False):
+                if num(yi) is not None:
+                    cell[role].setdefault(int(xi), []).append(float(yi))
             fig.add_trace(go.Scatter(
-                x=list(x), y=[num(v) for v in y], mode="lines+markers" if len(x) < 3 else "lines",
-                name=label, legendgroup=cond, showlegend=legend,
-                line={"color": color, "width": 1.3}, marker={"size": 4}, opacity=0.75,
-                meta={"role": role, "condition": cond, "run_key": r.get("run_key")},
+                x=list(x), y=[num(v) for v in y], mode="lines", name=label,
+                legendgroup=cond, showlegend=False, line={"color": color, "width": 0.8},
+                opacity=0.35,
+                meta={"role": role, "condition": cond, "fraction": fraction,
+                      "trial": r.get("trial"), "run_key": r.get("run_key")},
                 hovertemplate=f"{run}<br>step %{{x}}: %{{y:{fmt}}}<extra></extra>"),
                 row=1, col=col)
             n_curves += 1
+    shown: set[str] = set()
+    for (cond, fraction), cell in groups.items():
+        color, label = colour(cond, conds), condition_label(cond)
+        for col, role in enumerate(("loss", "val_ap"), start=1):
+            points = sorted(cell[role].items())
+            if not points:
+                continue
+            x = [p[0] for p in points]
+            lo, hi = [min(p[1]) for p in points], [max(p[1]) for p in points]
+            mean = [sum(p[1]) / len(p[1]) for p in points]
+            n = max(len(p[1]) for p in points)
+            meta = {"condition": cond, "fraction": fraction, "trials": n}
+            fig.add_trace(go.Scatter(x=x, y=hi, mode="lines", line={"width": 0},
+                                     showlegend=False, hoverinfo="skip", legendgroup=cond,
+                                     meta={"role": f"{role}_band", **meta}), row=1, col=col)
+            fig.add_trace(go.Scatter(x=x, y=lo, mode="lines", line={"width": 0},
+                                     fill="tonexty", fillcolor=_rgba(color, 0.15),
+                                     showlegend=False, hoverinfo="skip", legendgroup=cond,
+                                     meta={"role": f"{role}_band", **meta}), row=1, col=col)
+            fig.add_trace(go.Scatter(
+                x=x, y=mean, mode="lines+markers" if len(x) < 3 else "lines", name=label,
+                legendgroup=cond, showlegend=cond not in shown,
+                line={"color": color, "width": 2.0}, marker={"size": 4},
+                meta={"role": f"{role}_mean", **meta},
+                hovertemplate=(f"{html.escape(label)} {pct(fraction)}: mean of {n} trial(s)"
+                               "<br>step %{x}: %{y:.3f}<extra></extra>")), row=1, col=col)
+            shown.add(cond)
     for col in (1, 2):
         fig.update_xaxes(title_text="optimiser step", rangemode="tozero", row=1, col=col)
     fig.update_layout(template=PLOTLY_TEMPLATE, height=380,

@@ -273,6 +273,7 @@ function render(d) {
   plot("plot-ap", d.figures.ap);
   plot("plot-delta", d.figures.delta);
   plot("plot-curves", d.figures.curves);
+  filterCurves();
   $("summary").innerHTML = d.summary.rows.length ? table(d.summary.columns, d.summary.rows,
     (i) => (d.summary.numeric || [])[i]) : "<p class=muted>No comparison yet.</p>";
   const sentences = d.summary.sentences || [];
@@ -291,11 +292,28 @@ function render(d) {
   $("warnings-section").style.display = d.warnings.length ? "block" : "none";
   state.renders += 1;
 }
+// the learning curves show what the runs table's filters let through (condition, fraction;
+// a run's own curve also its trial)
+function filterCurves() {
+  const el = $("plot-curves");
+  if (!el || !el.data) return;
+  const f = state.filter;
+  const ok = (key, value) => f[key] === undefined || f[key] === "" ||
+    String(value) === f[key];
+  const vis = el.data.map((t) => {
+    const m = t.meta || {};
+    if (m.condition === undefined) return true;
+    return ok("condition", m.condition) && ok("fraction", m.fraction) &&
+      (m.trial === undefined || ok("trial", m.trial));
+  });
+  Plotly.restyle(el, {visible: vis});
+}
 $("runs-controls").addEventListener("change", (e) => {
   const el = e.target;
   if (el.id === "group-by") state.groupBy = el.value;
   else if (el.dataset && el.dataset.key) state.filter[el.dataset.key] = el.value;
   renderRuns();
+  filterCurves();
 });
 $("runs-controls").addEventListener("click", (e) => {
   if (e.target.id === "download-csv") download(runsCsv(state.shown), "text/csv", "csv");
