@@ -140,6 +140,25 @@ class ServerWatch:
         typer.secho(f"warning: the Prefect server ({self.api_url}) went away during the run "
                     f"({self.why}); finishing it without Prefect", fg="yellow", err=True)
 
+    def run(self, with_prefect, without_prefect, restart=lambda: None):
+        """``with_prefect()``'s summary; when the server went away during it (whether it
+        raised or returned), say so in one line, call ``restart()`` (e.g. reset a progress
+        bar) and return ``without_prefect()``'s summary, marked ``prefect_server_went_away``
+        (the work already done is cached, so the plain run only does the rest)."""
+        summary = None
+        try:
+            summary = with_prefect()
+        except Exception:
+            if not self.gone.is_set():
+                raise
+        if not self.gone.is_set():
+            return summary
+        self.say_gone()
+        restart()
+        summary = without_prefect()
+        summary["prefect_server_went_away"] = self.why or True
+        return summary
+
     def __enter__(self) -> ServerWatch:
         if self.api_url:
             self._thread.start()
@@ -186,19 +205,14 @@ def export_folder_lock(folder):
     a folder another run is writing exits with status 2 and one line naming that run."""
     from sim2radar.fileio import FolderBusyError, writer_lock
 
-    if folder is None:
+    with contextlib.ExitStack() as held:
+        if folder is not None:
+            try:
+                held.enter_context(writer_lock(folder, "export folder"))
+            except FolderBusyError as exc:
+                typer.secho(f"error: --export-openpcdet: {exc}", fg="red", err=True)
+                raise typer.Exit(2) from None
         yield
-        return
-    try:
-        lock = writer_lock(folder, "export folder")
-        lock.__enter__()
-    except FolderBusyError as exc:
-        typer.secho(f"error: --export-openpcdet: {exc}", fg="red", err=True)
-        raise typer.Exit(2) from None
-    try:
-        yield
-    finally:
-        lock.__exit__(None, None, None)
 
 
 def console():

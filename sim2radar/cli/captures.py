@@ -54,25 +54,18 @@ def run_captures(captures: Path, *, store: str, dataset: str, settings: dict[str
 
         quiet = (quiet_recorded_failures(["capture-scene", *STEP_NAMES], verbose)
                  if use_prefect else nullcontext())
-        summary = None
+        def run(prefect: bool) -> dict[str, Any]:
+            return capture_dataset(captures, store, dataset, export_dir=export_dir,
+                                   force=force, workers=workers,
+                                   dask_address=dask_address if prefect else None,
+                                   use_prefect=prefect, on_scene=on_scene,
+                                   retry_failed=retry_failed, **settings)
+
         with quiet, ServerWatch(os.environ.get("PREFECT_API_URL") if use_prefect
                                 else None) as watch:
-            try:
-                summary = capture_dataset(captures, store, dataset, export_dir=export_dir,
-                                          force=force, workers=workers,
-                                          dask_address=dask_address, use_prefect=use_prefect,
-                                          on_scene=on_scene, retry_failed=retry_failed,
-                                          **settings)
-            except Exception:
-                if not watch.gone.is_set():
-                    raise
-        if watch.gone.is_set():  # the work done is in the store; the rest runs here
-            watch.say_gone()
-            progress.update(bar, completed=0, description="without Prefect")
-            summary = capture_dataset(captures, store, dataset, export_dir=export_dir,
-                                      force=force, workers=workers, use_prefect=False,
-                                      on_scene=on_scene, retry_failed=retry_failed, **settings)
-            summary["prefect_server_went_away"] = watch.why or True
+            summary = watch.run(lambda: run(use_prefect), lambda: run(False),
+                                lambda: progress.update(bar, completed=0,
+                                                        description="without Prefect"))
     summary["pngs"] = []
     if png_dir is not None:
         from sim2radar.factory.captures import CaptureSpec

@@ -126,27 +126,24 @@ def _run_generate(
             from sim2radar.cli._app import ServerWatch, quiet_recorded_failures
             from sim2radar.flows._steps import STEP_NAMES
 
-            summary = None
-            with progress_callback(on_world), \
-                    quiet_recorded_failures(["generate-world-dataset", *STEP_NAMES], verbose), \
-                    ServerWatch(os.environ.get("PREFECT_API_URL")) as watch:
+            def with_prefect() -> dict[str, Any]:
                 try:
-                    summary = run_flow(  # failed worlds: Failed in Prefect, summary here
+                    return run_flow(  # failed worlds: Failed in Prefect, summary here
                         generate_dataset_flow.with_options(task_runner=runner, name=flow_name),
                         seeds=seeds, spec=spec, store=store, dataset=dataset,
                         export_dir=export_dir, force=force, strict=strict, **extras)
                 except DatasetFailures as exc:  # strict: the run is marked failed in Prefect
-                    summary = exc.summary
-                except Exception:
-                    if not watch.gone.is_set():
-                        raise
-            if watch.gone.is_set():  # the work done is in the store; the rest runs here
-                watch.say_gone()
-                progress.update(bar, completed=0, description="without Prefect")
-                summary = generate_dataset_plain(seeds, spec, store, dataset,
-                                                 export_dir=export_dir, force=force,
-                                                 on_world=on_world, **extras)
-                summary["prefect_server_went_away"] = watch.why or True
+                    return exc.summary
+
+            with progress_callback(on_world), \
+                    quiet_recorded_failures(["generate-world-dataset", *STEP_NAMES], verbose), \
+                    ServerWatch(os.environ.get("PREFECT_API_URL")) as watch:
+                summary = watch.run(
+                    with_prefect,
+                    lambda: generate_dataset_plain(seeds, spec, store, dataset,
+                                                   export_dir=export_dir, force=force,
+                                                   on_world=on_world, **extras),
+                    lambda: progress.update(bar, completed=0, description="without Prefect"))
         else:
             summary = generate_dataset_plain(seeds, spec, store, dataset, export_dir=export_dir,
                                              force=force, on_world=on_world, **extras)
