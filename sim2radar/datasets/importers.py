@@ -223,18 +223,18 @@ def read_label_file(path: Path, calib: Path | None) -> tuple[np.ndarray, list[st
 
 
 def _canonical(names: list[str], path: Path, settings: ImportSettings,
-               counts: dict[str, int]) -> list[int | str]:
-    """Each raw name as the detector's class (matched case-insensitively), or the index of a
-    dropped label as an int marker."""
+               counts: dict[str, int]) -> list[str | None]:
+    """Each raw name as the detector's class (matched case-insensitively), None for a dropped
+    label (counted in ``counts``)."""
     by_lower = {c.lower(): c for c in settings.classes}
-    out: list[int | str] = []
+    out: list[str | None] = []
     for name in names:
         c = by_lower.get(name.lower())
         if c is not None:
             out.append(c)
         elif name.lower() in _IGNORED_CLASSES or settings.drop_other_classes:
             counts[name] = counts.get(name, 0) + 1
-            out.append(-1)
+            out.append(None)
         else:
             raise DatasetError(f"{path}: label class {name!r} is not one of the detector's "
                                f"classes {list(settings.classes)} (matched without case); drop "
@@ -307,7 +307,7 @@ def _frames(root: Path, files: list[Path], settings: ImportSettings,
                                "frame without objects)")
         boxes, names = read_label_file(lab, calib / f"{f.stem}.txt")
         classes = _canonical(names, lab, settings, dropped)
-        keep = [i for i, c in enumerate(classes) if isinstance(c, str)]
+        keep = [i for i, c in enumerate(classes) if c is not None]
         yield Frame(f.stem, read_point_file(f, settings), boxes[keep].astype(np.float32),
                     tuple(classes[i] for i in keep))
 
