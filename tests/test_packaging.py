@@ -251,15 +251,20 @@ def _under(path: str | Path, folder: Path) -> bool:
     return Path(path).resolve().is_relative_to(folder.resolve())
 
 
-def test_wheel_install_runs_from_an_empty_folder(wheel, tmp_path):
-    path, src = wheel
+def _install(wheel_path: Path, tmp_path: Path, *, shadow: bool = False, **extra_env: str
+             ) -> tuple[Path, Path, dict[str, str], Path]:
+    """The wheel in a fresh venv: (venv folder, its site-packages, its environment, an empty
+    working folder holding decoy packages whose ``__init__.py`` raises: ``storage/``,
+    ``tasks/``, ``flows/``, ``configs/``, and with ``shadow`` a ``sim2radar/`` too, as a
+    checkout used as the working folder would have)."""
     env_dir = tmp_path / "venv"
     # with pip (ensurepip, offline), and without the project's environment at first
     venv.EnvBuilder(with_pip=True, clear=True).create(env_dir)
     python = env_dir / "bin" / "python"
     env = _clean_env(PREFECT_HOME=str(tmp_path / "prefect"), VIRTUAL_ENV=str(env_dir),
-                     PATH=f"{env_dir / 'bin'}{os.pathsep}{os.environ.get('PATH', '')}")
-    _run([python, "-m", "pip", "install", "--no-deps", "--no-index", "-q", path],
+                     PATH=f"{env_dir / 'bin'}{os.pathsep}{os.environ.get('PATH', '')}",
+                     **extra_env)
+    _run([python, "-m", "pip", "install", "--no-deps", "--no-index", "-q", wheel_path],
          cwd=tmp_path, env=env)
     site = Path(_run([python, "-c", "import sysconfig; print(sysconfig.get_paths()['purelib'])"],
                      cwd=tmp_path, env=env).stdout.strip())
@@ -270,10 +275,17 @@ def test_wheel_install_runs_from_an_empty_folder(wheel, tmp_path):
     (site / "_sim2radar_test_deps.pth").write_text("".join(f"{d}\n" for d in sorted(deps)))
 
     work = tmp_path / "work"
-    for decoy in MAPPED:
+    for decoy in (*MAPPED, *(["sim2radar"] if shadow else [])):
         (work / decoy).mkdir(parents=True)
         (work / decoy / "__init__.py").write_text(
             f"raise RuntimeError('the decoy {decoy}/ in the working folder was imported')\n")
+    return env_dir, site, env, work
+
+
+def test_wheel_install_runs_from_an_empty_folder(wheel, tmp_path):
+    path, src = wheel
+    env_dir, site, env, work = _install(path, tmp_path)
+    python = env_dir / "bin" / "python"
 
     info = _run([env_dir / "bin" / "sim2radar", "info"], cwd=work, env=env).stdout
     version = tomllib.loads((src / "pyproject.toml").read_text())["project"]["version"]
@@ -321,3 +333,113 @@ def test_wheel_install_runs_from_an_empty_folder(wheel, tmp_path):
                                     for f in probe["presets"].values())
     assert probe["scenes"] and all(_under(f, pkg / "data") for f in probe["scenes"])
     assert probe["scene_meshes"] > 0
+
+
+#: read in the wheel's venv: every deployment's entrypoint, job variables, schedules' activity
+_DEPLOYMENTS_PROBE = r"""
+import json
+from prefect.client.orchestration import get_client
+with get_client(sync_client=True) as c:
+    out = {}
+    for d in c.read_deployments():
+        flow = c.read_flow(d.flow_id).name
+        out[f"{flow}/{d.name}"] = {"entrypoint": d.entrypoint, "path": d.path,
+                                   "job_variables": d.job_variables, "paused": d.paused,
+                                   "pull_steps": d.pull_steps,
+                                   "active": [s.active for s in d.schedules]}
+print(json.dumps(out))
+"""
+
+
+def _stop_group(proc: subprocess.Popen) -> None:
+    import signal
+
+    for sig in (signal.SIGTERM, signal.SIGKILL):
+        try:
+            os.killpg(proc.pid, sig)
+        except ProcessLookupError:
+            return
+        try:
+            proc.wait(timeout=20)
+            return
+        except subprocess.TimeoutExpired:
+            continue
+
+
+def test_the_installed_wheel_deploys_and_a_worker_runs_a_deployment(wheel, tmp_path):
+    """Issue #34: `sim2radar deploy` from a wheel in a fresh venv, no checkout anywhere. The
+    deployments reach the managed server with module entrypoints, the working folder given by
+    --home and schedules off (a home holding a ``sim2radar/`` package folder, as a checkout
+    does, is refused: Prefect would import it instead of the installed package); a process
+    worker started in another folder runs radar-on-demand in the home to Completed, and `prefect` finds the managed server through the Prefect profile
+    it wrote; --schedule turns a schedule on."""
+    from sim2radar.storage import ArtifactStore
+
+    path, _ = wheel
+    env_dir, _, env, work = _install(path, tmp_path, shadow=True,
+                                     SIM2RADAR_PREFECT_SERVER="managed",
+                                     PREFECT_WORKER_QUERY_SECONDS="2",
+                                     PREFECT_SERVER_ANALYTICS_ENABLED="false")
+    for key in [k for k in env if k.startswith("PREFECT_LOGGING") or k == "PREFECT_API_URL"]:
+        del env[key]
+    python, cli = env_dir / "bin" / "python", env_dir / "bin" / "sim2radar"
+    elsewhere = tmp_path / "elsewhere"
+    elsewhere.mkdir()
+    home = str(tmp_path / "prefect")
+    _run([cli, "server", "start", "--home", home], cwd=elsewhere, env=env, timeout=240)
+    worker = None
+    try:
+        refused = subprocess.run([str(cli), "deploy", "--all", "--home", str(work)],
+                                 cwd=elsewhere, env=env, capture_output=True, text=True,
+                                 timeout=240)
+        assert refused.returncode == 2, refused.stdout + refused.stderr
+        assert f"{work.resolve()} holds a sim2radar/ package folder" in refused.stderr
+        work = tmp_path / "home"  # harmless decoys (flows/, tasks/ ...), no sim2radar/
+        for decoy in MAPPED:
+            (work / decoy).mkdir(parents=True)
+            (work / decoy / "__init__.py").write_text("raise RuntimeError('decoy imported')\n")
+        out = _run([cli, "deploy", "--all", "--home", work], cwd=elsewhere, env=env,
+                   timeout=240).stdout
+        assert "created the process work pool sim2radar-cpu" in out, out
+        assert out.count("deployed ") == 7, out
+        # what the server holds (read through the profile the managed server wrote)
+        deps = json.loads(_run([python, "-c", _DEPLOYMENTS_PROBE], cwd=elsewhere,
+                               env=env).stdout.strip().splitlines()[-1])
+        assert len(deps) == 7, sorted(deps)
+        for name, dep in deps.items():
+            assert dep["entrypoint"].startswith("sim2radar.flows."), (name, dep)
+            assert dep["job_variables"]["working_dir"] == str(work.resolve()), (name, dep)
+            assert dep["job_variables"]["env"]["SIM2RADAR_HOME"] == str(work.resolve())
+            assert not any(dep["active"]), f"{name}: a schedule was registered active"
+            assert not dep["paused"]
+        assert deps["simulate-dataset/nightly-radar"]["active"] == [False]
+
+        worker = subprocess.Popen(
+            [str(python), "-m", "prefect", "worker", "start", "--pool", "sim2radar-cpu"],
+            cwd=elsewhere, env=env, stdout=open(tmp_path / "worker.log", "wb"),
+            stderr=subprocess.STDOUT, start_new_session=True)
+        store = tmp_path / "store"
+        try:
+            ran = _run([python, "-m", "prefect", "deployment", "run",
+                        "simulate-dataset/radar-on-demand", "-p", f'store="{store}"',
+                        "-p", 'dataset="wheel"', "--watch", "--watch-interval", "2",
+                        "--watch-timeout", "300"], cwd=elsewhere, env=env, timeout=360).stdout
+        except AssertionError as exc:
+            log = (tmp_path / "worker.log").read_text(errors="replace")[-4000:]
+            raise AssertionError(f"{exc}\n--- worker log\n{log}") from None
+        assert "Completed" in ran, ran
+        (row,) = ArtifactStore(store).manifest("wheel").rows()
+        assert (row["scene_id"], row["status"]) == ("demo_corridor", "ok"), row
+
+        again = _run([cli, "deploy", "nightly-radar", "--schedule", "--home", work],
+                     cwd=elsewhere, env=env, timeout=240).stdout
+        assert "schedules on" in again, again
+        deps = json.loads(_run([python, "-c", _DEPLOYMENTS_PROBE], cwd=elsewhere,
+                               env=env).stdout.strip().splitlines()[-1])
+        assert deps["simulate-dataset/nightly-radar"]["active"] == [True]
+        assert deps["generate-dataset-job/nightly-generate"]["active"] == [False]
+    finally:
+        if worker is not None:
+            _stop_group(worker)
+        subprocess.run([str(cli), "server", "stop", "--home", home], cwd=elsewhere, env=env,
+                       capture_output=True, timeout=120)

@@ -28,6 +28,7 @@ from sim2radar.cli import models as _models  # noqa: E402,F401  isort: skip
 from sim2radar.cli import store as _store  # noqa: E402,F401  isort: skip
 from sim2radar.cli import importing as _importing  # noqa: E402,F401  isort: skip
 from sim2radar.cli import config as _config  # noqa: E402,F401  isort: skip
+from sim2radar.cli import deploy as _deploy  # noqa: E402,F401  isort: skip
 
 __all__ = ["app", "main"]
 

@@ -100,3 +100,52 @@ def test_the_captures_deployment_resolves_to_a_capture_spec(monkeypatch):
     spec = CaptureSpec(radar=params["radar"], reconstruction=params["reconstruction"],
                        poses=params["poses"], seed=params["seed"])
     assert spec.poses.frames == 54 and spec.reconstruction.depth.name == "lidar"
+
+
+def test_prefect_yaml_is_generated_from_the_package_definitions():
+    """deploy/prefect.yaml (the `prefect deploy` path) is exactly what `sim2radar deploy
+    --prefect-yaml` writes from the package's deployments.yaml: the two cannot drift."""
+    from sim2radar.flows.deployments import Target, definitions, prefect_yaml
+
+    expected = prefect_yaml(Target(home="{{ $SIM2RADAR_HOME }}"))
+    assert (REPO / "deploy" / "prefect.yaml").read_text() == expected, (
+        "deploy/prefect.yaml is stale: regenerate it with `sim2radar deploy --prefect-yaml "
+        "deploy/prefect.yaml`")
+    doc = yaml.safe_load(expected)
+    assert [d["name"] for d in doc["deployments"]] == [d["name"] for d in definitions()]
+    for dep in doc["deployments"]:
+        assert not dep["entrypoint"].endswith(".py") and ".py:" not in dep["entrypoint"]
+        assert all(s["active"] is False for s in dep.get("schedules", []))
+        assert dep["work_pool"]["job_variables"]["working_dir"] == "{{ $SIM2RADAR_HOME }}"
+    scheduled = yaml.safe_load(prefect_yaml(Target(home="/srv/x", schedule=True)))
+    assert all(s["active"] for d in scheduled["deployments"] for s in d.get("schedules", []))
+    assert scheduled["pull"][0]["prefect.deployments.steps.set_working_directory"] == {
+        "directory": "/srv/x"}
+
+
+def test_runner_deployments_carry_module_entrypoints_home_and_inactive_schedules(tmp_path):
+    from sim2radar.flows.deployments import Target, definitions, runner_deployments, select
+
+    entries = select(definitions(), ["simulate-dataset/nightly-radar", "weekly-reference"])
+    deps = runner_deployments(entries, Target(home=str(tmp_path), pool="p", queue="q"))
+    assert [d.name for d in deps] == ["nightly-radar", "weekly-reference"]
+    for dep in deps:
+        assert dep.entrypoint.startswith("sim2radar.flows.")
+        assert dep.work_pool_name == "p" and dep.work_queue_name == "q"
+        assert dep.job_variables == {"working_dir": str(tmp_path),
+                                     "env": {"SIM2RADAR_HOME": str(tmp_path)}}
+        assert dep.schedules and not any(s.active for s in dep.schedules)
+    (active,) = runner_deployments(entries[:1], Target(home=str(tmp_path), schedule=True))
+    assert all(s.active for s in active.schedules)
+    with pytest.raises(KeyError, match="no deployment 'nightly'; there are: nightly-radar"):
+        select(definitions(), ["nightly"])
+
+
+def test_a_home_holding_another_sim2radar_package_is_refused(tmp_path):
+    from sim2radar.flows.deployments import home_problem
+
+    assert home_problem(tmp_path) is None
+    assert home_problem(REPO) is None  # the editable install of this checkout: its own package
+    (tmp_path / "sim2radar").mkdir()
+    (tmp_path / "sim2radar" / "__init__.py").write_text("")
+    assert "holds a sim2radar/ package folder" in home_problem(tmp_path)
