@@ -38,15 +38,41 @@ def _fmt(v: float, spec: str = ".1f") -> str:
     return "-" if v is None or (isinstance(v, float) and math.isnan(v)) else format(v, spec)
 
 
-def finish_generate(summary: dict[str, Any], json_out: Path | None, strict: bool) -> None:
+#: help of every run command's ``--allow-failures``
+ALLOW_FAILURES_HELP = ("Exit with status 0 even when some work failed (it is recorded in the "
+                       "manifest, and the Prefect run still ends Failed).")
+
+
+def exit_status(summary: dict[str, Any], *, allow_failures: bool = False,
+                strict: bool = False, unit: str = "worlds") -> int:
+    """The exit status of a run command, matching the Prefect run's state: 1 when any of its
+    work failed (the flow ended Failed) unless ``allow_failures``; 1 under ``strict`` also when
+    a material fell back; else 0. Says why on stderr when it is 1."""
+    failed = int(summary["counts"].get("failed", 0))
+    total = sum(int(n) for n in summary["counts"].values())
+    fallbacks = fallback_count(summary)
+    if failed and not allow_failures:
+        typer.secho(f"{failed} of {total} {unit} failed (recorded in the manifest; the others finished): "
+                    "exit status 1 (--allow-failures exits 0)", fg="red", err=True)
+        return 1
+    if strict and (failed or fallbacks):
+        typer.secho(f"--strict: {failed} {unit} failed, {fallbacks} material(s) fell back: "
+                    "exit status 1", fg="red", err=True)
+        return 1
+    return 0
+
+
+def finish_generate(summary: dict[str, Any], json_out: Path | None, strict: bool,
+                    allow_failures: bool = False) -> None:
     """The end of a generate-style command: print the summary, write it as JSON if asked, and
-    exit with status 1 under ``--strict`` when a world or frame failed or a material fell
-    back."""
+    exit with :func:`exit_status` (1 when a world or frame failed, unless ``allow_failures``;
+    under ``strict`` also when a material fell back)."""
     print_generate_summary(summary)
     if json_out is not None:
         json_out.parent.mkdir(parents=True, exist_ok=True)
         json_out.write_text(json.dumps(summary, indent=1, default=str))
-    code = 1 if strict and (summary["counts"]["failed"] or fallback_count(summary)) else 0
+    code = exit_status(summary, allow_failures=allow_failures, strict=strict,
+                       unit=summary.get("unit", "worlds"))
     if summary.get("prefect_server_went_away"):
         from sim2radar.cli._app import exit_now
 

@@ -123,11 +123,12 @@ def generate_from_captures(captures: Path, *, config: Path | None, out: str,
                            reconstruction: str | None, seed: int | None,
                            export_openpcdet: Path | None, png_dir: Path | None, no_png: bool,
                            force: bool, strict: bool, workers: int, dask: str | None,
+                           allow_failures: bool = False,
                            no_prefect: bool, json_out: Path | None, verbose: bool,
                            procedural: dict[str, Any], retry_failed: bool = False) -> None:
     """The ``generate --captures`` branch: validate everything (exit 2 naming the file and
-    field), run, print the summary and the seconds per step, exit 1 under ``--strict`` when a
-    scene failed."""
+    field), run, print the summary and the seconds per step, exit 1 when a scene failed (unless
+    ``allow_failures``) or, under ``--strict``, a material fell back."""
     from sim2radar.cli._datasets import finish_generate
     from sim2radar.cli.simulate import _default_png_dir
     from sim2radar.factory.spec import load_generate_config
@@ -169,4 +170,4 @@ def generate_from_captures(captures: Path, *, config: Path | None, out: str,
         png_dir=None if no_png else png_dir, force=force, workers=workers, dask_address=dask,
         use_prefect=not no_prefect, verbose=verbose, retry_failed=retry_failed)
     print_stage_table(summary)
-    finish_generate(summary, json_out, strict)
+    finish_generate(summary, json_out, strict, allow_failures)

@@ -26,6 +26,7 @@ from sim2radar.cli._app import (
     export_folder_lock,
 )
 from sim2radar.cli._datasets import (
+    ALLOW_FAILURES_HELP,
     finish_generate,
     preflight,
     print_generate_summary,
@@ -200,8 +201,9 @@ def generate(
                                         help="BEV PNGs [default: OUT/../bev for local stores]."),
     no_png: bool = typer.Option(False, "--no-png", help="Do not write BEV PNGs."),
     force: bool = typer.Option(False, help="Recompute dataset frames even when cached."),
-    strict: bool = typer.Option(False, help="Exit with status 1 if any world or frame failed "
-                                "or any material fell back to unknown (a VLM outage)."),
+    strict: bool = typer.Option(False, help="Also exit with status 1 when a material fell back "
+                                "to unknown (a VLM outage)."),
+    allow_failures: bool = typer.Option(False, "--allow-failures", help=ALLOW_FAILURES_HELP),
     workers: int = typer.Option(1, help="Worlds processed concurrently (threads, or processes "
                                 "with --dask local)."),
     dask: str | None = typer.Option(
@@ -222,8 +224,9 @@ def generate(
     A second run with the same inputs recomputes nothing. Failed worlds/frames are recorded in
     the manifest; the others finish. A material that fell back to ``unknown`` (VLM
     ``on_error: unknown``) is counted in the summary and manifest and its frames are made again
-    by the next run. Exit status: 0, or 1 with --strict when anything failed or fell back; 2
-    for bad arguments or configs.
+    by the next run. Exit status: 0; 1 when a world or frame failed (as the Prefect run, which
+    ends Failed; --allow-failures exits 0) or, with --strict, a material fell back; 2 for bad
+    arguments or configs.
     """
     from sim2radar.cli.simulate import _default_png_dir, _prefect_env
 
@@ -244,8 +247,8 @@ def generate(
         generate_from_captures(
             captures, config=config, out=out, dataset=dataset, frames=frames, radar=radar,
             reconstruction=reconstruction, seed=seed, export_openpcdet=export_openpcdet,
-            png_dir=png_dir, no_png=no_png, force=force, strict=strict, workers=workers,
-            dask=dask, no_prefect=no_prefect, json_out=json_out, verbose=verbose,
+            png_dir=png_dir, no_png=no_png, force=force, strict=strict,
+            allow_failures=allow_failures, workers=workers, dask=dask, no_prefect=no_prefect, json_out=json_out, verbose=verbose,
             retry_failed=retry_failed, procedural={
                 "--worlds": worlds, "--first-seed": first_seed, "--geometry": geometry,
                 "--width": width, "--height": height, "--spp": spp,
@@ -308,4 +311,4 @@ def generate(
         dask_address=dask, use_prefect=not no_prefect, verbose=verbose,
         export_whole_dataset=retry_failed,
     )
-    finish_generate(summary, json_out, strict)
+    finish_generate(summary, json_out, strict, allow_failures)

@@ -22,6 +22,7 @@ from sim2radar.cli._app import (
     exit_unless_writable,
     exit_unless_writable_outputs,
 )
+from sim2radar.cli._datasets import ALLOW_FAILURES_HELP
 from sim2radar.factory.spec import MAX_FRAMES_PER_WORLD, MAX_WORLDS
 
 __all__ = ["reference"]
@@ -49,7 +50,9 @@ def reference(
     png_dir: Path | None = typer.Option(None, "--png-dir", help="BEV PNGs [default OUT/../bev]."),
     no_png: bool = typer.Option(False, "--no-png", help="Do not write BEV PNGs."),
     force: bool = typer.Option(False, help="Recompute frames even when cached."),
-    strict: bool = typer.Option(False, help="Exit with status 1 if any world or frame failed."),
+    strict: bool = typer.Option(False, hidden=True, help="Kept for scripts: failures exit 1 "
+                                "by default now."),
+    allow_failures: bool = typer.Option(False, "--allow-failures", help=ALLOW_FAILURES_HELP),
     workers: int = typer.Option(1, help="Worlds processed concurrently."),
     dask: str | None = typer.Option(None, "--dask", help="Dask scheduler address or 'local'."),
     no_prefect: bool = typer.Option(False, "--no-prefect", help="Plain loop without Prefect."),
@@ -91,4 +94,4 @@ def reference(
         flow_name="reference-dataset", **args,
     )
     summary["plan"] = plan.split_frames()
-    finish_generate(summary, json_out, strict)
+    finish_generate(summary, json_out, strict, allow_failures)

@@ -23,6 +23,7 @@ from sim2radar.cli._app import (
     quiet_recorded_failures,
 )
 from sim2radar.cli._app import console as _console
+from sim2radar.cli._datasets import ALLOW_FAILURES_HELP, exit_status
 from sim2radar.configio import DEFAULT_RADAR
 
 
@@ -143,7 +144,9 @@ def simulate(
     no_png: bool = typer.Option(False, "--no-png", help="Do not write bird's-eye-view PNGs."),
     seed: int = typer.Option(0, help="Run seed (per-frame seeds derive from it)."),
     force: bool = typer.Option(False, help="Recompute even when the artifacts exist."),
-    strict: bool = typer.Option(False, help="Exit with status 1 if any scene failed."),
+    strict: bool = typer.Option(False, hidden=True, help="Kept for scripts: failures exit 1 "
+                                "by default now."),
+    allow_failures: bool = typer.Option(False, "--allow-failures", help=ALLOW_FAILURES_HELP),
     workers: int = typer.Option(1, help="Scenes simulated concurrently (threads)."),
     dask: str | None = typer.Option(None, help="Dask scheduler address, or 'local' (needs prefect-dask)."),
     no_prefect: bool = typer.Option(False, "--no-prefect", help="Run the plain loop without the Prefect engine."),
@@ -154,7 +157,8 @@ def simulate(
 
     One frame per radar pose of each scene; a second run with the same inputs recomputes
     nothing (content keys). Broken scenes are recorded as failed in the manifest; the others
-    finish. Exit status: 0, or 1 with --strict when any scene failed; 2 for bad arguments.
+    finish. Exit status: 0; 1 when a scene failed (as the Prefect run, which ends Failed;
+    --allow-failures exits 0); 2 for bad arguments.
     """
     from sim2radar.radar import RadarConfigError, load_radar_config
 
@@ -191,7 +195,7 @@ def simulate(
     if json_out is not None:
         json_out.parent.mkdir(parents=True, exist_ok=True)
         json_out.write_text(json.dumps(summary, indent=1, default=str))
-    if strict and summary["counts"]["failed"]:
+    if exit_status(summary, allow_failures=allow_failures, unit="scenes"):
         raise typer.Exit(1)
 
 

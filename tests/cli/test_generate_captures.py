@@ -118,7 +118,8 @@ def test_bad_radar_yaml_fails_its_scene_in_one_line_while_the_others_finish(one_
                           str(tmp_path / "summary.json")], capture_output=True, text=True,
                          env={**os.environ, "COLUMNS": "1000"}, timeout=300)
     output = run.stdout + run.stderr
-    assert run.returncode == 0, output
+    assert run.returncode == 1, output  # two scenes failed
+    assert "2 of 3 scenes failed" in output
     assert "Traceback" not in output and "LinAlgError" not in output
     assert "must be a rotation" not in output
     summary = json.loads((tmp_path / "summary.json").read_text())

@@ -61,12 +61,18 @@ def test_simulate_exit_codes_and_outputs(plate_scene, broken_scenes, tmp_path):
     store = tmp_path / "store"
     args = ["simulate", str(plate_scene), str(broken_scenes["missing"]), "--out", str(store), "--no-prefect"]
     result = runner.invoke(app, args + ["--json", str(tmp_path / "s.json")])
-    assert result.exit_code == 0, result.output  # failures are recorded, not fatal by default
+    # a failed scene is recorded while the others finish, and the exit status says it failed
+    # (as the Prefect run does, which ends Failed)
+    assert result.exit_code == 1, result.output
     assert "1 computed, 0 cached (skipped), 1 failed" in result.output
     assert "mesh file not found" in result.output
+    assert "1 of 2 scenes failed" in result.output and "--allow-failures exits 0" in result.output
     assert len(list((tmp_path / "bev").glob("plate_f*.png"))) == 2  # default: next to the store
-    again = runner.invoke(app, args + ["--strict"])
-    assert again.exit_code == 1 and "0 computed, 1 cached (skipped), 1 failed" in again.output
+    assert json.loads((tmp_path / "s.json").read_text())["counts"]["failed"] == 1
+    again = runner.invoke(app, args + ["--allow-failures"])
+    assert again.exit_code == 0 and "0 computed, 1 cached (skipped), 1 failed" in again.output
+    fine = runner.invoke(app, ["simulate", str(plate_scene), "--out", str(store), "--no-prefect"])
+    assert fine.exit_code == 0, fine.output
     bad = runner.invoke(app, ["simulate", str(plate_scene), "--radar", "no-such-radar", "--out", str(store)])
     assert bad.exit_code == 2 and "presets" in bad.output
 
@@ -87,7 +93,8 @@ def test_simulate_bad_scene_is_recorded_without_a_traceback(prefect_server, plat
     proc = subprocess.run([sys.executable, "-c", "from sim2radar.cli import main; main()", *args],
                           cwd=tmp_path, env=env, capture_output=True, text=True, timeout=300)
     output = proc.stdout + proc.stderr
-    assert proc.returncode == 0, output
+    assert proc.returncode == 1, output  # as the Prefect run: Failed
+    assert "2 of 3 scenes failed" in output
     assert "Traceback" not in output and "Finished in state Failed" not in output, output
     assert "1 computed, 0 cached (skipped), 2 failed" in output
     assert "wall.ply: mesh file not found" in output
