@@ -30,7 +30,25 @@ import typer
 from sim2radar.cli._app import app, exit_unless_writable
 from sim2radar.factory.spec import MAX_FRAMES_PER_WORLD, MAX_WORLDS
 
-__all__ = ["demo", "run_demo"]
+__all__ = ["DEMO_SIZES", "demo", "demo_sizes", "run_demo"]
+
+#: the data each demo profile makes unless told otherwise: the ``smoke`` profile (a toy
+#: detector whose APs mean nothing) checks the whole chain in a few minutes on 2 cores with
+#: small datasets and small renders; every other profile uses the ``demo`` sizes
+DEMO_SIZES: dict[str, dict[str, int | None]] = {
+    "demo": {"worlds": 6, "frames": 4, "reference_worlds": 20, "reference_frames": 6,
+             "width": None, "height": None, "spp": None},
+    "smoke": {"worlds": 3, "frames": 2, "reference_worlds": 3, "reference_frames": 3,
+              "width": 160, "height": 120, "spp": 4},
+}
+
+
+def demo_sizes(profile: str, **given: int | None) -> dict[str, int | None]:
+    """The sizes of a demo run: the profile's :data:`DEMO_SIZES` (``demo``'s for any other
+    profile) with every value in ``given`` that is not None on top."""
+    sizes = dict(DEMO_SIZES.get(profile, DEMO_SIZES["demo"]))
+    sizes.update({k: v for k, v in given.items() if v is not None})
+    return sizes
 
 
 def _manifest_status(summary: dict[str, Any], name: str, role: str) -> dict[str, Any]:
@@ -142,15 +160,15 @@ def run_demo(
 @app.command()
 def demo(
     out: Path = typer.Option(Path("out"), "--out", "-o", help="Output folder."),
-    worlds: int = typer.Option(6, "--worlds", "-n", min=1, max=MAX_WORLDS, help="Simulated-domain worlds (seeds 0..)."),
-    frames: int = typer.Option(4, "--frames", "-m", min=1, max=MAX_FRAMES_PER_WORLD, help="Frames per simulated world."),
-    reference_worlds: int = typer.Option(20, help="Proxy-real worlds (seeds from 100000)."),
-    reference_frames: int = typer.Option(6, help="Frames per proxy-real world."),
+    worlds: int | None = typer.Option(None, "--worlds", "-n", min=1, max=MAX_WORLDS, help="Simulated-domain worlds (seeds 0..) [6; smoke 3]."),
+    frames: int | None = typer.Option(None, "--frames", "-m", min=1, max=MAX_FRAMES_PER_WORLD, help="Frames per simulated world [4; smoke 2]."),
+    reference_worlds: int | None = typer.Option(None, min=1, max=MAX_WORLDS, help="Proxy-real worlds (seeds from 100000) [20; smoke 3]."),
+    reference_frames: int | None = typer.Option(None, min=1, max=MAX_FRAMES_PER_WORLD, help="Frames per proxy-real world [6; smoke 3]."),
     profile: str = typer.Option("demo", help="Experiment profile (demo, smoke, paper, YAML)."),
     ablations: bool = typer.Option(False, help="Also run the ablation conditions."),
-    width: int | None = typer.Option(None, help="Camera width [px] (default 640)."),
-    height: int | None = typer.Option(None, help="Camera height [px] (default 480)."),
-    spp: int | None = typer.Option(None, help="RGB samples per pixel."),
+    width: int | None = typer.Option(None, help="Camera width [px] [640; smoke 160]."),
+    height: int | None = typer.Option(None, help="Camera height [px] [480; smoke 120]."),
+    spp: int | None = typer.Option(None, help="RGB samples per pixel [rig default; smoke 4]."),
     verbose: bool = typer.Option(False, "--verbose", "-v", help="Show Prefect's logs."),
 ) -> None:
     """Run the whole mission on the built-in default: simulated and proxy-real radar datasets,
@@ -161,11 +179,18 @@ def demo(
 
     exit_unless_writable(str(out))
     _prefect_env(verbose)
-    rig = {k: v for k, v in (("width", width), ("height", height), ("spp", spp)) if v is not None}
+    size = demo_sizes(profile, worlds=worlds, frames=frames, reference_worlds=reference_worlds,
+                      reference_frames=reference_frames, width=width, height=height, spp=spp)
+    rig = {k: size[k] for k in ("width", "height", "spp") if size[k] is not None}
+    typer.echo(f"{profile} demo: {size['worlds']} simulated worlds x {size['frames']} frames, "
+               f"{size['reference_worlds']} proxy-real worlds x {size['reference_frames']} "
+               f"frames" + (f", renders {rig.get('width', 640)}x{rig.get('height', 480)} px"
+                            if rig else "") + " (options override)")
     try:
-        res = run_demo(out, worlds=worlds, frames=frames, reference_worlds=reference_worlds,
-                       reference_frames=reference_frames, profile=profile, ablations=ablations,
-                       rig=rig, verbose=verbose)
+        res = run_demo(out, worlds=size["worlds"], frames=size["frames"],
+                       reference_worlds=size["reference_worlds"],
+                       reference_frames=size["reference_frames"], profile=profile,
+                       ablations=ablations, rig=rig, verbose=verbose)
     except (ValueError, FileNotFoundError) as exc:
         typer.secho(f"error: {exc}", fg="red", err=True)
         raise typer.Exit(2) from None
