@@ -7,6 +7,8 @@
     sim2radar sweep data/sim data/proxy_real --profile diagnosis --name diagnosis \
         --sim-gt data/sim_gt --ref data/ref_on_sim                 # the diagnosis arms
     sim2radar sweep-report docs/results/diagnosis      # rebuild results.md + dashboard.html
+    sim2radar sweep data/sim data/proxy_real --name demo --mlflow sqlite:///mlflow.db  # + MLflow
+    sim2radar sweep-report out/sweeps/demo --mlflow http://tracker:5000   # (re)log to MLflow
 
 Prefect and torch are imported inside the command, so ``sim2radar --help`` stays fast.
 """
@@ -126,14 +128,27 @@ def run_sweep(sim: str, real: str, *, profile: str, name: str, out: str, store: 
               ablations: bool = False, overrides: dict[str, Any] | None = None,
               workers: int | None = None, dask_address: str | None = None,
               device: str | None = None, show_progress: bool = True,
-              verbose: bool = False, force: list[str] | None = None) -> dict[str, Any]:
+              verbose: bool = False, force: list[str] | None = None,
+              mlflow: str | None = None, mlflow_experiment: str | None = None,
+              mlflow_checkpoints: bool = False) -> dict[str, Any]:
     """Prepare (validating every input first) and run a sweep with a progress bar; returns
     the flow's summary. ``datasets``: the other conditions' datasets by role
-    (``{"sim-gt": ...}``)."""
+    (``{"sim-gt": ...}``).
+
+    ``mlflow``: a tracking URI to log the sweep to
+    (:class:`~sim2radar.experiment.tracking.SweepTracker`; experiment ``mlflow_experiment``,
+    default the sweep's name): what the folder already holds before the flow starts, each run
+    (and the pre-trainings before it) as it finishes, the statistics at the end under
+    ``summary["mlflow"]``. A tracker failure is warned about once and the sweep goes on.
+    Without MLflow installed it raises ImportError before anything runs."""
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
     from sim2radar.cli.simulate import _prefect_env
 
+    if mlflow is not None:
+        from sim2radar.experiment.tracking import require_mlflow
+
+        require_mlflow()        # before any work: the extra is missing, say so now
     _prefect_env(verbose)
     from sim2radar.flows.run_experiment import progress_callback, run_experiment_flow
     from sim2radar.flows.runners import task_runner
@@ -142,6 +157,10 @@ def run_sweep(sim: str, real: str, *, profile: str, name: str, out: str, store: 
     plan = prepare_sweep({**(datasets or {}), "sim": sim, "real": real}, profile=profile,
                          name=name, out=out, store=store, ablations=ablations,
                          overrides=overrides, device=device, force=force or ())
+    tracker = None
+    if mlflow is not None:
+        tracker = _Tracking(mlflow, plan.context.sweep_dir, mlflow_experiment or plan.name,
+                            mlflow_checkpoints)
     runner = task_runner(int(workers or plan.concurrent_runs), dask_address)
     columns = [TextColumn("[bold]sweep"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
                TextColumn("{task.description}")]
@@ -155,12 +174,44 @@ def run_sweep(sim: str, real: str, *, profile: str, name: str, out: str, store: 
                 f"{row['status']} AP {ap:.1f}" if ap is not None else row["status"])
             progress.update(bar, advance=1, description=f"{row['condition']} "
                             f"{100 * row['fraction']:g}% t{row['trial']}: {shown}")
+            if tracker is not None:
+                tracker.sync()      # runs.parquet holds the row by now
 
         from sim2radar.flows._states import run_flow
 
         with progress_callback(on_run):   # failed runs: Failed in Prefect, summary here
-            return run_flow(run_experiment_flow.with_options(task_runner=runner),
-                            plan_path=plan.plan_path)
+            summary = run_flow(run_experiment_flow.with_options(task_runner=runner),
+                               plan_path=plan.plan_path)
+    if tracker is not None:
+        tracker.sync(final=True)
+        summary = {**summary, "mlflow": tracker.summary()}
+    return summary
+
+
+class _Tracking:
+    """A sweep's MLflow logging from the command line: a
+    :class:`~sim2radar.experiment.tracking.SweepTracker` that warns once (in yellow, on
+    stderr) and lets the sweep go on when the tracker fails, counting what it logged."""
+
+    def __init__(self, uri: str, sweep_dir: str, experiment: str, checkpoints: bool) -> None:
+        from sim2radar.experiment.tracking import SweepTracker
+
+        self.experiment, self.logged = experiment, 0
+        self.last = None
+        self.tracker = SweepTracker(
+            uri, sweep_dir, experiment=experiment, checkpoints=checkpoints, on_error="warn",
+            warn=lambda msg: typer.secho(f"warning: {msg}", fg="yellow", err=True))
+        self.sync()     # the parent run, and what a resumed sweep finished before
+
+    def sync(self, final: bool = False) -> None:
+        self.last = self.tracker.sync(final=final)
+        self.logged += len(self.last.logged)
+
+    def summary(self) -> dict[str, Any]:
+        res = self.last
+        return {"tracking_uri": self.tracker.uri, "experiment": self.experiment,
+                "experiment_id": res.experiment_id, "parent_run_id": res.parent_run_id,
+                "logged": self.logged, "error": res.error}
 
 
 def print_sweep_summary(summary: dict[str, Any]) -> None:
@@ -206,6 +257,13 @@ def print_sweep_summary(summary: dict[str, Any]) -> None:
                          f"; threshold {s['threshold']:g} met by {s['n_met']}/{s['n']}"))
     console.print(f"results:   {summary['results_md']}")
     console.print(f"dashboard: {summary['dashboard']}")
+    track = summary.get("mlflow")
+    if track:
+        console.print(f"mlflow:    {track['logged']} run(s) logged to experiment "
+                      f"{track['experiment']!r} at {track['tracking_uri']} (sweep run "
+                      f"{track['parent_run_id']})" if track["error"] is None else
+                      f"mlflow:    logging stopped ({track['error']})", markup=False,
+                      highlight=False)
 
 
 @app.command()
@@ -250,6 +308,14 @@ def sweep(
         None, "--force-run", help="Redo this run from scratch (its id, e.g. "
         "sim-pretrain-f0.05-t2, or key); repeatable. Its row and checkpoints are moved "
         "aside, not deleted."),
+    mlflow: str | None = typer.Option(
+        None, "--mlflow", help="Also log every run and pre-training to MLflow at this tracking "
+        "URI (sqlite:///mlflow.db, http://host:5000), as each finishes; needs "
+        "pip install 'sim2radar[mlflow]'. A tracker failure warns once; the sweep goes on."),
+    mlflow_experiment: str | None = typer.Option(
+        None, "--mlflow-experiment", help="With --mlflow: the experiment (default: --name)."),
+    mlflow_checkpoints: bool = typer.Option(
+        False, "--mlflow-checkpoints", help="With --mlflow: also upload each run's last.pt."),
 ) -> None:
     """Run the experiment grid: baseline vs sim-pretrain (and ablations) over real-data
     fractions x trials, with paired statistics, a results table and a dashboard.
@@ -259,6 +325,14 @@ def sweep(
     """
     from sim2radar.datasets import DatasetError
 
+    if mlflow is not None and not plan:
+        from sim2radar.experiment.tracking import MlflowMissing, require_mlflow
+
+        try:
+            require_mlflow()      # up front: before any input is read or run trained
+        except MlflowMissing as exc:
+            typer.secho(f"error: --mlflow: {exc}", fg="red", err=True)
+            raise typer.Exit(2) from None
     exit_unless_writable(store, "--store")
     if not plan:
         exit_unless_writable_outputs({"--out": out})
@@ -293,7 +367,9 @@ def sweep(
         summary = run_sweep(sim, real, profile=profile, name=name, out=str(out), store=store,
                             datasets=datasets, ablations=ablations,
                             overrides=overrides or None, workers=workers, dask_address=dask,
-                            device=device, verbose=verbose, force=force_run)
+                            device=device, verbose=verbose, force=force_run, mlflow=mlflow,
+                            mlflow_experiment=mlflow_experiment,
+                            mlflow_checkpoints=mlflow_checkpoints)
     except (ValueError, FileNotFoundError, DatasetError, ImportError) as exc:
         typer.secho(f"error: {exc}", fg="red", err=True)
         raise typer.Exit(2) from None
@@ -359,15 +435,31 @@ def sweep_report(
         None, "--publish", help="First copy the sweep's raw files (sweep.json, plan.json, "
         "runs.parquet, pretrainings.parquet, stats.json, the pre-registration) into this folder, "
         "e.g. docs/results/<study>, and write the report there."),
+    mlflow: str | None = typer.Option(
+        None, "--mlflow", help="Then log the sweep's runs, pre-trainings and results to MLflow "
+        "at this tracking URI: only what it lacks (a sweep logged before adds nothing); needs "
+        "pip install 'sim2radar[mlflow]'."),
+    mlflow_experiment: str | None = typer.Option(
+        None, "--mlflow-experiment", help="With --mlflow: the experiment (default: the sweep's "
+        "name)."),
+    mlflow_checkpoints: bool = typer.Option(
+        False, "--mlflow-checkpoints", help="With --mlflow: also upload each run's last.pt."),
 ) -> None:
     """Rebuild a sweep's stats.json, results.md and dashboard.html from its raw files (a
-    finished sweep, or one published under docs/results/<study>/). Trains nothing."""
+    finished sweep, or one published under docs/results/<study>/), and with --mlflow log it to
+    MLflow. Trains nothing. Exit status 0, 1 when the MLflow tracker failed, 2 for bad
+    input."""
     import pyarrow.parquet as pq
 
     from sim2radar.experiment.sweep import write_results
+    from sim2radar.experiment.tracking import MlflowMissing, TrackingError
     from sim2radar.fileio import json_text
 
     try:
+        if mlflow is not None:
+            from sim2radar.experiment.tracking import require_mlflow
+
+            require_mlflow()      # up front: before any file is written
         for name in ("sweep.json", "runs.parquet"):
             if json_text(folder / name) is None if name.endswith(".json") else \
                     not (folder / name).is_file():
@@ -385,8 +477,22 @@ def sweep_report(
         pre = pq.read_table(pre_path).to_pylist() if pre_path.is_file() else []
         exit_unless_writable_outputs({"FOLDER": folder})
         res = write_results(folder, doc, rows, pre)
-    except (ValueError, FileNotFoundError, KeyError, OSError) as exc:
+        if mlflow is not None:
+            from sim2radar.experiment.tracking import SweepTracker
+
+            tracker = SweepTracker(mlflow, folder, experiment=mlflow_experiment,
+                                   checkpoints=mlflow_checkpoints)
+            synced = tracker.sync(final=True)
+    except TrackingError as exc:
         typer.secho(f"error: {exc}", fg="red", err=True)
+        raise typer.Exit(1) from None
+    except (ValueError, FileNotFoundError, KeyError, OSError, MlflowMissing) as exc:
+        typer.secho(f"error: {'--mlflow: ' if isinstance(exc, MlflowMissing) else ''}{exc}",
+                    fg="red", err=True)
         raise typer.Exit(2) from None
     typer.echo(f"results:   {res['results_md']}")
     typer.echo(f"dashboard: {res['dashboard']}")
+    if mlflow is not None:
+        typer.echo(f"mlflow:    {len(synced.logged)} run(s) logged ({len(synced.replaced)} "
+                   f"replacing older ones), {synced.unchanged} already there; experiment "
+                   f"{synced.experiment_id} at {tracker.uri}, sweep run {synced.parent_run_id}")

@@ -13,6 +13,8 @@ fractions x paired trials.
 - :mod:`~sim2radar.experiment.report` — Table 1 as Markdown and as artifact rows.
 - :mod:`~sim2radar.experiment.data`, :mod:`~sim2radar.experiment.runner` — datasets of a sweep
   and one training run (import them directly; they load torch).
+- :mod:`~sim2radar.experiment.tracking` — a sweep folder mirrored into MLflow (import it
+  directly; MLflow is the optional ``mlflow`` extra).
 
 Prefect wiring lives in ``tasks/experiment.py`` and ``flows/``; nothing here imports Prefect.
 """
