@@ -118,6 +118,16 @@ def nearest_bev_iou(boxes_a: torch.Tensor, boxes_b: torch.Tensor) -> torch.Tenso
     return inter / (area_a[:, None] + area_b[None, :] - inter).clamp(min=1e-6)
 
 
+def _nearest_bev_batched(boxes: torch.Tensor) -> torch.Tensor:
+    """(..., 7) boxes -> (..., 4) nearest axis-aligned BEV boxes (:func:`_nearest_bev`)."""
+    rot = limit_period(boxes[..., 6], offset=0.5, period=math.pi).abs()
+    swap = rot > math.pi / 4
+    dx = torch.where(swap, boxes[..., 4], boxes[..., 3])
+    dy = torch.where(swap, boxes[..., 3], boxes[..., 4])
+    x, y = boxes[..., 0], boxes[..., 1]
+    return torch.stack([x - dx / 2, y - dy / 2, x + dx / 2, y + dy / 2], dim=-1)
+
+
 @torch.no_grad()
 def assign_targets(
     anchors: torch.Tensor,
@@ -131,6 +141,11 @@ def assign_targets(
     every box's best anchor(s) are forced positive; anchors below ``unmatched_threshold`` are
     negative; the rest are ignored.
 
+    The whole batch at once on the anchors' device: a (B, A, M) IoU tensor with padding masked,
+    no per-frame loop and no host synchronisation (no ``nonzero``/boolean indexing), so on a GPU
+    the assignment never waits for the host. Same labels, targets and weights as assigning
+    frame by frame (``tests/detect/test_anchors.py`` compares with that reference).
+
     Parameters
     ----------
     anchors : (A, 7) tensor — anchors [m, rad].
@@ -142,30 +157,32 @@ def assign_targets(
     box_targets : (B, A, 7) — encoded targets (zero for non-positives).
     reg_weights : (B, A) — 1 for positives, else 0.
     """
-    batch = gt_boxes.shape[0]
-    n_anchor = anchors.shape[0]
-    labels = torch.full((batch, n_anchor), -1, dtype=torch.long, device=anchors.device)
-    targets = anchors.new_zeros(batch, n_anchor, 7)
-    weights = anchors.new_zeros(batch, n_anchor)
-    for b in range(batch):
-        valid = gt_boxes[b, :, 7] > 0
-        gt = gt_boxes[b][valid]
-        if gt.shape[0] == 0:
-            labels[b] = 0
-            continue
-        classes = gt[:, 7].long()
-        overlap = nearest_bev_iou(anchors, gt[:, :7])  # (A, G)
-        a_max, a_arg = overlap.max(dim=1)
-        g_max = overlap.max(dim=0).values
-        g_max = torch.where(g_max == 0, torch.full_like(g_max, -1.0), g_max)
-        forced = torch.nonzero(overlap == g_max[None, :], as_tuple=True)[0]
-        lab = labels[b]
-        lab[forced] = classes[a_arg[forced]]
-        pos = a_max >= matched_threshold
-        lab[pos] = classes[a_arg[pos]]
-        fg = lab > 0
-        lab[a_max < unmatched_threshold] = 0
-        lab[forced] = classes[a_arg[forced]]
-        targets[b, fg] = encode_boxes(gt[a_arg[fg], :7], anchors[fg])
-        weights[b, fg] = 1.0
-    return labels, targets, weights
+    gt_boxes = gt_boxes.to(anchors.device)
+    classes = gt_boxes[..., 7].long()                       # (B, M)
+    valid = classes > 0
+    a, b = _nearest_bev_batched(anchors), _nearest_bev_batched(gt_boxes[..., :7])
+    w = (torch.minimum(a[None, :, None, 2], b[:, None, :, 2])
+         - torch.maximum(a[None, :, None, 0], b[:, None, :, 0]))
+    h = (torch.minimum(a[None, :, None, 3], b[:, None, :, 3])
+         - torch.maximum(a[None, :, None, 1], b[:, None, :, 1]))
+    inter = w.clamp(min=0) * h.clamp(min=0)                  # (B, A, M)
+    area_a = (a[:, 2] - a[:, 0]) * (a[:, 3] - a[:, 1])
+    area_b = (b[..., 2] - b[..., 0]) * (b[..., 3] - b[..., 1])
+    overlap = inter / (area_a[None, :, None] + area_b[:, None, :] - inter).clamp(min=1e-6)
+    overlap = torch.where(valid[:, None, :], overlap, torch.full_like(overlap, -1.0))
+    a_max, a_arg = overlap.max(dim=2)                       # (B, A): best box per anchor
+    g_max = overlap.max(dim=1).values                       # (B, M): best anchor per box
+    # a box's best anchor(s) are forced positive, unless it overlaps no anchor at all
+    forced = ((overlap == g_max[:, None, :]) & (valid & (g_max > 0))[:, None, :]).any(dim=2)
+    best_class = torch.gather(classes, 1, a_arg)             # (B, A)
+    has_gt = valid.any(dim=1, keepdim=True)                 # (B, 1)
+    fg = (forced | (a_max >= matched_threshold)) & has_gt
+    labels = torch.full_like(best_class, -1)
+    labels = torch.where(fg, best_class, labels)
+    labels = torch.where(a_max < unmatched_threshold, torch.zeros_like(labels), labels)
+    labels = torch.where(forced, best_class, labels)
+    labels = torch.where(has_gt, labels, torch.zeros_like(labels))
+    matched = torch.gather(gt_boxes[..., :7], 1, a_arg[..., None].expand(-1, -1, 7))
+    encoded = encode_boxes(matched, anchors.expand_as(matched))
+    targets = torch.where(fg[..., None], encoded, torch.zeros_like(encoded))
+    return labels, targets, fg.to(anchors.dtype)

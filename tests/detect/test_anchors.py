@@ -63,3 +63,67 @@ def test_nearest_bev_swaps_sizes_for_boxes_closer_to_the_y_axis():
     box = torch.tensor([[0.0, 0.0, 0.0, 2.0, 0.5, 1.0, 1.4]])  # ~80 deg: treated as 90
     same = torch.tensor([[0.0, 0.0, 0.0, 0.5, 2.0, 1.0, 0.0]])
     assert nearest_bev_iou(box, same).item() == pytest.approx(1.0)
+
+
+def _assign_frame_by_frame(anchors, gt_boxes, matched, unmatched):
+    """The assigner as it was before it was batched (frame by frame, boolean indexing): the
+    reference the batched one must reproduce exactly."""
+    batch, n_anchor = gt_boxes.shape[0], anchors.shape[0]
+    labels = torch.full((batch, n_anchor), -1, dtype=torch.long)
+    targets = anchors.new_zeros(batch, n_anchor, 7)
+    weights = anchors.new_zeros(batch, n_anchor)
+    for b in range(batch):
+        gt = gt_boxes[b][gt_boxes[b, :, 7] > 0]
+        if gt.shape[0] == 0:
+            labels[b] = 0
+            continue
+        classes = gt[:, 7].long()
+        overlap = nearest_bev_iou(anchors, gt[:, :7])
+        a_max, a_arg = overlap.max(dim=1)
+        g_max = overlap.max(dim=0).values
+        g_max = torch.where(g_max == 0, torch.full_like(g_max, -1.0), g_max)
+        forced = torch.nonzero(overlap == g_max[None, :], as_tuple=True)[0]
+        lab = labels[b]
+        lab[forced] = classes[a_arg[forced]]
+        pos = a_max >= matched
+        lab[pos] = classes[a_arg[pos]]
+        fg = lab > 0
+        lab[a_max < unmatched] = 0
+        lab[forced] = classes[a_arg[forced]]
+        targets[b, fg] = encode_boxes(gt[a_arg[fg], :7], anchors[fg])
+        weights[b, fg] = 1.0
+    return labels, targets, weights
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_batched_assignment_equals_frame_by_frame(seed):
+    """Random scenes on the default anchor grid: doors near anchors (exact, shifted, rotated by
+    0/90 degrees and in between), boxes far outside, a second class, padding between boxes
+    (an unknown class collates to 0), frames without boxes: identical labels, bit-identical
+    targets and weights."""
+    g = torch.Generator().manual_seed(seed)
+    cfg = ModelConfig()
+    anchors = generate_anchors(cfg)
+    batch, m = 6, 9
+    gt = torch.zeros(batch, m, 8)
+    for b in range(batch - 1):  # the last frame stays empty
+        n = int(torch.randint(1, m + 1, (1,), generator=g))
+        pick = anchors[torch.randint(0, len(anchors), (n,), generator=g)]
+        boxes = pick.clone()
+        boxes[:, :2] += (torch.rand(n, 2, generator=g) - 0.5) * 0.4
+        boxes[:, 3:6] *= 0.7 + 0.6 * torch.rand(n, 3, generator=g)
+        boxes[:, 6] = torch.tensor([0.0, math.pi / 2, 0.3, -1.2])[
+            torch.randint(0, 4, (n,), generator=g)]
+        boxes[0] = pick[0]  # one exact match per frame: forced and positive at once
+        if n > 2:
+            boxes[1, :2] = torch.tensor([50.0, 50.0])  # overlaps no anchor: forces nothing
+        gt[b, :n, :7] = boxes
+        gt[b, :n, 7] = torch.randint(1, 3, (n,), generator=g).float()
+        if n > 3:
+            gt[b, 2, 7] = 0  # an unknown class between known ones
+    for thresholds in ((0.5, 0.35), (0.6, 0.45)):
+        want = _assign_frame_by_frame(anchors, gt, *thresholds)
+        got = assign_targets(anchors, gt, *thresholds)
+        assert torch.equal(got[0], want[0])
+        assert torch.equal(got[1], want[1]) and torch.equal(got[2], want[2])
+        assert (got[0] > 0).sum() >= batch - 1  # every frame with a box has a positive
