@@ -1,11 +1,17 @@
-"""``sim2radar dashboard``: the sweep dashboard, as a file or served live.
+"""``sim2radar dashboard``: the sweep dashboard, as a file or served live, or two sweeps
+compared.
 
     sim2radar dashboard out/sweeps/demo --out demo.html       # one self-contained page
     sim2radar dashboard demo --out demo.html                   # a name under --root
     sim2radar dashboard demo --serve                           # live on 127.0.0.1:8765
+    sim2radar dashboard demo demo2 --out cmp.html              # two sweeps compared
 
 The page works offline (Plotly and the data inline). ``--serve`` shows it on a loopback
-address and the page refreshes itself as the sweep's runs finish; Ctrl-C stops it.
+address and the page refreshes itself as the sweep's runs finish; Ctrl-C stops it. Each run
+has its own view (click its row; served, also ``/run/<run id>``). With two sweeps the page
+compares them (per shared condition and fraction: both mean APs with their intervals, the
+difference of their Δ to the baseline; the settings that differ; what only one ran); it is
+written with ``--out`` only (``--serve`` shows one sweep).
 """
 
 from __future__ import annotations
@@ -49,8 +55,8 @@ def _fail(message: str) -> typer.Exit:
 
 @app.command()
 def dashboard(
-    sweep: Annotated[str, typer.Argument(
-        help="Sweep folder, or a sweep name under --root.")],
+    sweep: Annotated[list[str], typer.Argument(
+        help="Sweep folder, or a sweep name under --root; two to compare them (A B).")],
     out: Annotated[Path | None, typer.Option(
         "--out", "-o", help="Write the self-contained HTML page here.")] = None,
     serve: Annotated[bool, typer.Option(
@@ -62,14 +68,29 @@ def dashboard(
     poll: Annotated[float, typer.Option(
         "--poll", min=0.2, help="Seconds between the live page's refreshes.")] = 3.0,
 ) -> None:
-    """Sweep dashboard: AP vs real data, differences with intervals, learning curves, runs,
-    datasets, sim-real gap, provenance. Offline HTML (--out) or live (--serve)."""
-    from sim2radar.experiment.dashboard import serve_dashboard, write_dashboard
+    """Sweep dashboard: AP vs real data, differences with intervals, learning curves, runs
+    (each with its own view), datasets, sim-real gap, provenance. Offline HTML (--out) or
+    live (--serve). With two sweeps: a page comparing them (--out)."""
+    from sim2radar.experiment.dashboard import serve_dashboard, write_comparison, write_dashboard
 
+    if len(sweep) > 2:
+        raise _fail(f"{len(sweep)} sweeps given: give one sweep, or two (A B) to compare them")
+    if len(sweep) == 2 and serve:
+        raise _fail("--serve shows one sweep live; to compare two sweeps write the page: "
+                    f"sim2radar dashboard {sweep[0]} {sweep[1]} --out cmp.html")
     if out is None and not serve:
-        raise _fail("nothing to do: give --out FILE.html, --serve, or both")
+        raise _fail("nothing to do: give --out FILE.html, --serve, or both"
+                    if len(sweep) == 1 else "give --out FILE.html for the comparison page")
     try:
-        folder = resolve_sweep(sweep, root)
+        if len(sweep) == 2:
+            a, b = (resolve_sweep(s, root) for s in sweep)
+            try:
+                typer.echo(str(write_comparison(a, b, out)))
+            except OSError as exc:
+                raise _fail(f"{out}: cannot be written ({exc.strerror or exc}); choose "
+                            "another --out") from None
+            return
+        folder = resolve_sweep(sweep[0], root)
         if out is not None:
             try:
                 typer.echo(str(write_dashboard(folder, out)))

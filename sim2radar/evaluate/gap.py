@@ -15,8 +15,9 @@ The report is in three modules; every public name of the other two is re-exporte
 - :mod:`sim2radar.evaluate.gap_figures` — the PNGs (:func:`overlay_png`, :func:`gap_figures`,
   :data:`FIGURES`).
 - this module — :func:`write_gap_report`, which reads the two dataset folders it is given, and
-  writes ``gap.json`` (:func:`artefacts_dict` is its artefacts section) and six PNGs into the
-  folder it is given.
+  writes ``gap.json`` (:func:`artefacts_dict` is its artefacts section, :func:`overlay_dict`
+  the overlay's points: with the per-frame point counts, every figure's numbers are in it, so
+  the dashboard draws them itself) and the PNGs into the folder it is given.
 
 Coordinates are the radar frame: x forward, y left, z up [m]; intensities [dB].
 
@@ -78,6 +79,7 @@ __all__ = [
     "fov_definition",
     "gap_figures",
     "histogram_edges",
+    "overlay_dict",
     "overlay_png",
     "point_count_stats",
     "write_gap_report",
@@ -190,6 +192,9 @@ def write_gap_report(
          "intensity": {"edges_db", "sim_before", "sim_after", "real", "fitted_on", "match"},
          "chamfer": {"pairs", "mean_m", "per_frame": {id: m}} or null,
          "overlay_frame": id or null,
+         "overlay": {"frame", "sim_frame", "real_frame", "title", "sim_points",
+                     "real_points", "boxes"} (:func:`overlay_dict`: the overlay's points),
+         "points": {"sim_counts", "real_counts"} (points in each analysed frame),
          "artefacts": {"settings", "definitions", "doppler_edges_mps", "sim", "real"}
                       (:func:`artefacts_dict`),
          "fidelity": {"sim", "real" (:class:`~sim2radar.evaluate.fidelity.DomainFidelity`),
@@ -242,6 +247,8 @@ def write_gap_report(
                  f"points (blue), sim {sim_id} {len(sim_pts):,} points (red); "
                  f"density {_pct(len(sim_pts) / max(len(real_pts), 1))}")
     overlay_png(sim_pts, real_pts, title=title, boxes=boxes, path=out_dir / FIGURES["overlay"])
+    overlay = overlay_dict(sim_pts, real_pts, boxes, title=title, frame=chosen,
+                           sim_frame=chosen or sim_ids[0], real_frame=chosen or real_ids[0])
     for name, data in gap_figures(rep).items():
         atomic_write(out_dir / FIGURES[name], data)
     fid = {role: domain_fidelity(pts, _labels(root, pts), info.point_geometry,
@@ -269,6 +276,8 @@ def write_gap_report(
             "pairs": rep.chamfer.pairs, "mean_m": rep.chamfer.mean_m,
             "per_frame": dict(rep.chamfer.per_frame)},
         "overlay_frame": chosen,
+        "overlay": overlay,
+        "points": {"sim_counts": rep.sim.counts, "real_counts": rep.real.counts},
         "artefacts": artefacts_dict(rep),
         "fidelity": {"sim": fid["sim"].to_dict(), "real": fid["real"].to_dict(),
                      "readings": fidelity_readings(fid["sim"], fid["real"]),
@@ -277,6 +286,43 @@ def write_gap_report(
     })
     write_json(out_dir / "gap.json", doc)
     return doc
+
+
+#: decimals of the overlay's coordinates in ``gap.json`` [m]: 1 mm, far below a range bin
+OVERLAY_DECIMALS_M = 3
+#: decimals of the overlay's intensities in ``gap.json`` [dB]
+OVERLAY_DECIMALS_DB = 1
+
+
+def overlay_dict(sim_points: np.ndarray, real_points: np.ndarray, boxes: np.ndarray | None,
+                 *, title: str, frame: str | None, sim_frame: str, real_frame: str,
+                 ) -> dict[str, Any]:
+    """``gap.json["overlay"]``: the overlay figure's numbers, so a viewer can draw it
+    (the dashboard's interactive overlay) without the datasets.
+
+    Parameters
+    ----------
+    sim_points, real_points : (N, ≥4), (M, ≥4) — x, y, z [m], intensity [dB] of the frames
+        drawn.
+    boxes : (K, 7) or None — ``x y z dx dy dz heading`` [m, rad] labels drawn.
+    title : the PNG's title; frame : the shared frame id (None: different scenes);
+    sim_frame, real_frame : the frame ids drawn.
+
+    Returns
+    -------
+    dict — ``frame``, ``sim_frame``, ``real_frame``, ``title``, ``sim_points`` and
+    ``real_points`` ((N, 4) lists: x, y, z rounded to :data:`OVERLAY_DECIMALS_M`, intensity
+    to :data:`OVERLAY_DECIMALS_DB`), ``boxes`` ((K, 7) list).
+    """
+    def rounded(p: np.ndarray) -> np.ndarray:
+        p = np.asarray(p, np.float64).reshape(-1, np.shape(p)[-1])[:, :4]
+        return np.concatenate([np.round(p[:, :3], OVERLAY_DECIMALS_M),
+                               np.round(p[:, 3:4], OVERLAY_DECIMALS_DB)], axis=1)
+
+    bxs = np.zeros((0, 7)) if boxes is None else np.asarray(boxes, np.float64).reshape(-1, 7)
+    return {"frame": frame, "sim_frame": sim_frame, "real_frame": real_frame, "title": title,
+            "sim_points": rounded(sim_points), "real_points": rounded(real_points),
+            "boxes": bxs}
 
 
 def _labels(root: Path, frames: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:

@@ -144,7 +144,11 @@ def test_histogram_edges_cover_the_span_and_respect_the_bin_cap():
 def test_report_has_exactly_the_dashboard_structure(report):
     out, doc = report
     assert set(doc) == {"sim", "real", "points_ratio", "azimuth", "range", "intensity",
-                        "chamfer", "overlay_frame", "artefacts", "fidelity", "figures"}
+                        "chamfer", "overlay_frame", "overlay", "points", "artefacts",
+                        "fidelity", "figures"}
+    assert set(doc["overlay"]) == {"frame", "sim_frame", "real_frame", "title", "sim_points",
+                                   "real_points", "boxes"}
+    assert set(doc["points"]) == {"sim_counts", "real_counts"}
     fid = doc["fidelity"]
     assert set(fid) == {"sim", "real", "readings", "definitions"}
     for role in ("sim", "real"):
@@ -201,6 +205,8 @@ def test_report_measures_the_constructed_gap(report, datasets):
     assert doc["sim"]["points_per_frame_mean"] == SIM_POINTS
     assert doc["real"]["points_per_frame_median"] == REAL_POINTS
     assert doc["points_ratio"] == pytest.approx(SIM_POINTS / REAL_POINTS)  # 12.5 %
+    # the points figure's numbers: every analysed frame's count, in frame order
+    assert doc["points"] == {"sim_counts": [SIM_POINTS] * 4, "real_counts": [REAL_POINTS] * 6}
     fov = doc["azimuth"]["effective_fov_deg"]
     assert fov["sim"] == pytest.approx(0.95 * 2 * SIM_HALF_DEG, abs=1.0)  # ~28.5°, "31°"
     assert fov["real"] == pytest.approx(0.95 * 2 * REAL_HALF_DEG, abs=2.0)  # ~114°, "120°"
@@ -238,6 +244,17 @@ def test_shared_ids_give_chamfer_pairs_and_the_overlay_frame(report, datasets):
     # any sim point: the Chamfer distance is well above zero
     assert all(d > 0.1 for d in ch["per_frame"].values())
     assert doc["overlay_frame"] in SHARED
+    # the overlay's numbers: that frame's points to 1 mm and 0.1 dB, and its label box
+    ov = doc["overlay"]
+    fid = doc["overlay_frame"]
+    assert ov["frame"] == ov["sim_frame"] == ov["real_frame"] == fid
+    for key, pts in (("sim_points", sim[fid]), ("real_points", real[fid])):
+        got = np.asarray(ov[key])
+        assert got.shape == (len(pts), 4)
+        np.testing.assert_allclose(got[:, :3], pts[:, :3], atol=5e-4 + 1e-6)
+        np.testing.assert_allclose(got[:, 3], pts[:, 3], atol=0.05 + 1e-5)
+    np.testing.assert_allclose(ov["boxes"], _box(), atol=1e-6)
+    assert f"frame {fid}" in ov["title"]
 
 
 def test_no_shared_ids_and_no_train_split(tmp_path):
@@ -248,6 +265,10 @@ def test_no_shared_ids_and_no_train_split(tmp_path):
                                             np.zeros((0, 7)), ())], {"val": ["r0"]})
     doc = write_gap_report(tmp_path / "sim", tmp_path / "real", tmp_path / "out")
     assert doc["chamfer"] is None and doc["overlay_frame"] is None
+    ov = doc["overlay"]      # different scenes: the first frame of each, no shared id
+    assert (ov["frame"], ov["sim_frame"], ov["real_frame"]) == (None, "s0", "r0")
+    assert len(ov["sim_points"]) == 100 and len(ov["real_points"]) == 400
+    assert "different scenes" in ov["title"]
     assert "no ImageSets/train.txt" in doc["intensity"]["fitted_on"]
     assert doc["points_ratio"] == pytest.approx(0.25)
     assert (tmp_path / "out" / "overlay.png").is_file()

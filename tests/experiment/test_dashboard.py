@@ -2,8 +2,9 @@
 means, paired differences with their simultaneous interval, the MDE and P(improved) per cell
 and the sentence on what the sweep could detect, the pooled primary endpoint, the
 pre-trainings' checks and loss curves, trial points, runs with their folders, progress, banner
-per real domain, gap figures), that the page is self-contained, that partial, old and broken
-sweep folders behave, the CLI, and the live server's endpoints.
+per real domain), that the page is self-contained, that partial, old and broken sweep folders
+behave, the CLI, and the live server's endpoints. The gap section: test_dashboard_gap.py; the
+runs' own views: test_dashboard_runs.py; two sweeps compared: test_dashboard_compare.py.
 
 ``make_sweep`` / ``append_run`` / ``pretrain_row`` / ``write_pretrainings`` are shared with
 test_dashboard_browser.py.
@@ -345,88 +346,6 @@ def test_progress_banner_datasets_gap_and_provenance(sweep_dir):
     assert (prov["settings_digest"], prov["settings_fixed_at"]) == ("0123456789abcdef0123",
                                                                    "2026-11-20T08:00:00+00:00")
     json.dumps(data, allow_nan=False)   # no NaN reaches the page
-
-
-def test_gap_pngs_are_embedded_and_bad_figure_entries_are_warned(sweep_dir):
-    import base64
-
-    sweep = load_sweep(sweep_dir)
-    assert set(sweep.gap_images) == {"overlay", "azimuth"}
-    uri = sweep.gap_images["overlay"]
-    assert uri.startswith("data:image/png;base64,")
-    assert base64.b64decode(uri.split(",", 1)[1]) == (sweep_dir / "gap/overlay.png").read_bytes()
-    text = " ".join(sweep.warnings)
-    assert "range.png: missing" in text                      # named in gap.json, not there
-    assert "'../sweep.json' is not a file name" in text        # no path escapes the gap folder
-
-
-def _gap_report_into(sweep: Path) -> dict:
-    """A real ``sim2radar gap`` report in ``sweep/gap``: SIM, undeclared, 4 points per frame
-    of which 3 sit on a 40 dB point's range 20 dB weaker at 20°-40° (angle-sidelobe arcs), no
-    Doppler; REAL, declared measured, its radar 1 m above the floor, 1 of its 4 points below
-    it, 2 beyond 8 m, Doppler 0, 0, 0.5, -1 m/s."""
-    from sim2radar.datasets import Frame, write_dataset, write_metadata
-    from sim2radar.evaluate.gap import write_gap_report
-
-    def at(r, az_deg, db, z=0.0, *extra):
-        a = np.radians(az_deg)
-        h = np.sqrt(r * r - z * z)
-        return [h * np.cos(a), h * np.sin(a), z, db, *extra]
-
-    sim = np.array([at(4.0, 0, 40), at(4.0, 20, 20), at(4.0, -30, 20), at(4.0, 40, 20)],
-                   np.float32)
-    real = np.array([at(3.0, 0, 30, -1.5, 0.0), at(5.0, 10, 30, 0.0, 0.0),
-                     at(9.0, -10, 30, 0.0, 0.5), at(9.5, 20, 30, 0.0, -1.0)], np.float32)
-    data = sweep / "data"
-    for name, pts in (("sim", sim), ("real", real)):
-        write_dataset(data / name, [Frame("f0", pts, np.zeros((0, 7)), ())], {"train": ["f0"]})
-    write_metadata(data / "real", {"domain": "measured", "radar_height_m": 1.0})
-    write_metadata(data / "sim", {"point_geometry": {"behind_share": 0.5, "beyond_share": 0.25},
-                                  "labels_vs_truth": {"recall": 0.5, "precision": 1.0,
-                                                      "width_error_m": 0.12}})
-    return write_gap_report(data / "sim", data / "real", sweep / "gap")
-
-
-def test_gap_section_shows_the_artefact_figures_and_artefacts_png(tmp_path):
-    sweep = make_sweep(tmp_path / "a")
-    doc = _gap_report_into(sweep)
-    data = load_sweep(sweep)
-    assert "artefacts" in data.gap_images and not data.warnings
-    gap = dashboard_data(data)
-    rows = {r[0]: r[1:] for r in gap["gap"]["rows"]}
-    assert rows["domain (dataset.json)"] == ["undeclared", "measured"]
-    assert rows["sidelobe-bin share / control"] == ["75.0 % / 0.0 %", "0.0 % / 0.0 %"]
-    sim_doppler, real_doppler = rows["Doppler: moving share"]
-    assert "no Doppler" in sim_doppler and sim_doppler == doc["artefacts"]["sim"]["doppler_note"]
-    assert real_doppler == "50.0 % (median |v| 0.25 m/s)"
-    assert rows["range > 8 m"] == ["0.0 %", "50.0 %"]
-    below_sim, below_real = rows["> 0.1 m below the floor"]
-    assert "floor height unknown" in below_sim and below_real == "25.0 %"
-    # the fidelity rows: what SIM's dataset.json measured; REAL (measured) has no truth
-    assert rows["points > 1 m behind the first true surface"] == [
-        "50.0 %", "not measured (no true geometry)"]
-    assert rows["points beyond 0.85 R_max"][0] == "25.0 %"
-    assert rows["door labels vs true doors: recall / precision"] == [
-        "50.0 % / 100.0 % (width error 0.12 m)", "—"]
-    assert rows["azimuth covered (1–99 %)"][0].startswith("-")
-    facts = dict(gap["gap"]["facts"])
-    assert "13 dB stronger" in facts["sidelobe share"]
-    assert any(k == "reading" and "SIM 50 %" in v for k, v in gap["gap"]["facts"])
-    assert [f["name"] for f in gap["gap"]["figures"]].count("artefacts") == 1
-    page = render_html(gap)
-    assert _embedded(page)["gap"]["rows"] == gap["gap"]["rows"]
-    json.dumps(gap, allow_nan=False)
-
-
-def test_gap_section_of_an_older_report_without_artefacts_shows_dashes(sweep_dir):
-    gap = dashboard_data(load_sweep(sweep_dir))["gap"]
-    rows = {r[0]: r[1:] for r in gap["rows"]}
-    for label in ("domain (dataset.json)", "sidelobe-bin share / control",
-                  "Doppler: moving share", "range > 8 m", "> 0.1 m below the floor"):
-        assert rows[label] == ["—", "—"], label
-    assert ["points per frame (mean)", "300.5", "1,200.0"] in gap["rows"]   # the rest as before
-    assert "sidelobe share" not in dict(gap["facts"])
-    render_html(dashboard_data(load_sweep(sweep_dir)))
 
 
 def test_measured_and_unknown_domains(tmp_path):
@@ -997,7 +916,7 @@ def test_the_columns_the_page_reads_are_the_run_tables_columns():
     """The dashboard checks runs.parquet against RUNS_COLUMNS without importing the store (the
     library sits below it): every column it reads must exist in experiment_runs with a type
     of that kind, and the identity columns must be the schema's non-nullable ones."""
-    from sim2radar.experiment.dashboard.data import _RUN_IDENTITY, RUNS_COLUMNS, _holds
+    from sim2radar.experiment.dashboard.reading import _RUN_IDENTITY, RUNS_COLUMNS, _holds
 
     schema = get_schema("experiment_runs").schema
     for name, kind in RUNS_COLUMNS.items():

@@ -2,7 +2,9 @@
 static page loads with no console error and requests nothing but itself, the AP plot has one
 mean series per condition, the runs table sorts, a screenshot is taken; the served page shows a
 run appended to runs.parquet without a reload; the primary endpoint and the pre-trainings'
-sections render, and hide where an old sweep has neither.
+sections render, and hide where an old sweep has neither; clicking a run opens its own view
+with its numbers from runs.parquet (offline, and served at /run/<id>); the gap report's
+figures are drawn from gap.json; the comparison page of two sweeps renders its figures.
 
 Needs ``/usr/bin/chromium`` (``make setup`` installs Debian's ``chromium``; Playwright's own
 browser downloads are not used). Skipped only on a machine without apt.
@@ -17,7 +19,12 @@ from pathlib import Path
 
 import pytest
 
-from sim2radar.experiment.dashboard import load_sweep, serve_dashboard, write_dashboard
+from sim2radar.experiment.dashboard import (
+    load_sweep,
+    serve_dashboard,
+    write_comparison,
+    write_dashboard,
+)
 from tests.experiment.test_dashboard import (
     append_run,
     edit_sweep_json,
@@ -26,6 +33,8 @@ from tests.experiment.test_dashboard import (
     run_row,
     write_pretrainings,
 )
+from tests.experiment.test_dashboard_gap import _gap_report_into
+from tests.experiment.test_dashboard_runs import _with_pretrainings
 
 CHROMIUM = Path("/usr/bin/chromium")
 #: flags for a sandbox-less container; without the background-networking ones Chromium's own
@@ -89,7 +98,12 @@ def test_static_page_is_offline_plots_every_condition_and_sorts(tmp_path, page):
     assert page.locator("#plot-ap .scatterlayer .trace .js-line").count() == 2
     assert page.locator("#banner.proxy").inner_text().startswith("PROXY real domain")
     assert page.locator("#run-count").inner_text() == "18"
-    assert page.locator(".gap-figs img").count() == 2
+    # the fixture's gap.json is an older report's: azimuth, range and intensity are drawn
+    # from its numbers, the overlay (no numbers) is its PNG, and the page says why
+    page.wait_for_selector("#gap-plot-intensity .main-svg")
+    assert page.locator("#gap .gap-plot .main-svg").count() >= 3
+    assert page.locator(".gap-figs img").count() == 1
+    assert "holds no numbers for them" in page.locator("#gap-image-note").inner_text()
     assert page.evaluate("Array.from(document.images).every(i => i.complete && "
                          "i.naturalWidth > 0)")
 
@@ -261,3 +275,123 @@ def test_primary_endpoint_and_pretrainings_render(tmp_path, page):
     assert page.locator("#pretrain-empty").inner_text() == "No pre-training recorded."
     assert page.locator("#plot-pretrain-check").is_hidden()
     assert page.errors == []
+
+
+_RUN_JS = """() => ({
+    settings: Object.fromEntries(Array.from(document.querySelectorAll(
+        '#run-settings tbody tr')).map(r => [r.children[0].textContent,
+                                             r.children[1].textContent])),
+    aps: Array.from(document.querySelectorAll('#run-aps tbody tr')).map(r =>
+        [r.children[0].textContent, r.children[1].textContent]),
+    traces: Object.fromEntries(document.getElementById('plot-run').data.map(t =>
+        [t.meta.role, {x: t.x, y: t.y}])),
+    pretrain: document.getElementById('run-pretrain').textContent,
+    folder: document.getElementById('run-folder').textContent})"""
+
+
+def test_clicking_a_run_opens_its_view_with_its_numbers(tmp_path, page):
+    """Click a run's row: its view shows that run's settings, final APs and learning curve as
+    runs.parquet holds them, and its pre-training's check; the address names the run (a
+    link opens it), and closing the view hides it. Offline: nothing is requested."""
+    import pyarrow.parquet as pq
+
+    from sim2radar.experiment.dashboard.labels import metric_label
+
+    sweep = _with_pretrainings(tmp_path / "t")
+    html = write_dashboard(sweep, tmp_path / "dash.html")
+    runs = {r["run_key"]: r for r in pq.read_table(sweep / "runs.parquet").to_pylist()}
+    page.goto(html.as_uri())
+    page.wait_for_selector("#plot-ap .main-svg")
+    assert page.locator("#run-section").is_hidden()
+    for cond, fraction, trial in (("sim-pretrain", 0.5, 1), ("baseline", 0.1, 2)):
+        key = f"{cond}-{fraction:g}-{trial}-" + "0" * 40
+        page.locator(f"#runs-table tr[data-run='{key}'] td").first.click()
+        page.wait_for_function("(k) => !document.getElementById('run-section').hidden && "
+                               "document.getElementById('run-id').textContent === k", arg=key)
+        page.wait_for_selector("#plot-run .main-svg")
+        assert page.evaluate("location.hash") == f"#run={key}"
+        assert page.locator(f"#runs-table tr.selected[data-run='{key}']").count() == 1
+        row, shown = runs[key], page.evaluate(_RUN_JS)
+        assert shown["settings"]["seed"] == str(row["seed"])
+        assert shown["settings"]["trial"] == str(row["trial"])
+        assert shown["settings"]["epochs"] == str(row["epochs"])
+        assert shown["settings"]["run key"] == key
+        # every final AP, the sweep's metric first, as runs.parquet holds it
+        assert shown["aps"][0][0].startswith(metric_label("ap_3d_r40_iou03"))
+        for label, value in shown["aps"]:
+            metric = next(m for m in row if m.startswith("ap_")
+                          and label.startswith(metric_label(m)))
+            assert float(value) == pytest.approx(row[metric], abs=0.005), label
+        assert shown["traces"]["run_loss"]["y"] == pytest.approx(row["history_loss"])
+        assert shown["traces"]["run_loss"]["x"] == row["history_epoch"]
+        assert shown["traces"]["run_val_ap"]["y"] == pytest.approx(row["history_val_ap"])
+        assert shown["folder"] == f"runs/{cond}-{fraction:g}-{trial}"
+    assert shown["pretrain"] == "" and "run_pretrain_loss" not in shown["traces"]
+    assert "from scratch" in page.locator("#run-pretrain-note").inner_text()
+
+    # a link to a run opens it; the pre-training it loaded is shown with its check
+    key = "sim-pretrain-0.1-1-" + "0" * 40
+    page.goto(html.as_uri() + f"#run={key}")
+    page.wait_for_function("(k) => document.getElementById('run-id').textContent === k",
+                           arg=key)
+    shown = page.evaluate(_RUN_JS)
+    assert "pretrain-sim-t1" in shown["pretrain"] and "35 — met" in shown["pretrain"]
+    assert shown["traces"]["run_pretrain_loss"]["y"] == [3.0, 2.0, 2.0]
+    page.click("#run-close")
+    assert page.locator("#run-section").is_hidden() and page.evaluate("location.hash") == ""
+    assert page.errors == []
+    assert page.requests == [html.as_uri()] * len(page.requests)   # the file only
+
+
+def test_served_run_address_opens_its_view_and_stays_live(tmp_path, page):
+    sweep = make_sweep(tmp_path / "s", ran=("baseline",), failed=())
+    key = run_row("baseline", 0.5, 2)["run_key"]
+    with serve_dashboard(sweep, poll_s=0.5) as server:
+        page.goto(server.url + f"run/{key}")
+        page.wait_for_selector("#plot-run .main-svg")
+        assert page.locator("#run-title").inner_text() == "Run: Baseline · 50 % real · trial 2"
+        assert page.locator("#run-settings").inner_text().count("1002") == 1     # its seed
+        # polling from /run/<id> reads the root's data.json: a new run still arrives
+        n = append_run(sweep, run_row("sim-pretrain", 0.1, 0))
+        page.wait_for_function("(n) => document.getElementById('run-count').textContent "
+                               "=== String(n)", arg=n)
+        assert page.locator("#run-section").is_visible()
+        assert page.errors == []
+        origin = server.url.rstrip("/")
+        assert {u.split("?")[0] for u in page.requests} <= {server.url + f"run/{key}",
+                                                            origin + "/data.json"}
+
+
+def test_gap_figures_are_drawn_from_the_reports_numbers(tmp_path, page):
+    sweep = make_sweep(tmp_path / "g")
+    _gap_report_into(sweep)
+    html = write_dashboard(sweep, tmp_path / "dash.html")
+    page.goto(html.as_uri())
+    for name in ("overlay", "points", "azimuth", "range", "intensity", "artefacts",
+                 "fidelity"):
+        page.wait_for_selector(f"#gap-plot-{name} .main-svg")
+    assert page.locator(".gap-figs img").count() == 0
+    # the overlay draws the frame's points: 4 sim and 4 real in each view
+    assert page.locator("#gap-plot-overlay .scatterlayer .trace .point").count() >= 16
+    assert page.errors == [] and page.requests == [html.as_uri()]
+
+
+def test_comparison_page_renders_its_figures_offline(tmp_path, page):
+    a = make_sweep(tmp_path / "a")
+    b = make_sweep(tmp_path / "b", conditions=("baseline", "sim-pretrain", "sim-gt-pretrain"),
+                   fractions=(0.1, 0.25, 0.5), failed=())
+    html = write_comparison(a, b, tmp_path / "cmp.html")
+    page.goto(html.as_uri())
+    page.wait_for_selector("#plot-ap .main-svg")
+    page.wait_for_selector("#plot-delta .main-svg")
+    # 2 shared conditions x 2 sweeps drawn as lines; the difference of the Δs per condition
+    assert page.locator("#plot-ap .scatterlayer .trace .js-line").count() == 4
+    assert page.evaluate("""() => document.getElementById('plot-delta').data
+        .filter(t => t.meta.role === 'delta-diff').length""") == 1
+    assert page.locator("#ap-table tbody tr").count() == 4
+    assert page.locator("#delta-table tbody tr").count() == 2
+    assert "Sim-GT Pretrain" in page.locator("#only-b").inner_text()
+    assert page.locator("#settings-table tbody tr", has_text="fractions").count() == 1
+    assert page.locator("#sweep-a").inner_text().startswith("A: a")
+    assert page.errors == []
+    assert page.requests == [html.as_uri()]

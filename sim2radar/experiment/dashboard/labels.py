@@ -9,7 +9,7 @@ from typing import Any
 
 from sim2radar.experiment.profiles import CONDITIONS
 
-__all__ = ["colour", "metric_label", "num", "pct"]
+__all__ = ["colour", "fmt", "metric_label", "num", "pct", "share", "signed"]
 
 #: colours of conditions outside the registry (profiles.CONDITIONS holds the known ones')
 MORE_COLOURS = ("#ff7f0e", "#8c564b", "#e377c2", "#7f7f7f", "#bcbd22", "#17becf")
@@ -29,6 +29,29 @@ def num(v: Any) -> float | None:
 def pct(fraction: float) -> str:
     """``0.25`` -> ``25 %``."""
     return f"{100 * fraction:g} %"
+
+
+def fmt(v: Any, spec: str = ",.1f") -> str:
+    """A number for a fact table: integers with thousands separators, floats with ``spec``;
+    ``—`` for None, a non-number as its text."""
+    if isinstance(v, int) and not isinstance(v, bool):
+        return f"{v:,}"
+    f = num(v)
+    if f is None:
+        return "—" if v is None else str(v)
+    return format(f, spec)
+
+
+def share(v: Any) -> str:
+    """A share in [0, 1] as a percentage: ``0.25`` -> ``25.0 %``; ``—`` for none."""
+    f = num(v)
+    return "—" if f is None else f"{100 * f:.1f} %"
+
+
+def signed(v: Any, digits: int = 1) -> str:
+    """A signed number with a typographic minus (``+1.2``, ``−0.8``); ``—`` for none."""
+    f = num(v)
+    return "—" if f is None else format(f, f"+.{digits}f").replace("-", "\u2212")
 
 
 def metric_label(metric: str) -> str:

@@ -4,10 +4,15 @@ document.
 
     render_html(data, live=False) -> str     the page: Plotly's JS, script, style, data inline
     write_dashboard(folder, out_path)        load, render and write one sweep's page atomically
+    render_compare_html(data) -> str         the comparison page of two sweeps
+                                             (:func:`~.compare.compare_data`'s document)
+    write_comparison(a, b, out_path)         load both, render and write it atomically
 
 The page is one self-contained file that works offline: Plotly's bundle, the script, the style,
-the data and the sim–real gap PNGs (``data:`` URIs) are inline, and a Content-Security-Policy in
-the page forbids loading anything else. The live page polls ``data.json`` every ``poll_s``
+the data (the sim–real gap figures as Plotly figures of ``gap.json``'s numbers, PNGs as
+``data:`` URIs only for an older report) are inline, and a Content-Security-Policy in the page
+forbids loading anything else. The comparison page is made the same way from its own template
+and script (``compare.html.j2``, ``compare.js``), with the same style and ``common.js``. The live page polls ``data.json`` every ``poll_s``
 seconds and re-renders in place (``Plotly.react``, rebuilt tables), so runs appear as the sweep
 finishes them, without a reload.
 """
@@ -23,16 +28,19 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
+from sim2radar.experiment.dashboard.compare import compare_data
 from sim2radar.experiment.dashboard.data import dashboard_data, load_sweep
 from sim2radar.fileio import atomic_write
 
-__all__ = ["PAGE_FILES", "POLL_S", "render_html", "write_dashboard"]
+__all__ = ["PAGE_FILES", "POLL_S", "render_compare_html", "render_html", "write_comparison",
+           "write_dashboard"]
 
 #: seconds between the live page's polls of ``data.json``
 POLL_S = 3.0
 #: the page's files in the package data folder ``sim2radar/experiment/page/``, by role
 PAGE_FILES = {"template": "dashboard.html.j2", "script": "dashboard.js",
-              "style": "dashboard.css"}
+              "style": "dashboard.css", "common": "common.js",
+              "compare_template": "compare.html.j2", "compare_script": "compare.js"}
 #: the page loads nothing: inline scripts and styles, images as data: URIs, and (live) its own
 #: data.json; fonts, frames and every other fetch are refused by the browser
 _CSP = ("default-src 'none'; script-src 'unsafe-inline'; "
@@ -66,14 +74,14 @@ def _escape(value: Any) -> Any:
 
 
 @functools.cache
-def _template() -> Any:
-    """The page's compiled Jinja2 template (autoescaped; StrictUndefined: a missing variable is
+def _template(role: str = "template") -> Any:
+    """A page's compiled Jinja2 template (autoescaped; StrictUndefined: a missing variable is
     an error, not an empty string)."""
     import jinja2
 
     env = jinja2.Environment(autoescape=True, undefined=jinja2.StrictUndefined,
                              finalize=_escape)
-    return env.from_string(_page_file("template"))
+    return env.from_string(_page_file(role))
 
 
 @functools.cache
@@ -83,8 +91,13 @@ def _static() -> dict[str, Any]:
 
     # plotly's own to_html relies on the same property of its bundle
     return {"plotly_js": _inline(get_plotlyjs(), "script", "the Plotly bundle"),
-            "js": _inline(_page_file("script"), "script", PAGE_FILES["script"]),
+            "common_js": _inline(_page_file("common"), "script", PAGE_FILES["common"]),
             "css": _inline(_page_file("style"), "style", PAGE_FILES["style"])}
+
+
+def _script(role: str) -> Any:
+    """A page's own script (``script`` or ``compare_script``), checked and marked safe."""
+    return _inline(_page_file(role), "script", PAGE_FILES[role])
 
 
 def _script_json(doc: Any) -> Any:
@@ -97,15 +110,18 @@ def _script_json(doc: Any) -> Any:
                   .replace("\u2028", "\\u2028").replace("\u2029", "\\u2029"))
 
 
-def render_html(data: Mapping[str, Any], *, live: bool = False, poll_s: float = POLL_S) -> str:
+def render_html(data: Mapping[str, Any], *, live: bool = False, poll_s: float = POLL_S,
+                data_url: str = "data.json") -> str:
     """The dashboard page: one self-contained HTML document.
 
     Parameters
     ----------
     data : :func:`~.data.dashboard_data`'s dict.
-    live : poll ``data.json`` (relative to the page) every ``poll_s`` seconds and re-render
-        when it changed; for the page :func:`~.server.serve_dashboard` serves.
+    live : poll ``data_url`` every ``poll_s`` seconds and re-render when it changed; for the
+        page :func:`~.server.serve_dashboard` serves.
     poll_s : seconds between polls [s] (live only).
+    data_url : the live page's data (relative to the page, or ``/data.json`` for a page that
+        is also served below the root, at ``/run/<id>``).
 
     Returns
     -------
@@ -130,8 +146,47 @@ def render_html(data: Mapping[str, Any], *, live: bool = False, poll_s: float = 
         banner_text=str(banner.get("text", "")),
         footer=footer,
         data_json=_script_json(data),
-        live_json=_script_json({"poll_ms": poll_ms}),
+        live_json=_script_json({"poll_ms": poll_ms, "data_url": data_url}),
+        js=_script("script"),
         **_static())
+
+
+def render_compare_html(data: Mapping[str, Any]) -> str:
+    """The comparison page of two sweeps: one self-contained HTML document, offline as the
+    dashboard (Plotly's bundle, script, style and data inline; a Content-Security-Policy lets
+    it load nothing).
+
+    Parameters
+    ----------
+    data : :func:`~.compare.compare_data`'s dict.
+    """
+    a, b = data.get("a") or {}, data.get("b") or {}
+    names = f"{a.get('name', 'A')} vs {b.get('name', 'B')}"
+    return _template("compare_template").render(
+        csp=_CSP.format(connect="'none'"),
+        page_title=f"sim2radar sweeps {names}",
+        title=f"Sweeps compared: {names}",
+        footer=(f"Static comparison of {a.get('folder', 'A')} (A) and {b.get('folder', 'B')} "
+                f"(B). Each sweep's own page: sim2radar dashboard SWEEP --out FILE.html"),
+        data_json=_script_json(data),
+        js=_script("compare_script"),
+        **_static())
+
+
+def write_comparison(folder_a: str | os.PathLike, folder_b: str | os.PathLike,
+                     out_path: str | os.PathLike) -> Path:
+    """Write the comparison page of the sweeps in ``folder_a`` (A, the reference) and
+    ``folder_b`` (B) to ``out_path`` (atomically; the parent folders are made). Returns
+    ``out_path``.
+
+    Raises
+    ------
+    SweepFolderError — see :func:`~.data.load_sweep`.
+    """
+    page = render_compare_html(compare_data(load_sweep(folder_a), load_sweep(folder_b)))
+    out = Path(out_path)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    return atomic_write(out, page.encode("utf-8"))
 
 
 def write_dashboard(folder: str | os.PathLike, out_path: str | os.PathLike) -> Path:

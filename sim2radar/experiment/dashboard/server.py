@@ -1,10 +1,13 @@
-"""The live dashboard: one sweep folder's page on a loopback address, ``/`` and ``/data.json``.
+"""The live dashboard: one sweep folder's page on a loopback address: ``/``, ``/data.json`` and
+``/run/<run id>`` (the page with that run's own view open).
 
     serve_dashboard(folder, port=0)          start serving; returns the DashboardServer
     allowed_host(header, bind_host)          the Host-header check (DNS rebinding)
 
 The page is :func:`~.page.render_html` with ``live=True``; it polls ``/data.json``
-(:func:`~.data.dashboard_data` of the folder as it is now) and re-renders in place.
+(:func:`~.data.dashboard_data` of the folder as it is now) and re-renders in place. ``/run/<id>``
+serves the same page, which opens the run its address names (a run's id is its ``run_key``,
+:func:`~.runs.run_ids`); an id the sweep does not have (yet) is 404.
 """
 
 from __future__ import annotations
@@ -13,6 +16,7 @@ import ipaddress
 import json
 import os
 import threading
+import urllib.parse
 from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 from pathlib import Path
 from typing import Any
@@ -90,8 +94,9 @@ class DashboardServer:
     """The live dashboard of one sweep folder on a loopback address.
 
     ``/`` is the live page, ``/data.json`` :func:`dashboard_data` of the folder as it is now
-    (re-read when one of its files changed; 503 with ``{"error"}`` while it cannot be read);
-    anything else is 404. A request whose ``Host`` header is not a loopback name
+    (re-read when one of its files changed; 503 with ``{"error"}`` while it cannot be read),
+    ``/run/<id>`` the live page opened on that run's view (404 for an id the sweep has not
+    got, or not yet); anything else is 404. A request whose ``Host`` header is not a loopback name
     (:func:`allowed_host`: ``127.0.0.1``, ``localhost`` or ``[::1]``, any port) gets 403 with a
     one-line body: a web page cannot read the dashboard by pointing its own domain at
     127.0.0.1 (DNS rebinding). Requests are served by a
@@ -115,6 +120,7 @@ class DashboardServer:
         self._lock = threading.Lock()
         self._cache: tuple[Any, int, bytes] | None = None  # (signature, status, JSON body)
         self._last_good: dict[str, Any] | None = None
+        self._run_ids: frozenset[str] = frozenset()  # the runs of the last readable state
         self._thread: threading.Thread | None = None
         server = self
 
@@ -131,6 +137,14 @@ class DashboardServer:
                 elif path == "/data.json":
                     status, body = server.data_json()
                     self._send(status, "application/json", body)
+                elif path.startswith("/run/") and len(path) > len("/run/"):
+                    run = urllib.parse.unquote(path[len("/run/"):])
+                    if server.has_run(run):
+                        self._send(200, "text/html; charset=utf-8", server.page_bytes())
+                    else:
+                        why = (f"no run {run!r} in {server.folder} (not finished yet, or "
+                               f"another sweep's); the runs are listed at {server.url}\n")
+                        self._send(404, "text/plain; charset=utf-8", why.encode("utf-8"))
                 else:
                     self._send(404, "text/plain; charset=utf-8", b"not found\n")
 
@@ -189,11 +203,17 @@ class DashboardServer:
                 data = dashboard_data(load_sweep(self.folder, require_runs=False))
                 status, doc = 200, data
                 self._last_good = data
+                self._run_ids = frozenset(data["runs"]["ids"])
             except ValueError as exc:
                 status, doc = 503, {"error": str(exc)}
             body = json.dumps(doc, allow_nan=False, ensure_ascii=False).encode("utf-8")
             self._cache = (sig, status, body)
             return status, body
+
+    def has_run(self, run_id: str) -> bool:
+        """Whether the sweep (as it is now, or as last readable) has a run of this id."""
+        self.data_json()
+        return run_id in self._run_ids
 
     def page(self) -> str:
         """The live page with the folder's current data (or its last readable state)."""
@@ -209,7 +229,8 @@ class DashboardServer:
                 return cached[1]
             data = json.loads(body) if status == 200 else (
                 self._last_good or error_data(self.folder, json.loads(body)["error"]))
-            html = render_html(data, live=True, poll_s=self.poll_s).encode("utf-8")
+            html = render_html(data, live=True, poll_s=self.poll_s,
+                               data_url="/data.json").encode("utf-8")
             self._page_cache = (body, html)
             self.renders += 1
             return html

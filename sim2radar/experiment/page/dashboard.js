@@ -2,19 +2,16 @@
 // sim2radar.experiment.dashboard.page.render_html. render(data) fills every section from
 // the JSON document in #dashboard-data; the live page (#dashboard-live: poll_ms > 0) polls
 // data.json and calls render again when it changed. Table sort, filter and grouping state
-// survive re-renders. window.dashboard (state) and window.dashboardExport are read by the
-// browser tests (tests/experiment/test_dashboard_browser.py).
+// survive re-renders. Clicking a run's row opens its own view (#run=<id>; the live server
+// also serves it at /run/<id>). window.dashboard (state) and window.dashboardExport are read
+// by the browser tests (tests/experiment/test_dashboard_browser.py). esc, table and plot are
+// common.js's (S2R), shared with the comparison page.
 (function () {
 "use strict";
-const CONFIG = {responsive: true, displaylogo: false};
 const state = {data: null, text: null, sortCol: null, sortDir: 1, renders: 0,
-  filter: {}, groupBy: "", shown: []};
+  filter: {}, groupBy: "", shown: [], run: null, gapText: null};
 window.dashboard = state;
-const $ = (id) => document.getElementById(id);
-function esc(v) {
-  return String(v).replace(/[&<>"']/g, (c) => ({"&": "&amp;", "<": "&lt;", ">": "&gt;",
-    '"': "&quot;", "'": "&#39;"}[c]));
-}
+const {$, esc, table, plot} = S2R;
 function fmt(v, type) {
   if (v === null || v === undefined || v === "") return type === "text" ? "" : "—";
   switch (type) {
@@ -32,17 +29,6 @@ function fmt(v, type) {
 function label(name) {
   const c = (state.data.conditions || []).find((x) => x.name === name);
   return c ? c.label : String(name);
-}
-function table(columns, rows, numeric) {  // numeric: (column index) -> right-align
-  const head = "<tr>" + columns.map((c) => "<th>" + esc(c) + "</th>").join("") + "</tr>";
-  const body = rows.map((r) => "<tr>" + r.map((v, i) =>
-    "<td" + (numeric && numeric(i) ? " class=num" : "") + ">" + esc(v === null ||
-      v === undefined ? "—" : v) + "</td>").join("") + "</tr>").join("");
-  return "<table><thead>" + head + "</thead><tbody>" + body + "</tbody></table>";
-}
-function plot(id, fig) {
-  if (!fig) { Plotly.purge($(id)); $(id).innerHTML = ""; return; }  // purge: no stale state
-  Plotly.react($(id), fig.data, fig.layout, CONFIG);
 }
 function compare(a, b, type) {
   const na = a === null || a === undefined || a === "", nb = b === null || b === undefined ||
@@ -99,6 +85,7 @@ function renderRuns() {
     "none") + ">" + esc(c.label) + "</th>").join("");
   const vis = visibleRuns(), rows = vis.rows;
   state.shown = rows;
+  const ids = new Map(runs.rows.map((r, i) => [r, (runs.ids || [])[i]]));
   const statusCol = runs.status_column, metricCol = runs.metric_column;
   let body = "", last = null;
   for (const r of rows) {
@@ -112,7 +99,10 @@ function renderRuns() {
         " · " + members.length + " run(s) · mean " + esc(cols[metricCol].label) + " " +
         (mean === null ? "—" : mean.toFixed(2)) + "</td></tr>";
     }
-    body += "<tr class='run" + (r[statusCol] === "failed" ? " failed" : "") + "'>" +
+    const id = ids.get(r);
+    body += "<tr class='run" + (r[statusCol] === "failed" ? " failed" : "") +
+      (id !== undefined && id === state.run ? " selected" : "") + "'" +
+      (id !== undefined ? " data-run='" + esc(id) + "' title='open this run'" : "") + ">" +
       r.map((v, i) => {
         const t = cols[i].type, title = t === "key" && v ? " title='" + esc(v) + "'" : "";
         const cls = cols[i].key === "error" ? " class=err" : (t !== "text" && t !== "key" &&
@@ -185,7 +175,13 @@ function renderDatasets(d) {
   }
   $("datasets").innerHTML = out;
 }
+// the gap report's figures, drawn from gap.json's numbers; PNGs only where it has none.
+// Rebuilt only when the report changed (a live re-render keeps their zoom)
 function renderGap(g) {
+  const text = JSON.stringify(g);
+  if (text === state.gapText) return;
+  state.gapText = text;
+  for (const el of document.querySelectorAll("#gap .plot")) Plotly.purge(el);
   if (!g) {
     $("gap").innerHTML = "<p class=muted>No sim–real gap report in this sweep folder " +
       "(gap/gap.json): <code>sim2radar gap SIM REAL --out &lt;sweep&gt;/gap</code> writes one.</p>";
@@ -193,10 +189,16 @@ function renderGap(g) {
   }
   let out = table(["", "sim", "real"], g.rows, (i) => i > 0) + "<br>" +
     table(["", ""], g.facts, null);
-  out += "<div class=gap-figs>" + g.figures.map((f) => "<figure><img alt='" + esc(f.name) +
-    "' src='" + esc(f.uri) + "'><figcaption>" + esc(f.name) + "</figcaption></figure>").join("")
-    + "</div>";
+  out += (g.figures || []).map((f) => "<div class='card gap-plot'><div id='gap-plot-" +
+    esc(f.name) + "' class=plot></div><p class=muted>" + esc(f.title) + "</p></div>").join("");
+  if ((g.images || []).length) {
+    out += "<p class=muted id=gap-image-note>" + esc(g.image_note || "") + "</p>" +
+      "<div class=gap-figs>" + g.images.map((f) => "<figure><img alt='" + esc(f.name) +
+      "' src='" + esc(f.uri) + "'><figcaption>" + esc(f.title) + " (PNG)</figcaption></figure>")
+      .join("") + "</div>";
+  }
   $("gap").innerHTML = out;
+  for (const f of g.figures || []) plot("gap-plot-" + f.name, f.figure);
 }
 function renderProvenance(p) {
   if (!p) {
@@ -257,6 +259,67 @@ function renderPretrainings(p) {
   $("pretrain-rows").innerHTML = table(p.table.columns, p.table.rows,
     (i) => p.table.numeric[i]);
 }
+// one run's own view (#run-section): its settings, learning curve, final APs, its
+// pre-training's check and its folder, from run_views; hidden while no run is chosen
+function renderRun() {
+  const sec = $("run-section"), id = state.run;
+  const views = (state.data.run_views || {}).views || {};
+  if (id === null) {
+    sec.hidden = true;
+    plot("plot-run", null);
+    return;
+  }
+  sec.hidden = false;
+  const v = views[id];
+  $("run-id").textContent = id;
+  if (!v) {
+    $("run-title").textContent = "Run not found";
+    $("run-body").hidden = true;
+    $("run-missing").hidden = false;
+    $("run-missing").textContent = "No run " + id + " in this sweep" +
+      (live.poll_ms > 0 ? " (yet: it appears here when it finishes)." : ".");
+    plot("plot-run", null);
+    return;
+  }
+  $("run-missing").hidden = true;
+  $("run-body").hidden = false;
+  $("run-title").textContent = "Run: " + v.title;
+  $("run-status").textContent = v.status;
+  $("run-status").className = "badge " + v.status;
+  $("run-error").textContent = v.error;
+  $("run-error").hidden = !v.error;
+  $("run-settings").innerHTML = table(["setting", "value"], v.settings, null);
+  $("run-aps").innerHTML = table(v.aps.columns, v.aps.rows, (i) => v.aps.numeric[i]);
+  $("run-delta").textContent = v.delta || "";
+  const layout = Object.assign({}, state.data.run_views.layout, {uirevision: id});
+  if (!v.pretraining) {  // the third panel says why it is empty
+    layout.annotations = (layout.annotations || []).concat([{text: "no pre-training",
+      xref: "x3 domain", yref: "y3 domain", x: 0.5, y: 0.5, showarrow: false,
+      font: {size: 14, color: "#777"}}]);
+  }
+  plot("plot-run", {data: v.traces, layout: layout});
+  $("run-curve-note").textContent = v.curve_note || "";
+  $("run-pretrain-note").textContent = v.pretraining ? "Found " + v.pretraining.how + "." :
+    "Pre-training: " + v.pretraining_note + ".";
+  $("run-pretrain").innerHTML = v.pretraining ? table(["check", "value"], v.pretraining.rows,
+    null) : "";
+  $("run-folder").textContent = v.folder || "—";
+  $("run-folder-path").textContent = v.folder_path || "—";
+  $("run-checkpoint").textContent = v.checkpoint || "—";
+}
+// the run named by the address: #run=<id>, else the live server's /run/<id>
+function runFromAddress() {
+  const h = location.hash.match(/^#run=(.+)$/);
+  if (h) return decodeURIComponent(h[1]);
+  const p = location.pathname.match(/\/run\/([^/]+)$/);
+  return p && live.poll_ms > 0 ? decodeURIComponent(p[1]) : null;
+}
+function openRun(id, scroll) {
+  state.run = id;
+  renderRuns();
+  renderRun();
+  if (scroll && id !== null) $("run-section").scrollIntoView({block: "start"});
+}
 function render(d) {
   state.data = d;
   document.title = "sim2radar sweep " + d.name;
@@ -285,6 +348,7 @@ function render(d) {
   $("stats-source").textContent = "statistics: " + d.stats_source;
   renderControls();
   renderRuns();
+  renderRun();
   renderDatasets(d);
   renderGap(d.gap);
   renderProvenance(d.provenance);
@@ -321,6 +385,13 @@ $("runs-controls").addEventListener("click", (e) => {
     "json");
 });
 $("runs-table").addEventListener("click", (e) => {
+  const row = e.target.closest("tr[data-run]");
+  if (row) {  // the address names the run: a link to it, and the back button closes it
+    const hash = "#run=" + encodeURIComponent(row.dataset.run);
+    if (location.hash === hash) openRun(row.dataset.run, true);
+    else location.hash = hash;
+    return;
+  }
   const th = e.target.closest("th[data-col]");
   if (!th) return;
   const i = Number(th.dataset.col);
@@ -328,15 +399,22 @@ $("runs-table").addEventListener("click", (e) => {
   state.sortCol = i;
   renderRuns();
 });
+$("run-close").addEventListener("click", () => {
+  if (location.hash) history.replaceState(null, "", location.pathname + location.search);
+  openRun(null, false);
+});
+window.addEventListener("hashchange", () => openRun(runFromAddress(), true));
+const live = JSON.parse($("dashboard-live").textContent);
 const initial = $("dashboard-data").textContent;
 state.text = initial;
+state.run = runFromAddress();
 render(JSON.parse(initial));
-const live = JSON.parse($("dashboard-live").textContent);
+if (state.run !== null) $("run-section").scrollIntoView({block: "start"});
 if (live.poll_ms > 0) {
   const status = $("live-status");
   async function poll() {
     try {
-      const r = await fetch("data.json", {cache: "no-store"});
+      const r = await fetch(live.data_url, {cache: "no-store"});
       const text = await r.text();
       if (!r.ok) {
         let msg = text;
