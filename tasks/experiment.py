@@ -72,6 +72,9 @@ STAGES = {"pretrain": "experiment_pretrain", "finetune": "experiment_runs"}
 RUNS_FILE = "runs.parquet"
 PRETRAININGS_FILE = "pretrainings.parquet"
 PLAN_FILE = "plan.json"
+#: folder under the sweeps root holding the measured precision decisions
+#: (:func:`sim2radar.detect.precision.decide_precision`), one per device and model
+PRECISION_TABLE = ".precision"
 
 
 def _code_version() -> dict[str, Any]:
@@ -140,7 +143,7 @@ def prepare_sweep(datasets: Mapping[str, str | os.PathLike | None], *, profile: 
     """
     sweep.check_sweep_name(name)
     setup = sweep.setup_sweep(profile, datasets, ablations=ablations, overrides=overrides,
-                              device=device)
+                              device=device, precision_table=Path(out) / PRECISION_TABLE)
     sweep_dir = Path(out) / name
     fixed_at = sweep.settings_fixed_at(_read_sweep_json(sweep_dir / "sweep.json"),
                                        setup.settings, name=name, sweep_dir=sweep_dir)
@@ -176,16 +179,19 @@ def read_plan(plan_path: str | os.PathLike) -> SweepPlan:
 
 
 def plan_cost(datasets: Mapping[str, str | os.PathLike | None], *, profile: Any = "demo",
-              store: str | os.PathLike = "out/store", ablations: bool = False,
+              store: str | os.PathLike = "out/store", out: str | os.PathLike = "out/sweeps",
+              ablations: bool = False,
               overrides: dict[str, Any] | None = None, device: str | None = None,
               workers: tuple[int, ...] = (1, 8),
               step_seconds: dict[str, float] | None = None) -> dict[str, Any]:
     """What a sweep would cost, without creating it (nothing is written to the sweeps folder;
     ``store:`` datasets are exported to a temporary folder):
     :func:`sim2radar.experiment.sweep.sweep_cost` of the sweep :func:`prepare_sweep` would
-    plan."""
+    plan; mixed precision as recorded for this device under ``out``, else assumed (no probe
+    runs for an estimate)."""
     setup = sweep.setup_sweep(profile, datasets, ablations=ablations, overrides=overrides,
-                              device=device)
+                              device=device, precision_table=Path(out) / PRECISION_TABLE,
+                              probe=False)
     with tempfile.TemporaryDirectory(prefix="sim2radar-plan-") as tmp:
         domains = sweep.open_datasets(datasets, setup.roles, functools.partial(
             _export, open_store(store).root_uri, Path(tmp), setup.profile.sweep_seed))

@@ -355,7 +355,8 @@ def sweep(
         if plan:
             from sim2radar.tasks.experiment import plan_cost
 
-            cost = plan_cost(datasets, profile=profile, store=store, ablations=ablations,
+            cost = plan_cost(datasets, profile=profile, store=store, out=out,
+                             ablations=ablations,
                              overrides=overrides or None, device=device,
                              workers=_ints(plan_workers, "--plan-workers"),
                              step_seconds=_step_seconds(step_seconds))

@@ -102,23 +102,32 @@ def resolve_profile(profile: str | os.PathLike | ExperimentProfile,
     return prof
 
 
-def _resolve_precision(cfg, device: str | None):
+def _resolve_precision(cfg, device: str | None, table: str | os.PathLike | None,
+                       probe: bool) -> tuple[Any, dict[str, Any]]:
     """``runtime.amp: auto`` decided once, for the sweep's device, on the machine that plans
-    it: every run of the sweep trains in the same precision wherever it executes, and the
-    choice is part of the runs' keys and the sweep's settings."""
-    from sim2radar.hardware import autocast_dtype, torch_device
+    it, by measurement (:func:`sim2radar.detect.precision.decide_precision`: a timed probe of
+    this model, recorded in ``table`` and reused): every run of the sweep trains in the same
+    precision wherever it executes, and the choice is part of the runs' keys and the sweep's
+    settings. Returns the config with ``amp`` true/false and the decision (for sweep.json)."""
+    from sim2radar.detect.precision import decide_precision
+    from sim2radar.hardware import torch_device
 
-    if cfg.runtime.amp != "auto":
-        return cfg
     dev = torch_device(device or cfg.runtime.device)
-    return cfg.with_updates(runtime={"amp": autocast_dtype(dev, "auto") is not None})
+    decision = decide_precision(cfg, dev, table=table, probe=probe)
+    return cfg.with_updates(runtime={"amp": decision.amp}), decision.to_dict()
 
 
-def stage_configs(profile: ExperimentProfile, device: str | None) -> tuple[Any, Any]:
+def stage_configs(profile: ExperimentProfile, device: str | None, *,
+                  precision_table: str | os.PathLike | None = None,
+                  probe: bool = True) -> tuple[tuple[Any, Any], dict[str, Any]]:
     """The pre-training and fine-tuning ``DetectConfig`` of the profile, mixed precision
-    resolved for ``device`` (the device itself is not set: :func:`build_plan` does)."""
-    return (_resolve_precision(profile.detector_config("pretrain"), device),
-            _resolve_precision(profile.detector_config("finetune"), device))
+    resolved for ``device`` (the device itself is not set: :func:`build_plan` does), and the
+    precision decisions by stage."""
+    pre, pre_dec = _resolve_precision(profile.detector_config("pretrain"), device,
+                                      precision_table, probe)
+    ft, ft_dec = _resolve_precision(profile.detector_config("finetune"), device,
+                                    precision_table, probe)
+    return (pre, ft), {"pretrain": pre_dec, "finetune": ft_dec}
 
 
 def role_flag(role: str) -> str:
@@ -214,22 +223,26 @@ class SweepSetup:
     settings: dict[str, Any]
     device: str | None = None
     preregistration: dict[str, Any] | None = None
+    precision: dict[str, Any] = dataclasses.field(default_factory=dict)
 
 
 def setup_sweep(profile: str | os.PathLike | ExperimentProfile, datasets: Mapping[str, Any], *,
                 ablations: bool = False, overrides: Mapping[str, Any] | None = None,
-                device: str | None = None) -> SweepSetup:
+                device: str | None = None, precision_table: str | os.PathLike | None = None,
+                probe: bool = True) -> SweepSetup:
     """:func:`resolve_profile`, :func:`sweep_conditions` (``datasets``: role -> source),
-    :func:`stage_configs` and the protocol settings; raises ValueError / FileNotFoundError
-    naming the profile, field or missing dataset."""
+    :func:`stage_configs` (``precision_table``, ``probe``: how ``amp: auto`` is decided) and
+    the protocol settings; raises ValueError / FileNotFoundError naming the profile, field or
+    missing dataset."""
     prof = resolve_profile(profile, overrides)
     conditions, roles = sweep_conditions(prof, ablations, datasets)
-    configs = stage_configs(prof, device)
+    configs, precision = stage_configs(prof, device, precision_table=precision_table,
+                                       probe=probe)
     settings = protocol_settings(prof, *(c.model_dump(mode="json") for c in configs))
     prereg = preregistration(prof)
     if prereg is not None:
         settings["preregistration"] = {"sha256": prereg["sha256"]}
-    return SweepSetup(prof, conditions, roles, configs, settings, device, prereg)
+    return SweepSetup(prof, conditions, roles, configs, settings, device, prereg, precision)
 
 
 class PreregistrationMissing(ValueError):
@@ -420,6 +433,7 @@ def build_plan(setup: SweepSetup, domains: Mapping[str, Any], *, name: str, swee
         "provenance": {**provenance, "configs": {"pretrain": pre_dump, "finetune": ft_dump}},
         "settings": dict(settings), "settings_digest": protocol_digest(settings),
         "settings_fixed_at": fixed_at, "created_at": _now(),
+        "precision": dict(setup.precision),
         "preregistration": None if setup.preregistration is None else {
             "file": PREREGISTRATION_FILE, "sha256": setup.preregistration["sha256"],
             "source": setup.preregistration["path"]},

@@ -186,6 +186,13 @@ def test_a_sweep_refuses_changed_settings_but_not_changed_execution(first, data)
     sweep = json.loads((first["dir"] / "sweep.json").read_text())
     # amp "auto" is decided once, when the sweep is planned: every run trains the same way
     assert isinstance(sweep["settings"]["detector"]["finetune"]["amp"], bool)
+    # ... by measurement (or the table), recorded with its figures
+    for stage in ("pretrain", "finetune"):
+        decision = sweep["precision"][stage]
+        assert decision["amp"] is sweep["settings"]["detector"][stage]["amp"]
+        assert decision["source"] in ("probe", "recorded", "table")
+        if decision["source"] != "table":
+            assert decision["seconds_per_step"]["float32"] > 0
     md = (first["dir"] / "results.md").read_text()
     assert f"digest `{sweep['settings_digest']}`" in md and sweep["settings_fixed_at"] in md
     datasets = {"sim": data["sim"], "real": data["real"]}
