@@ -100,9 +100,9 @@ def sample_ground_truth(
         pick = rng.choice(len(pool), size=min(n, len(pool)), replace=False)
         cand = np.stack([pool[i] for i in pick]).astype(np.float64)
         existing = np.concatenate(out_boxes).astype(np.float64)
-        iou_self = bev_iou(cand, cand)
+        iou = bev_iou(cand, np.concatenate([cand, existing]))   # one call: its fixed cost once
+        iou_self, iou_exist = iou[:, :len(cand)], iou[:, len(cand):]
         np.fill_diagonal(iou_self, 0.0)
-        iou_exist = bev_iou(cand, existing) if len(existing) else np.zeros((len(cand), 0))
         clash = iou_self.max(axis=1) + (iou_exist.max(axis=1) if iou_exist.shape[1] else 0.0)
         ok = np.flatnonzero(clash == 0)
         if ok.size == 0:
