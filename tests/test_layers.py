@@ -10,8 +10,9 @@ Layers, lowest first (a module may import its own layer and the ones below):
   5 cli       sim2radar.cli, benchmarks
 
 The rule: a module imports only from its own layer or the ones below, and no import cycle
-(docs/design.md, "Layout"; the top-level folders install as ``sim2radar.flows`` etc., README
-"Package layout").
+(docs/architecture.md, "Rooms and layers"; the top-level folders install as ``sim2radar.flows``
+etc., README "Package layout"). The README's "Rooms" table lists every room (:func:`room`) with
+its layer; :func:`test_the_readme_rooms_table_matches_the_layers` keeps the two in step.
 ``python tests/test_layers.py`` prints the graph's cycles and upward arrows.
 """
 
@@ -155,6 +156,44 @@ def test_no_import_cycles():
 def test_no_import_climbs_up_the_layers():
     mods = modules()
     assert upward(import_graph(mods), mods) == []
+
+
+def room(module: str, mods: dict[str, Path]) -> str:
+    """The room of a module, as the README's "Rooms" table names it: a top-level folder
+    (``storage/``, ``tasks/``, ``flows/``, ``benchmarks/``), a sub-package of the library
+    (``sim2radar/radar/``, ``sim2radar/cli/``) or the library's shared modules
+    (``sim2radar/*.py``)."""
+    for folder, package in FOLDERS.items():
+        if folder != "sim2radar" and (module == package or module.startswith(package + ".")):
+            return f"{folder}/"
+    parts = module.split(".")
+    if len(parts) > 1 and mods.get(f"sim2radar.{parts[1]}", ROOT).name == "__init__.py":
+        return f"sim2radar/{parts[1]}/"
+    return "sim2radar/*.py"
+
+
+def readme_rooms(readme: Path = ROOT / "README.md") -> dict[str, int]:
+    """Room -> layer of the README's "Rooms" table (first two columns)."""
+    text = readme.read_text(encoding="utf-8")
+    assert "\n### Rooms\n" in text, f"{readme}: no '### Rooms' section"
+    section = text.split("\n### Rooms\n", 1)[1].split("\n#", 1)[0]
+    rows = [line.split("|") for line in section.splitlines() if line.startswith("| `")]
+    return {cells[1].strip().strip("`"): int(cells[2].split()[0]) for cells in rows}
+
+
+def test_the_readme_rooms_table_matches_the_layers():
+    """The README's "Rooms" table names exactly the rooms of the import graph, each at the
+    layer of all its modules: a new sub-package or a moved module cannot drift from it."""
+    mods = modules()
+    found: dict[str, set[int]] = defaultdict(set)
+    for m in mods:
+        found[room(m, mods)].add(layer(m))
+    table = readme_rooms()
+    assert sorted(table) == sorted(found), (
+        f"README 'Rooms' table: missing {sorted(set(found) - set(table))}, "
+        f"not a room {sorted(set(table) - set(found))}")
+    wrong = {r: (table[r], sorted(found[r])) for r in table if found[r] != {table[r]}}
+    assert not wrong, f"README 'Rooms' layer column (stated, actual): {wrong}"
 
 
 def test_the_plain_path_does_not_import_prefect():
