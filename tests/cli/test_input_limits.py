@@ -141,7 +141,7 @@ def test_a_capture_with_a_huge_image_or_a_bomb_intrinsics_fails_alone(tmp_path):
     res = _bounded("generate", "--captures", str(caps), "--no-prefect", "--frames", "1",
                    "--no-png", "--out", str(tmp_path / "store"), timeout=400, gib=10)
     out = res.stdout + res.stderr
-    assert res.returncode == 0, out
+    assert res.returncode == 1, out  # two scenes failed (recorded), the third finished
     assert "1 computed" in out and "2 failed" in out, out
     assert "400 MP" in out and "billion laughs" in out
     assert "Traceback" not in out

@@ -149,7 +149,7 @@ def test_forcing_480x640_fails_the_scene_with_the_swin_line(captures, model_dir,
         code, output, rows, export = _run(captures, model_dir, tmp_path, srv.base_url,
                                           gdino_input_hw=[480, 640])
         assert srv.n_requests == 0  # segmentation failed first: no segment reached the VLM
-    assert code == 0, output  # a failed scene is recorded; --strict would exit 1
+    assert code == 1, output  # the failed scene is recorded, and the exit status says so
     assert "Traceback" not in output, output
     # the scene fails before any radar frame exists: no frame row, none ok
     assert list(rows) == [SCENE]
