@@ -12,6 +12,11 @@ with ``time.perf_counter`` around it (CUDA synchronised on a GPU), median over t
 two warm-up steps. Host-side work on the critical path is augmentation + collation (and, on a
 GPU, whatever of the assignment waits for the host); the issue #31 goal is <= 5 ms per step on
 the GPU machine's CPU.
+
+Then the same step inside :func:`sim2radar.detect.train.train` (the profile's precision as
+``amp: auto`` resolves here) with ``runtime.prefetch_batches`` 0 (each batch made just before
+its step) and 1 (a background thread makes the next batch during the step;
+:mod:`sim2radar.detect.batches`): median seconds per step over the epochs after the first.
 """
 
 from __future__ import annotations
@@ -106,6 +111,19 @@ def step_breakdown(profile: str, device: torch.device, n_steps: int) -> dict[str
     return {k: round(1000 * statistics.median(v), 1) for k, v in parts.items()}
 
 
+def prefetch_step_seconds(profile: str, device: torch.device) -> dict[str, float]:
+    """Median s/step of ``train()`` with prefetch 0 and 1 (same batches: only time differs)."""
+    from sim2radar.datasets import make_door_frames
+    from sim2radar.experiment import load_profile
+    from sim2radar.experiment.cost import measure_step_seconds
+
+    cfg = load_profile(profile).detector_config("finetune")
+    frames = make_door_frames(4 * BATCH, seed=0, points_per_frame=POINTS_PER_FRAME)
+    return {f"prefetch_{n}": round(measure_step_seconds(
+        cfg.with_updates(runtime={"prefetch_batches": n}), frames, device=device), 4)
+        for n in (0, 1)}
+
+
 def main() -> dict:
     from sim2radar.hardware import torch_device
 
@@ -122,6 +140,11 @@ def main() -> dict:
         res[profile] = ms
         print(f"{profile:8s} {ms['augment']:9.1f} {ms['collate']:9.1f} {ms['assign']:9.1f} "
               f"{ms['model']:9.1f} {ms['step']:9.1f} {ms['host']:9.1f}")
+    for profile in PROFILES:
+        s = prefetch_step_seconds(profile, device)
+        res[profile].update(s)
+        print(f"{profile:8s} train() step, amp auto: prefetch 0 {s['prefetch_0']:.4f} s, "
+              f"prefetch 1 {s['prefetch_1']:.4f} s")
     return res
 
 

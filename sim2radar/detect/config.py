@@ -250,6 +250,10 @@ class RuntimeConfig(_Frozen):
     checkpoint_every: int = 10
     #: keep this many epoch checkpoints besides ``last.pt``
     keep_checkpoints: int = 2
+    #: training batches a background thread augments and collates ahead of the model's step
+    #: (0: each just before its step); the same batches bit for bit either way
+    #: (sim2radar.detect.batches)
+    prefetch_batches: int = Field(1, ge=0, le=8)
     progress: bool = True
 
 

@@ -39,7 +39,8 @@ import numpy as np
 import torch
 
 from sim2radar.datasets.openpcdet import Frame, OpenPCDetDataset
-from sim2radar.detect.augment import GTDatabase, augment_frame, build_gt_database
+from sim2radar.detect.augment import GTDatabase, build_gt_database
+from sim2radar.detect.batches import collate, epoch_batches
 from sim2radar.detect.config import DetectConfig, load_config
 from sim2radar.detect.model import ENCODER_MODULES, Detections, PointPillars
 from sim2radar.evaluate.ap import evaluate_detections
@@ -90,33 +91,6 @@ class TrainResult:
     steps: int
     history: list[dict[str, float]] = field(default_factory=list)
     seconds: float = 0.0
-
-
-# ---------------------------------------------------------------------------- batching
-def collate(
-    points: Sequence[np.ndarray],
-    boxes: Sequence[np.ndarray],
-    names: Sequence[Sequence[str]],
-    class_names: Sequence[str],
-    device: torch.device | str = "cpu",
-) -> tuple[torch.Tensor, torch.Tensor]:
-    """Stack frames into the model's inputs.
-
-    Returns
-    -------
-    points : (N, 1 + C) float32 — batch index, then the point columns.
-    gt_boxes : (B, M_max, 8) float32 — boxes [m, rad] + 1-based class id (0 = padding).
-    """
-    cols = [np.concatenate([np.full((len(p), 1), b, np.float32), p], axis=1)
-            for b, p in enumerate(points)]
-    pts = torch.from_numpy(np.concatenate(cols)) if cols else torch.zeros(0, 1)
-    m = max([len(b) for b in boxes] + [1])
-    gt = np.zeros((len(boxes), m, 8), np.float32)
-    for b, (bx, nm) in enumerate(zip(boxes, names, strict=True)):
-        ids = [class_names.index(n) + 1 if n in class_names else 0 for n in nm]
-        gt[b, : len(bx), :7] = bx
-        gt[b, : len(bx), 7] = ids
-    return pts.to(device), torch.from_numpy(gt).to(device)
 
 
 def _autocast(device: torch.device, dtype: torch.dtype | None):
@@ -501,14 +475,11 @@ def _train(config, train_ids, out_dir: Path, init_encoder_from, seed, *, data_di
         rng = np.random.default_rng([cfg.seed, epoch])
         order = rng.permutation(len(frames))
         sums: dict[str, float] = {}
-        for step in range(steps_per_epoch):
-            batch = [frames[i] for i in order[step * bs : (step + 1) * bs]]
-            aug = [augment_frame(f, cfg.augmentation, rng, mcfg.point_cloud_range_m, db)
-                   for f in batch]
-            pts, gt = collate([a[0] for a in aug], [a[1] for a in aug], [a[2] for a in aug],
-                              mcfg.class_names, dev)
+        batches = epoch_batches(frames, order, bs, cfg.augmentation, mcfg, rng, db, dev,
+                                prefetch=rt.prefetch_batches)
+        for pts, gt, n_frames in batches:
             with _autocast(dev, amp_dtype):
-                out = model(pts, len(batch))
+                out = model(pts, n_frames)
             loss, parts = model.loss(out, gt)
             optimizer.zero_grad(set_to_none=True)
             scaler.scale(loss).backward()

@@ -319,7 +319,7 @@ def test_validation_ap_matches_the_protocol_and_restores_the_mode(tmp_path):
 def test_encoder_transfer_is_the_only_difference_between_conditions(tmp_path, monkeypatch):
     """Same seed with and without ``init_encoder_from``: the same head initialisation, the same
     frame order and augmentation draws; only the encoder's weights differ."""
-    import sim2radar.detect.train as tr
+    import sim2radar.detect.batches as tr  # where training batches are augmented
 
     frames = make_door_frames(5, seed=8, points_per_frame=400)
     cfg = small_config(optimization=dict(batch_size=2, epochs=2))
