@@ -33,6 +33,7 @@ The sweep folder (``<out>/<name>/``)::
 
 from __future__ import annotations
 
+import contextlib
 import importlib
 import os
 from collections.abc import Callable, Mapping
@@ -66,13 +67,17 @@ def progress_callback(fn: Callable[[dict], None]):
 
 
 @flow(name="run-experiment", log_prints=False)
-def run_experiment_flow(plan_path: str) -> dict[str, Any]:
+def run_experiment_flow(plan_path: str, gpu_slots: bool = False) -> dict[str, Any]:
     """Run a prepared sweep — the ``plan.json`` :func:`sim2radar.tasks.experiment.prepare_sweep`
     wrote (its ``plan_path``; a paper-sized plan is over Prefect's 512 KiB limit on a flow run's
     parameters, its path is not): every pre-training and fine-tuning task, the tables,
     statistics, artifacts and dashboard. It ends Failed in Prefect when any run or
     pre-training failed (the summary rides on the state: :func:`~sim2radar.flows._states.
-    run_flow` returns it)."""
+    run_flow` returns it).
+
+    ``gpu_slots``: on a Dask cluster, every training task asks for one unit of the worker
+    resource :data:`~sim2radar.experiment.packing.GPU_RESOURCE`; a GPU worker started with
+    ``--resources GPU_RUNS=N`` then runs at most N of them at once (``--runs-per-gpu``)."""
     from prefect.artifacts import (
         create_markdown_artifact,
         create_progress_artifact,
@@ -130,12 +135,24 @@ def run_experiment_flow(plan_path: str) -> dict[str, Any]:
     # a pre-training's runs start when it finishes; the runs from scratch start at once
     pending: dict[Any, tuple[Any, PretrainResult | None]] = {}
 
+    def slot():
+        if not gpu_slots:
+            return contextlib.nullcontext()
+        import dask
+
+        from sim2radar.experiment.packing import GPU_RESOURCE
+
+        return dask.annotate(resources={GPU_RESOURCE: 1})
+
     def finetune(run, pretrain: PretrainResult | None) -> None:
-        fut = finetune_task.with_options(task_run_name=run.id).submit(ctx, run, pretrain)
+        with slot():
+            fut = finetune_task.with_options(task_run_name=run.id).submit(ctx, run, pretrain)
         pending[fut] = (run, pretrain)
 
     for p in plan.pretrains:
-        pending[pretrain_task.with_options(task_run_name=p.id).submit(ctx, p)] = (p, None)
+        with slot():
+            fut = pretrain_task.with_options(task_run_name=p.id).submit(ctx, p)
+        pending[fut] = (p, None)
     for r in plan.runs:
         if r.pretrain_id is None:
             finetune(r, None)
@@ -199,6 +216,7 @@ def run_experiment(
     dask_address: str | None = None,
     device: str | None = None,
     force: list[str] | None = None,
+    runs_per_gpu: int | str | None = None,
 ) -> dict[str, Any]:
     """Prepare and run a sweep (see the module docstring); configs and datasets are validated
     before the flow starts, so a bad input fails fast with the file and field named.
@@ -216,15 +234,41 @@ def run_experiment(
         ``dask_address`` (``"local"`` or ``tcp://...``) the runs go to Dask instead of threads.
     force : run ids (``baseline-f0.05-t2``) or keys to redo from scratch (their stored rows and
         checkpoints are moved aside, not deleted).
+    runs_per_gpu : concurrent training runs per GPU (a count, or ``"auto"``: measured), on a
+        CUDA device only (:func:`packed_runner`).
     """
     from sim2radar.tasks.experiment import prepare_sweep
 
     plan = prepare_sweep({**(datasets or {}), "sim": sim, "real": real}, profile=profile,
                          name=name, out=out, store=store, ablations=ablations,
                          overrides=overrides, device=device, force=force or ())
-    runner = task_runner(int(workers or plan.concurrent_runs), dask_address)
+    runner, gpu_slots = packed_runner(plan, workers, dask_address, runs_per_gpu)
     return run_flow(run_experiment_flow.with_options(task_runner=runner),
-                    plan_path=plan.plan_path)
+                    plan_path=plan.plan_path, gpu_slots=gpu_slots)
+
+
+def packed_runner(plan, workers: int | None, dask_address: str | None,
+                  runs_per_gpu: int | str | None) -> tuple[Any, bool]:
+    """The sweep's task runner and whether its training tasks claim GPU slots.
+
+    Without ``runs_per_gpu``: ``workers`` (default the profile's ``concurrent_runs``) threads,
+    or Dask processes with ``dask_address``. With it (a CUDA device:
+    :func:`sim2radar.tasks.experiment.pack_runs` decides and records N):
+    N x GPUs training processes — a Dask ``LocalCluster`` when ``dask_address`` is ``local``
+    or not given and prefect-dask is installed (threads otherwise) — or, on a scheduler
+    address, tasks that each claim one ``GPU_RUNS`` unit, so workers started with
+    ``--resources GPU_RUNS=N`` (one per GPU) run N at once.
+    """
+    if runs_per_gpu is None:
+        return task_runner(int(workers or plan.concurrent_runs), dask_address), False
+    from sim2radar.flows.runners import dask_available
+    from sim2radar.tasks.experiment import pack_runs
+
+    decision, n_gpus = pack_runs(plan, runs_per_gpu)
+    n = decision.runs * n_gpus
+    if dask_address and dask_address != "local":
+        return task_runner(n, dask_address), True
+    return task_runner(n, "local" if dask_available() else None), False
 
 
 @flow(name="run-experiment-job", log_prints=False)
@@ -239,11 +283,14 @@ def run_experiment_job(
     ablations: bool = False,
     workers: int | None = None,
     dask_address: str | None = None,
+    runs_per_gpu: int | str | None = None,
 ) -> dict[str, Any]:
-    """Deployment entry point (``deploy/prefect.yaml``): :func:`run_experiment` as a subflow
+    """Deployment entry point (``sim2radar deploy``): :func:`run_experiment` as a subflow
     (the package's copy, so Dask workers can import it); ``datasets``: the ablations' datasets
-    by role (``{"sim-gt": ..., "sim-one-material": ...}``)."""
+    by role (``{"sim-gt": ..., "sim-one-material": ...}``); ``runs_per_gpu``: a count or
+    ``"auto"`` on a GPU pool."""
     package = importlib.import_module("sim2radar.flows.run_experiment")
     return relay(package.run_experiment(sim, real, profile=profile, name=name, out=out,
                                         store=store, datasets=datasets, ablations=ablations,
-                                        workers=workers, dask_address=dask_address), "runs")
+                                        workers=workers, dask_address=dask_address,
+                                        runs_per_gpu=runs_per_gpu), "runs")

@@ -168,6 +168,74 @@ def prepare_sweep(datasets: Mapping[str, str | os.PathLike | None], *, profile: 
     return dataclasses.replace(plan, plan_path=str(path))
 
 
+def parse_runs_per_gpu(value: int | str | None) -> int | str | None:
+    """``--runs-per-gpu``: a count >= 1, ``"auto"``, or None (not packing).
+
+    Raises
+    ------
+    ValueError — anything else, naming the option.
+    """
+    if value is None or value == "auto":
+        return value
+    text = str(value).strip()
+    if isinstance(value, bool) or not text.isdigit() or int(text) < 1:
+        raise ValueError(f"--runs-per-gpu must be a count >= 1 or 'auto', got {value!r}")
+    return int(text)
+
+
+def cuda_devices(device: str | None) -> int:
+    """How many GPUs a sweep on ``device`` packs runs onto: 1 for ``cuda:K``, every visible
+    GPU for ``cuda`` or an automatic device on a GPU machine.
+
+    Raises
+    ------
+    ValueError — the device is not a CUDA GPU (runs per GPU mean nothing there).
+    """
+    import torch
+
+    from sim2radar.hardware import torch_device
+
+    dev = torch_device(device)
+    if dev.type != "cuda":
+        raise ValueError(f"--runs-per-gpu: the sweep's device is {dev}, not a CUDA GPU; on a "
+                         "CPU give --workers (concurrent runs) instead")
+    return 1 if dev.index is not None else max(1, torch.cuda.device_count())
+
+
+def pack_runs(plan: SweepPlan, runs_per_gpu: int | str, *, steps: int = 20):
+    """How many of ``plan``'s training runs share each GPU
+    (:class:`~sim2radar.experiment.packing.PackingDecision`): ``runs_per_gpu`` as given, or
+    for ``"auto"`` measured (:func:`~sim2radar.experiment.packing.aggregate_throughput` of the
+    sweep's fine-tuning model, 1/2/4/8 processes, :func:`~.packing.choose_runs`). The decision
+    is recorded in the sweep's ``sweep.json`` (``packing``, with the number of GPUs).
+
+    Raises
+    ------
+    ValueError — the sweep's device is not a CUDA GPU, or a bad count.
+    """
+    from sim2radar.detect.config import DetectConfig
+    from sim2radar.experiment.packing import (
+        PackingDecision,
+        aggregate_throughput,
+        choose_runs,
+    )
+
+    runs_per_gpu = parse_runs_per_gpu(runs_per_gpu)
+    n_gpus = cuda_devices(plan.context.device)
+    if runs_per_gpu == "auto":
+        from sim2radar.hardware import torch_device
+
+        cfg = DetectConfig.model_validate(plan.context.finetune_config)
+        device = str(torch_device(plan.context.device or cfg.runtime.device))
+        decision = choose_runs(aggregate_throughput(cfg, device, steps=steps))
+    else:
+        decision = PackingDecision(int(runs_per_gpu), reason="given (--runs-per-gpu)")
+    path = Path(plan.context.sweep_dir) / "sweep.json"
+    doc = _read_sweep_json(path) or {}
+    write_json(path, {**doc, "packing": {**decision.to_dict(), "gpus": n_gpus}})
+    return decision, n_gpus
+
+
 def read_plan(plan_path: str | os.PathLike) -> SweepPlan:
     """The plan :func:`prepare_sweep` wrote (``<sweep>/plan.json``), with its ``plan_path``."""
     path = Path(plan_path)
@@ -183,19 +251,46 @@ def plan_cost(datasets: Mapping[str, str | os.PathLike | None], *, profile: Any 
               ablations: bool = False,
               overrides: dict[str, Any] | None = None, device: str | None = None,
               workers: tuple[int, ...] = (1, 8),
-              step_seconds: dict[str, float] | None = None) -> dict[str, Any]:
+              step_seconds: dict[str, float] | None = None,
+              runs_per_gpu: int | str | None = None) -> dict[str, Any]:
     """What a sweep would cost, without creating it (nothing is written to the sweeps folder;
     ``store:`` datasets are exported to a temporary folder):
     :func:`sim2radar.experiment.sweep.sweep_cost` of the sweep :func:`prepare_sweep` would
     plan; mixed precision as recorded for this device under ``out``, else assumed (no probe
-    runs for an estimate)."""
+    runs for an estimate).
+
+    ``runs_per_gpu`` (a count or ``"auto"``, CUDA only): the runs sharing each GPU's measured
+    aggregate throughput (:func:`~sim2radar.experiment.packing.aggregate_throughput` of the
+    fine-tuning model, used for both stages) sets one run's seconds per step, and the wall time
+    is planned for N x GPUs concurrent runs (``packing`` in the result)."""
     setup = sweep.setup_sweep(profile, datasets, ablations=ablations, overrides=overrides,
                               device=device, precision_table=Path(out) / PRECISION_TABLE,
                               probe=False)
+    packing = None
+    if runs_per_gpu is not None:
+        from sim2radar.experiment.packing import (
+            PROBE_COUNTS,
+            aggregate_throughput,
+            choose_runs,
+        )
+        from sim2radar.hardware import torch_device
+
+        runs_per_gpu = parse_runs_per_gpu(runs_per_gpu)
+        n_gpus = cuda_devices(device)
+        ft = setup.configs[1]
+        dev = str(torch_device(device or ft.runtime.device))
+        counts = PROBE_COUNTS if runs_per_gpu == "auto" else (runs_per_gpu,)
+        per_n = aggregate_throughput(ft, dev, counts)
+        decision = choose_runs(per_n)
+        s = decision.seconds_per_step()
+        step_seconds = {"pretrain": s, "finetune": s}
+        workers = (decision.runs * n_gpus,)
+        packing = {**decision.to_dict(), "gpus": n_gpus}
     with tempfile.TemporaryDirectory(prefix="sim2radar-plan-") as tmp:
         domains = sweep.open_datasets(datasets, setup.roles, functools.partial(
             _export, open_store(store).root_uri, Path(tmp), setup.profile.sweep_seed))
-        return sweep.sweep_cost(setup, domains, workers=workers, step_seconds=step_seconds)
+        cost = sweep.sweep_cost(setup, domains, workers=workers, step_seconds=step_seconds)
+    return cost if packing is None else {**cost, "packing": packing}
 
 
 def force_runs(store: str, sweep_dir: str | os.PathLike,

@@ -130,7 +130,8 @@ def run_sweep(sim: str, real: str, *, profile: str, name: str, out: str, store: 
               device: str | None = None, show_progress: bool = True,
               verbose: bool = False, force: list[str] | None = None,
               mlflow: str | None = None, mlflow_experiment: str | None = None,
-              mlflow_checkpoints: bool = False) -> dict[str, Any]:
+              mlflow_checkpoints: bool = False,
+              runs_per_gpu: int | str | None = None) -> dict[str, Any]:
     """Prepare (validating every input first) and run a sweep with a progress bar; returns
     the flow's summary. ``datasets``: the other conditions' datasets by role
     (``{"sim-gt": ...}``).
@@ -150,8 +151,11 @@ def run_sweep(sim: str, real: str, *, profile: str, name: str, out: str, store: 
 
         require_mlflow()        # before any work: the extra is missing, say so now
     _prefect_env(verbose)
-    from sim2radar.flows.run_experiment import progress_callback, run_experiment_flow
-    from sim2radar.flows.runners import task_runner
+    from sim2radar.flows.run_experiment import (
+        packed_runner,
+        progress_callback,
+        run_experiment_flow,
+    )
     from sim2radar.tasks.experiment import prepare_sweep
 
     plan = prepare_sweep({**(datasets or {}), "sim": sim, "real": real}, profile=profile,
@@ -161,7 +165,7 @@ def run_sweep(sim: str, real: str, *, profile: str, name: str, out: str, store: 
     if mlflow is not None:
         tracker = _Tracking(mlflow, plan.context.sweep_dir, mlflow_experiment or plan.name,
                             mlflow_checkpoints)
-    runner = task_runner(int(workers or plan.concurrent_runs), dask_address)
+    runner, gpu_slots = packed_runner(plan, workers, dask_address, runs_per_gpu)
     columns = [TextColumn("[bold]sweep"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
                TextColumn("{task.description}")]
     with Progress(*columns, disable=not show_progress) as progress:
@@ -181,7 +185,7 @@ def run_sweep(sim: str, real: str, *, profile: str, name: str, out: str, store: 
 
         with progress_callback(on_run):   # failed runs: Failed in Prefect, summary here
             summary = run_flow(run_experiment_flow.with_options(task_runner=runner),
-                               plan_path=plan.plan_path)
+                               plan_path=plan.plan_path, gpu_slots=gpu_slots)
     if tracker is not None:
         tracker.sync(final=True)
         summary = {**summary, "mlflow": tracker.summary()}
@@ -293,6 +297,11 @@ def sweep(
     trials: int | None = typer.Option(None, help="Override the profile's trials."),
     fractions: str | None = typer.Option(None, help="Override the fractions, e.g. 0.1,0.5,1."),
     workers: int | None = typer.Option(None, help="Concurrent runs (default: the profile's)."),
+    runs_per_gpu: str | None = typer.Option(
+        None, "--runs-per-gpu", help="Training runs sharing each CUDA GPU at once, in separate "
+        "processes: a count, or 'auto' (measured: aggregate steps/s of 1/2/4/8; recorded in "
+        "sweep.json). With --dask tcp://..., tasks claim GPU_RUNS units: start each GPU worker "
+        "with --resources GPU_RUNS=N."),
     dask: str | None = typer.Option(None, "--dask", help="Dask scheduler address or 'local'."),
     device: str | None = typer.Option(None, help="Torch device (cpu, cuda, cuda:1)."),
     json_out: Path | None = typer.Option(None, "--json", help="Also write the summary as JSON."),
@@ -341,6 +350,11 @@ def sweep(
     try:
         if workers is not None and workers < 1:
             raise ValueError(f"--workers must be >= 1, got {workers}")
+        if runs_per_gpu is not None:
+            from sim2radar.tasks.experiment import cuda_devices, parse_runs_per_gpu
+
+            runs_per_gpu = parse_runs_per_gpu(runs_per_gpu)
+            cuda_devices(device)        # a CUDA GPU, or exit 2 now
         if trials is not None:
             overrides["trials"] = trials
         fr = _fractions(fractions)
@@ -359,7 +373,8 @@ def sweep(
                              ablations=ablations,
                              overrides=overrides or None, device=device,
                              workers=_ints(plan_workers, "--plan-workers"),
-                             step_seconds=_step_seconds(step_seconds))
+                             step_seconds=_step_seconds(step_seconds),
+                             runs_per_gpu=runs_per_gpu)
             print_plan(cost)
             if json_out is not None:
                 json_out.parent.mkdir(parents=True, exist_ok=True)
@@ -370,7 +385,7 @@ def sweep(
                             overrides=overrides or None, workers=workers, dask_address=dask,
                             device=device, verbose=verbose, force=force_run, mlflow=mlflow,
                             mlflow_experiment=mlflow_experiment,
-                            mlflow_checkpoints=mlflow_checkpoints)
+                            mlflow_checkpoints=mlflow_checkpoints, runs_per_gpu=runs_per_gpu)
     except (ValueError, FileNotFoundError, DatasetError, ImportError) as exc:
         typer.secho(f"error: {exc}", fg="red", err=True)
         raise typer.Exit(2) from None

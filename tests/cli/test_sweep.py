@@ -55,7 +55,8 @@ def _fake_flow(monkeypatch, tmp_path: Path, uri: str | None = None,
     and ends with its stats.json. With ``uri``, records after each run how many runs MLflow's
     ``experiment`` holds."""
     import sim2radar.flows._states as states
-    import sim2radar.tasks.experiment as tasks
+    import sim2radar.flows.run_experiment  # noqa: F401 - imported before the patch below, so
+    import sim2radar.tasks.experiment as tasks  # its module-level run_flow stays the real one
     from sim2radar.experiment.stats import sweep_statistics
     from sim2radar.fileio import write_json
     from sim2radar.flows import _progress
@@ -71,7 +72,7 @@ def _fake_flow(monkeypatch, tmp_path: Path, uri: str | None = None,
                                pretrains=(), runs=seen["rows"], concurrent_runs=1,
                                plan_path=str(folder / "plan.json"))
 
-    def run_flow(flow, plan_path):
+    def run_flow(flow, plan_path, gpu_slots=False):
         folder, rows = Path(plan_path).parent, seen["rows"]
         for i, row in enumerate(rows):
             write_runs(folder, rows[: i + 1])

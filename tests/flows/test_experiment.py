@@ -251,7 +251,9 @@ def test_a_paper_sized_plan_reaches_the_flow_as_a_file(data, tmp_path):
     assert path.stat().st_size > limit and len(plan.pretrains) >= 24
     with pytest.raises(ValueError, match="less than 524,288 bytes"):
         validate_parameter_size({"plan": plan.to_dict()}, limit)  # what was sent before
-    assert list(inspect.signature(run_experiment_flow.fn).parameters) == ["plan_path"]
+    # the plan's path, and one flag (whether training tasks claim GPU slots)
+    assert list(inspect.signature(run_experiment_flow.fn).parameters) == ["plan_path",
+                                                                          "gpu_slots"]
     validate_parameter_size({"plan_path": str(path)}, limit)  # what is sent now
     assert read_plan(path) == plan                            # typed, as prepared
 
@@ -431,17 +433,40 @@ def test_a_killed_sweep_resumes_and_only_finishes_the_missing_runs(data, tmp_pat
 
 def test_a_sweep_on_a_dask_cluster_gives_the_thread_runners_results(first, data, tmp_path):
     """The same smoke sweep with its runs on a 2-process LocalCluster (loopback) finishes every
-    run and reports the thread runner's APs: training is seeded per run, not per process."""
+    run and reports the thread runner's APs: training is seeded per run, not per process.
+    The runs claim GPU slots (what ``--runs-per-gpu`` does on a cluster of GPU workers): each
+    training task asks the scheduler for one GPU_RUNS unit, which the workers declare."""
     pytest.importorskip("prefect_dask")
     distributed = pytest.importorskip("distributed")
-    from sim2radar.flows.run_experiment import run_experiment
-    from sim2radar.flows.runners import local_cluster_kwargs
+    from distributed.diagnostics.plugin import SchedulerPlugin
 
-    with distributed.LocalCluster(**local_cluster_kwargs(2)) as lc:
-        summary = run_experiment(data["sim"], data["real"], profile="smoke", name="t",
-                                 out=tmp_path / "sweeps", store=tmp_path / "store",
-                                 dask_address=lc.scheduler_address)
+    from sim2radar.experiment.packing import GPU_RESOURCE
+    from sim2radar.flows._states import run_flow
+    from sim2radar.flows.run_experiment import run_experiment_flow
+    from sim2radar.flows.runners import local_cluster_kwargs, task_runner
+    from sim2radar.tasks.experiment import prepare_sweep
+
+    class Restrictions(SchedulerPlugin):
+        def __init__(self, scheduler):
+            self.scheduler, self.seen = scheduler, {}
+
+        def transition(self, key, start, finish, *args, **kwargs):
+            if finish == "processing":
+                ts = self.scheduler.tasks.get(key)
+                self.seen[key] = dict(ts.resource_restrictions or {}) if ts else None
+
+    plan = prepare_sweep({"sim": data["sim"], "real": data["real"]}, profile="smoke",
+                         name="t", out=tmp_path / "sweeps", store=tmp_path / "store")
+    with distributed.LocalCluster(**local_cluster_kwargs(2),
+                                  resources={GPU_RESOURCE: 1}) as lc:
+        plugin = Restrictions(lc.scheduler)
+        lc.scheduler.add_plugin(plugin, name="restrictions")
+        summary = run_flow(run_experiment_flow.with_options(
+            task_runner=task_runner(2, lc.scheduler_address)), plan_path=plan.plan_path,
+            gpu_slots=True)
     assert summary["counts"] == {"ok": 8, "skipped": 0, "failed": 0}
+    assert len(plugin.seen) == 8 + len(plan.pretrains)       # every training task ...
+    assert all(r == {GPU_RESOURCE: 1} for r in plugin.seen.values()), plugin.seen  # ... a slot
 
     def aps(path):
         rows = pq.read_table(path).to_pylist()
