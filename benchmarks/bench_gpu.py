@@ -1,0 +1,173 @@
+"""The prepared GPU benchmark (issue #31): what one accelerator does for the paper grid.
+
+    python -m benchmarks gpu          # on a GPU: <= 8 minutes; on a CPU: small sizes, ~2 min
+
+Figures, each measured here:
+
+1. **Training step** per profile (``paper``, ``study``) and precision (float32, the device's
+   mixed dtype): median seconds per optimiser step of the profile's fine-tuning model
+   (:func:`sim2radar.detect.precision.probe_step_seconds`: batch of synthetic corridors at
+   IFR's density, augmentation, collation, forward, loss, backward, AdamW), and what ``amp:
+   auto`` would choose from them (:data:`~sim2radar.detect.precision.MIN_GAIN` rule).
+2. **Runs per GPU**: N training processes started together on the one device (1/2/4/8 on a
+   GPU, 1/2 on a CPU at one thread each), each running the same steps of the paper model in
+   the chosen precision; aggregate optimiser steps per second = N x steps / wall time.
+3. **The paper grid's planned wall time**: its jobs (``paper`` profile: 5 fractions x 5
+   trials, baseline + sim-pretrain, 371 real training frames, 270 sim frames; optimiser steps
+   from :func:`sim2radar.experiment.cost.sweep_jobs`) replayed on the best N
+   (:func:`~sim2radar.experiment.cost.wall_time`, each run's step at N-sharing speed).
+4. **The radar on the device**: a ray-traced ``ti-mmwcas`` frame of a 20k-triangle corridor
+   with the Mitsuba variant in use (``cuda_ad_rgb`` on a GPU) against bare ``ray_intersect``
+   of the same rays; and a reference-radar frame (signal synthesis + TI chain, torch on the
+   device) from 20,000 synthetic paths.
+
+Run on a GPU machine without internet: see the README's "A GPU machine" for the wheels to
+carry. Record the figures in BENCHMARKS.md with the card's name.
+"""
+
+from __future__ import annotations
+
+import statistics
+import time
+
+#: paper grid sizes (arXiv 2602.13314, Table 1): real training frames, sim frames
+PAPER_REAL_TRAIN = 371
+PAPER_SIM_FRAMES = 270
+
+def _gpu() -> bool:
+    import torch
+
+    return torch.cuda.is_available()
+
+
+def step_times(device: str, profiles: tuple[str, ...], steps: int) -> dict:
+    """Median s/step per profile and precision, and what ``amp: auto`` would choose."""
+    import torch
+
+    from sim2radar.detect.precision import MIN_GAIN, probe_step_seconds
+    from sim2radar.experiment import load_profile
+    from sim2radar.hardware import autocast_dtype
+
+    mixed = autocast_dtype(device, True)
+    mixed_name = str(mixed).removeprefix("torch.")
+    out = {}
+    for profile in profiles:
+        cfg = load_profile(profile).detector_config("finetune")
+        fp32 = probe_step_seconds(cfg, device, None, steps=steps)
+        amp_s = probe_step_seconds(cfg, device, mixed, steps=steps)
+        choice = mixed_name if amp_s <= (1 - MIN_GAIN) * fp32 else "float32"
+        out[profile] = {"float32": round(fp32, 4), mixed_name: round(amp_s, 4),
+                        "auto_chooses": choice}
+        print(f"{profile:6s} step: float32 {fp32:.4f} s, {mixed_name} {amp_s:.4f} s "
+              f"-> amp auto: {choice}")
+        if device.startswith("cuda"):
+            torch.cuda.empty_cache()
+    return out
+
+
+def runs_per_device(device: str, profile: str, dtype: str, counts: tuple[int, ...],
+                    steps: int, threads: int) -> dict:
+    """Aggregate optimiser steps/s of N concurrent training processes on the device
+    (:func:`sim2radar.experiment.packing.aggregate_throughput`), and what ``--runs-per-gpu
+    auto`` would choose from them."""
+    from sim2radar.experiment import load_profile
+    from sim2radar.experiment.packing import aggregate_throughput, choose_runs
+
+    cfg = load_profile(profile).detector_config("finetune").with_updates(
+        runtime={"amp": dtype != "float32", "num_threads": threads})
+    t0 = time.perf_counter()
+    per_n = aggregate_throughput(cfg, device, counts, steps=steps)
+    out = {n: {"steps_per_s": v} for n, v in per_n.items()}
+    for n, v in per_n.items():
+        print(f"{n} run(s) on {device}: {v:.1f} steps/s in aggregate ({n / v:.4f} s per step "
+              "each)")
+    choice = choose_runs(per_n)
+    print(f"--runs-per-gpu auto would choose {choice.runs} ({time.perf_counter() - t0:.0f} s)")
+    return out
+
+
+def paper_grid(per_n: dict) -> dict:
+    """The paper grid's jobs and planned wall time on the best number of runs per device."""
+    from sim2radar.experiment import load_profile
+    from sim2radar.experiment.cost import sweep_jobs, wall_time
+    from sim2radar.experiment.plan import plan_sweep
+
+    profile = load_profile("paper")
+    ids = [f"{i:06d}" for i in range(PAPER_REAL_TRAIN)]
+    pretrains, runs = plan_sweep(profile, ids, ("baseline", "sim-pretrain"))
+    jobs = sweep_jobs(pretrains, runs, {"sim": PAPER_SIM_FRAMES}, profile.batch_size)
+    total = sum(j.steps for j in jobs)
+    plans = {}
+    for n, fig in per_n.items():
+        s = n / fig["steps_per_s"]          # one run's step while n share the device
+        plans[n] = round(wall_time(jobs, {"pretrain": s, "finetune": s}, workers=n) / 60, 1)
+    best = min(plans, key=plans.get)
+    print(f"paper grid: {len(jobs)} jobs, {total} optimiser steps; planned "
+          + ", ".join(f"{n} per device {m:.1f} min" for n, m in plans.items())
+          + f" (best: {best})")
+    return {"jobs": len(jobs), "steps": total, "planned_minutes": plans, "best_runs": best}
+
+
+def radar_frames() -> dict:
+    """Ray-traced frame vs bare intersection, and a reference-radar frame, on this machine."""
+    import numpy as np
+
+    from benchmarks._scenes import corridor
+    from benchmarks.bench_signal import synthetic_paths
+    from sim2radar.radar import RadarScene, load_radar_config
+    from sim2radar.radar.signal import simulate_signal_frame
+
+    radar = load_radar_config("ti-mmwcas")
+    scene = RadarScene(corridor(20_000))
+    pose = np.eye(4)
+    pose[:3, 3] = [0.0, 0.0, 1.0]
+    scene.simulate(radar, pose, seed=0)
+    scene.intersect_only(radar, pose, seed=0)
+    sim_s, bare_s = [], []
+    for i in range(5):
+        t0 = time.perf_counter()
+        scene.simulate(radar, pose, seed=i + 1)
+        sim_s.append(time.perf_counter() - t0)
+        bare_s.append(scene.intersect_only(radar, pose, seed=i + 1)["seconds"])
+    frame, bare = statistics.median(sim_s), statistics.median(bare_s)
+    ref = load_radar_config("ti-mmwcas-reference")
+    paths = synthetic_paths(20_000, seed=0)
+    simulate_signal_frame(paths, ref, seed=0)
+    ref_s = []
+    for i in range(3):
+        t0 = time.perf_counter()
+        out = simulate_signal_frame(paths, ref, seed=i + 1)
+        ref_s.append(time.perf_counter() - t0)
+    res = {"variant": scene.variant, "frame_s": round(frame, 4), "bare_s": round(bare, 4),
+           "ratio": round(frame / bare, 2), "reference_frame_s": round(statistics.median(ref_s), 3),
+           "reference_device": out.stats["device"]}
+    print(f"ray-traced frame ({scene.variant}): {frame * 1000:.1f} ms vs bare ray_intersect "
+          f"{bare * 1000:.1f} ms ({frame / bare:.2f}x); reference frame (20k paths, "
+          f"{out.stats['device']}): {res['reference_frame_s']:.3f} s")
+    return res
+
+
+def main() -> dict:
+    import torch
+
+    gpu = _gpu()
+    device = "cuda" if gpu else "cpu"
+    name = torch.cuda.get_device_name() if gpu else "CPU (no CUDA: small sizes)"
+    print(f"device: {name}, torch {torch.__version__}")
+    t0 = time.perf_counter()
+    res: dict = {"device": name}
+    res["step"] = step_times(device, ("paper", "study") if gpu else ("demo",),
+                             steps=20 if gpu else 2)
+    best = res["step"]["paper" if gpu else "demo"]["auto_chooses"]
+    res["runs_per_device"] = runs_per_device(
+        device, "paper" if gpu else "demo", best, (1, 2, 4, 8) if gpu else (1, 2),
+        steps=30 if gpu else 3, threads=2 if gpu else 1)
+    res["paper_grid"] = paper_grid(res["runs_per_device"])
+    res["radar"] = radar_frames()
+    res["seconds"] = round(time.perf_counter() - t0, 1)
+    print(f"benchmark took {res['seconds']:.0f} s")
+    return res
+
+
+if __name__ == "__main__":
+    main()
