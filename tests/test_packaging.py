@@ -166,6 +166,7 @@ def _expected_members(src: Path) -> set[str]:
         expected.add("sim2radar/configs/" + cfg.relative_to(src / "configs").as_posix())
     for preset in (src / "sim2radar/radar/presets").glob("*.yaml"):
         expected.add(preset.relative_to(src).as_posix())
+    expected.add("sim2radar/flows/deployments.yaml")   # `sim2radar deploy` reads it
     # the demo scene and (once it exists) the dashboard's page: every file, any depth
     for folder in ("sim2radar/data", "sim2radar/experiment/page"):
         for path in (src / folder).rglob("*"):

@@ -470,13 +470,15 @@ def _train(config, train_ids, out_dir: Path, init_encoder_from, seed, *, data_di
         progress = tqdm(total=total_steps, initial=start_epoch * steps_per_epoch,
                         desc=f"train {cfg.name}", unit="step", dynamic_ncols=True)
     model.train()
+    prefetch = rt.prefetch_batches if rt.prefetch_batches is not None else int(
+        dev.type == "cuda")
     for epoch in range(start_epoch, opt_cfg.epochs):
         t_epoch = time.perf_counter()
         rng = np.random.default_rng([cfg.seed, epoch])
         order = rng.permutation(len(frames))
         sums: dict[str, float] = {}
         batches = epoch_batches(frames, order, bs, cfg.augmentation, mcfg, rng, db, dev,
-                                prefetch=rt.prefetch_batches)
+                                prefetch=prefetch)
         for pts, gt, n_frames in batches:
             with _autocast(dev, amp_dtype):
                 out = model(pts, n_frames)
