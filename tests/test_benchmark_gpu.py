@@ -1,0 +1,35 @@
+"""``python -m benchmarks gpu`` runs on a machine without CUDA (small sizes), so CI exercises the
+script a GPU session will run (issue #31), and its figures are coherent."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def test_the_gpu_benchmark_runs_on_a_cpu(capsys, monkeypatch):
+    import torch
+
+    if torch.cuda.is_available():
+        pytest.skip("on a GPU the benchmark takes minutes: run `python -m benchmarks gpu`")
+    monkeypatch.syspath_prepend(str(ROOT))
+    sys.modules.pop("benchmarks.bench_gpu", None)
+    from benchmarks import bench_gpu
+
+    res = bench_gpu.main()
+    out = capsys.readouterr().out
+    step = res["step"]["demo"]
+    assert step["float32"] > 0 and step["auto_chooses"] in ("float32", "bfloat16")
+    assert set(res["runs_per_device"]) == {1, 2}
+    assert all(v["steps_per_s"] > 0 for v in res["runs_per_device"].values())
+    grid = res["paper_grid"]
+    # the paper's grid: 5 fractions x 5 trials x (baseline + sim-pretrain) + 25 pre-trainings
+    assert grid["jobs"] == 75 and grid["steps"] > 100_000
+    assert grid["best_runs"] in (1, 2) and grid["throughput_of"] == "demo"
+    radar = res["radar"]
+    assert radar["frame_s"] > radar["bare_s"] > 0 and radar["reference_frame_s"] > 0
+    assert "--runs-per-gpu auto would choose" in out and "paper grid: 75 jobs" in out
