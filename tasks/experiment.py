@@ -142,11 +142,14 @@ def prepare_sweep(datasets: Mapping[str, str | os.PathLike | None], *, profile: 
     ValueError, FileNotFoundError, DatasetError — naming the dataset, profile or field at fault.
     """
     sweep.check_sweep_name(name)
-    setup = sweep.setup_sweep(profile, datasets, ablations=ablations, overrides=overrides,
-                              device=device, precision_table=Path(out) / PRECISION_TABLE)
     sweep_dir = Path(out) / name
-    fixed_at = sweep.settings_fixed_at(_read_sweep_json(sweep_dir / "sweep.json"),
-                                       setup.settings, name=name, sweep_dir=sweep_dir)
+    old = _read_sweep_json(sweep_dir / "sweep.json")
+    # a sweep keeps the precision it decided first (its runs' keys depend on it)
+    known = old.get("precision") if isinstance(old, dict) else None
+    setup = sweep.setup_sweep(profile, datasets, ablations=ablations, overrides=overrides,
+                              device=device, precision_table=Path(out) / PRECISION_TABLE,
+                              known_precision=known if isinstance(known, dict) else None)
+    fixed_at = sweep.settings_fixed_at(old, setup.settings, name=name, sweep_dir=sweep_dir)
     sweep_dir.mkdir(parents=True, exist_ok=True)
     st = open_store(store)
     domains = sweep.open_datasets(datasets, setup.roles, functools.partial(

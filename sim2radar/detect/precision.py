@@ -180,14 +180,18 @@ def _decide(cfg, device, *, probe: bool) -> PrecisionDecision:
 
 
 def decide_precision(cfg, device, *, table: str | os.PathLike | None = None,
-                     probe: bool = True) -> PrecisionDecision:
+                     probe: bool = True, known: dict[str, Any] | None = None
+                     ) -> PrecisionDecision:
     """What ``cfg.runtime.amp`` means on ``device``.
 
-    ``true``/``false`` are taken as they are (``fixed``). ``auto``: the decision recorded in
-    ``table`` for this device and model if there is one, else the table rule (a CPU without
-    native bfloat16: float32) or a probe (:func:`probe_step_seconds` of both precisions,
-    :data:`MIN_GAIN` rule), written to ``table``. ``probe=False`` never probes (a plan or cost
-    estimate): an unrecorded decision is then the ``rule`` (mixed precision assumed).
+    ``true``/``false`` are taken as they are (``fixed``). ``auto``: ``known`` (a decision this
+    sweep recorded before, :meth:`PrecisionDecision.to_dict`) when it was made for this device,
+    else the decision recorded in ``table`` for this device and model, else the table rule (a
+    CPU without native bfloat16: float32) or a probe (:func:`probe_step_seconds` of both
+    precisions, :data:`MIN_GAIN` rule), written to ``table``. Only a decision that can be
+    recorded is measured: without ``table``, or with ``probe=False`` (a plan or cost
+    estimate), an unrecorded decision is the ``rule`` (mixed precision where the hardware has
+    it), so two calls always agree.
     """
     import torch
 
@@ -200,6 +204,10 @@ def decide_precision(cfg, device, *, table: str | os.PathLike | None = None,
         mixed = str(_mixed_dtype(device)).removeprefix("torch.")
         return PrecisionDecision(True, mixed, device_name(device), "fixed",
                                  reason="runtime.amp: true")
+    if known and known.get("device") == device_name(device) and "amp" in known:
+        fields = {f.name for f in dataclasses.fields(PrecisionDecision)}
+        return dataclasses.replace(PrecisionDecision(**{k: v for k, v in known.items()
+                                                        if k in fields}), source="recorded")
     path = None
     if table is not None:
         path = Path(table) / f"{_slug(device_name(device))}-{_digest(cfg)}.json"
@@ -208,7 +216,7 @@ def decide_precision(cfg, device, *, table: str | os.PathLike | None = None,
             return dataclasses.replace(PrecisionDecision(**doc), source="recorded")
         except (OSError, ValueError, TypeError):
             pass        # none yet, or unreadable: decide again (and rewrite it)
-    decision = _decide(cfg, device, probe=probe)
+    decision = _decide(cfg, device, probe=probe and table is not None)
     if path is not None and decision.source == "probe":
         from sim2radar.fileio import write_json
 

@@ -103,7 +103,8 @@ def resolve_profile(profile: str | os.PathLike | ExperimentProfile,
 
 
 def _resolve_precision(cfg, device: str | None, table: str | os.PathLike | None,
-                       probe: bool) -> tuple[Any, dict[str, Any]]:
+                       probe: bool, known: Mapping[str, Any] | None = None
+                       ) -> tuple[Any, dict[str, Any]]:
     """``runtime.amp: auto`` decided once, for the sweep's device, on the machine that plans
     it, by measurement (:func:`sim2radar.detect.precision.decide_precision`: a timed probe of
     this model, recorded in ``table`` and reused): every run of the sweep trains in the same
@@ -113,20 +114,23 @@ def _resolve_precision(cfg, device: str | None, table: str | os.PathLike | None,
     from sim2radar.hardware import torch_device
 
     dev = torch_device(device or cfg.runtime.device)
-    decision = decide_precision(cfg, dev, table=table, probe=probe)
+    decision = decide_precision(cfg, dev, table=table, probe=probe,
+                                known=dict(known) if known else None)
     return cfg.with_updates(runtime={"amp": decision.amp}), decision.to_dict()
 
 
 def stage_configs(profile: ExperimentProfile, device: str | None, *,
                   precision_table: str | os.PathLike | None = None,
-                  probe: bool = True) -> tuple[tuple[Any, Any], dict[str, Any]]:
+                  probe: bool = True, known: Mapping[str, Any] | None = None
+                  ) -> tuple[tuple[Any, Any], dict[str, Any]]:
     """The pre-training and fine-tuning ``DetectConfig`` of the profile, mixed precision
     resolved for ``device`` (the device itself is not set: :func:`build_plan` does), and the
-    precision decisions by stage."""
+    precision decisions by stage (``known``: the ones this sweep recorded before, by stage)."""
+    known = known or {}
     pre, pre_dec = _resolve_precision(profile.detector_config("pretrain"), device,
-                                      precision_table, probe)
+                                      precision_table, probe, known.get("pretrain"))
     ft, ft_dec = _resolve_precision(profile.detector_config("finetune"), device,
-                                    precision_table, probe)
+                                    precision_table, probe, known.get("finetune"))
     return (pre, ft), {"pretrain": pre_dec, "finetune": ft_dec}
 
 
@@ -229,15 +233,16 @@ class SweepSetup:
 def setup_sweep(profile: str | os.PathLike | ExperimentProfile, datasets: Mapping[str, Any], *,
                 ablations: bool = False, overrides: Mapping[str, Any] | None = None,
                 device: str | None = None, precision_table: str | os.PathLike | None = None,
-                probe: bool = True) -> SweepSetup:
+                probe: bool = True, known_precision: Mapping[str, Any] | None = None
+                ) -> SweepSetup:
     """:func:`resolve_profile`, :func:`sweep_conditions` (``datasets``: role -> source),
-    :func:`stage_configs` (``precision_table``, ``probe``: how ``amp: auto`` is decided) and
-    the protocol settings; raises ValueError / FileNotFoundError naming the profile, field or
-    missing dataset."""
+    :func:`stage_configs` (``precision_table``, ``probe``, ``known_precision``: how ``amp:
+    auto`` is decided) and the protocol settings; raises ValueError / FileNotFoundError naming
+    the profile, field or missing dataset."""
     prof = resolve_profile(profile, overrides)
     conditions, roles = sweep_conditions(prof, ablations, datasets)
     configs, precision = stage_configs(prof, device, precision_table=precision_table,
-                                       probe=probe)
+                                       probe=probe, known=known_precision)
     settings = protocol_settings(prof, *(c.model_dump(mode="json") for c in configs))
     prereg = preregistration(prof)
     if prereg is not None:

@@ -82,3 +82,20 @@ def test_a_real_probe_times_the_model_in_both_precisions():
     bf16 = precision.probe_step_seconds(cfg, "cpu", torch.bfloat16, steps=2)
     assert 0 < fp32 < 30 and 0 < bf16 < 30
     assert precision.device_name("cpu").startswith("cpu:")
+
+
+def test_only_a_decision_that_can_be_recorded_is_measured_and_a_known_one_is_kept(
+        monkeypatch, tmp_path):
+    """Without a table the decision is the rule (two calls always agree: a sweep's settings
+    and run keys cannot flip with timing noise); a sweep's earlier decision for this device
+    wins over the table."""
+    calls = _fake_probe(monkeypatch, {"float32": 1.0, "bfloat16": 2.0})
+    first = precision.decide_precision(_cfg(), "cpu")
+    assert first.source == "rule" and first.amp is True and calls == []
+    known = precision.PrecisionDecision(False, "float32", precision.device_name("cpu"),
+                                        "probe", {"float32": 1.0}, 4, "earlier").to_dict()
+    got = precision.decide_precision(_cfg(), "cpu", table=tmp_path, known=known)
+    assert (got.amp, got.source) == (False, "recorded") and calls == []
+    elsewhere = dict(known, device="cuda:Some GPU")
+    assert precision.decide_precision(_cfg(), "cpu", table=tmp_path,
+                                      known=elsewhere).source == "probe"
