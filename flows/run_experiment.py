@@ -44,6 +44,7 @@ from typing import Any
 from prefect import flow, get_run_logger
 from prefect.futures import as_completed
 
+from sim2radar.experiment.folder import SweepFolder
 from sim2radar.experiment.plan import PlannedPretrain, PretrainResult
 from sim2radar.fileio import write_json
 from sim2radar.flows import _progress
@@ -100,7 +101,7 @@ def run_experiment_flow(plan_path: str, gpu_slots: bool = False) -> dict[str, An
 
     def write_progress() -> None:
         failed = sum(r["status"] == "failed" for r in rows.values())
-        write_json(sweep_dir / "progress.json", {
+        write_json(SweepFolder(sweep_dir).progress_json, {
             "total_runs": total, "finished": len(rows), "failed": failed,
             "total_pretrainings": len(plan.pretrains),
             "pretrainings_finished": len(pretrainings),

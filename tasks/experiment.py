@@ -44,6 +44,7 @@ from prefect import task
 from prefect.cache_policies import NO_CACHE
 
 from sim2radar.experiment import sweep
+from sim2radar.experiment.folder import SweepFolder
 from sim2radar.experiment.plan import (
     PlannedPretrain,
     PlannedRun,
@@ -69,9 +70,6 @@ log = logging.getLogger(__name__)
 EXPERIMENT_STAGE_VERSION = 1
 #: store stage of each kind of training job
 STAGES = {"pretrain": "experiment_pretrain", "finetune": "experiment_runs"}
-RUNS_FILE = "runs.parquet"
-PRETRAININGS_FILE = "pretrainings.parquet"
-PLAN_FILE = "plan.json"
 #: folder under the sweeps root holding the measured precision decisions
 #: (:func:`sim2radar.detect.precision.decide_precision`), one per device and model
 PRECISION_TABLE = ".precision"
@@ -117,14 +115,6 @@ def _export(store: str, folder: Path, seed: int, role: str, name: str, geometry:
     return dest
 
 
-def _read_sweep_json(path: Path) -> dict[str, Any] | None:
-    try:
-        return json.loads(path.read_text()) if path.is_file() else None
-    except (OSError, ValueError) as exc:
-        raise ValueError(f"{path}: unreadable ({exc}); delete it (and the sweep folder's runs "
-                         "if they are not wanted) or choose a new sweep name") from None
-
-
 def prepare_sweep(datasets: Mapping[str, str | os.PathLike | None], *, profile: Any = "demo",
                   name: str = "sweep", out: str | os.PathLike = "out/sweeps",
                   store: str | os.PathLike = "out/store", ablations: bool = False,
@@ -142,8 +132,9 @@ def prepare_sweep(datasets: Mapping[str, str | os.PathLike | None], *, profile: 
     ValueError, FileNotFoundError, DatasetError — naming the dataset, profile or field at fault.
     """
     sweep.check_sweep_name(name)
-    sweep_dir = Path(out) / name
-    old = _read_sweep_json(sweep_dir / "sweep.json")
+    folder = SweepFolder(Path(out) / name)
+    sweep_dir = folder.root
+    old = folder.read_sweep()
     # a sweep keeps the precision it decided first (its runs' keys depend on it)
     known = old.get("precision") if isinstance(old, dict) else None
     setup = sweep.setup_sweep(profile, datasets, ablations=ablations, overrides=overrides,
@@ -159,15 +150,14 @@ def prepare_sweep(datasets: Mapping[str, str | os.PathLike | None], *, profile: 
         fixed_at=fixed_at, key_of=_key_of,
         provenance={"versions": package_versions(), "code": _code_version(),
                     "git": git_commit()})
-    write_json(sweep_dir / "sweep.json", plan.sweep)
+    write_json(folder.sweep_json, plan.sweep)
     if setup.preregistration is not None:   # the copy the results link (same digest: settings)
-        atomic_write(sweep_dir / sweep.PREREGISTRATION_FILE,
-                     setup.preregistration["text"].encode())
+        atomic_write(folder.preregistration_md, setup.preregistration["text"].encode())
     if force:
         force_runs(st.root_uri, sweep_dir, plan.find_runs(force))
     # the flow takes this file's path, not the plan: a paper-sized grid's plan (run subsets,
     # 25 intensity matches) is ~1 MB, over the 512 KiB Prefect allows for a flow run's parameters
-    path = write_json(sweep_dir / PLAN_FILE, plan.to_dict()).resolve()
+    path = write_json(folder.plan_json, plan.to_dict()).resolve()
     return dataclasses.replace(plan, plan_path=str(path))
 
 
@@ -233,9 +223,8 @@ def pack_runs(plan: SweepPlan, runs_per_gpu: int | str, *, steps: int = 20):
         decision = choose_runs(aggregate_throughput(cfg, device, steps=steps))
     else:
         decision = PackingDecision(int(runs_per_gpu), reason="given (--runs-per-gpu)")
-    path = Path(plan.context.sweep_dir) / "sweep.json"
-    doc = _read_sweep_json(path) or {}
-    write_json(path, {**doc, "packing": {**decision.to_dict(), "gpus": n_gpus}})
+    SweepFolder(plan.context.sweep_dir).update_sweep(
+        packing={**decision.to_dict(), "gpus": n_gpus})
     return decision, n_gpus
 
 
@@ -312,9 +301,9 @@ def force_runs(store: str, sweep_dir: str | os.PathLike,
         path = st.path(stage, job.key)
         if st.fs.exists(path):
             st.quarantine(path, f"--force-run {job.id}: redone on request")
-        folder = Path(sweep_dir) / kind / job.key
+        folder = SweepFolder(sweep_dir).job_dir(kind, job.key)
         if folder.exists():
-            dest = Path(sweep_dir) / "quarantine" / kind / f"{job.key}.{stamp}"
+            dest = SweepFolder(sweep_dir).quarantine_dir(kind, job.key, stamp)
             dest.parent.mkdir(parents=True, exist_ok=True)
             os.replace(folder, dest)
             log.warning("sweep: %s forced; its folder moved to %s", job.id, dest)
@@ -329,7 +318,7 @@ def _claim(ctx: SweepContext, key: str, done, out: Path, what: str):
 
     return wait_and_claim(
         Path(ctx.sweep_dir) / "claims", key, done,
-        note=lambda: {"resume": (out / "last.pt").is_file()},
+        note=lambda: {"resume": (out / SweepFolder.LAST_CHECKPOINT).is_file()},
         on_wait=lambda holder: log.warning(
             "%s is claimed by pid %s on %s (%s); waiting for it to finish, or for its claim to "
             "go stale (no heartbeat for %.0f s: a process on another host cannot be asked "
@@ -372,9 +361,10 @@ def run_pretraining(ctx: SweepContext, job: PlannedPretrain) -> PretrainResult:
         frames = _load(ctx, spec.sim_role, ids, cfg)
         return with_intensity(frames, match) if match is not None and frames else frames
 
-    out = Path(ctx.sweep_dir) / "pretrain" / job.key
-    done, checked = out / "done.json", out / "check.json"
-    if checked.is_file() and not checkpoint_loads(out / "last.pt"):
+    out = SweepFolder(ctx.sweep_dir).pretrain_dir(job.key)
+    done, checked = out / SweepFolder.DONE, out / SweepFolder.CHECK
+    last = out / SweepFolder.LAST_CHECKPOINT
+    if checked.is_file() and not checkpoint_loads(last):
         # finished, but its checkpoint was damaged since (now in quarantine/): redo the rest
         quarantine_file(checked, "its pre-training's last.pt does not load")
     claim = _claim(ctx, job.key, checked.is_file, out, f"pre-training {job.id}")
@@ -382,7 +372,7 @@ def run_pretraining(ctx: SweepContext, job: PlannedPretrain) -> PretrainResult:
     with claim or contextlib.nullcontext():     # None: finished, read back below
         frames = sim_frames(train_ids) if claim is not None else []
         ckpt = pretrain_encoder(cfg, frames, out, seed=spec.seed, epochs=spec.epochs,
-                                device=ctx.device) if claim is not None else out / "last.pt"
+                                device=ctx.device) if claim is not None else last
         if claim is not None:
             t0 = time.perf_counter()
             real = ctx.datasets["real"]
@@ -422,7 +412,8 @@ def _pretrain_row(ctx: SweepContext, job: PlannedPretrain, check, done: Mapping[
         steps=int(done.get("steps", 0)), history_epoch=[int(h["epoch"]) for h in hist],
         history_loss=[float(h["total"]) for h in hist],
         wall_time_s=float(done.get("seconds", 0.0)), check_s=float(check_s),
-        checkpoint=os.path.relpath(out / "last.pt", Path(ctx.sweep_dir).parent),
+        checkpoint=os.path.relpath(out / SweepFolder.LAST_CHECKPOINT,
+                                   Path(ctx.sweep_dir).parent),
         status=status, error="", finished_at=datetime.now(UTC).isoformat(timespec="seconds"))
     for where, aps in (("train", check.train), ("heldout", check.sim),
                        ("zero_shot", check.real)):
@@ -463,7 +454,7 @@ def write_pretrainings_table(sweep_dir: str | os.PathLike,
     schema = get_schema(STAGES["pretrain"])
     ordered = sorted((dict(r) for r in rows), key=lambda r: str(r["pretrain_id"]))
     table = schema.validate(pa.Table.from_pylist(ordered, schema=schema.schema))
-    path = Path(sweep_dir) / PRETRAININGS_FILE
+    path = SweepFolder(sweep_dir).pretrainings_table
     atomic_write_with(path, lambda tmp: pq.write_table(table, tmp))
     return path
 
@@ -473,7 +464,7 @@ def run_finetuning(ctx: SweepContext, job: PlannedRun,
     """Fine-tune and test one cell's run (or read it back); returns its experiment_runs row
     with ``status`` ``ok`` (computed now) or ``skipped`` (found in the store)."""
     st = open_store(ctx.store)
-    out = Path(ctx.sweep_dir) / "runs" / job.key
+    out = SweepFolder(ctx.sweep_dir).run_dir(job.key)
     for _ in range(2):
         claim = _claim(ctx, job.key, lambda: st.exists("experiment_runs", job.key), out,
                        f"run {job.id}")
@@ -502,7 +493,8 @@ def _finetune(ctx: SweepContext, st, job: PlannedRun, pretrain: PretrainResult |
         val_frames=_load(ctx, "real", real.ids([ctx.val_split]), cfg) if ctx.val_every else [],
         val_every=ctx.val_every, max_val_points=ctx.max_val_points, device=ctx.device)
     row = {**_base_row(ctx, job, pretrain), **fields, "status": "ok", "error": "",
-           "checkpoint": os.path.relpath(out / "last.pt", Path(ctx.sweep_dir).parent),
+           "checkpoint": os.path.relpath(out / SweepFolder.LAST_CHECKPOINT,
+                                         Path(ctx.sweep_dir).parent),
            "finished_at": datetime.now(UTC).isoformat(timespec="seconds")}
     schema = get_schema("experiment_runs")
     table = schema.validate(pa.Table.from_pylist([row], schema=schema.schema))
@@ -544,7 +536,7 @@ def write_runs_table(sweep_dir: str | os.PathLike, rows: list[dict[str, Any]]) -
 
     schema = get_schema("experiment_runs")
     table = schema.validate(pa.Table.from_pylist(rows, schema=schema.schema))
-    path = Path(sweep_dir) / RUNS_FILE
+    path = SweepFolder(sweep_dir).runs_table
     atomic_write_with(path, lambda tmp: pq.write_table(table, tmp))
     return path
 

@@ -28,6 +28,7 @@ from typing import Any
 import typer
 
 from sim2radar.cli._app import app, exit_unless_writable
+from sim2radar.experiment.folder import SweepFolder
 from sim2radar.factory.spec import MAX_FRAMES_PER_WORLD, MAX_WORLDS
 
 __all__ = ["DEMO_SIZES", "demo", "demo_sizes", "run_demo"]
@@ -122,8 +123,8 @@ def run_demo(
     paired = _reference_dataset(store, "reference-paired", data / "proxy_real_paired", None,
                                 verbose, first_seed=0, worlds=worlds, frames_per_world=frames)
     gap = write_gap_report(data / "reconstructed", data / "proxy_real_paired",
-                           sweep_dir / "gap")
-    write_json(sweep_dir / "generation.json", {"datasets": [
+                           SweepFolder(sweep_dir).gap_dir)
+    write_json(SweepFolder(sweep_dir).generation_json, {"datasets": [
         _manifest_status(sim, "demo", "sim"), _manifest_status(real, "reference", "real"),
         _manifest_status(paired, "reference-paired", "gap")]
         + ([_manifest_status(one_material, "demo-one-material", "sim-one-material")]

@@ -24,6 +24,7 @@ import typer
 
 from sim2radar.cli._app import app, exit_unless_writable, exit_unless_writable_outputs
 from sim2radar.cli._app import console as _console
+from sim2radar.experiment.folder import SweepFolder
 
 __all__ = ["sweep", "sweep_report", "publish_sweep", "run_sweep", "sweep_datasets",
            "condition_overrides", "print_sweep_summary", "print_plan", "PUBLISHED_FILES"]
@@ -400,8 +401,7 @@ def sweep(
 #: a published JSON file larger than this is kept gzip-compressed (``name.json.gz``) [bytes]
 PUBLISH_GZIP_BYTES = 256 * 1024
 #: a sweep folder's raw files a published study keeps (small; the checkpoints stay behind)
-PUBLISHED_FILES = ("sweep.json", "plan.json", "runs.parquet", "pretrainings.parquet",
-                   "stats.json", "progress.json", "preregistration.md")
+PUBLISHED_FILES = SweepFolder.PUBLISHED
 
 
 def publish_sweep(folder: Path, dest: Path) -> list[str]:
@@ -422,7 +422,7 @@ def publish_sweep(folder: Path, dest: Path) -> list[str]:
         src = folder / name
         if not src.is_file() or src.resolve() == (dest / name).resolve():
             continue
-        if name == "preregistration.md" and (dest / name).is_file():
+        if name == SweepFolder.PREREGISTRATION and (dest / name).is_file():
             if (dest / name).read_bytes() != src.read_bytes():
                 raise ValueError(f"{dest / name} differs from the pre-registration the sweep "
                                  f"ran under ({src}); a published pre-registration is never "
@@ -476,7 +476,7 @@ def sweep_report(
             from sim2radar.experiment.tracking import require_mlflow
 
             require_mlflow()      # up front: before any file is written
-        for name in ("sweep.json", "runs.parquet"):
+        for name in (SweepFolder.SWEEP, SweepFolder.RUNS):
             if json_text(folder / name) is None if name.endswith(".json") else \
                     not (folder / name).is_file():
                 raise FileNotFoundError(f"{folder / name}: not found; a sweep folder holds "
@@ -487,9 +487,10 @@ def sweep_report(
             copied = publish_sweep(folder, publish)
             typer.echo(f"published {', '.join(copied) or 'nothing new'} to {publish}")
             folder = publish
-        doc = json.loads(json_text(folder / "sweep.json"))
-        rows = pq.read_table(folder / "runs.parquet").to_pylist()
-        pre_path = folder / "pretrainings.parquet"
+        layout = SweepFolder(folder)
+        doc = json.loads(json_text(layout.sweep_json))
+        rows = pq.read_table(layout.runs_table).to_pylist()
+        pre_path = layout.pretrainings_table
         pre = pq.read_table(pre_path).to_pylist() if pre_path.is_file() else []
         exit_unless_writable_outputs({"FOLDER": folder})
         res = write_results(folder, doc, rows, pre)

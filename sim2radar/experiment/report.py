@@ -11,6 +11,7 @@ from collections.abc import Iterable, Mapping
 from typing import Any
 
 from sim2radar.datasets import UNDECLARED
+from sim2radar.experiment.folder import SweepFolder
 from sim2radar.experiment.profiles import BASELINE, CONDITIONS
 from sim2radar.experiment.stats import DEGENERATE, as_rows
 
@@ -395,8 +396,8 @@ def results_markdown(
                 f"`{settings.get('digest', '?')}`), fixed at {settings.get('fixed_at', '?')}, "
                 "before any run of this sweep; a rerun with changed settings is refused.", ""]
     if preregistration:
-        out += [f"Pre-registration: [{preregistration.get('file', 'preregistration.md')}]"
-                f"({preregistration.get('file', 'preregistration.md')}) (SHA-256 "
+        file = preregistration.get("file", SweepFolder.PREREGISTRATION)
+        out += [f"Pre-registration: [{file}]({file}) (SHA-256 "
                 f"`{str(preregistration.get('sha256', '?'))[:16]}…`, part of the settings: "
                 "it cannot change once the sweep has started).", ""]
     out += _primary_section(stats, level, power)

@@ -22,6 +22,7 @@ from typing import Any
 
 import numpy as np
 
+from sim2radar.experiment.folder import SweepFolder
 from sim2radar.fileio import write_json
 
 __all__ = [
@@ -62,10 +63,10 @@ def pretrain_encoder(cfg, frames: Sequence, out_dir: str | Path, *, seed: int, e
     from sim2radar.detect.train import checkpoint_loads, quarantine_file, train
 
     out_dir = Path(out_dir)
-    done = out_dir / "done.json"
+    done = out_dir / SweepFolder.DONE
     if done.is_file():
-        if checkpoint_loads(out_dir / "last.pt"):
-            return out_dir / "last.pt"
+        if checkpoint_loads(out_dir / SweepFolder.LAST_CHECKPOINT):
+            return out_dir / SweepFolder.LAST_CHECKPOINT
         # finished, but its checkpoint no longer loads (moved into quarantine/): train again,
         # resuming from its newest good epoch checkpoint
         quarantine_file(done, "its pre-training's last.pt does not load")

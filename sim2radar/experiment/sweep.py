@@ -29,6 +29,7 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
+from sim2radar.experiment.folder import SweepFolder
 from sim2radar.experiment.plan import (
     DatasetRef,
     PlannedPretrain,
@@ -68,7 +69,7 @@ __all__ = [
 ]
 
 #: the pre-registration's copy in a sweep folder
-PREREGISTRATION_FILE = "preregistration.md"
+PREREGISTRATION_FILE = SweepFolder.PREREGISTRATION
 #: ``key_of(kind, inputs, key_inputs) -> content key``: ``kind`` is ``"pretrain"`` or
 #: ``"finetune"``, ``inputs`` the dataset digests by name, ``key_inputs`` what
 #: :func:`~.plan.pretrain_key_inputs` / :func:`~.plan.run_key_inputs` give
@@ -521,10 +522,11 @@ def write_results(sweep_dir: str | os.PathLike, doc: Mapping[str, Any],
                                     "digest": doc.get("settings_digest"),
                                     "fixed_at": doc.get("settings_fixed_at")},
                           preregistration=prereg)
-    write_json(sweep_dir / "stats.json", stats)
-    atomic_write(sweep_dir / "results.md", md.encode())
-    dashboard = write_dashboard(sweep_dir, sweep_dir / "dashboard.html")
-    return {"stats": stats, "markdown": md, "results_md": str(sweep_dir / "results.md"),
+    folder = SweepFolder(sweep_dir)
+    write_json(folder.stats_json, stats)
+    atomic_write(folder.results_md, md.encode())
+    dashboard = write_dashboard(sweep_dir, folder.dashboard_html)
+    return {"stats": stats, "markdown": md, "results_md": str(folder.results_md),
             "dashboard": str(dashboard)}
 
 

@@ -53,13 +53,14 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any, Literal
 
+from sim2radar.experiment.folder import SweepFolder
 from sim2radar.fileio import json_text, jsonable
 
 __all__ = [
     "MLFLOW_EXTRA",
     "KINDS",
     "MlflowMissing",
-    "SweepFolder",
+    "SweepSnapshot",
     "SweepTracker",
     "SyncResult",
     "TrackingError",
@@ -87,9 +88,7 @@ MAX_RUN_ARTIFACT_BYTES = 1 << 20
 #: ~10 MB, a plan ~1 MB) [bytes]
 MAX_SWEEP_ARTIFACT_BYTES = 64 << 20
 #: the sweep folder's files the parent run holds (each, or its ``.gz`` copy in a published one)
-SWEEP_ARTIFACTS = ("sweep.json", "plan.json", "stats.json", "results.md", "progress.json",
-                   "preregistration.md", "runs.parquet", "pretrainings.parquet",
-                   "dashboard.html")
+SWEEP_ARTIFACTS = SweepFolder.DOCUMENTS
 #: history.json fields that are not per-epoch metrics (the total loss comes from the row)
 _NOT_CURVES = frozenset({"epoch", "total", "val_ap", "seconds", "hook_seconds"})
 #: row fields that do not change what a row says (left out of its identity)
@@ -129,7 +128,7 @@ def require_mlflow():
 
 # ------------------------------------------------------------------------ the sweep folder
 @dataclasses.dataclass(frozen=True)
-class SweepFolder:
+class SweepSnapshot:
     """What of a sweep folder goes to MLflow.
 
     Attributes
@@ -178,7 +177,7 @@ def _stats_counts_runs(stats: Mapping[str, Any], runs: Sequence[Mapping[str, Any
     return counted == sum(r.get("condition") in conds for r in runs)
 
 
-def read_sweep_folder(folder: str | os.PathLike) -> SweepFolder:
+def read_sweep_folder(folder: str | os.PathLike) -> SweepSnapshot:
     """Read what of a sweep folder goes to MLflow (a running, finished or published sweep).
 
     Raises
@@ -189,7 +188,8 @@ def read_sweep_folder(folder: str | os.PathLike) -> SweepFolder:
     path = Path(folder)
     if not path.is_dir():
         raise ValueError(f"{path}: no such sweep folder")
-    sweep_json = path / "sweep.json"
+    layout = SweepFolder(path)
+    sweep_json = layout.sweep_json
     try:
         text = json_text(sweep_json)
         doc = None if text is None else json.loads(text)
@@ -205,18 +205,18 @@ def read_sweep_folder(folder: str | os.PathLike) -> SweepFolder:
     if not name or not all(c.isalnum() or c in "-_." for c in name):
         raise ValueError(f"{sweep_json}: sweep name {name!r} has characters other than "
                          "letters, digits, '-', '_' and '.'; it names the sweep's MLflow runs")
-    runs = _read_table(path / "runs.parquet", _RUN_COLUMNS, "experiment_runs")
-    pretrainings = _read_table(path / "pretrainings.parquet", _PRETRAIN_COLUMNS,
+    runs = _read_table(layout.runs_table, _RUN_COLUMNS, "experiment_runs")
+    pretrainings = _read_table(layout.pretrainings_table, _PRETRAIN_COLUMNS,
                                "experiment_pretrain")
     stats = None
     try:
-        text = json_text(path / "stats.json")
+        text = json_text(layout.stats_json)
         stats = None if text is None else json.loads(text)
     except (OSError, UnicodeDecodeError, json.JSONDecodeError):
         stats = None    # the statistics are rebuilt by `sim2radar sweep-report`; not logged
     if not isinstance(stats, dict) or not _stats_counts_runs(stats, runs):
         stats = None
-    return SweepFolder(path, name, doc, runs, pretrainings, stats)
+    return SweepSnapshot(path, name, doc, runs, pretrainings, stats)
 
 
 # ----------------------------------------------------------------- what a row is in MLflow
@@ -303,7 +303,7 @@ def run_name(row: Mapping[str, Any]) -> str:
                    int(row.get("epochs") or 0)).name
 
 
-def run_params(folder: SweepFolder, row: Mapping[str, Any], kind: str) -> dict[str, str]:
+def run_params(folder: SweepSnapshot, row: Mapping[str, Any], kind: str) -> dict[str, str]:
     """The MLflow params of a ``runs.parquet`` row (``kind="run"``) or a
     ``pretrainings.parquet`` row (``kind="pretraining"``) of ``folder``."""
     from sim2radar.experiment.profiles import CONDITIONS
@@ -348,10 +348,10 @@ def _finite(value: Any) -> float | None:
 
 def _history_file(run_dir: Path | None, epochs: Sequence[int]) -> list[dict[str, Any]]:
     """The run folder's ``history.json`` records, when they are the row's epochs."""
-    if run_dir is None or not (run_dir / "history.json").is_file():
+    if run_dir is None or not (run_dir / SweepFolder.HISTORY).is_file():
         return []
     try:
-        hist = json.loads((run_dir / "history.json").read_text()).get("history") or []
+        hist = json.loads((run_dir / SweepFolder.HISTORY).read_text()).get("history") or []
     except (OSError, ValueError, AttributeError):
         return []
     if [int(h.get("epoch", -1)) for h in hist if isinstance(h, dict)] != list(epochs):
@@ -403,14 +403,15 @@ def _ms(iso: Any, minus_s: Any = 0.0) -> int | None:
     return int(1000 * (t.timestamp() - (_finite(minus_s) or 0.0)))
 
 
-def _run_dir(folder: SweepFolder, row: Mapping[str, Any], kind: str) -> Path | None:
+def _run_dir(folder: SweepSnapshot, row: Mapping[str, Any], kind: str) -> Path | None:
     """The row's run folder where it exists: its checkpoint's folder (written relative to the
     sweep's parent folder; a run found finished in the store keeps the folder of the sweep that
     trained it), else ``runs/<key>`` or ``pretrain/<key>``."""
     ckpt = str(row.get("checkpoint") or "")
     key = row["run_key" if kind == "run" else "pretrain_key"]
     for cand in ((folder.path.parent / ckpt).parent if ckpt else None,
-                 folder.path / ("runs" if kind == "run" else "pretrain") / str(key)):
+                 SweepFolder(folder.path).job_dir("runs" if kind == "run" else "pretrain",
+                                                  str(key))):
         if cand is not None and cand.is_dir():
             return cand.resolve()
     return None
@@ -573,7 +574,7 @@ class SweepTracker:
                 f"MLflow at {self.uri}: {what} failed ({type(exc).__name__}: {text[:500]}); "
                 f"the sweep folder keeps every result: {self._fix}") from exc
 
-    def _connect(self, folder: SweepFolder) -> None:
+    def _connect(self, folder: SweepSnapshot) -> None:
         """The client, the experiment, and what of this sweep it already holds."""
         from mlflow import MlflowClient
         from mlflow.entities import ViewType
@@ -638,7 +639,7 @@ class SweepTracker:
     def _delete(self, run_id: str) -> None:
         self._call(f"deleting the superseded run {run_id}", self._client.delete_run, run_id)
 
-    def _sync(self, folder: SweepFolder, final: bool) -> SyncResult:
+    def _sync(self, folder: SweepSnapshot, final: bool) -> SyncResult:
         self._connect(folder)
         if self._parent is None:
             self._parent = self._create_parent(folder)
@@ -666,7 +667,7 @@ class SweepTracker:
         return SyncResult(self._experiment_id, self._parent, tuple(logged), tuple(replaced),
                           unchanged)
 
-    def _create_parent(self, folder: SweepFolder) -> str:
+    def _create_parent(self, folder: SweepSnapshot) -> str:
         from mlflow.entities import Param
 
         doc = folder.doc
@@ -693,7 +694,7 @@ class SweepTracker:
         self._parent_state = {"metrics": {}, "status": "RUNNING", "artifacts": None}
         return run.info.run_id
 
-    def _log_row(self, folder: SweepFolder, kind: str, key: str, ident: str, name: str,
+    def _log_row(self, folder: SweepSnapshot, kind: str, key: str, ident: str, name: str,
                  row: Mapping[str, Any]) -> _Logged:
         from mlflow.entities import Metric, Param
 
@@ -741,11 +742,11 @@ class SweepTracker:
         files = sorted(p for p in run_dir.iterdir() if p.is_file() and p.suffix != ".pt"
                        and not p.name.startswith(".")
                        and p.stat().st_size <= MAX_RUN_ARTIFACT_BYTES)
-        if self.checkpoints and (run_dir / "last.pt").is_file():
-            files.append(run_dir / "last.pt")
+        if self.checkpoints and (run_dir / SweepFolder.LAST_CHECKPOINT).is_file():
+            files.append(run_dir / SweepFolder.LAST_CHECKPOINT)
         return files
 
-    def _update_parent(self, folder: SweepFolder, final: bool) -> None:
+    def _update_parent(self, folder: SweepSnapshot, final: bool) -> None:
         from mlflow.entities import Metric
 
         client, parent, state = self._client, self._parent, self._parent_state
@@ -788,7 +789,7 @@ def _sweep_files(folder: Path) -> list[Path]:
     return out
 
 
-def _sweep_status(folder: SweepFolder) -> str:
+def _sweep_status(folder: SweepSnapshot) -> str:
     """FAILED when a run or pre-training failed, KILLED when planned runs are missing,
     FINISHED otherwise."""
     rows = [*folder.runs, *folder.pretrainings]
@@ -804,7 +805,7 @@ def _frac(f: Any) -> str:
     return f"f{float(f):g}"
 
 
-def _parent_metrics(folder: SweepFolder) -> dict[str, float]:
+def _parent_metrics(folder: SweepSnapshot) -> dict[str, float]:
     """The parent run's metrics: counts, and from fresh statistics the primary endpoint
     (``primary.*``), the other pooled differences (``pooled.<condition>.*``), the per-fraction
     differences (``delta.<condition>.f<fraction>``, ``p_holm...``) and the cell means

@@ -39,6 +39,7 @@ from typing import Any
 from sim2radar.experiment.dashboard.data import banner
 from sim2radar.experiment.dashboard.labels import colour, metric_label, num, pct, signed
 from sim2radar.experiment.dashboard.reading import SweepData, conditions_of
+from sim2radar.experiment.folder import SweepFolder
 from sim2radar.experiment.profiles import BASELINE
 from sim2radar.experiment.report import condition_label
 from sim2radar.experiment.stats import DEFAULT_METRIC, sweep_stats
@@ -224,7 +225,7 @@ def settings_diff(a: SweepData, b: SweepData) -> dict[str, Any]:
     """
     sa, sb = _settings_of(a), _settings_of(b)
     if sa is None or sb is None:
-        missing = " and ".join(str(d.folder / "sweep.json") for d, s in ((a, sa), (b, sb))
+        missing = " and ".join(str(SweepFolder(d.folder).sweep_json) for d, s in ((a, sa), (b, sb))
                                if s is None)
         return {"rows": [], "n_compared": 0, "n_same": 0,
                 "note": f"{missing} not found: the settings cannot be compared."}

@@ -36,6 +36,7 @@ from typing import Any
 
 from sim2radar.experiment.dashboard.gap import png_fallbacks
 from sim2radar.experiment.dashboard.labels import num
+from sim2radar.experiment.folder import SweepFolder
 from sim2radar.experiment.learnability import pretraining_table
 from sim2radar.experiment.profiles import BASELINE, CONDITIONS
 from sim2radar.experiment.stats import AP_METRICS, DEFAULT_METRIC, sweep_statistics
@@ -52,9 +53,9 @@ __all__ = [
 ]
 
 #: files of a sweep folder the dashboard reads, by role
-FILES = {"runs": "runs.parquet", "sweep": "sweep.json", "stats": "stats.json",
-         "pretrainings": "pretrainings.parquet", "generation": "generation.json",
-         "gap": "gap/gap.json", "progress": "progress.json"}
+FILES = {"runs": SweepFolder.RUNS, "sweep": SweepFolder.SWEEP, "stats": SweepFolder.STATS,
+         "pretrainings": SweepFolder.PRETRAININGS, "generation": SweepFolder.GENERATION,
+         "gap": SweepFolder.GAP_REPORT, "progress": SweepFolder.PROGRESS}
 #: PNG file signature (PNG spec, §5.2)
 _PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 

@@ -23,6 +23,7 @@ from typing import Any
 
 from sim2radar.experiment.dashboard.data import FILES, dashboard_data, error_data, load_sweep
 from sim2radar.experiment.dashboard.page import POLL_S, render_html
+from sim2radar.experiment.folder import SweepFolder
 
 __all__ = ["LOOPBACK_HOST_NAMES", "DashboardServer", "allowed_host", "serve_dashboard"]
 
@@ -182,7 +183,7 @@ class DashboardServer:
     def _signature(self) -> tuple:
         sig = []
         paths = [self.folder / f for f in FILES.values()]
-        gap_dir = self.folder / "gap"
+        gap_dir = SweepFolder(self.folder).gap_dir
         if gap_dir.is_dir():
             paths += sorted(p for p in gap_dir.iterdir() if p.suffix == ".png")
         for p in paths:
