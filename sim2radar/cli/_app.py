@@ -99,15 +99,20 @@ def quiet_recorded_failures(task_names: Iterable[str], verbose: bool = False):
 class ServerWatch:
     """Whether the Prefect API this process reports to stopped answering: a daemon thread
     asks ``{PREFECT_API_URL}/health`` every ``interval_s`` and sets :attr:`gone` after two
-    failures in a row. From then on Prefect's console output (its client's retries, the
-    events worker's reconnects, the API log handler's errors) is dropped: the command says in
-    one line that the server went away and finishes the run without it."""
+    refusals in a row (the server's process is gone), or after ``busy_s`` seconds of
+    answers that only time out (a server too busy to answer within 2 s on a loaded machine is
+    not gone: five runs starting together on 2 cores timed it out twice in a row). From then
+    on Prefect's console output (its client's retries, the events worker's reconnects, the API
+    log handler's errors) is dropped: the command says in one line that the server went away
+    and finishes the run without it."""
 
-    def __init__(self, api_url: str | None, interval_s: float = 1.0) -> None:
+    def __init__(self, api_url: str | None, interval_s: float = 1.0,
+                 busy_s: float = 30.0) -> None:
         import threading
 
         self.api_url = api_url
         self.interval_s = interval_s
+        self.busy_s = busy_s
         self.gone = threading.Event()
         self.why = ""
         self._stop = threading.Event()
@@ -125,11 +130,18 @@ class ServerWatch:
             return str(getattr(exc, "reason", exc))
 
     def _poll(self) -> None:
-        misses = 0
+        import time
+
+        misses, since = 0, 0.0
         while not self._stop.wait(self.interval_s):
             why = self._answers()
-            misses = misses + 1 if why else 0
-            if misses >= 2:
+            if not why:
+                misses = 0
+                continue
+            misses += 1
+            since = since if misses > 1 else time.monotonic()
+            busy = "timed out" in why.lower()
+            if misses >= 2 and (not busy or time.monotonic() - since >= self.busy_s):
                 self.why = why
                 _silence_prefect()
                 self.gone.set()
