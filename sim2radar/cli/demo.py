@@ -183,7 +183,7 @@ def demo(
     size = demo_sizes(profile, worlds=worlds, frames=frames, reference_worlds=reference_worlds,
                       reference_frames=reference_frames, width=width, height=height, spp=spp)
     rig = {k: size[k] for k in ("width", "height", "spp") if size[k] is not None}
-    typer.echo(f"{profile} demo: {size['worlds']} simulated worlds x {size['frames']} frames, "
+    typer.echo(f"{profile} profile: {size['worlds']} simulated worlds x {size['frames']} frames, "
                f"{size['reference_worlds']} proxy-real worlds x {size['reference_frames']} "
                f"frames" + (f", renders {rig.get('width', 640)}x{rig.get('height', 480)} px"
                             if rig else "") + " (options override)")
