@@ -111,17 +111,43 @@ def condition_overrides(text: str | None) -> dict[str, list[str]]:
             "ablations": [n for n in names if CONDITIONS[n].ablation]}
 
 
-def sweep_datasets(sim: str, real: str, options: dict[str, str | None]) -> dict[str, str]:
-    """The sweep's datasets by role: SIM, REAL and each given dataset option (``--sim-gt``) of
-    the condition registry (:attr:`sim2radar.experiment.profiles.Condition.flag`)."""
-    from sim2radar.experiment.profiles import CONDITIONS
+def sweep_datasets(sim: str, real: str, options: dict[str, str | None],
+                   pairs: list[str] | None = None) -> dict[str, str]:
+    """The sweep's datasets by role: SIM, REAL, each given dataset option (``--sim-gt``) of
+    the condition registry (:attr:`sim2radar.experiment.profiles.Condition.flag`), and each
+    ``--dataset ROLE=PATH`` pair, whose roles come from the registry as it is now
+    (:func:`~sim2radar.experiment.profiles.dataset_roles`): a condition registered with a new
+    role is run with ``--dataset ROLE=PATH``, no new option needed.
+
+    Raises
+    ------
+    ValueError — an unknown option or role (listing the known roles), a pair without ``=``, a
+    role given twice, or ``sim``/``real`` given as a pair (they are the SIM and REAL
+    arguments).
+    """
+    from sim2radar.experiment.profiles import CONDITIONS, dataset_roles
 
     roles = {c.flag: c.sim_role for c in CONDITIONS.values() if c.flag}
     unknown = sorted(set(options) - set(roles))
     if unknown:
         raise ValueError(f"no condition takes the dataset option(s) {unknown}")
-    return {"sim": sim, "real": real,
-            **{roles[flag]: path for flag, path in options.items() if path is not None}}
+    out = {"sim": sim, "real": real,
+           **{roles[flag]: path for flag, path in options.items() if path is not None}}
+    known = [r for r in dataset_roles() if r not in ("sim", "real")]
+    for pair in pairs or []:
+        role, sep, path = pair.partition("=")
+        role, path = role.strip(), path.strip()
+        if not sep or not role or not path:
+            raise ValueError(f"--dataset {pair!r}: expected ROLE=PATH, e.g. ref=data/ref")
+        if role in ("sim", "real"):
+            raise ValueError(f"--dataset {pair!r}: {role} is the {role.upper()} argument")
+        if role not in known:
+            raise ValueError(f"--dataset {pair!r}: no condition pre-trains on role {role!r}; "
+                             f"known roles: {known}")
+        if role in out:
+            raise ValueError(f"--dataset {pair!r}: the {role} dataset is given twice")
+        out[role] = path
+    return out
 
 
 def run_sweep(sim: str, real: str, *, profile: str, name: str, out: str, store: str,
@@ -289,6 +315,10 @@ def sweep(
     ref: str | None = typer.Option(
         None, "--ref", help="Reference radar on the sim worlds' ground truth (the ref-pretrain "
         "positive control)."),
+    dataset: list[str] | None = typer.Option(
+        None, "--dataset", help="ROLE=PATH: the dataset of the conditions that pre-train on "
+        "ROLE (a role of the condition registry, e.g. ref, sim-gt); repeatable. --ref, --sim-gt "
+        "and --sim-one-material are shorthands."),
     conditions: str | None = typer.Option(
         None, "--conditions", help="Override the profile's conditions, e.g. "
         "baseline,sim-pretrain,sim-gt-pretrain,ref-pretrain,sim-pretrain-lowlr."),
@@ -366,7 +396,7 @@ def sweep(
             overrides["preregistration"] = preregistration.resolve()
         datasets = sweep_datasets(sim, real, {"--sim-gt": sim_gt,
                                               "--sim-one-material": sim_one_material,
-                                              "--ref": ref})
+                                              "--ref": ref}, dataset)
         if plan:
             from sim2radar.tasks.experiment import plan_cost
 

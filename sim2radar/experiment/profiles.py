@@ -53,6 +53,7 @@ __all__ = [
     "CONDITIONS",
     "PAPER_FRACTIONS",
     "ROLES",
+    "dataset_roles",
     "Condition",
     "ExperimentProfile",
     "bundled_profiles",
@@ -136,8 +137,15 @@ CONDITIONS: dict[str, Condition] = {c.name: c for c in (
               "(material labelling removed)", "Sim One-Material Pretrain", "#9467bd"),
 )}
 #: dataset roles of a sweep: ``real`` and each condition's pre-training role, in order
-ROLES: tuple[str, ...] = ("real", *dict.fromkeys(c.sim_role for c in CONDITIONS.values()
-                                                 if c.sim_role))
+def dataset_roles() -> tuple[str, ...]:
+    """The dataset roles a sweep knows, from the registry as it is now: ``real``, then each
+    condition's ``sim_role`` in registry order (a condition registered at run time brings its
+    role with it)."""
+    return ("real", *dict.fromkeys(c.sim_role for c in CONDITIONS.values() if c.sim_role))
+
+
+#: the dataset roles of the built-in registry (:func:`dataset_roles` follows later additions)
+ROLES: tuple[str, ...] = dataset_roles()
 ABLATIONS = tuple(n for n, c in CONDITIONS.items() if c.ablation)
 
 

@@ -44,7 +44,7 @@ from sim2radar.experiment.plan import (
     run_key_inputs,
     settings_changes,
 )
-from sim2radar.experiment.profiles import ABLATIONS, CONDITIONS, ROLES, ExperimentProfile
+from sim2radar.experiment.profiles import ABLATIONS, CONDITIONS, ExperimentProfile, dataset_roles
 from sim2radar.vocab import STATUSES
 
 __all__ = [
@@ -153,19 +153,20 @@ def sweep_conditions(profile: ExperimentProfile, ablations: bool,
     ValueError — a role that is not one of ROLES; conditions whose datasets were not given,
     naming their options (``--sim-gt``).
     """
-    unknown = sorted(set(datasets) - set(ROLES))
+    roles = dataset_roles()
+    unknown = sorted(set(datasets) - set(roles))
     if unknown:
-        raise ValueError(f"unknown dataset role(s) {unknown}; known: {list(ROLES)}")
+        raise ValueError(f"unknown dataset role(s) {unknown}; known: {list(roles)}")
     conditions = list(profile.all_conditions)
     if ablations:
         conditions += [c for c in ABLATIONS if c not in conditions]
     needed = {"real"} | {CONDITIONS[c].sim_role for c in conditions if CONDITIONS[c].sim_role}
-    missing = [r for r in ROLES if r in needed and datasets.get(r) is None]
+    missing = [r for r in roles if r in needed and datasets.get(r) is None]
     if missing:
         raise ValueError("conditions " + ", ".join(c for c in conditions
                                                      if CONDITIONS[c].sim_role in missing)
                          + " need the dataset(s) " + ", ".join(map(role_flag, missing)))
-    return tuple(conditions), tuple(r for r in ROLES if r in needed)
+    return tuple(conditions), tuple(r for r in roles if r in needed)
 
 
 #: roles whose ``store:NAME`` dataset is exported with the worlds' true geometry by default: the

@@ -38,6 +38,19 @@ def test_every_conditions_dataset_has_its_option():
         sweep_datasets("s", "r", {"--sim-noisy": "n"})
 
 
+def test_dataset_role_pairs():
+    """``--dataset ROLE=PATH`` names any registry role (the shorthands' too)."""
+    assert sweep_datasets("s", "r", {}, ["ref=data/ref", "sim-gt = data/gt"]) == {
+        "sim": "s", "real": "r", "ref": "data/ref", "sim-gt": "data/gt"}
+    for pair, message in (("ref", "expected ROLE=PATH"), ("=x", "expected ROLE=PATH"),
+                          ("real=x", "REAL argument"), ("noisy=x", "known roles"),
+                          ("ref=", "expected ROLE=PATH")):
+        with pytest.raises(ValueError, match=message):
+            sweep_datasets("s", "r", {}, [pair])
+    with pytest.raises(ValueError, match="given twice"):
+        sweep_datasets("s", "r", {"--ref": "a"}, ["ref=b"])
+
+
 # ------------------------------------------------------------------------------ --mlflow
 def _constructed_sweep(folder: Path) -> list[dict]:
     """The dashboard tests' sweep folder (2 conditions x 3 fractions x 3 trials, none failed,

@@ -367,6 +367,33 @@ def test_bad_inputs_exit_2_with_one_line(data, tmp_path):
     assert res.exit_code == 2 and "--sim-gt" in res.output
 
 
+def test_a_condition_registered_at_run_time_runs_through_the_unchanged_cli(
+        data, prefect_server, tmp_path, monkeypatch):
+    """Issue #32: a new condition is one registry entry. Registered here with a new dataset
+    role, it runs a smoke sweep from the command line (``--dataset ROLE=PATH``, no new
+    option), its runs are recorded under its name, and an unknown role is refused."""
+    from typer.testing import CliRunner
+
+    from sim2radar.cli import app
+    from sim2radar.experiment.profiles import CONDITIONS, Condition
+
+    monkeypatch.setitem(CONDITIONS, "twin-pretrain", Condition(
+        "twin-pretrain", "twin", False, "pre-trained on a twin sim dataset", "Twin Pretrain",
+        "#17becf"))
+    args = ["sweep", str(data["sim"]), str(data["real"]), "--profile", "smoke", "--name", "tw",
+            "--out", str(tmp_path / "sweeps"), "--store", str(tmp_path / "store"),
+            "--conditions", "baseline,twin-pretrain"]
+    bad = CliRunner().invoke(app, [*args, "--dataset", "twins=x"])
+    assert bad.exit_code == 2 and "known roles" in bad.output and "twin" in bad.output
+    res = CliRunner().invoke(app, [*args, "--dataset", f"twin={data['sim']}"])
+    assert res.exit_code == 0, res.output
+    rows = pq.read_table(tmp_path / "sweeps" / "tw" / "runs.parquet").to_pylist()
+    assert {r["condition"] for r in rows} == {"baseline", "twin-pretrain"}
+    assert all(r["status"] == "ok" for r in rows)
+    sweep = json.loads((tmp_path / "sweeps" / "tw" / "sweep.json").read_text())
+    assert set(sweep["datasets"]) == {"real", "twin"}
+
+
 def test_plan_prints_the_grid_cost_and_creates_nothing(data, tmp_path):
     from typer.testing import CliRunner
 
