@@ -200,6 +200,12 @@ def _silence_prefect() -> None:
             lg.setLevel(logging.CRITICAL + 1)
 
 
+def fail(message: str, code: int = 2) -> typer.Exit:
+    """Print ``error: message`` in red on stderr; the ``typer.Exit(code)`` to raise."""
+    typer.secho(f"error: {message}", fg="red", err=True)
+    return typer.Exit(code)
+
+
 def exit_now(code: int) -> None:
     """Exit with ``code`` without Prefect's exit handlers: after the server went away, its
     events worker would spend minutes retrying every event it still holds."""

@@ -22,7 +22,7 @@ from typing import Annotated
 
 import typer
 
-from sim2radar.cli._app import app
+from sim2radar.cli._app import app, fail
 
 __all__ = ["dashboard", "resolve_sweep"]
 
@@ -48,11 +48,6 @@ def resolve_sweep(sweep: str, root: Path) -> Path:
                      "under --root")
 
 
-def _fail(message: str) -> typer.Exit:
-    typer.secho(f"error: {message}", fg="red", err=True)
-    return typer.Exit(2)
-
-
 @app.command()
 def dashboard(
     sweep: Annotated[list[str], typer.Argument(
@@ -74,12 +69,12 @@ def dashboard(
     from sim2radar.experiment.dashboard import serve_dashboard, write_comparison, write_dashboard
 
     if len(sweep) > 2:
-        raise _fail(f"{len(sweep)} sweeps given: give one sweep, or two (A B) to compare them")
+        raise fail(f"{len(sweep)} sweeps given: give one sweep, or two (A B) to compare them")
     if len(sweep) == 2 and serve:
-        raise _fail("--serve shows one sweep live; to compare two sweeps write the page: "
+        raise fail("--serve shows one sweep live; to compare two sweeps write the page: "
                     f"sim2radar dashboard {sweep[0]} {sweep[1]} --out cmp.html")
     if out is None and not serve:
-        raise _fail("nothing to do: give --out FILE.html, --serve, or both"
+        raise fail("nothing to do: give --out FILE.html, --serve, or both"
                     if len(sweep) == 1 else "give --out FILE.html for the comparison page")
     try:
         if len(sweep) == 2:
@@ -87,7 +82,7 @@ def dashboard(
             try:
                 typer.echo(str(write_comparison(a, b, out)))
             except OSError as exc:
-                raise _fail(f"{out}: cannot be written ({exc.strerror or exc}); choose "
+                raise fail(f"{out}: cannot be written ({exc.strerror or exc}); choose "
                             "another --out") from None
             return
         folder = resolve_sweep(sweep[0], root)
@@ -95,16 +90,16 @@ def dashboard(
             try:
                 typer.echo(str(write_dashboard(folder, out)))
             except OSError as exc:
-                raise _fail(f"{out}: cannot be written ({exc.strerror or exc}); choose "
+                raise fail(f"{out}: cannot be written ({exc.strerror or exc}); choose "
                             "another --out") from None
         if serve:
             try:
                 server = serve_dashboard(folder, port=port, poll_s=poll)
             except OSError as exc:  # the port is taken
-                raise _fail(f"port {port}: {exc.strerror or exc}; choose another --port "
+                raise fail(f"port {port}: {exc.strerror or exc}; choose another --port "
                             "(0: any free port)") from None
     except ValueError as exc:  # SweepFolderError is a ValueError
-        raise _fail(str(exc)) from None
+        raise fail(str(exc)) from None
     if not serve:
         return
     typer.echo(f"serving {folder} at {server.url} (Ctrl-C stops)")

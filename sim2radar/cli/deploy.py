@@ -22,14 +22,9 @@ from typing import Annotated
 
 import typer
 
-from sim2radar.cli._app import app
+from sim2radar.cli._app import app, fail
 
 __all__ = ["deploy"]
-
-
-def _fail(message: str, code: int = 2) -> typer.Exit:
-    typer.secho(f"error: {message}", fg="red", err=True)
-    return typer.Exit(code)
 
 
 def _home(home: Path | None) -> str:
@@ -41,9 +36,9 @@ def _home(home: Path | None) -> str:
     source = "--home" if home else ("SIM2RADAR_HOME" if os.environ.get("SIM2RADAR_HOME")
                                     else "the current folder")
     if not path.is_dir():
-        raise _fail(f"{source} {chosen}: no such folder; create it or give another --home")
+        raise fail(f"{source} {chosen}: no such folder; create it or give another --home")
     if problem := home_problem(path):
-        raise _fail(f"{source}: {problem}")
+        raise fail(f"{source}: {problem}")
     return str(path)
 
 
@@ -88,16 +83,16 @@ def deploy(
         try:
             typer.echo(str(write_prefect_yaml(prefect_yaml, target)))
         except OSError as exc:
-            raise _fail(f"{prefect_yaml}: cannot be written ({exc.strerror or exc})") from None
+            raise fail(f"{prefect_yaml}: cannot be written ({exc.strerror or exc})") from None
         return
     if not names and not all_:
-        raise _fail("nothing to deploy: name deployments or give --all (--list lists them)")
+        raise fail("nothing to deploy: name deployments or give --all (--list lists them)")
     if names and all_:
-        raise _fail("give deployment names or --all, not both")
+        raise fail("give deployment names or --all, not both")
     try:
         chosen = select(entries, list(names or []))
     except KeyError as exc:
-        raise _fail(exc.args[0]) from None
+        raise fail(exc.args[0]) from None
     target = Target(home=_home(home), pool=pool, queue=queue, schedule=schedule)
 
     from sim2radar.cli.server import use_managed_server
@@ -110,7 +105,7 @@ def deploy(
             typer.echo(f"created the process work pool {pool}")
         registered = apply(chosen, target)
     except Exception as exc:  # noqa: BLE001 - the API's errors, shown as one line
-        raise _fail(f"registering the deployments failed: {exc}", code=1) from None
+        raise fail(f"registering the deployments failed: {exc}", code=1) from None
     for name in registered:
         typer.echo(f"deployed {name}")
     state = "on" if schedule else "off (turn on with --schedule or in the UI)"
