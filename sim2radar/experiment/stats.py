@@ -87,6 +87,7 @@ __all__ = [
     "paired_t_power",
     "paper_delta",
     "proportion_improved",
+    "stats_count_runs",
     "sweep_statistics",
     "sweep_stats",
     "trials_to_detect",
@@ -459,6 +460,17 @@ def interval_coverage(n_pairs: int, alpha: float = 0.05, *, sweeps: int = COVERA
         hit_b += int(np.sum((s["boot_lo"] <= 0.0) & (0.0 <= s["boot_hi"])))
     return Coverage(n, int(sweeps), 1.0 - float(alpha), hit_t / int(sweeps),
                     hit_b / int(sweeps), int(n_resamples), int(seed))
+
+
+def stats_count_runs(stats: Mapping[str, Any], runs: Sequence[Mapping[str, Any]]) -> bool:
+    """Whether a :func:`sweep_statistics` document counts exactly the runs of its conditions
+    in ``runs`` (False for a document written before the latest runs finished, or not one)."""
+    conds = set(stats.get("conditions") or ())
+    try:
+        counted = sum(int(c.get("n", 0)) + int(c.get("n_failed", 0)) for c in stats["cells"])
+    except (KeyError, TypeError, ValueError, AttributeError):
+        return False
+    return counted == sum(r.get("condition") in conds for r in runs)
 
 
 def _num(v: Any) -> float | None:

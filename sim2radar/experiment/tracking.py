@@ -44,7 +44,6 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import json
-import math
 import os
 import threading
 import warnings
@@ -53,7 +52,9 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any, Literal
 
+from sim2radar.experiment.dashboard.labels import num
 from sim2radar.experiment.folder import SweepFolder
+from sim2radar.experiment.stats import stats_count_runs
 from sim2radar.fileio import json_text, jsonable
 
 __all__ = [
@@ -167,16 +168,6 @@ def _read_table(path: Path, columns: Sequence[str], what: str) -> list[dict[str,
     return table.to_pylist()
 
 
-def _stats_counts_runs(stats: Mapping[str, Any], runs: Sequence[Mapping[str, Any]]) -> bool:
-    """True if ``stats`` counts exactly the runs of its conditions (the dashboard's rule)."""
-    conds = set(stats.get("conditions") or ())
-    try:
-        counted = sum(int(c.get("n", 0)) + int(c.get("n_failed", 0)) for c in stats["cells"])
-    except (KeyError, TypeError, ValueError, AttributeError):
-        return False
-    return counted == sum(r.get("condition") in conds for r in runs)
-
-
 def read_sweep_folder(folder: str | os.PathLike) -> SweepSnapshot:
     """Read what of a sweep folder goes to MLflow (a running, finished or published sweep).
 
@@ -214,7 +205,7 @@ def read_sweep_folder(folder: str | os.PathLike) -> SweepSnapshot:
         stats = None if text is None else json.loads(text)
     except (OSError, UnicodeDecodeError, json.JSONDecodeError):
         stats = None    # the statistics are rebuilt by `sim2radar sweep-report`; not logged
-    if not isinstance(stats, dict) or not _stats_counts_runs(stats, runs):
+    if not isinstance(stats, dict) or not stats_count_runs(stats, runs):
         stats = None
     return SweepSnapshot(path, name, doc, runs, pretrainings, stats)
 
@@ -336,16 +327,6 @@ def run_params(folder: SweepSnapshot, row: Mapping[str, Any], kind: str) -> dict
     return out
 
 
-def _finite(value: Any) -> float | None:
-    if value is None or isinstance(value, bool):
-        return None
-    try:
-        v = float(value)
-    except (TypeError, ValueError):
-        return None
-    return v if math.isfinite(v) else None
-
-
 def _history_file(run_dir: Path | None, epochs: Sequence[int]) -> list[dict[str, Any]]:
     """The run folder's ``history.json`` records, when they are the row's epochs."""
     if run_dir is None or not (run_dir / SweepFolder.HISTORY).is_file():
@@ -368,20 +349,20 @@ def run_metrics(row: Mapping[str, Any], kind: str, run_dir: Path | None = None,
     out."""
     epochs = [int(e) for e in row.get("history_epoch") or ()]
     out = [("train_loss", v, e) for e, v in zip(epochs, row.get("history_loss") or (),
-                                                strict=False) if _finite(v) is not None]
+                                                strict=False) if num(v) is not None]
     if kind == "run":
         out += [("val_ap_3d_r40_iou03", v, int(e)) for e, v in
                 zip(row.get("history_val_epoch") or (), row.get("history_val_ap") or (),
-                    strict=False) if _finite(v) is not None]
+                    strict=False) if num(v) is not None]
     for rec in _history_file(run_dir, epochs):
         for key, v in rec.items():
-            if key in _NOT_CURVES or _finite(v) is None:
+            if key in _NOT_CURVES or num(v) is None:
                 continue
             out.append((key if key == "lr" else f"train_loss_{key}", float(v),
                         int(rec["epoch"])))
     finals = [k for k in row if k.startswith("ap_") or "_ap_" in k]
     finals += ["wall_time_s", "check_s", "steps", "sim_real_ratio"]
-    out += [(k, _finite(row.get(k)), 0) for k in finals if _finite(row.get(k)) is not None]
+    out += [(k, num(row.get(k)), 0) for k in finals if num(row.get(k)) is not None]
     return [(k, float(v), int(s)) for k, v, s in out]
 
 
@@ -400,7 +381,7 @@ def _ms(iso: Any, minus_s: Any = 0.0) -> int | None:
         return None
     if t.tzinfo is None:
         t = t.replace(tzinfo=UTC)
-    return int(1000 * (t.timestamp() - (_finite(minus_s) or 0.0)))
+    return int(1000 * (t.timestamp() - (num(minus_s) or 0.0)))
 
 
 def _run_dir(folder: SweepSnapshot, row: Mapping[str, Any], kind: str) -> Path | None:
@@ -814,7 +795,7 @@ def _parent_metrics(folder: SweepSnapshot) -> dict[str, float]:
     out: dict[str, float | None] = {
         "runs_finished": sum(r.get("status") != "failed" for r in runs),
         "runs_failed": sum(r.get("status") == "failed" for r in runs),
-        "runs_planned": _finite(folder.doc.get("n_runs")),
+        "runs_planned": num(folder.doc.get("n_runs")),
         "pretrainings_finished": sum(r.get("status") != "failed" for r in pre),
         "pretrainings_failed": sum(r.get("status") == "failed" for r in pre),
     }
@@ -831,4 +812,4 @@ def _parent_metrics(folder: SweepSnapshot) -> dict[str, float]:
         out[f"p_holm.{cell}"] = x.get("p_holm")
     for c in stats.get("cells") or ():
         out[f"mean.{c.get('condition')}.{_frac(c.get('fraction'))}"] = c.get("mean")
-    return {k: float(v) for k, v in ((k, _finite(v)) for k, v in out.items()) if v is not None}
+    return {k: float(v) for k, v in ((k, num(v)) for k, v in out.items()) if v is not None}

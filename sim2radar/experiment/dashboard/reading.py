@@ -39,7 +39,12 @@ from sim2radar.experiment.dashboard.labels import num
 from sim2radar.experiment.folder import SweepFolder
 from sim2radar.experiment.learnability import pretraining_table
 from sim2radar.experiment.profiles import BASELINE, CONDITIONS
-from sim2radar.experiment.stats import AP_METRICS, DEFAULT_METRIC, sweep_statistics
+from sim2radar.experiment.stats import (
+    AP_METRICS,
+    DEFAULT_METRIC,
+    stats_count_runs,
+    sweep_statistics,
+)
 from sim2radar.fileio import json_text
 
 __all__ = [
@@ -244,14 +249,6 @@ def _png_data_uri(path: Path) -> str | None:
     return "data:image/png;base64," + base64.b64encode(data).decode("ascii")
 
 
-def _stats_matches(stats: Mapping[str, Any], runs: Sequence[Mapping[str, Any]]) -> bool:
-    """True if ``stats`` counts exactly the runs of its conditions (not written before a run
-    was added)."""
-    conds = set(stats.get("conditions", []))
-    counted = sum(int(c.get("n", 0)) + int(c.get("n_failed", 0)) for c in stats["cells"])
-    return counted == sum(r.get("condition") in conds for r in runs)
-
-
 def conditions_of(sweep: Mapping[str, Any] | None, runs: Sequence[Mapping[str, Any]]) -> list[str]:
     """Planned conditions (sweep.json) then any others found in the runs, baseline first."""
     planned = list((sweep or {}).get("conditions") or [])
@@ -380,7 +377,7 @@ def load_sweep(folder: str | os.PathLike, *, require_runs: bool = True) -> Sweep
     stats_source = f"{FILES['stats']}"
     if stats is not None:
         _check_stats(stats, folder / FILES["stats"])
-        if not _stats_matches(stats, runs):
+        if not stats_count_runs(stats, runs):
             stats = None
             stats_source = (f"computed from {FILES['runs']} ({FILES['stats']} counts other runs: "
                             "written before the latest runs finished)")
