@@ -207,22 +207,14 @@ def pack_runs(plan: SweepPlan, runs_per_gpu: int | str, *, steps: int = 20):
     ValueError — the sweep's device is not a CUDA GPU, or a bad count.
     """
     from sim2radar.detect.config import DetectConfig
-    from sim2radar.experiment.packing import (
-        PackingDecision,
-        aggregate_throughput,
-        choose_runs,
-    )
+    from sim2radar.experiment.packing import decide_runs
+    from sim2radar.hardware import torch_device
 
     runs_per_gpu = parse_runs_per_gpu(runs_per_gpu)
     n_gpus = cuda_devices(plan.context.device)
-    if runs_per_gpu == "auto":
-        from sim2radar.hardware import torch_device
-
-        cfg = DetectConfig.model_validate(plan.context.finetune_config)
-        device = str(torch_device(plan.context.device or cfg.runtime.device))
-        decision = choose_runs(aggregate_throughput(cfg, device, steps=steps))
-    else:
-        decision = PackingDecision(int(runs_per_gpu), reason="given (--runs-per-gpu)")
+    cfg = DetectConfig.model_validate(plan.context.finetune_config)
+    device = str(torch_device(plan.context.device or cfg.runtime.device))
+    decision = decide_runs(cfg, device, runs_per_gpu, steps=steps)
     SweepFolder(plan.context.sweep_dir).update_sweep(
         packing={**decision.to_dict(), "gpus": n_gpus})
     return decision, n_gpus
@@ -260,20 +252,14 @@ def plan_cost(datasets: Mapping[str, str | os.PathLike | None], *, profile: Any 
                               probe=False)
     packing = None
     if runs_per_gpu is not None:
-        from sim2radar.experiment.packing import (
-            PROBE_COUNTS,
-            aggregate_throughput,
-            choose_runs,
-        )
+        from sim2radar.experiment.packing import decide_runs
         from sim2radar.hardware import torch_device
 
         runs_per_gpu = parse_runs_per_gpu(runs_per_gpu)
         n_gpus = cuda_devices(device)
         ft = setup.configs[1]
         dev = str(torch_device(device or ft.runtime.device))
-        counts = PROBE_COUNTS if runs_per_gpu == "auto" else (runs_per_gpu,)
-        per_n = aggregate_throughput(ft, dev, counts)
-        decision = choose_runs(per_n)
+        decision = decide_runs(ft, dev, runs_per_gpu, measure=True)
         s = decision.seconds_per_step()
         step_seconds = {"pretrain": s, "finetune": s}
         workers = (decision.runs * n_gpus,)

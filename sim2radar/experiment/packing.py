@@ -27,7 +27,7 @@ from collections.abc import Mapping, Sequence
 from typing import Any
 
 __all__ = ["GPU_RESOURCE", "MIN_GAIN", "PROBE_COUNTS", "PackingDecision",
-           "aggregate_throughput", "choose_runs"]
+           "aggregate_throughput", "choose_runs", "decide_runs"]
 
 #: the Dask worker resource a packed sweep's training task claims one unit of: start a GPU
 #: worker with ``dask worker ADDRESS --nthreads N --resources GPU_RUNS=N`` to run N at once
@@ -131,3 +131,18 @@ def choose_runs(steps_per_s: Mapping[int, float], min_gain: float = MIN_GAIN
     return PackingDecision(best_n, dict(ordered), "probe",
                            f"aggregate steps/s by runs per device {{{shown}}}: {best_n} "
                            f"(a larger count must add >= {min_gain:.0%})")
+
+
+def decide_runs(cfg, device: str, runs_per_gpu: int | str, *, measure: bool = False,
+                steps: int = 20) -> PackingDecision:
+    """The runs per device for ``--runs-per-gpu``: ``"auto"`` measured over
+    :data:`PROBE_COUNTS` and chosen (:func:`choose_runs`); a count as given, its aggregate
+    throughput measured too when ``measure`` (a plan needs the figure, a sweep does not)."""
+    if runs_per_gpu == "auto":
+        return choose_runs(aggregate_throughput(cfg, device, PROBE_COUNTS, steps=steps))
+    n = int(runs_per_gpu)
+    if measure:
+        return dataclasses.replace(choose_runs(aggregate_throughput(cfg, device, (n,),
+                                                                    steps=steps)),
+                                   source="given", reason="given (--runs-per-gpu), measured")
+    return PackingDecision(n, reason="given (--runs-per-gpu)")
