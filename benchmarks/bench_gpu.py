@@ -44,7 +44,7 @@ def step_times(device: str, profiles: tuple[str, ...], steps: int) -> dict:
     """Median s/step per profile and precision, and what ``amp: auto`` would choose."""
     import torch
 
-    from sim2radar.detect.precision import MIN_GAIN, probe_step_seconds
+    from sim2radar.detect.precision import prefers_mixed, probe_step_seconds
     from sim2radar.experiment import load_profile
     from sim2radar.hardware import autocast_dtype
 
@@ -55,7 +55,7 @@ def step_times(device: str, profiles: tuple[str, ...], steps: int) -> dict:
         cfg = load_profile(profile).detector_config("finetune")
         fp32 = probe_step_seconds(cfg, device, None, steps=steps)
         amp_s = probe_step_seconds(cfg, device, mixed, steps=steps)
-        choice = mixed_name if amp_s <= (1 - MIN_GAIN) * fp32 else "float32"
+        choice = mixed_name if prefers_mixed(fp32, amp_s) else "float32"
         out[profile] = {"float32": round(fp32, 4), mixed_name: round(amp_s, 4),
                         "auto_chooses": choice}
         print(f"{profile:6s} step: float32 {fp32:.4f} s, {mixed_name} {amp_s:.4f} s "

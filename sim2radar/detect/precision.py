@@ -23,14 +23,16 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import json
+import logging
 import os
 import statistics
-import time
+import tempfile
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
 __all__ = ["MIN_GAIN", "PROBE_STEPS", "PrecisionDecision", "decide_precision", "device_name",
-           "probe_step_seconds"]
+           "measure_step_seconds", "prefers_mixed", "probe_step_seconds"]
 
 #: mixed precision must beat float32's median step by this fraction to be chosen
 MIN_GAIN = 0.05
@@ -105,50 +107,49 @@ def _slug(text: str) -> str:
     return "".join(c if c.isalnum() or c in "-." else "_" for c in text)[:80]
 
 
+def measure_step_seconds(cfg, frames: Sequence[Any], *, steps_per_epoch: int = 3,
+                         epochs: int = 3, device=None) -> float:
+    """Median seconds per optimiser step of ``cfg`` (a resolved DetectConfig: model, batch,
+    precision, threads) on this machine, training on the first ``steps_per_epoch x batch``
+    of ``frames`` for ``epochs`` epochs and timing the epochs after the first (warm-up)."""
+    from sim2radar.detect.train import train
+
+    if epochs < 2:
+        raise ValueError("epochs must be >= 2: the first epoch is warm-up")
+    batch = int(cfg.optimization.batch_size)
+    subset = list(frames)[: max(1, steps_per_epoch * batch)]
+    if not subset:
+        raise ValueError("no frames to time a training step on")
+    train_log = logging.getLogger("sim2radar.detect.train")
+    level = train_log.level
+    train_log.setLevel(logging.ERROR)     # a few steps: BatchNorm's "will not settle" is moot
+    try:
+        with tempfile.TemporaryDirectory(prefix="sim2radar-step-") as tmp:
+            res = train(cfg.with_updates(runtime={"progress": False}), out_dir=tmp,
+                        frames=subset, epochs=epochs, seed=0, device=device)
+    finally:
+        train_log.setLevel(level)
+    per_epoch = res.steps // res.epochs
+    return statistics.median(float(h["seconds"]) / per_epoch for h in res.history[1:])
+
+
 def probe_step_seconds(cfg, device, dtype, steps: int = PROBE_STEPS) -> float:
-    """Median seconds per training step of ``cfg``'s model on ``device`` with autocast to
-    ``dtype`` (None: float32): batch ``cfg.optimization.batch_size`` of synthetic corridor
-    frames, augmentation, collation, forward, loss, backward and AdamW, one warm-up step."""
-    import numpy as np
-    import torch
-
+    """Seconds per training step of ``cfg``'s model on ``device`` in float32 (``dtype`` None)
+    or in the device's mixed precision (any other ``dtype``): :func:`measure_step_seconds` of
+    one warm-up epoch and one timed epoch of ``steps`` steps on synthetic corridor frames at
+    IFR's density."""
     from sim2radar.datasets import make_door_frames
-    from sim2radar.detect.augment import augment_frame, build_gt_database
-    from sim2radar.detect.model import PointPillars
-    from sim2radar.detect.train import collate
 
-    device = torch.device(device)
-    mcfg, bs = cfg.model, cfg.optimization.batch_size
-    frames = make_door_frames(2 * bs, seed=0, points_per_frame=_PROBE_POINTS,
-                              num_point_features=mcfg.num_point_features)
-    db = build_gt_database(frames, mcfg.class_names, cfg.augmentation.min_points_in_gt)
-    rng = np.random.default_rng(0)
-    with torch.random.fork_rng(devices=[device] if device.type == "cuda" else []):
-        torch.manual_seed(0)
-        model = PointPillars(mcfg).to(device).train()
-    opt = torch.optim.AdamW(model.parameters(), lr=1e-4)
-    scaler = torch.amp.GradScaler("cuda", enabled=dtype == torch.float16)
-    times = []
-    for i in range(steps + 1):
-        batch = [frames[(i * bs + k) % len(frames)] for k in range(bs)]
-        if device.type == "cuda":
-            torch.cuda.synchronize(device)
-        t0 = time.perf_counter()
-        aug = [augment_frame(f, cfg.augmentation, rng, mcfg.point_cloud_range_m, db)
-               for f in batch]
-        pts, gt = collate([a[0] for a in aug], [a[1] for a in aug], [a[2] for a in aug],
-                          mcfg.class_names, device)
-        with torch.autocast(device.type, dtype=dtype, enabled=dtype is not None):
-            out = model(pts, len(batch))
-        loss, _ = model.loss(out, gt)
-        opt.zero_grad(set_to_none=True)
-        scaler.scale(loss).backward()
-        scaler.step(opt)
-        scaler.update()
-        if device.type == "cuda":
-            torch.cuda.synchronize(device)
-        times.append(time.perf_counter() - t0)
-    return statistics.median(times[1:])
+    bs = cfg.optimization.batch_size
+    frames = make_door_frames(steps * bs, seed=0, points_per_frame=_PROBE_POINTS,
+                              num_point_features=cfg.model.num_point_features)
+    return measure_step_seconds(cfg.with_updates(runtime={"amp": dtype is not None}), frames,
+                                steps_per_epoch=steps, epochs=2, device=device)
+
+
+def prefers_mixed(float32_s: float, mixed_s: float) -> bool:
+    """The rule: mixed precision only when its step is at least :data:`MIN_GAIN` faster."""
+    return mixed_s <= (1.0 - MIN_GAIN) * float32_s
 
 
 def _decide(cfg, device, *, probe: bool) -> PrecisionDecision:
@@ -170,7 +171,7 @@ def _decide(cfg, device, *, probe: bool) -> PrecisionDecision:
                                         "probes it before its first run)")
     fp32 = probe_step_seconds(cfg, device, None)
     amp_s = probe_step_seconds(cfg, device, mixed)
-    faster = amp_s <= (1.0 - MIN_GAIN) * fp32
+    faster = prefers_mixed(fp32, amp_s)
     figures = {"float32": round(fp32, 5), mixed_name: round(amp_s, 5)}
     verdict = (f"{mixed_name} {amp_s:.4f} s/step vs float32 {fp32:.4f} s/step: "
                + (f"at least {MIN_GAIN:.0%} faster, chosen" if faster else

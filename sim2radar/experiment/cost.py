@@ -18,13 +18,10 @@ from __future__ import annotations
 
 import dataclasses
 import heapq
-import logging
 import math
-import statistics
-import tempfile
 from collections.abc import Mapping, Sequence
-from typing import Any
 
+from sim2radar.detect.precision import measure_step_seconds
 from sim2radar.experiment.plan import PretrainSpec, RunSpec
 
 __all__ = ["Job", "measure_step_seconds", "sweep_jobs", "wall_time"]
@@ -111,29 +108,3 @@ def wall_time(jobs: Sequence[Job], seconds_per_step: Mapping[str, float], worker
             heapq.heappush(free, t2)
             queue.extend(waiting.pop(j2.name, []))
     return end
-
-
-def measure_step_seconds(cfg, frames: Sequence[Any], *, steps_per_epoch: int = 3,
-                         epochs: int = 3, device=None) -> float:
-    """Median seconds per optimiser step of ``cfg`` (a resolved DetectConfig: model, batch,
-    precision, threads) on this machine, training on the first ``steps_per_epoch x batch``
-    of ``frames`` for ``epochs`` epochs and timing the epochs after the first (warm-up)."""
-    from sim2radar.detect.train import train
-
-    if epochs < 2:
-        raise ValueError("epochs must be >= 2: the first epoch is warm-up")
-    batch = int(cfg.optimization.batch_size)
-    subset = list(frames)[: max(1, steps_per_epoch * batch)]
-    if not subset:
-        raise ValueError("no frames to time a training step on")
-    train_log = logging.getLogger("sim2radar.detect.train")
-    level = train_log.level
-    train_log.setLevel(logging.ERROR)     # a few steps: BatchNorm's "will not settle" is moot
-    try:
-        with tempfile.TemporaryDirectory(prefix="sim2radar-step-") as tmp:
-            res = train(cfg.with_updates(runtime={"progress": False}), out_dir=tmp,
-                        frames=subset, epochs=epochs, seed=0, device=device)
-    finally:
-        train_log.setLevel(level)
-    per_epoch = res.steps // res.epochs
-    return statistics.median(float(h["seconds"]) / per_epoch for h in res.history[1:])
