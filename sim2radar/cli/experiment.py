@@ -18,7 +18,7 @@ from __future__ import annotations
 import json
 import math
 from pathlib import Path
-from typing import Any
+from typing import Annotated, Any
 
 import typer
 
@@ -29,6 +29,12 @@ from sim2radar.experiment.folder import SweepFolder
 __all__ = ["sweep", "sweep_report", "publish_sweep", "run_sweep", "sweep_datasets",
            "condition_overrides", "print_sweep_summary", "print_plan", "PUBLISHED_FILES"]
 
+
+#: the MLflow options ``sweep`` and ``sweep-report`` share (beside their own ``--mlflow``)
+MlflowExperiment = Annotated[str | None, typer.Option(
+    "--mlflow-experiment", help="With --mlflow: the experiment (default: the sweep's name).")]
+MlflowCheckpoints = Annotated[bool, typer.Option(
+    "--mlflow-checkpoints", help="With --mlflow: also upload each run's last.pt.")]
 
 def _fractions(text: str | None) -> list[float] | None:
     if text is None:
@@ -352,10 +358,8 @@ def sweep(
         None, "--mlflow", help="Also log every run and pre-training to MLflow at this tracking "
         "URI (sqlite:///mlflow.db, http://host:5000), as each finishes; needs "
         "pip install 'sim2radar[mlflow]'. A tracker failure warns once; the sweep goes on."),
-    mlflow_experiment: str | None = typer.Option(
-        None, "--mlflow-experiment", help="With --mlflow: the experiment (default: --name)."),
-    mlflow_checkpoints: bool = typer.Option(
-        False, "--mlflow-checkpoints", help="With --mlflow: also upload each run's last.pt."),
+    mlflow_experiment: MlflowExperiment = None,
+    mlflow_checkpoints: MlflowCheckpoints = False,
 ) -> None:
     """Run the experiment grid: baseline vs sim-pretrain (and ablations) over real-data
     fractions x trials, with paired statistics, a results table and a dashboard.
@@ -485,11 +489,8 @@ def sweep_report(
         None, "--mlflow", help="Then log the sweep's runs, pre-trainings and results to MLflow "
         "at this tracking URI: only what it lacks (a sweep logged before adds nothing); needs "
         "pip install 'sim2radar[mlflow]'."),
-    mlflow_experiment: str | None = typer.Option(
-        None, "--mlflow-experiment", help="With --mlflow: the experiment (default: the sweep's "
-        "name)."),
-    mlflow_checkpoints: bool = typer.Option(
-        False, "--mlflow-checkpoints", help="With --mlflow: also upload each run's last.pt."),
+    mlflow_experiment: MlflowExperiment = None,
+    mlflow_checkpoints: MlflowCheckpoints = False,
 ) -> None:
     """Rebuild a sweep's stats.json, results.md and dashboard.html from its raw files (a
     finished sweep, or one published under docs/results/<study>/), and with --mlflow log it to

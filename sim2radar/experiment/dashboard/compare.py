@@ -250,9 +250,15 @@ def _fraction_axis(fractions: Sequence[float]) -> dict[str, Any]:
 _STYLE = {"a": ("solid", "circle"), "b": ("dash", "square-open")}
 
 
-def _err(ci: Sequence[Any], y: float) -> tuple[float, float]:
-    lo, hi = (list(ci or []) + [None, None])[:2]
-    return (hi - y if num(hi) is not None else 0.0, y - lo if num(lo) is not None else 0.0)
+def _error_y(values: Sequence[tuple[Sequence[Any], float]], width: int) -> dict[str, Any]:
+    """Plotly's asymmetric error bars of ``(interval, value)`` pairs (a missing bound: 0)."""
+    up, down = [], []
+    for ci, y in values:
+        lo, hi = (list(ci or []) + [None, None])[:2]
+        up.append(hi - y if num(hi) is not None else 0.0)
+        down.append(y - lo if num(lo) is not None else 0.0)
+    return {"type": "data", "symmetric": False, "array": up, "arrayminus": down,
+            "visible": True, "width": width}
 
 
 def _ap_figure(cells: Sequence[Mapping[str, Any]], conds: Sequence[str], names: Mapping,
@@ -268,11 +274,9 @@ def _ap_figure(cells: Sequence[Mapping[str, Any]], conds: Sequence[str], names: 
         for side, dx in (("a", 1 - _DODGE), ("b", 1 + _DODGE)):
             pts = [c for c in mine if c[side]["mean"] is not None]
             dash, symbol = _STYLE[side]
-            errs = [_err(c[side]["ci"], c[side]["mean"]) for c in pts]
             fig.add_trace(go.Scatter(
                 x=[100 * c["fraction"] * dx for c in pts], y=[c[side]["mean"] for c in pts],
-                error_y={"type": "data", "symmetric": False, "array": [e[0] for e in errs],
-                         "arrayminus": [e[1] for e in errs], "visible": True, "width": 4},
+                error_y=_error_y([(c[side]["ci"], c[side]["mean"]) for c in pts], 4),
                 mode="lines+markers", name=f"{condition_label(cond)} — {names[side]}",
                 legendgroup=cond, line={"color": colour(cond, conds), "dash": dash,
                                         "width": 2.2},
@@ -317,11 +321,9 @@ def _delta_figure(deltas: Sequence[Mapping[str, Any]], conds: Sequence[str], nam
         for side, dx in (("a", 1 - _DODGE), ("b", 1 + _DODGE)):
             pts = [d for d in mine if d[side]["delta"] is not None]
             dash, symbol = _STYLE[side]
-            errs = [_err(d[side]["ci"], d[side]["delta"]) for d in pts]
             fig.add_trace(go.Scatter(
                 x=[100 * d["fraction"] * dx for d in pts], y=[d[side]["delta"] for d in pts],
-                error_y={"type": "data", "symmetric": False, "array": [e[0] for e in errs],
-                         "arrayminus": [e[1] for e in errs], "visible": True, "width": 4},
+                error_y=_error_y([(d[side]["ci"], d[side]["delta"]) for d in pts], 4),
                 mode="lines+markers", name=f"{condition_label(cond)} Δ — {names[side]}",
                 legendgroup=cond, line={"color": col, "dash": dash, "width": 2},
                 marker={"color": col, "symbol": symbol, "size": 8, "line": {"width": 2}},
@@ -333,11 +335,9 @@ def _delta_figure(deltas: Sequence[Mapping[str, Any]], conds: Sequence[str], nam
                                "%{customdata[2]}, %{customdata[1]} pair(s)<extra></extra>")),
                 row=1, col=1)
         pts = [d for d in mine if d["diff"]["diff"] is not None]
-        errs = [_err(d["diff"]["ci"], d["diff"]["diff"]) for d in pts]
         fig.add_trace(go.Scatter(
             x=[100 * d["fraction"] for d in pts], y=[d["diff"]["diff"] for d in pts],
-            error_y={"type": "data", "symmetric": False, "array": [e[0] for e in errs],
-                     "arrayminus": [e[1] for e in errs], "visible": True, "width": 5},
+            error_y=_error_y([(d["diff"]["ci"], d["diff"]["diff"]) for d in pts], 5),
             mode="lines+markers", name=f"{condition_label(cond)}: Δ_B − Δ_A",
             legendgroup=cond, line={"color": col, "width": 2.5},
             marker={"color": col, "size": 10, "symbol": "diamond"},
