@@ -5,7 +5,7 @@ The scene (all meshes merged into one in-memory ``mi.Mesh``, one BVH) is built o
 coefficients, per-face object indices let a transmitted ray leave the object it entered.
 
 Everything per ray is one vectorised Dr.Jit program; a Python loop runs over bounces only,
-in :meth:`RadarScene._interactions` — the one bounce loop. It yields, per bounce, what each
+in :func:`~sim2radar.radar.raytrace_bounces.interactions` — the one bounce loop. It yields, per bounce, what each
 interaction sends back to the radar (specular and diffuse samples without the carrier phase,
 path length, first and last interaction point, visibility), after the return model of
 :mod:`sim2radar.radar.returns`. Two consumers read it:
@@ -18,13 +18,15 @@ path length, first and last interaction point, visibility), after the return mod
 
 Where each part is:
 
-- this module — :class:`RadarScene`: the Mitsuba scene it builds, the per-(config, seed) cache,
-  the two consumers above, the visibility query :meth:`RadarScene.first_hit_distance` and the
+- this module — :class:`RadarScene`: it holds the built scene (a
+  :class:`~sim2radar.radar.raytrace_bounces.SceneHandle`) and the per-(config, seed) cache, and
+  has the two consumers above, the visibility query :meth:`RadarScene.first_hit_distance` and the
   bare-Mitsuba baseline :meth:`RadarScene.intersect_only`;
 - :mod:`sim2radar.radar.raytrace_mesh` — meshes merged into one with per-face material and
   object indices, the pose check (NumPy; re-exported here);
 - :mod:`sim2radar.radar.raytrace_tables` — the device tables and ray grid of a config and seed;
-- :mod:`sim2radar.radar.raytrace_bounces` — the bounce loop (``RadarScene``'s base class);
+- :mod:`sim2radar.radar.raytrace_bounces` — the scene handle (Mitsuba scene, per-face material
+  and object indices) and the bounce loop, functions over the handle;
 - :mod:`sim2radar.radar.raytrace_polarization` — the Jones-vector operations of polarised rays.
 """
 
@@ -43,8 +45,8 @@ from sim2radar.radar.config import RadarConfig, load_radar_config
 from sim2radar.radar.frame import RadarFrame, simulate_scene_frame
 from sim2radar.radar.link_budget import pattern_exponent
 from sim2radar.radar.paths import PATH_KINDS, PathSet
-from sim2radar.radar.raytrace_bounces import BounceLoop
-from sim2radar.radar.raytrace_mesh import check_pose, face_object_ids, merge_meshes, mesh_list
+from sim2radar.radar.raytrace_bounces import SceneHandle, build_scene, interactions, primary_rays
+from sim2radar.radar.raytrace_mesh import check_pose, face_object_ids, merge_meshes
 from sim2radar.radar.raytrace_tables import Prepared, material_tables, prepare_rays
 
 __all__ = ["RadarScene", "face_object_ids", "merge_meshes", "check_pose"]
@@ -64,7 +66,7 @@ AMPLITUDE_STEP = 2.0**-40
 #: radar within ~0.5 mm of a metal surface could overflow).
 POWER_STEP = 2.0**-54
 #: A margin under the 2^63 steps a 64-bit sum holds; the tests check the headroom against it.
-_SUM_LIMIT = 2**61
+SUM_LIMIT = 2**61
 
 
 def _element_gain(dr, x, y, z, q_az: float, q_el: float):
@@ -77,7 +79,7 @@ def _element_gain(dr, x, y, z, q_az: float, q_el: float):
     return dr.power(cos_az, q_az) * dr.power(cos_el, q_el)
 
 
-class RadarScene(BounceLoop):
+class RadarScene:
     """A scene built once for Mitsuba, simulated from many radar poses.
 
     Parameters
@@ -85,6 +87,14 @@ class RadarScene(BounceLoop):
     meshes : sequence of MaterialMesh
         Scene geometry in the world frame [m]; each mesh's material must be known to
         :mod:`sim2radar.em`.
+
+    Attributes
+    ----------
+    handle : SceneHandle — the built scene the bounce loop traces
+        (:func:`sim2radar.radar.raytrace_bounces.build_scene`).
+    variant : str — the Mitsuba variant that traces it.
+    n_triangles, n_objects : int — faces and meshes merged.
+    build_seconds : float — wall time of the build [s].
 
     Examples
     --------
@@ -108,28 +118,17 @@ class RadarScene(BounceLoop):
         import drjit as dr
         import mitsuba as mi
 
-        self._mi, self._dr = mi, dr
-        meshes = mesh_list(meshes)  # once: an iterator would be consumed by the first pass
-        vertices, faces, face_material, self.materials = merge_meshes(meshes)
-        self.n_triangles = int(len(faces))
-        self.n_objects = len(meshes)
-        mesh = mi.Mesh(
-            "radar_scene",
-            vertex_count=len(vertices),
-            face_count=len(faces),
-            has_vertex_normals=False,
-            has_vertex_texcoords=False,
-        )
-        params = mi.traverse(mesh)
-        params["vertex_positions"] = to_drjit(mi.Float, vertices.ravel(), np.float32)
-        params["faces"] = to_drjit(mi.UInt32, faces.ravel(), np.uint32)
-        params.update()
-        self._scene = mi.load_dict({"type": "scene", "mesh": mesh})
-        self._face_material = to_drjit(mi.UInt32, face_material, np.uint32)
-        self._face_object = to_drjit(mi.UInt32, face_object_ids(meshes), np.uint32)
+        self.handle: SceneHandle = build_scene(mi, dr, meshes)
+        self.n_triangles = self.handle.n_triangles
+        self.n_objects = self.handle.n_objects
         self._prepared: dict[tuple[str, int | None], Prepared] = {}
         self._tables: dict[str, dict] = {}
         self.build_seconds = time.perf_counter() - t0
+
+    @property
+    def materials(self) -> list[str]:
+        """Normalised material names of the scene (index = per-face material index)."""
+        return list(self.handle.materials)
 
     # ------------------------------------------------------------------------------------
     def _prepare(self, radar: RadarConfig, seed: int | None) -> Prepared:
@@ -142,8 +141,8 @@ class RadarScene(BounceLoop):
         if h not in self._tables:
             if len(self._tables) > 4:
                 self._tables.pop(next(iter(self._tables)))
-            self._tables[h] = material_tables(self._mi, self.materials, radar)
-        prep = prepare_rays(self._mi, self._dr, radar, seed, self._tables[h])
+            self._tables[h] = material_tables(self.handle.mi, self.materials, radar)
+        prep = prepare_rays(self.handle.mi, self.handle.dr, radar, seed, self._tables[h])
         if len(self._prepared) > 8:
             self._prepared.pop(next(iter(self._prepared)))
         self._prepared[key] = prep
@@ -177,7 +176,7 @@ class RadarScene(BounceLoop):
         path beyond it aliases into bin ``i mod N``), is added to its range bin and fine
         azimuth point once per element row (:mod:`sim2radar.radar.binning`).
         """
-        mi, dr = self._mi, self._dr
+        mi, dr = self.handle.mi, self.handle.dr
         pose = check_pose(pose)
         t0 = time.perf_counter()
         prep = self._prepare(radar, seed)
@@ -206,7 +205,7 @@ class RadarScene(BounceLoop):
         cells = dr.zeros(int64, 2 * n_r * n_a * n_e)
         hits = dr.zeros(mi.UInt32, radar.max_bounces)
 
-        for it in self._interactions(radar, pose, prep, hits):
+        for it in interactions(self.handle, radar, pose, prep, hits):
             a0_re = it.spec_re + it.diff_re
             a0_im = it.spec_im + it.diff_im
             # e^{-jkL}: reduce to the fractional number of wavelengths first (float32 sincos
@@ -325,14 +324,14 @@ class RadarScene(BounceLoop):
         """
         from sim2radar.radar.link_budget import noise_power_per_cell
 
-        mi, dr = self._mi, self._dr
+        mi, dr = self.handle.mi, self.handle.dr
         pose = check_pose(pose)
         t0 = time.perf_counter()
         prep = self._prepare(radar, seed)
         t1 = time.perf_counter()
         hits = dr.zeros(mi.UInt32, radar.max_bounces)
         records = []
-        for it in self._interactions(radar, pose, prep, hits):
+        for it in interactions(self.handle, radar, pose, prep, hits):
             fields = [it.visible, it.spec_re, it.spec_im, it.diff_re, it.diff_im, it.path_m,
                       it.departure, it.arrival, it.n_interactions]
             dr.schedule(*fields)
@@ -419,7 +418,7 @@ class RadarScene(BounceLoop):
         -------
         (N,) float64 — distance to the first hit [m], ``inf`` where the ray misses.
         """
-        mi, dr = self._mi, self._dr
+        mi, dr = self.handle.mi, self.handle.dr
         o = np.asarray(origins_m, dtype=np.float64)
         d = np.asarray(directions, dtype=np.float64)
         if o.ndim != 2 or o.shape[1] != 3 or d.shape != o.shape:
@@ -432,7 +431,7 @@ class RadarScene(BounceLoop):
             raise ValueError("origins and directions must be finite, directions non-zero")
         ray = mi.Ray3f(to_drjit(mi.Point3f, o.T, np.float32),
                        to_drjit(mi.Vector3f, (d / norm).T, np.float32))
-        pi = self._scene.ray_intersect_preliminary(ray)
+        pi = self.handle.scene.ray_intersect_preliminary(ray)
         t = dr.select(pi.is_valid(), pi.t, dr.inf)
         return np.asarray(t.numpy(), dtype=np.float64)
 
@@ -445,10 +444,10 @@ class RadarScene(BounceLoop):
         Used by the benchmark to measure the simulator's overhead over ``ray_intersect``.
         Returns ``{"seconds": ..., "n_intersections": ...}``.
         """
-        mi, dr = self._mi, self._dr
+        mi, dr = self.handle.mi, self.handle.dr
         pose = check_pose(pose)
         prep = self._prepare(radar, seed)
-        ray, _ = self._primary_rays(prep, pose)
+        ray, _ = primary_rays(self.handle, prep, pose)
         n = prep.n_rays
         dr.eval(ray)
         dr.sync_thread()
@@ -456,7 +455,7 @@ class RadarScene(BounceLoop):
         t0 = time.perf_counter()
         count = 0
         for bounce in range(radar.max_bounces):
-            si = self._scene.ray_intersect(ray, active)
+            si = self.handle.scene.ray_intersect(ray, active)
             valid = active & si.is_valid()
             if bounce + 1 < radar.max_bounces:
                 normal = si.n

@@ -3,7 +3,8 @@
 Brute-force Möller–Trumbore ray–triangle intersection and the return model of
 :mod:`sim2radar.radar.returns` evaluated in float64 with the exact Fresnel / slab coefficients
 and the exact directive-lobe normalisation (no look-up tables), bounce by bounce like
-``RadarScene._interactions``: :func:`reference_interactions` yields per-bounce NumPy records,
+:func:`sim2radar.radar.raytrace_bounces.interactions`: :func:`reference_interactions` yields
+per-bounce NumPy records,
 :func:`reference_trace` weights them by the elements' two-way gain and bins them with
 :func:`sim2radar.radar.binning.deposit`,
 :func:`reference_paths` keeps them as paths.
@@ -143,7 +144,8 @@ def _return_leg(scene: _Scene, radar: RadarConfig, hit, normal, radar_pos, visib
 def reference_interactions(
     meshes, radar: RadarConfig, pose=None, seed: int | None = None
 ) -> Iterator[dict]:
-    """Per-bounce NumPy records (world frame) of every ray, like ``RadarScene._interactions``."""
+    """Per-bounce NumPy records (world frame) of every ray, like
+    :func:`sim2radar.radar.raytrace_bounces.interactions`."""
     pose = check_pose(pose)
     scene = _Scene(meshes)
     sc = radar.scattering
