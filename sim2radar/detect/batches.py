@@ -1,36 +1,63 @@
-"""Training batches: augmentation and collation of one epoch, overlapped with the model's step.
+"""Training batches: augmentation and collation in ``torch.utils.data.DataLoader`` workers.
 
-    for pts, gt, n in epoch_batches(frames, order, aug_cfg, mcfg, rng, db, device, prefetch=2):
-        loss = model.loss(model(pts, n), gt) ...
+    with TrainingBatches(frames, 8, aug_cfg, mcfg, db, seed, device, workers=2) as batches:
+        for epoch in range(start_epoch, epochs):
+            for pts, gt, n in batches.epoch(epoch):
+                loss = model.loss(model(pts, n), gt) ...
 
-Each batch is the frames ``order[k*B:(k+1)*B]`` augmented in order with the epoch's one
-random generator (GT sampling, flip, rotation, scaling, shuffle), then collated. With
-``prefetch > 0`` a background thread prepares the next ``prefetch`` batches while the model
-trains on the current one — the same frames, the same draws in the same order, so **the same
-batches bit for bit** as preparing each one just before its step (``prefetch=0``; a test
-trains both ways and compares every loss). The host's augmentation then leaves the step's
-critical path where there is spare compute beside the model (a GPU step, or a CPU with idle
-cores); NumPy and PyTorch release the GIL in their kernels. On CUDA the batches are collated
-into pinned memory and copied to the device without blocking.
+**Order of random draws** (issue #31; :data:`RANDOM_DRAWS`). Epoch ``e`` of a run with seed
+``s`` visits the frames in the order ``numpy.random.default_rng([s, e]).permutation(N)``. Batch
+``k`` of the epoch is the frames ``order[k*B:(k+1)*B]``, each augmented in turn (GT sampling,
+flip, rotation, scaling, point shuffle: :func:`~sim2radar.detect.augment.augment_frame`) with
+the batch's own generator ``default_rng(SeedSequence([s, e], spawn_key=(k,)))`` — the ``k``-th
+child of ``SeedSequence([s, e]).spawn``, independent of the order's stream and of every other
+batch's — then collated (:func:`collate`). A batch's points and boxes are therefore a function
+of ``(s, e, k)`` alone: the same bit for bit whichever worker makes it, for any number of
+workers (0 = in this process), any prefetch depth, and after resuming a run at an epoch
+boundary (tests/detect/test_batches.py). Before issue #31 one generator per epoch drew the
+order and then every batch's augmentation in sequence, which worker processes cannot share;
+runs of the same seed made before and after differ, and the order's name is part of the
+detector config (:attr:`~sim2radar.detect.config.AugmentConfig.random_draws`), hence of a
+sweep run's key.
 
-Why a thread and not ``torch.utils.data.DataLoader`` worker processes: workers would each need
-their own random stream, so a batch's augmentation would depend on which worker made it or
-need a new per-batch seeding — a new order of draws, and results no longer comparable with
-the runs already in the store. One producer thread keeps today's stream exactly.
+**Where the work runs.** ``workers = 0``: the batches are made in this process when the loop
+asks (the same DataLoader code path, no second loop). ``workers > 0``: that many persistent
+worker processes (one torch and, where threadpoolctl is installed, one BLAS thread each, so
+they do not oversubscribe the cores the model uses) each prepare ``prefetch_factor`` batches
+ahead, so augmentation and collation leave the step's critical path. The frames and the
+GT-sampling database reach the workers once per :class:`TrainingBatches`: shared
+copy-on-write under the ``fork`` start method (Linux's default before Python 3.14), pickled
+once per worker under ``spawn``/``forkserver``. On CUDA the batches are collated into pinned
+memory and copied to the device without blocking. How many workers pay off is measured
+(BENCHMARKS.md, :func:`resolve_loader_workers`).
 """
 
 from __future__ import annotations
 
-import queue
-import threading
+import os
 from collections.abc import Iterator, Sequence
 
 import numpy as np
 import torch
+from torch.utils.data import DataLoader, Dataset, Sampler
 
 from sim2radar.detect.augment import GTDatabase, augment_frame
 
-__all__ = ["collate", "epoch_batches"]
+__all__ = [
+    "RANDOM_DRAWS",
+    "TrainingBatches",
+    "batch_generator",
+    "collate",
+    "epoch_order",
+    "make_batch",
+    "resolve_loader_workers",
+]
+
+#: name of the order of random draws above (the only one this code makes)
+RANDOM_DRAWS = "per_batch"
+#: DataLoader workers ``"auto"`` gives on CUDA: the host's ~7 ms of augmentation per batch
+#: (BENCHMARKS.md) is a fraction of a GPU step, two workers keep up with slack for jitter
+CUDA_AUTO_WORKERS = 2
 
 
 def collate(
@@ -65,67 +92,160 @@ def collate(
     return pts.to(device, non_blocking=pin), gt_t.to(device, non_blocking=pin)
 
 
-def _batches(frames, order, batch_size, aug_cfg, mcfg, rng, db, device, pin):
-    for start in range(0, len(order), batch_size):
-        batch = [frames[i] for i in order[start:start + batch_size]]
-        aug = [augment_frame(f, aug_cfg, rng, mcfg.point_cloud_range_m, db) for f in batch]
-        pts, gt = collate([a[0] for a in aug], [a[1] for a in aug], [a[2] for a in aug],
-                          mcfg.class_names, "cpu" if pin else device, pin=pin)
-        yield pts, gt, len(batch)
+def epoch_order(seed: int, epoch: int, n_frames: int) -> np.ndarray:
+    """(n_frames,) int64 — the frame order of ``epoch`` (0-based): a permutation drawn from
+    ``default_rng([seed, epoch])``."""
+    return np.random.default_rng([int(seed), int(epoch)]).permutation(n_frames)
 
 
-_DONE = object()
+def batch_generator(seed: int, epoch: int, batch: int) -> np.random.Generator:
+    """The generator batch ``batch`` of ``epoch`` (both 0-based) draws its augmentation from:
+    child ``batch`` of ``SeedSequence([seed, epoch])`` (what ``.spawn`` would give)."""
+    seq = np.random.SeedSequence([int(seed), int(epoch)], spawn_key=(int(batch),))
+    return np.random.default_rng(seq)
 
 
-def epoch_batches(frames: Sequence, order: Sequence[int], batch_size: int, aug_cfg, mcfg,
-                  rng: np.random.Generator, db: GTDatabase | None, device: torch.device, *,
-                  prefetch: int = 0) -> Iterator[tuple[torch.Tensor, torch.Tensor, int]]:
-    """The epoch's batches ``(points, gt_boxes, n_frames)`` on ``device``, in ``order``.
+def make_batch(frames: Sequence, order: Sequence[int], batch: int, batch_size: int, aug_cfg,
+               mcfg, db: GTDatabase | None, rng: np.random.Generator,
+               ) -> tuple[torch.Tensor, torch.Tensor, int]:
+    """Batch ``batch`` of an epoch in ``order``: its frames augmented in turn with ``rng``
+    and collated on the host; ``(points, gt_boxes, n_frames)`` as :func:`collate` gives."""
+    chosen = [frames[i] for i in order[batch * batch_size:(batch + 1) * batch_size]]
+    aug = [augment_frame(f, aug_cfg, rng, mcfg.point_cloud_range_m, db) for f in chosen]
+    pts, gt = collate([a[0] for a in aug], [a[1] for a in aug], [a[2] for a in aug],
+                      mcfg.class_names)
+    return pts, gt, len(chosen)
 
-    ``prefetch``: batches a background thread prepares ahead (0: each one when asked). An
-    exception while preparing a batch is raised here, at that batch; leaving the loop early
-    stops the thread.
-    """
-    pin = prefetch > 0 and device.type == "cuda"
-    made = _batches(frames, order, batch_size, aug_cfg, mcfg, rng, db, device, pin)
-    if prefetch <= 0:
-        yield from made
-        return
-    ready: queue.Queue = queue.Queue(maxsize=prefetch)
-    stop = threading.Event()
 
-    def put(item) -> bool:
-        """Queue ``item`` unless the consumer has left; whether it was queued."""
-        while not stop.is_set():
-            try:
-                ready.put(item, timeout=0.1)
-                return True
-            except queue.Full:
-                continue
-        return False
+class _Batches(Dataset):
+    """Map-style dataset whose item ``(epoch, k)`` is batch ``k`` of ``epoch`` (module
+    docstring); what each DataLoader worker holds."""
 
-    def produce() -> None:
-        try:
-            for item in made:
-                if not put(item):
-                    return
-            put(_DONE)
-        except BaseException as exc:  # noqa: BLE001 - handed to the consumer, raised there
-            put(exc)
+    def __init__(self, frames, batch_size, aug_cfg, mcfg, db, seed):
+        self.frames, self.batch_size, self.aug_cfg = list(frames), int(batch_size), aug_cfg
+        self.mcfg, self.db, self.seed = mcfg, db, int(seed)
+        self._order: tuple[int, np.ndarray] | None = None
 
-    worker = threading.Thread(target=produce, name="sim2radar-batches", daemon=True)
-    worker.start()
+    def __len__(self) -> int:
+        return -(-len(self.frames) // self.batch_size)
+
+    def __getitem__(self, key: tuple[int, int]) -> tuple[torch.Tensor, torch.Tensor, int]:
+        epoch, k = key
+        if self._order is None or self._order[0] != epoch:  # one permutation per epoch
+            self._order = (epoch, epoch_order(self.seed, epoch, len(self.frames)))
+        return make_batch(self.frames, self._order[1], k, self.batch_size, self.aug_cfg,
+                          self.mcfg, self.db, batch_generator(self.seed, epoch, k))
+
+
+class _EpochSampler(Sampler):
+    """Yields ``(epoch, 0) ... (epoch, n - 1)`` for the epoch last set (in the main process,
+    so persistent workers need no message about which epoch it is)."""
+
+    def __init__(self, n_batches: int):
+        self.n_batches, self.epoch = int(n_batches), 0
+
+    def __len__(self) -> int:
+        return self.n_batches
+
+    def __iter__(self) -> Iterator[tuple[int, int]]:
+        return iter([(self.epoch, k) for k in range(self.n_batches)])
+
+
+def _as_is(item):
+    """DataLoader ``collate_fn``: an item is already a whole collated batch."""
+    return item
+
+
+def _one_thread(worker_id: int) -> None:
+    """DataLoader ``worker_init_fn``: one torch thread and one BLAS/OpenMP thread per worker,
+    so the workers do not oversubscribe the cores the model's threads use."""
+    torch.set_num_threads(1)
     try:
-        while True:
-            item = ready.get()
-            if item is _DONE:
-                return
-            if isinstance(item, BaseException):
-                raise item
-            pts, gt, n = item
-            if pin:
-                pts, gt = pts.to(device, non_blocking=True), gt.to(device, non_blocking=True)
+        from threadpoolctl import threadpool_limits
+    except ImportError:  # optional: NumPy's BLAS then keeps its own count (augmentation
+        return           # calls no BLAS kernels large enough to start its threads)
+    threadpool_limits(1)
+
+
+def resolve_loader_workers(setting: int | str, device: torch.device) -> int:
+    """DataLoader worker processes for ``runtime.loader_workers``: an int as given; ``"auto"``
+    0 on a CPU (there the workers only compete with the model's threads for the cores:
+    BENCHMARKS.md, issue #31) and :data:`CUDA_AUTO_WORKERS` on CUDA (at most the cores
+    but one, at least one)."""
+    if setting != "auto":
+        return int(setting)
+    if device.type != "cuda":
+        return 0
+    return max(1, min(CUDA_AUTO_WORKERS, (os.cpu_count() or 2) - 1))
+
+
+class TrainingBatches:
+    """The batches of every epoch of one training run (module docstring), made by a
+    ``torch.utils.data.DataLoader`` with ``workers`` persistent worker processes.
+
+    Parameters
+    ----------
+    frames : training frames (their ``points``/``boxes``/``names`` are read, never changed).
+    batch_size : frames per batch; the last batch of an epoch may be smaller.
+    aug_cfg : :class:`~sim2radar.detect.config.AugmentConfig`.
+    mcfg : :class:`~sim2radar.detect.config.ModelConfig` (point-cloud range, class names).
+    db : GT-sampling database, or None.
+    seed : the run's seed.
+    device : where the batches go; on CUDA they are pinned and copied without blocking.
+    workers : worker processes (0: made in this process when asked).
+    prefetch_factor : batches each worker prepares ahead (``workers > 0``).
+    context : multiprocessing start method for the workers (None: the process default).
+
+    Use as a context manager (or call :meth:`close`): leaving it stops the workers. An
+    exception raised while a worker makes a batch is raised by :meth:`epoch` at that batch.
+    """
+
+    def __init__(self, frames: Sequence, batch_size: int, aug_cfg, mcfg,
+                 db: GTDatabase | None, seed: int, device: torch.device | str = "cpu", *,
+                 workers: int = 0, prefetch_factor: int = 2, context: str | None = None):
+        if workers < 0:
+            raise ValueError(f"workers must be >= 0, got {workers}")
+        self.device = torch.device(device)
+        self.workers = int(workers)
+        self._pin = self.device.type == "cuda"
+        dataset = _Batches(frames, batch_size, aug_cfg, mcfg, db, seed)
+        self._sampler = _EpochSampler(len(dataset))
+        parallel = self.workers > 0
+        self._loader: DataLoader | None = DataLoader(
+            dataset, batch_size=None, sampler=self._sampler, num_workers=self.workers,
+            collate_fn=_as_is, pin_memory=self._pin, persistent_workers=parallel,
+            prefetch_factor=prefetch_factor if parallel else None,
+            worker_init_fn=_one_thread if parallel else None,
+            multiprocessing_context=context if parallel else None)
+
+    def __len__(self) -> int:
+        """Batches per epoch."""
+        return len(self._sampler)
+
+    def epoch(self, epoch: int) -> Iterator[tuple[torch.Tensor, torch.Tensor, int]]:
+        """Epoch ``epoch``'s (0-based) batches ``(points, gt_boxes, n_frames)`` on the device,
+        in order (:func:`collate`'s shapes)."""
+        if self._loader is None:
+            raise RuntimeError("TrainingBatches is closed")
+        self._sampler.epoch = int(epoch)
+        for pts, gt, n in self._loader:
+            if self.device.type != "cpu":
+                pts = pts.to(self.device, non_blocking=self._pin)
+                gt = gt.to(self.device, non_blocking=self._pin)
             yield pts, gt, n
-    finally:
-        stop.set()
-        worker.join(timeout=5.0)
+
+    def close(self) -> None:
+        """Stop the worker processes (idempotent)."""
+        loader, self._loader = getattr(self, "_loader", None), None
+        it = getattr(loader, "_iterator", None)   # persistent workers live in the iterator
+        if it is not None and hasattr(it, "_shutdown_workers"):
+            it._shutdown_workers()
+
+    def __enter__(self) -> TrainingBatches:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    def __del__(self) -> None:
+        self.close()

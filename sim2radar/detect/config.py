@@ -20,6 +20,7 @@ of 0.10-0.25 m, so box depth across the wall is ~0.1-0.3 m; door height 2.0-2.1 
 from __future__ import annotations
 
 import math
+import warnings
 from pathlib import Path
 from typing import Any, Literal
 
@@ -196,6 +197,12 @@ class AugmentConfig(_Frozen):
     #: global scaling factor (OpenPCDet WORLD_SCALE_RANGE)
     scale_range: tuple[float, float] = (0.95, 1.05)
     shuffle_points: bool = True
+    #: the order of random draws behind the augmentation (sim2radar.detect.batches): batch k of
+    #: epoch e draws from child k of SeedSequence([seed, e]), so a batch does not depend on
+    #: the DataLoader worker that made it. The only order this code makes; a config field so
+    #: that it is part of a run's identity (runs before issue #31 drew every batch of an epoch
+    #: from one stream and have no such field)
+    random_draws: Literal["per_batch"] = "per_batch"
 
 
 class OptimConfig(_Frozen):
@@ -250,12 +257,34 @@ class RuntimeConfig(_Frozen):
     checkpoint_every: int = 10
     #: keep this many epoch checkpoints besides ``last.pt``
     keep_checkpoints: int = 2
-    #: training batches a background thread augments and collates ahead of the model's step
-    #: (0: each just before its step); the same batches bit for bit either way
-    #: (sim2radar.detect.batches). None: 1 on CUDA, 0 on a CPU, where the thread only competes
-    #: with the model's own threads (2 cores: 0.816 vs 0.823 s per paper-model step, BENCHMARKS)
-    prefetch_batches: int | None = Field(None, ge=0, le=8)
+    #: torch DataLoader worker processes that augment and collate the training batches ahead
+    #: of the model's step (0: in this process, each just before its step); the same batches
+    #: bit for bit for any count (sim2radar.detect.batches). "auto": 0 on a CPU, where workers
+    #: only compete with the model's threads for the cores (measured on 2 cores, BENCHMARKS.md,
+    #: issue #31), 2 on CUDA (sim2radar.detect.batches.resolve_loader_workers)
+    loader_workers: int | Literal["auto"] = "auto"
+    #: batches each DataLoader worker prepares ahead (loader_workers > 0)
+    loader_prefetch: int = Field(2, ge=1, le=16)
+    #: deprecated, ignored: the background thread it sized is gone (issue #31); configs and
+    #: checkpoints that carry it still load (a warning when it is set); not written any more
+    prefetch_batches: int | None = Field(None, ge=0, le=8, exclude=True)
     progress: bool = True
+
+    @field_validator("loader_workers")
+    @classmethod
+    def _workers(cls, v: int | str) -> int | str:
+        if isinstance(v, int) and not 0 <= v <= 64:
+            raise ValueError(f"must be 'auto' or an int in [0, 64], got {v}")
+        return v
+
+    @field_validator("prefetch_batches")
+    @classmethod
+    def _deprecated_prefetch(cls, v: int | None) -> int | None:
+        if v is not None:
+            warnings.warn("runtime.prefetch_batches is deprecated and ignored: training batches "
+                          "are made by runtime.loader_workers DataLoader workers (issue #31)",
+                          FutureWarning, stacklevel=2)
+        return v
 
 
 class DetectConfig(_Frozen):

@@ -15,8 +15,10 @@ Optimisation follows OpenPCDet's ``adam_onecycle``: AdamW (betas 0.9/0.99, decou
 decay on every parameter), one-cycle learning rate (cosine warm-up from lr/10 to lr over 40 %
 of the steps, cosine decay to lr/1e5) with inverse momentum (beta1 0.95 -> 0.85 -> 0.95),
 gradient-norm clipping at 10. Randomness: ``torch.manual_seed(seed)`` fixes the initial
-weights; epoch ``e`` draws its shuffling and augmentation from ``numpy.random.default_rng(
-[seed, e])``, so a resumed run continues exactly as an uninterrupted one. An ``on_epoch_end``
+weights; epoch ``e`` draws its frame order from ``numpy.random.default_rng([seed, e])`` and
+batch ``k``'s augmentation from child ``k`` of ``SeedSequence([seed, e])``
+(:mod:`sim2radar.detect.batches`, made in ``runtime.loader_workers`` DataLoader workers), so a
+resumed run continues exactly as an uninterrupted one, whatever the worker count. An ``on_epoch_end``
 hook (e.g. validation AP) runs with torch's random state saved and restored, so it cannot change
 the training either.
 """
@@ -40,7 +42,7 @@ import torch
 
 from sim2radar.datasets.openpcdet import Frame, OpenPCDetDataset
 from sim2radar.detect.augment import GTDatabase, build_gt_database
-from sim2radar.detect.batches import collate, epoch_batches
+from sim2radar.detect.batches import TrainingBatches, collate, resolve_loader_workers
 from sim2radar.detect.config import DetectConfig, load_config
 from sim2radar.detect.model import ENCODER_MODULES, Detections, PointPillars
 from sim2radar.evaluate.ap import evaluate_detections
@@ -367,6 +369,39 @@ def _param_groups(model: PointPillars, lr: float, encoder_scale: float) -> list[
     return [{"params": enc, "lr": lr * encoder_scale}, {"params": rest, "lr": lr}]
 
 
+def _train_epoch(epoch: int, batches: TrainingBatches, model: PointPillars, optimizer,
+                 scheduler, scaler, amp_dtype, dev: torch.device, grad_norm_clip: float,
+                 progress, on_epoch_end: EpochHook | None) -> dict[str, Any]:
+    """One epoch (0-based ``epoch``) of optimiser steps; its history record."""
+    t_epoch = time.perf_counter()
+    sums: dict[str, float] = {}
+    for pts, gt, n_frames in batches.epoch(epoch):
+        with _autocast(dev, amp_dtype):
+            out = model(pts, n_frames)
+        loss, parts = model.loss(out, gt)
+        optimizer.zero_grad(set_to_none=True)
+        scaler.scale(loss).backward()
+        scaler.unscale_(optimizer)
+        torch.nn.utils.clip_grad_norm_(model.parameters(), grad_norm_clip)
+        lr_used = optimizer.param_groups[-1]["lr"]      # the head's (the peak lr)
+        scaler.step(optimizer)
+        scaler.update()
+        scheduler.step()
+        for k, v in parts.items():
+            sums[k] = sums.get(k, 0.0) + v
+        if progress is not None:
+            progress.update(1)
+            progress.set_postfix(epoch=epoch + 1, loss=f"{parts['total']:.3f}")
+    record: dict[str, Any] = {k: v / len(batches) for k, v in sums.items()}
+    record.update(epoch=epoch + 1, lr=lr_used)
+    if on_epoch_end is not None:
+        t_hook = time.perf_counter()
+        record.update(_run_hook(on_epoch_end, epoch + 1, model, dev))
+        record["hook_seconds"] = time.perf_counter() - t_hook
+    record["seconds"] = time.perf_counter() - t_epoch
+    return record
+
+
 def _train(config, train_ids, out_dir: Path, init_encoder_from, seed, *, data_dir, epochs,
            resume, device, frames, on_epoch_end) -> TrainResult:
     """:func:`train` inside its run folder."""
@@ -437,6 +472,10 @@ def _train(config, train_ids, out_dir: Path, init_encoder_from, seed, *, data_di
                                  "from the checkpoint's; use a new out_dir")
         if ckpt.get("train_ids") != [f.frame_id for f in frames] or ckpt["seed"] != cfg.seed:
             raise ValueError(f"{last}: cannot resume with different train frames or seed")
+        if "random_draws" not in dict(ckpt["config"].get("augmentation") or {}):
+            raise ValueError(f"{last}: cannot resume a run trained before issue #31 (one random "
+                             "stream per epoch; batches now draw per batch, "
+                             "sim2radar.detect.batches); use a new out_dir")
         model.load_state_dict(ckpt["model"])
         optimizer.load_state_dict(ckpt["optimizer"])
         scheduler.load_state_dict(ckpt["scheduler"])
@@ -470,41 +509,15 @@ def _train(config, train_ids, out_dir: Path, init_encoder_from, seed, *, data_di
         progress = tqdm(total=total_steps, initial=start_epoch * steps_per_epoch,
                         desc=f"train {cfg.name}", unit="step", dynamic_ncols=True)
     model.train()
-    prefetch = rt.prefetch_batches if rt.prefetch_batches is not None else int(
-        dev.type == "cuda")
-    for epoch in range(start_epoch, opt_cfg.epochs):
-        t_epoch = time.perf_counter()
-        rng = np.random.default_rng([cfg.seed, epoch])
-        order = rng.permutation(len(frames))
-        sums: dict[str, float] = {}
-        batches = epoch_batches(frames, order, bs, cfg.augmentation, mcfg, rng, db, dev,
-                                prefetch=prefetch)
-        for pts, gt, n_frames in batches:
-            with _autocast(dev, amp_dtype):
-                out = model(pts, n_frames)
-            loss, parts = model.loss(out, gt)
-            optimizer.zero_grad(set_to_none=True)
-            scaler.scale(loss).backward()
-            scaler.unscale_(optimizer)
-            torch.nn.utils.clip_grad_norm_(model.parameters(), opt_cfg.grad_norm_clip)
-            lr_used = optimizer.param_groups[-1]["lr"]      # the head's (the peak lr)
-            scaler.step(optimizer)
-            scaler.update()
-            scheduler.step()
-            for k, v in parts.items():
-                sums[k] = sums.get(k, 0.0) + v
-            if progress is not None:
-                progress.update(1)
-                progress.set_postfix(epoch=epoch + 1, loss=f"{parts['total']:.3f}")
-        record = {k: v / steps_per_epoch for k, v in sums.items()}
-        record.update(epoch=epoch + 1, lr=lr_used)
-        if on_epoch_end is not None:
-            t_hook = time.perf_counter()
-            record.update(_run_hook(on_epoch_end, epoch + 1, model, dev))
-            record["hook_seconds"] = time.perf_counter() - t_hook
-        record["seconds"] = time.perf_counter() - t_epoch
-        history.append(record)
-        checkpoint(epoch + 1)
+    batches = TrainingBatches(frames, bs, cfg.augmentation, mcfg, db, cfg.seed, dev,
+                              workers=resolve_loader_workers(rt.loader_workers, dev),
+                              prefetch_factor=rt.loader_prefetch)
+    with batches:
+        for epoch in range(start_epoch, opt_cfg.epochs):
+            history.append(_train_epoch(epoch, batches, model, optimizer, scheduler, scaler,
+                                        amp_dtype, dev, opt_cfg.grad_norm_clip, progress,
+                                        on_epoch_end))
+            checkpoint(epoch + 1)
     if progress is not None:
         progress.close()
     if not last.is_file():  # zero epochs left to run: still leave a checkpoint
