@@ -5,7 +5,8 @@ compare with training from scratch over real-data fractions × trials — as a r
     summary = run_experiment("data/sim", "data/proxy_real", profile="demo", name="demo",
                              out="out/sweeps")
 
-Every training run is its own Prefect task keyed by content (:mod:`sim2radar.tasks.experiment`): a
+Every training run is its own Prefect task (:func:`pretrain_task`, :func:`finetune_task`
+around :mod:`sim2radar.tasks.experiment`'s plain functions) keyed by content: a
 finished run is ``skipped`` on a rerun, a run killed half-way resumes from its last checkpoint,
 and a pre-training shared by several cells runs once (per trial seed with the profile's
 ``pretrain_per_trial``). Baseline runs start at once; a pre-trained condition's runs start when
@@ -41,11 +42,12 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
-from prefect import flow, get_run_logger
+from prefect import flow, get_run_logger, task
+from prefect.cache_policies import NO_CACHE
 from prefect.futures import as_completed
 
 from sim2radar.experiment.folder import SweepFolder
-from sim2radar.experiment.plan import PlannedPretrain, PretrainResult
+from sim2radar.experiment.plan import PlannedPretrain, PlannedRun, PretrainResult, SweepContext
 from sim2radar.fileio import write_json
 from sim2radar.flows import _progress
 from sim2radar.flows._states import finish, relay, run_flow
@@ -53,13 +55,28 @@ from sim2radar.flows.runners import task_runner
 from sim2radar.tasks.experiment import (
     failed_pretrain_row,
     failed_row,
-    finetune_task,
-    pretrain_task,
+    run_finetuning,
+    run_pretraining,
     write_pretrainings_table,
     write_runs_table,
 )
 
-__all__ = ["run_experiment_flow", "run_experiment", "run_experiment_job", "progress_callback"]
+__all__ = ["run_experiment_flow", "run_experiment", "run_experiment_job", "progress_callback",
+           "pretrain_task", "finetune_task"]
+
+
+# --- Prefect tasks: no retries (deterministic training); caching by content key inside.
+@task(name="pretrain-encoder", cache_policy=NO_CACHE, retries=0, persist_result=False)
+def pretrain_task(ctx: SweepContext, job: PlannedPretrain) -> PretrainResult:
+    """Prefect task around :func:`sim2radar.tasks.experiment.run_pretraining`."""
+    return run_pretraining(ctx, job)
+
+
+@task(name="finetune-and-test", cache_policy=NO_CACHE, retries=0, persist_result=False)
+def finetune_task(ctx: SweepContext, job: PlannedRun,
+                  pretrain: PretrainResult | None) -> dict[str, Any]:
+    """Prefect task around :func:`sim2radar.tasks.experiment.run_finetuning`."""
+    return run_finetuning(ctx, job, pretrain)
 
 
 def progress_callback(fn: Callable[[dict], None]):

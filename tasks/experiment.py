@@ -1,6 +1,8 @@
-"""The experiment sweep's tasks: content keys, caching, store I/O and outcome records around
-:mod:`sim2radar.experiment`; they execute a :class:`~sim2radar.experiment.plan.SweepPlan`
-(planned, and summed up at the end, by :mod:`sim2radar.experiment.sweep`).
+"""The experiment sweep's work: content keys, caching, store I/O and outcome records around
+:mod:`sim2radar.experiment`; it executes a :class:`~sim2radar.experiment.plan.SweepPlan`
+(planned, and summed up at the end, by :mod:`sim2radar.experiment.sweep`). Plain functions, no
+Prefect import: ``flows/run_experiment.py`` wraps :func:`run_pretraining` and
+:func:`run_finetuning` in its Prefect tasks.
 
 Identity. A pre-training run is keyed by its sim dataset's digest and
 :func:`sim2radar.experiment.plan.pretrain_key_inputs` (role, seed, epochs, detector, intensity
@@ -40,8 +42,6 @@ from pathlib import Path
 from typing import Any
 
 import pyarrow as pa
-from prefect import task
-from prefect.cache_policies import NO_CACHE
 
 from sim2radar.experiment import sweep
 from sim2radar.experiment.folder import SweepFolder
@@ -61,7 +61,7 @@ from sim2radar.tasks.common import open_store
 
 __all__ = ["EXPERIMENT_STAGE_VERSION", "prepare_sweep", "read_plan", "plan_cost",
            "run_pretraining", "run_finetuning", "force_runs", "failed_row", "write_runs_table",
-           "failed_pretrain_row", "write_pretrainings_table", "pretrain_task", "finetune_task"]
+           "failed_pretrain_row", "write_pretrainings_table"]
 
 log = logging.getLogger(__name__)
 
@@ -296,7 +296,7 @@ def force_runs(store: str, sweep_dir: str | os.PathLike,
     return [r.id for r in runs]
 
 
-# --- Runs (plain functions; the Prefect tasks below only wrap them)
+# --- Runs (plain functions; flows/run_experiment.py wraps them in Prefect tasks)
 def _claim(ctx: SweepContext, key: str, done, out: Path, what: str):
     """Claim a run for this process (:mod:`sim2radar.experiment.claims`), waiting while another
     live process trains it; None once it is finished (by anyone)."""
@@ -526,16 +526,3 @@ def write_runs_table(sweep_dir: str | os.PathLike, rows: list[dict[str, Any]]) -
     atomic_write_with(path, lambda tmp: pq.write_table(table, tmp))
     return path
 
-
-# --- Prefect tasks: no retries (deterministic training); caching by content key inside.
-@task(name="pretrain-encoder", cache_policy=NO_CACHE, retries=0, persist_result=False)
-def pretrain_task(ctx: SweepContext, job: PlannedPretrain) -> PretrainResult:
-    """Prefect task around :func:`run_pretraining`."""
-    return run_pretraining(ctx, job)
-
-
-@task(name="finetune-and-test", cache_policy=NO_CACHE, retries=0, persist_result=False)
-def finetune_task(ctx: SweepContext, job: PlannedRun,
-                  pretrain: PretrainResult | None) -> dict[str, Any]:
-    """Prefect task around :func:`run_finetuning`."""
-    return run_finetuning(ctx, job, pretrain)

@@ -16,7 +16,8 @@ fractions x paired trials.
 - :mod:`~sim2radar.experiment.tracking` — a sweep folder mirrored into MLflow (import it
   directly; MLflow is the optional ``mlflow`` extra).
 
-Prefect wiring lives in ``tasks/experiment.py`` and ``flows/``; nothing here imports Prefect.
+``tasks/experiment.py`` executes a sweep (keys, store, claims) and ``flows/run_experiment.py``
+runs it as Prefect tasks; nothing here, nor in ``tasks/``, imports Prefect.
 """
 
 from sim2radar.experiment.plan import (

@@ -281,3 +281,20 @@ def test_labels_differing_only_in_case_or_no_label_at_all_are_refused_up_front(d
     with pytest.raises(ValueError, match=r"its 'train' split holds no label of the detector's "
                                          r"classes \['door'\]"):
         _plan(setup, none, tmp_path / "p2")
+
+
+def test_the_sweeps_plain_work_does_not_import_prefect():
+    """The sweep's plain functions (prepare, ``--plan``'s cost, one training run, the tables)
+    live in ``tasks/experiment.py`` without Prefect; its Prefect tasks are in ``flows/``."""
+    import subprocess
+    import sys
+
+    code = ("import sys, sim2radar.tasks.experiment, sim2radar.experiment.sweep; "
+            "print(sorted(m for m in sys.modules if m.split('.')[0] == 'prefect')[:3])")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         check=True)
+    assert out.stdout.strip() == "[]", out.stdout
+    from sim2radar.flows import run_experiment
+
+    assert run_experiment.pretrain_task.name == "pretrain-encoder"
+    assert run_experiment.finetune_task.name == "finetune-and-test"
