@@ -44,6 +44,7 @@ from typing import Any
 import pyarrow as pa
 
 from sim2radar.experiment import sweep
+from sim2radar.experiment.errors import SettingError
 from sim2radar.experiment.folder import SweepFolder
 from sim2radar.experiment.plan import (
     PlannedPretrain,
@@ -166,13 +167,14 @@ def parse_runs_per_gpu(value: int | str | None) -> int | str | None:
 
     Raises
     ------
-    ValueError — anything else, naming the option.
+    SettingError — anything else, naming the setting (``runs_per_gpu``).
     """
     if value is None or value == "auto":
         return value
     text = str(value).strip()
     if isinstance(value, bool) or not text.isdigit() or int(text) < 1:
-        raise ValueError(f"--runs-per-gpu must be a count >= 1 or 'auto', got {value!r}")
+        raise SettingError("{runs_per_gpu} must be a count >= 1 or 'auto', got {value}",
+                           value=repr(value))
     return int(text)
 
 
@@ -182,7 +184,7 @@ def cuda_devices(device: str | None) -> int:
 
     Raises
     ------
-    ValueError — the device is not a CUDA GPU (runs per GPU mean nothing there).
+    SettingError — the device is not a CUDA GPU (runs per GPU mean nothing there).
     """
     import torch
 
@@ -190,8 +192,8 @@ def cuda_devices(device: str | None) -> int:
 
     dev = torch_device(device)
     if dev.type != "cuda":
-        raise ValueError(f"--runs-per-gpu: the sweep's device is {dev}, not a CUDA GPU; on a "
-                         "CPU give --workers (concurrent runs) instead")
+        raise SettingError("{runs_per_gpu}: the sweep's device is {device}, not a CUDA GPU; "
+                           "on a CPU give {workers} (concurrent runs) instead", device=str(dev))
     return 1 if dev.index is not None else max(1, torch.cuda.device_count())
 
 

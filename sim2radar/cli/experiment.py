@@ -27,7 +27,8 @@ from sim2radar.cli._app import console as _console
 from sim2radar.experiment.folder import SweepFolder
 
 __all__ = ["sweep", "sweep_report", "publish_sweep", "run_sweep", "sweep_datasets",
-           "condition_overrides", "print_sweep_summary", "print_plan", "PUBLISHED_FILES"]
+           "condition_overrides", "print_sweep_summary", "print_plan", "PUBLISHED_FILES",
+           "SWEEP_FLAGS", "sweep_flag", "error_text"]
 
 
 #: the MLflow options ``sweep`` and ``sweep-report`` share (beside their own ``--mlflow``)
@@ -35,6 +36,40 @@ MlflowExperiment = Annotated[str | None, typer.Option(
     "--mlflow-experiment", help="With --mlflow: the experiment (default: the sweep's name).")]
 MlflowCheckpoints = Annotated[bool, typer.Option(
     "--mlflow-checkpoints", help="With --mlflow: also upload each run's last.pt.")]
+
+#: ``sim2radar sweep``'s option for each setting the library's errors name
+#: (:class:`~sim2radar.experiment.errors.SettingError`); datasets: :func:`sweep_flag`
+SWEEP_FLAGS = {"name": "--name", "out": "--out", "preregistration": "--preregistration",
+               "force": "--force-run", "runs_per_gpu": "--runs-per-gpu", "workers": "--workers",
+               "mlflow_experiment": "--mlflow-experiment"}
+#: the dataset options that are shorthands of ``--dataset ROLE=PATH``
+DATASET_SHORTHANDS = ("--sim-gt", "--sim-one-material", "--ref")
+
+
+def sweep_flag(setting: str) -> str | None:
+    """How ``sim2radar sweep`` spells a library setting: its option (:data:`SWEEP_FLAGS`), a
+    dataset role's shorthand option (``--sim-gt``: the registry's
+    :attr:`~sim2radar.experiment.profiles.Condition.flag`), SIM / REAL, or ``--dataset
+    ROLE=PATH`` for a role without one; None for a setting the command has no option for."""
+    if not setting.startswith("dataset:"):
+        return SWEEP_FLAGS.get(setting)
+    from sim2radar.experiment.profiles import CONDITIONS
+
+    role = setting.partition(":")[2]
+    if role in ("sim", "real"):
+        return role.upper()
+    flag = next((c.flag for c in CONDITIONS.values() if c.sim_role == role), None)
+    return flag if flag in DATASET_SHORTHANDS else f"--dataset {role}=PATH"
+
+
+def error_text(exc: BaseException) -> str:
+    """An error's message as the command line reports it: the settings a library
+    :class:`~sim2radar.experiment.errors.SettingError` names spelled as this command's
+    options (:func:`sweep_flag`)."""
+    from sim2radar.experiment.errors import SettingError
+
+    return exc.spelled(sweep_flag) if isinstance(exc, SettingError) else str(exc)
+
 
 def _fractions(text: str | None) -> list[float] | None:
     if text is None:
@@ -422,7 +457,7 @@ def sweep(
                             mlflow_experiment=mlflow_experiment,
                             mlflow_checkpoints=mlflow_checkpoints, runs_per_gpu=runs_per_gpu)
     except (ValueError, FileNotFoundError, DatasetError, ImportError) as exc:
-        typer.secho(f"error: {exc}", fg="red", err=True)
+        typer.secho(f"error: {error_text(exc)}", fg="red", err=True)
         raise typer.Exit(2) from None
     print_sweep_summary(summary)
     if json_out is not None:

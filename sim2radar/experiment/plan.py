@@ -28,6 +28,7 @@ import math
 from collections.abc import Mapping, Sequence
 from typing import Any
 
+from sim2radar.experiment.errors import SettingError
 from sim2radar.experiment.profiles import BASELINE, CONDITIONS, ExperimentProfile
 from sim2radar.experiment.subsets import real_subset, trial_seed
 
@@ -553,7 +554,8 @@ class SweepPlan:
 
         Raises
         ------
-        ValueError — for a name that is no run or pre-training of this sweep, with examples.
+        SettingError — for a name that is no run or pre-training of this sweep, with examples
+        (the ``force`` setting: ``--force-run`` on the command line).
         """
         jobs = [*self.runs, *self.pretrains]
         by_name = {j.id: j for j in jobs} | {j.key: j for j in jobs}
@@ -561,10 +563,11 @@ class SweepPlan:
         if unknown:
             example = (f" and pre-training ids like {self.pretrains[0].id!r}"
                        if self.pretrains else "")
-            raise ValueError(f"--force-run {unknown[0]!r}: no run or pre-training of this "
-                             f"sweep has that id or key; run ids look like {self.runs[0].id!r}"
-                             f"{example} (results.md, the dashboard, runs.parquet's run_key, "
-                             "pretrainings.parquet's pretrain_key)")
+            raise SettingError("{force} {value}: no run or pre-training of this sweep has that "
+                               "id or key; run ids look like {run}{example} (results.md, the "
+                               "dashboard, runs.parquet's run_key, pretrainings.parquet's "
+                               "pretrain_key)", value=repr(unknown[0]),
+                               run=repr(self.runs[0].id), example=example)
         return list({by_name[w].key: by_name[w] for w in wanted}.values())
 
     def to_dict(self) -> dict[str, Any]:

@@ -29,6 +29,7 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
+from sim2radar.experiment.errors import SettingError, dataset_setting
 from sim2radar.experiment.folder import SweepFolder
 from sim2radar.experiment.plan import (
     DatasetRef,
@@ -59,7 +60,6 @@ __all__ = [
     "open_datasets",
     "preregistration",
     "resolve_profile",
-    "role_flag",
     "settings_fixed_at",
     "setup_sweep",
     "stage_configs",
@@ -84,8 +84,9 @@ def check_sweep_name(name: str) -> None:
     """A sweep name is one safe path component (its folder is ``<out>/<name>``): letters,
     digits, '-', '_' and '.', not starting with '.' (so never ``.`` or ``..``)."""
     if not name or name.startswith(".") or not all(c.isalnum() or c in "-_." for c in name):
-        raise ValueError(f"--name {name!r}: a sweep name is one folder name under --out — use "
-                         "letters, digits, '-', '_' or '.', not starting with '.'")
+        raise SettingError("{name} {value}: a sweep name is one folder name under {out} — use "
+                           "letters, digits, '-', '_' or '.', not starting with '.'",
+                           value=repr(name))
 
 
 def resolve_profile(profile: str | os.PathLike | ExperimentProfile,
@@ -135,12 +136,6 @@ def stage_configs(profile: ExperimentProfile, device: str | None, *,
     return (pre, ft), {"pretrain": pre_dec, "finetune": ft_dec}
 
 
-def role_flag(role: str) -> str:
-    """The ``sim2radar sweep`` option naming a dataset role (the registry's
-    :attr:`~sim2radar.experiment.profiles.Condition.flag`); the role itself for ``real``."""
-    return next((c.flag for c in CONDITIONS.values() if c.sim_role == role), role)
-
-
 def sweep_conditions(profile: ExperimentProfile, ablations: bool,
                      datasets: Mapping[str, Any]) -> tuple[tuple[str, ...], tuple[str, ...]]:
     """The sweep's conditions (the profile's, plus every ablation with ``ablations``) and the
@@ -150,8 +145,9 @@ def sweep_conditions(profile: ExperimentProfile, ablations: bool,
 
     Raises
     ------
-    ValueError — a role that is not one of ROLES; conditions whose datasets were not given,
-    naming their options (``--sim-gt``).
+    ValueError — a role that is not one of ROLES. SettingError — conditions whose datasets
+    were not given, naming those datasets' settings (``{dataset:sim-gt}``: a command line
+    spells it as its option).
     """
     roles = dataset_roles()
     unknown = sorted(set(datasets) - set(roles))
@@ -163,9 +159,10 @@ def sweep_conditions(profile: ExperimentProfile, ablations: bool,
     needed = {"real"} | {CONDITIONS[c].sim_role for c in conditions if CONDITIONS[c].sim_role}
     missing = [r for r in roles if r in needed and datasets.get(r) is None]
     if missing:
-        raise ValueError("conditions " + ", ".join(c for c in conditions
-                                                     if CONDITIONS[c].sim_role in missing)
-                         + " need the dataset(s) " + ", ".join(map(role_flag, missing)))
+        raise SettingError("conditions {conditions} need the dataset(s) "
+                           + ", ".join(f"{{{dataset_setting(r)}}}" for r in missing),
+                           conditions=", ".join(c for c in conditions
+                                                if CONDITIONS[c].sim_role in missing))
     return tuple(conditions), tuple(r for r in roles if r in needed)
 
 
@@ -252,7 +249,7 @@ def setup_sweep(profile: str | os.PathLike | ExperimentProfile, datasets: Mappin
     return SweepSetup(prof, conditions, roles, configs, settings, device, prereg, precision)
 
 
-class PreregistrationMissing(ValueError):
+class PreregistrationMissing(SettingError):
     """A profile that declares ``preregistered: true`` has no readable pre-registration."""
 
 
@@ -276,18 +273,19 @@ def preregistration(profile: ExperimentProfile) -> dict[str, Any] | None:
         if not profile.preregistered:
             return None
         raise PreregistrationMissing(
-            f"profile {profile.name!r} is pre-registered but its pre-registration {path} "
-            f"cannot be read ({exc.strerror or exc}). Write it (question, conditions, "
-            "endpoints, trials, decision rules, what would count as transfer) and commit it "
-            "before the first run, or give its path with --preregistration.") from None
+            "profile {profile} is pre-registered but its pre-registration {path} cannot be "
+            "read ({reason}). Write it (question, conditions, endpoints, trials, decision "
+            "rules, what would count as transfer) and commit it before the first run, or give "
+            "its path with {preregistration}.", profile=repr(profile.name), path=str(path),
+            reason=str(exc.strerror or exc)) from None
     if profile.preregistered and not text.strip():
-        raise PreregistrationMissing(f"{path}: the pre-registration of profile "
-                                     f"{profile.name!r} is empty")
+        raise PreregistrationMissing("{path}: the pre-registration of profile {profile} is "
+                                     "empty", path=str(path), profile=repr(profile.name))
     return {"path": str(path), "sha256": hashlib.sha256(text.encode()).hexdigest(),
             "text": text}
 
 
-class SweepSettingsChanged(ValueError):
+class SweepSettingsChanged(SettingError):
     """A sweep folder's settings were fixed by its first preparation and now differ."""
 
 
@@ -309,29 +307,33 @@ def settings_fixed_at(old: Mapping[str, Any] | None, settings: Mapping[str, Any]
         return _now()
     if not isinstance(old, Mapping):
         raise SweepSettingsChanged(
-            f"{sweep_dir}/sweep.json holds {type(old).__name__}, not the sweep's document; "
-            "delete the sweep folder (or restore its sweep.json) to start again")
+            "{file} holds {kind}, not the sweep's document; delete the sweep folder (or "
+            "restore its sweep.json) to start again", file=str(SweepFolder(sweep_dir).sweep_json),
+            kind=type(old).__name__)
     if "settings" not in old:
         if "settings_digest" in old:        # written with settings, which are now gone
             raise SweepSettingsChanged(
-                f"{sweep_dir}/sweep.json has a settings digest ({old['settings_digest']}) but "
-                "no settings: the file was edited; restore it, or start a new sweep name")
+                "{file} has a settings digest ({digest}) but no settings: the file was edited; "
+                "restore it, or start a new sweep name", file=str(SweepFolder(sweep_dir).sweep_json),
+                digest=str(old["settings_digest"]))
         return str(old.get("created_at") or _now())   # a folder from before settings existed
     if not isinstance(old["settings"], Mapping):
         raise SweepSettingsChanged(
-            f"{sweep_dir}/sweep.json: field 'settings' is {old['settings']!r}, not the settings "
-            "document the sweep wrote; restore the file, or start a new sweep name")
+            "{file}: field 'settings' is {value}, not the settings document the sweep wrote; "
+            "restore the file, or start a new sweep name",
+            file=str(SweepFolder(sweep_dir).sweep_json), value=repr(old["settings"]))
     if protocol_digest(old["settings"]) == protocol_digest(settings):
         return str(old.get("settings_fixed_at") or old.get("created_at") or _now())
     changes = settings_changes(old["settings"], settings)
     shown = "\n  ".join(changes[:12]) + (f"\n  ... and {len(changes) - 12} more"
                                           if len(changes) > 12 else "")
     raise SweepSettingsChanged(
-        f"sweep {name!r} ({sweep_dir}) was created with other settings (fixed at "
-        f"{old.get('settings_fixed_at') or old.get('created_at')}, digest "
-        f"{protocol_digest(old['settings'])}); what changed:\n  {shown}\n"
-        "One sweep's runs all use the settings fixed before its first run: start a new sweep "
-        "name (--name) for the new settings, or delete the folder to discard the old sweep.")
+        "sweep {sweep} ({folder}) was created with other settings (fixed at {fixed_at}, digest "
+        "{digest}); what changed:\n  {shown}\nOne sweep's runs all use the settings fixed "
+        "before its first run: start a new sweep name ({name}) for the new settings, or delete "
+        "the folder to discard the old sweep.", sweep=repr(name), folder=str(sweep_dir),
+        fixed_at=str(old.get("settings_fixed_at") or old.get("created_at")),
+        digest=protocol_digest(old["settings"]), shown=shown)
 
 
 def _check_datasets(profile: ExperimentProfile, domains: Mapping[str, Any]) -> None:

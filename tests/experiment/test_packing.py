@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import pytest
 
+from sim2radar.cli.experiment import sweep_flag
 from sim2radar.experiment import load_profile
 from sim2radar.experiment.packing import aggregate_throughput, choose_runs
 from sim2radar.tasks.experiment import cuda_devices, parse_runs_per_gpu
@@ -39,13 +40,16 @@ def test_runs_per_gpu_option_values():
     assert parse_runs_per_gpu("auto") == "auto" and parse_runs_per_gpu(None) is None
     assert parse_runs_per_gpu("4") == 4 and parse_runs_per_gpu(2) == 2
     for bad in ("0", "-1", "two", "2.5", True):
-        with pytest.raises(ValueError, match="--runs-per-gpu must be a count"):
+        with pytest.raises(ValueError, match="runs per GPU must be a count") as err:
             parse_runs_per_gpu(bad)
+        assert err.value.spelled(sweep_flag).startswith("--runs-per-gpu must be a count")
 
 
 def test_runs_per_gpu_needs_a_cuda_device():
-    with pytest.raises(ValueError, match="not a CUDA GPU; on a CPU give --workers"):
+    with pytest.raises(ValueError, match="not a CUDA GPU; on a CPU give the number of "
+                       "concurrent runs") as err:
         cuda_devices("cpu")
+    assert "on a CPU give --workers" in err.value.spelled(sweep_flag)
 
 
 def test_the_sweep_command_refuses_runs_per_gpu_on_a_cpu(tmp_path):

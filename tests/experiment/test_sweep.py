@@ -10,8 +10,10 @@ import pickle
 
 import pytest
 
+from sim2radar.cli.experiment import sweep_flag
 from sim2radar.datasets import make_door_frames, write_dataset, write_metadata
 from sim2radar.experiment.data import open_domain
+from sim2radar.experiment.errors import SettingError
 from sim2radar.experiment.plan import SweepPlan, pretrain_key_inputs, run_key_inputs
 from sim2radar.experiment.profiles import ABLATIONS, CONDITIONS, ROLES
 from sim2radar.experiment.sweep import (
@@ -19,7 +21,6 @@ from sim2radar.experiment.sweep import (
     build_plan,
     open_datasets,
     resolve_profile,
-    role_flag,
     settings_fixed_at,
     setup_sweep,
     sweep_conditions,
@@ -68,21 +69,27 @@ def test_conditions_and_dataset_roles_come_from_the_registry():
     prof = resolve_profile("smoke")
     assert sweep_conditions(prof, False, {"sim": "s", "real": "r"}) == (
         ("baseline", "sim-pretrain"), ("real", "sim"))
-    # every dataset role is a condition's (or real), named on the command line by its flag
+    # every dataset role is a condition's (or real); the library names the missing datasets
+    # by role, the command line spells them as its options
     for cond in CONDITIONS.values():
         if cond.sim_role:
-            assert cond.sim_role in ROLES and role_flag(cond.sim_role) == cond.flag
-    with pytest.raises(ValueError, match="sim-gt-pretrain.*need the dataset.*--sim-gt, "
-                                         "--sim-one-material"):
+            assert cond.sim_role in ROLES
+    with pytest.raises(SettingError, match="sim-gt-pretrain.*need the dataset.*the sim-gt "
+                                           "dataset, the sim-one-material dataset") as err:
         sweep_conditions(prof, True, {"sim": "s", "real": "r", "sim-gt": None})
+    assert "--" not in str(err.value)
+    assert err.value.settings == ["dataset:sim-gt", "dataset:sim-one-material"]
+    assert "need the dataset(s) --sim-gt, --sim-one-material" in err.value.spelled(sweep_flag)
     conds, roles = sweep_conditions(prof, True, {r: r for r in ROLES})
     assert set(conds) == {"baseline", "sim-pretrain", *ABLATIONS}
     assert roles == ("real", "sim", "sim-gt", "sim-one-material")
     # the diagnosis conditions are main conditions a profile lists: the control needs --ref
     every = resolve_profile("smoke", {"conditions": [c for c in CONDITIONS if c not in ABLATIONS],
                                       "ablations": list(ABLATIONS)})
-    with pytest.raises(ValueError, match="ref-pretrain need the dataset.*--ref"):
+    with pytest.raises(SettingError, match="ref-pretrain need the dataset.*the ref dataset"
+                       ) as err:
         sweep_conditions(every, False, {r: r for r in ROLES if r != "ref"})
+    assert err.value.spelled(sweep_flag).endswith("need the dataset(s) --ref")
     conds, roles = sweep_conditions(every, False, {r: r for r in ROLES})
     assert set(conds) == set(CONDITIONS) and roles == ROLES
     with pytest.raises(ValueError, match="unknown dataset role.*'sim-noisy'.*known"):
@@ -99,8 +106,10 @@ def test_a_sweeps_settings_are_fixed_by_its_first_preparation(tmp_path):
     # a folder from before settings were recorded adopts the current ones
     assert settings_fixed_at({"created_at": "c"}, settings, name="t", sweep_dir=tmp_path) == "c"
     changed = setup_sweep("smoke", {"sim": "s", "real": "r"}, overrides={"lr": 0.5}).settings
-    with pytest.raises(SweepSettingsChanged, match=r"(?s)profile\.lr: 0\.003 -> 0\.5.*--name"):
+    with pytest.raises(SweepSettingsChanged, match=r"(?s)profile\.lr: 0\.003 -> 0\.5.*new sweep "
+                       r"name \(the sweep name\)") as err:
         settings_fixed_at(old, changed, name="t", sweep_dir=tmp_path)
+    assert "start a new sweep name (--name)" in err.value.spelled(sweep_flag)
     # execution-only fields do not count
     same = setup_sweep("smoke", {"sim": "s", "real": "r"}, overrides={"concurrent_runs": 4})
     assert settings_fixed_at(old, same.settings, name="t", sweep_dir=tmp_path) == first
@@ -169,8 +178,13 @@ def test_the_plan_travels_as_json_and_pickles(domains, tmp_path):
     pre = plan.pretrains[1]                                       # ... and pre-trainings
     assert plan.find_runs([pre.id, run.id, pre.key]) == [pre, run]
     with pytest.raises(ValueError, match=r"no run or pre-training of this sweep.*look like "
-                                         r"'baseline-f0\.5-t0' and pre-training ids like"):
+                                         r"'baseline-f0\.5-t0' and pre-training ids like") as err:
         plan.find_runs(["baseline-f0.33-t9"])
+    assert str(err.value).startswith("the runs to redo 'baseline-f0.33-t9': no run")
+    assert err.value.spelled(sweep_flag).startswith("--force-run 'baseline-f0.33-t9': no run")
+    again = pickle.loads(pickle.dumps(err.value))       # a Dask worker's error comes back whole
+    assert type(again) is SettingError and again.spelled(sweep_flag) == err.value.spelled(
+        sweep_flag)
 
 
 def test_a_plan_refuses_a_real_dataset_without_its_splits(domains, tmp_path):
