@@ -641,6 +641,39 @@ def _leakage(radar: RadarConfig) -> np.ndarray:
     return a * h * np.exp(2j * np.pi * np.remainder(cycles, 1.0))
 
 
+def _couple(torch, ctx, crx, x):
+    """``y[s, a, c, n] = sum_(b, d) ctx[a, b] crx[c, d] x[s, b, d, n]``: the TX and RX coupling
+    matrices applied one after the other (two small matrix products, 7x fewer operations than
+    the 192 x 192 Kronecker product; float32 rounding differs from it by ~5e-7 of the peak)."""
+    s, nt, nr, n = x.shape
+    y = torch.matmul(crx, x)                                               # (S, T, R, N)
+    return torch.matmul(ctx, y.reshape(s, nt, nr * n)).reshape(s, nt, nr, n)
+
+
+def _thermal_noise(torch, shape: tuple[int, ...], seed: int, power_w: float, device,
+                   on_device: bool | None = None):
+    """Circular complex Gaussian noise of ``power_w`` [W] per sample, (shape) complex64.
+
+    On the CPU from NumPy's ``default_rng(seed)`` (real parts, then imaginary parts); on any
+    other torch device (or with ``on_device``) drawn there, from a ``torch.Generator`` seeded
+    with ``seed`` (no host draw and no 25 MB copy per frame; a different stream of the same
+    distribution).
+    """
+    scale = math.sqrt(0.5 * power_w)
+    if on_device is None:
+        on_device = torch.device(device).type != "cpu"
+    if not on_device:
+        rng = np.random.default_rng(seed)
+        noise = (rng.standard_normal(shape, dtype=np.float32)
+                 + 1j * rng.standard_normal(shape, dtype=np.float32)).astype(np.complex64)
+        noise *= np.float32(scale)
+        return torch.as_tensor(noise, device=device)
+    gen = torch.Generator(device=device).manual_seed(int(seed))
+    re = torch.randn(shape, generator=gen, device=device, dtype=torch.float32)
+    im = torch.randn(shape, generator=gen, device=device, dtype=torch.float32)
+    return torch.complex(re, im) * scale
+
+
 def _adc_lsb(radar: RadarConfig) -> float:
     """ADC step [sqrt(W)] per rail: full scale ``adc_full_scale_db`` above the per-rail noise
     rms ``sqrt(k T F f_adc / 2)``, over ``2^bits`` levels spanning +-full scale."""
@@ -728,7 +761,7 @@ def synthesize_if(paths: PathSet, radar: RadarConfig, *, seed: int | None = None
         ctx = torch.as_tensor(imp.tx_coupling, device=device, dtype=torch.complex64)
         crx = torch.as_tensor(imp.rx_coupling, device=device, dtype=torch.complex64)
         gain = torch.as_tensor(imp.gain, device=device, dtype=torch.complex64)
-        x = torch.einsum("ab,cd,sbdn->sacn", ctx, crx, x) * gain[None, :, :, None]
+        x = _couple(torch, ctx, crx, x) * gain[None, :, :, None]
     if leak is not None:
         x = x + torch.as_tensor(leak * (doppler_gain if sig.doppler == "integrated" else 1.0),
                                 device=device, dtype=torch.complex64)[None]
@@ -747,12 +780,7 @@ def synthesize_if(paths: PathSet, radar: RadarConfig, *, seed: int | None = None
             stats["adc_clipped_fraction"] = float(
                 ((per_chirp.real.abs() > top) | (per_chirp.imag.abs() > top)).float().mean())
     if seed is not None:
-        rng = np.random.default_rng(seed)
-        shape = (n_slow, nt, nr, n)
-        noise = (rng.standard_normal(shape, dtype=np.float32)
-                 + 1j * rng.standard_normal(shape, dtype=np.float32)).astype(np.complex64)
-        noise *= np.float32(math.sqrt(0.5 * added_w))
-        x = x + torch.as_tensor(noise, device=device)
+        x = x + _thermal_noise(torch, (n_slow, nt, nr, n), seed, added_w, device)
     if sig.adc_bits is not None and sig.doppler == "full":
         lsb = _adc_lsb(radar)
         top = 2 ** (sig.adc_bits - 1) * lsb

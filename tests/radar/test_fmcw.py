@@ -323,3 +323,41 @@ def test_beat_frequency_sets_the_range_bin(small):
     beat_hz = small.slope_hz_per_s * 2 * r / SPEED_OF_LIGHT_M_S
     assert k == round(beat_hz / small.adc_sample_rate_hz * small.adc_samples)
     assert abs(k * small.range_resolution_m - r) <= small.range_resolution_m
+
+
+def test_coupling_applied_per_side_is_the_kronecker_coupling():
+    """TX then RX coupling as two small products equals the 192 x 192 Kronecker product to
+    float32 rounding (1e-6 of the peak)."""
+    from sim2radar.radar.fmcw import _couple
+
+    g = torch.Generator().manual_seed(0)
+    x = torch.randn(3, 12, 16, 32, dtype=torch.complex64, generator=g)
+    ctx = torch.randn(12, 12, dtype=torch.complex64, generator=g)
+    crx = torch.randn(16, 16, dtype=torch.complex64, generator=g)
+    want = torch.einsum("ab,cd,sbdn->sacn", ctx.to(torch.complex128), crx.to(torch.complex128),
+                        x.to(torch.complex128))
+    got = _couple(torch, ctx, crx, x).to(torch.complex128)
+    assert float((got - want).abs().max() / want.abs().max()) < 1e-6
+
+
+def test_thermal_noise_on_the_host_keeps_numpys_stream_and_on_a_device_its_power():
+    """On the CPU the noise is NumPy's default_rng(seed) stream (the frames of earlier
+    releases); drawn on the device (a torch stream) it has the same power per sample and
+    independent, zero-mean rails."""
+    from sim2radar.radar.fmcw import _thermal_noise
+
+    shape, power_w = (4, 12, 16, 256), 2.5e-12
+    host = _thermal_noise(torch, shape, 7, power_w, "cpu").numpy()
+    rng = np.random.default_rng(7)
+    want = (rng.standard_normal(shape, dtype=np.float32)
+            + 1j * rng.standard_normal(shape, dtype=np.float32)).astype(np.complex64)
+    want *= np.float32(math.sqrt(0.5 * power_w))
+    assert host.tobytes() == want.tobytes()
+    dev = _thermal_noise(torch, shape, 7, power_w, "cpu", on_device=True).numpy()
+    dev = dev.astype(np.complex128)
+    n = dev.size  # 196k samples: relative std of the power estimate 1 / sqrt(n) ~ 0.2 %
+    assert np.mean(np.abs(dev) ** 2) == pytest.approx(power_w, rel=0.02)
+    assert abs(np.mean(dev.real * dev.imag)) < 5 * power_w / math.sqrt(n)
+    assert abs(np.mean(dev)) < 5 * math.sqrt(power_w / n)
+    again = _thermal_noise(torch, shape, 7, power_w, "cpu", on_device=True).numpy()
+    assert again.tobytes() == dev.astype(np.complex64).tobytes()
