@@ -5,6 +5,12 @@
 :class:`RadarFrame`: beamforming, receiver noise and detection at ``fidelity: raytrace``, the
 signal chain at ``fidelity: signal``. :func:`sim2radar.radar.simulate_frame` builds the scene
 from meshes first.
+
+Where the ``raytrace`` frame's detection runs (:func:`detection_device`): where Mitsuba traces
+on CUDA, on that GPU in torch (:mod:`sim2radar.radar.detection_torch`: the sums never leave the
+device, only the point cloud comes back; issue #31); otherwise on the host in NumPy
+(:func:`sim2radar.radar.detection.detect_frame`), which on the project's 2-core CPU measured
+faster than torch there (BENCHMARKS.md, "The radar on the device").
 """
 
 from __future__ import annotations
@@ -20,7 +26,8 @@ from sim2radar.radar.config import RadarConfig
 from sim2radar.radar.detection import cell_noise_power, detect_frame
 from sim2radar.radar.paths import PathSet
 
-__all__ = ["RadarFrame", "TracedScene", "simulate_scene_frame"]
+__all__ = ["DeviceTrace", "RadarFrame", "TracedScene", "detection_device",
+           "simulate_scene_frame"]
 
 #: Second seed word of the receiver-noise random stream (distinct from the ray jitter's).
 NOISE_STREAM = 0x4E01
@@ -54,7 +61,8 @@ class RadarFrame:
     stats : dict
         ``fidelity``, ``max_range_m`` (R_max [m]); at ``raytrace``: ``n_rays``, ``n_hits``
         (first bounce), ``hits_per_bounce``, ``n_points``, ``n_triangles``, ``variant``,
-        ``seed``, ``noise_power_per_cell`` (N0 [sim. |a|^2]), ``noise_added`` and ``seconds``
+        ``seed``, ``noise_power_per_cell`` (N0 [sim. |a|^2]), ``noise_added``, ``detection_device``
+        (``host`` or the torch device, :func:`detection_device`) and ``seconds``
         per stage (``rays``, ``trace``, ``readback``, ``beamform``, ``detect``, ``total``); at
         ``signal``: ``n_paths``, the signal chain's stats
         (:class:`~sim2radar.radar.signal.SignalFrame`) and ``seconds`` (``trace``,
@@ -82,6 +90,36 @@ class RadarFrame:
     def intensity_db(self) -> np.ndarray:
         """(N,) float32 — point intensities [dB]."""
         return self.points[:, 3]
+
+
+@dataclasses.dataclass(frozen=True)
+class DeviceTrace:
+    """:class:`~sim2radar.radar.binning.TraceResult` with the sums on the tracer's device
+    (:meth:`sim2radar.radar.raytrace.RadarScene.trace_on_device`).
+
+    Attributes
+    ----------
+    accumulator : DeviceAccumulator — torch tensors (:mod:`sim2radar.radar.detection_torch`).
+    n_rays : int; hits_per_bounce : tuple of int; seconds : dict — as in ``TraceResult``.
+    """
+
+    accumulator: Any
+    n_rays: int
+    hits_per_bounce: tuple[int, ...]
+    seconds: dict[str, float]
+
+
+def detection_device(variant: str):
+    """The torch device a ``raytrace`` frame of a scene traced on Mitsuba ``variant`` is
+    detected on: the CUDA device (:func:`sim2radar.hardware.torch_device`) for a ``cuda_*``
+    variant when torch sees it, else ``None`` (NumPy on the host: on the 2-core CPU the NumPy
+    chain measured faster than torch's, and it keeps NumPy's noise stream)."""
+    if not variant.startswith("cuda"):
+        return None
+    from sim2radar.hardware import torch_device
+
+    device = torch_device()
+    return device if device.type == "cuda" else None
 
 
 class TracedScene(Protocol):
@@ -117,30 +155,54 @@ def simulate_scene_frame(
     return_cube: bool = False,
     seed: int | None = None,
     velocity_mps: np.ndarray | None = None,
+    device: Any = "auto",
 ) -> RadarFrame:
     """Simulate one frame of a pre-built scene (a :class:`~sim2radar.radar.raytrace.RadarScene`;
-    parameters as for :func:`sim2radar.radar.simulate_frame`)."""
+    parameters as for :func:`sim2radar.radar.simulate_frame`).
+
+    ``device`` (``raytrace`` fidelity, ``integrated`` detection): ``"auto"`` picks
+    :func:`detection_device` of the scene's variant; ``None`` detects on the host in NumPy; a
+    torch device (``"cpu"``, ``"cuda"``) traces into torch tensors
+    (:meth:`~sim2radar.radar.raytrace.RadarScene.trace_on_device`) and detects there
+    (:func:`sim2radar.radar.detection_torch.detect_frame`; its noise is a torch stream)."""
     if radar.fidelity == "signal":
         return _simulate_signal_scene_frame(scene, radar, pose, seed=seed,
                                             velocity_mps=velocity_mps)
+    if isinstance(device, str) and device == "auto":
+        device = detection_device(scene.variant)
+    if radar.detection.domain != "integrated":
+        device = None
     t0 = time.perf_counter()
-    result = scene.trace(radar, pose, seed=seed)
+    noise_added = seed is not None and radar.detection.add_noise
+    if device is not None:
+        result = scene.trace_on_device(radar, pose, seed=seed)
+    else:
+        result = scene.trace(radar, pose, seed=seed)
     t1 = time.perf_counter()
     geom = array_geometry(radar)
     n0 = cell_noise_power(radar)
-    noise_added = seed is not None and radar.detection.add_noise
-    # receiver noise per virtual channel (binning.add_receiver_noise), from its own stream
-    # (the ray jitter draws from default_rng(seed))
-    rng = np.random.default_rng([int(seed), NOISE_STREAM]) if noise_added else None
     cube = None
     if return_cube:
-        aperture = result.accumulator.aperture(geom)
+        host = result.accumulator if device is None else result.accumulator.to_host()
+        aperture = host.aperture(geom)
         if noise_added:
             aperture = add_receiver_noise(aperture, geom, n0,
                                           np.random.default_rng([int(seed), CUBE_NOISE_STREAM]))
         cube = beamform(aperture, geom)
     t2 = time.perf_counter()
-    found = detect_frame(result.accumulator, radar, velocity_mps=velocity_mps, rng=rng)
+    # receiver noise per virtual channel (binning.add_receiver_noise), from its own stream
+    # (the ray jitter draws from default_rng(seed))
+    if device is None:
+        rng = np.random.default_rng([int(seed), NOISE_STREAM]) if noise_added else None
+        found = detect_frame(result.accumulator, radar, velocity_mps=velocity_mps, rng=rng)
+    else:
+        from sim2radar.radar import detection_torch
+
+        gen = (detection_torch.noise_generator(int(seed), NOISE_STREAM,
+                                               result.accumulator.device)
+               if noise_added else None)
+        found = detection_torch.detect_frame(result.accumulator, radar,
+                                             velocity_mps=velocity_mps, generator=gen)
     points = found.points
     t3 = time.perf_counter()
     seconds = dict(result.seconds)
@@ -159,6 +221,7 @@ def simulate_scene_frame(
         "seed": seed,
         "noise_power_per_cell": n0,
         "noise_added": noise_added,
+        "detection_device": "host" if device is None else str(device),
         "rig_velocity_mps": (None if velocity_mps is None
                              else [float(v) for v in np.asarray(velocity_mps).reshape(3)]),
         "seconds": seconds,

@@ -42,7 +42,8 @@ from sim2radar.hardware import drjit_serial, to_drjit
 from sim2radar.mesh import MaterialMesh
 from sim2radar.radar.binning import Accumulator, TraceResult, array_geometry
 from sim2radar.radar.config import RadarConfig, load_radar_config
-from sim2radar.radar.frame import RadarFrame, simulate_scene_frame
+from sim2radar.radar.detection_torch import DeviceAccumulator
+from sim2radar.radar.frame import DeviceTrace, RadarFrame, simulate_scene_frame
 from sim2radar.radar.link_budget import pattern_exponent
 from sim2radar.radar.paths import PATH_KINDS, PathSet
 from sim2radar.radar.raytrace_bounces import SceneHandle, build_scene, interactions, primary_rays
@@ -176,6 +177,54 @@ class RadarScene:
         path beyond it aliases into bin ``i mod N``), is added to its range bin and fine
         azimuth point once per element row (:mod:`sim2radar.radar.binning`).
         """
+        grid, cells, hits, n_rays, seconds = self._trace_sums(radar, pose, seed)
+        t2 = time.perf_counter()
+        geom = array_geometry(radar)
+        n_z, n_r, m_fine = len(geom.z_half_wl), radar.n_range_bins, geom.fine_az
+        sums = cells.numpy().reshape(-1, 2)
+        accumulator = Accumulator(
+            grid=np.ascontiguousarray(grid.numpy()).view(np.complex64).reshape(n_z, n_r, m_fine),
+            power=sums[:, 0].copy(),
+            range_w=sums[:, 1].copy(),
+        )
+        seconds["readback"] = time.perf_counter() - t2
+        return TraceResult(
+            accumulator=accumulator,
+            n_rays=n_rays,
+            hits_per_bounce=tuple(int(h) for h in hits.numpy()),
+            seconds=seconds,
+        )
+
+    @drjit_serial
+    def trace_on_device(
+        self, radar: RadarConfig, pose: np.ndarray | None = None, *, seed: int | None = None
+    ) -> DeviceTrace:
+        """:meth:`trace` with the sums left on the device Mitsuba traces on: torch tensors
+        shared with Dr.Jit through DLPack (CUDA tensors on ``cuda_ad_rgb``, CPU tensors on
+        ``llvm_ad_rgb``); only the per-bounce hit counts are read back. The frame's detection
+        then runs there (:mod:`sim2radar.radar.detection_torch`)."""
+        grid, cells, hits, n_rays, seconds = self._trace_sums(radar, pose, seed)
+        t2 = time.perf_counter()
+        geom = array_geometry(radar)
+        n_z, n_r, m_fine = len(geom.z_half_wl), radar.n_range_bins, geom.fine_az
+        import torch
+
+        sums = cells.torch().reshape(-1, 2)
+        accumulator = DeviceAccumulator(
+            grid=torch.view_as_complex(grid.torch().reshape(n_z, n_r, m_fine, 2)),
+            power=sums[:, 0],
+            range_w=sums[:, 1],
+        )
+        hits_per_bounce = tuple(int(h) for h in hits.numpy())
+        seconds["readback"] = time.perf_counter() - t2
+        return DeviceTrace(accumulator=accumulator, n_rays=n_rays,
+                           hits_per_bounce=hits_per_bounce, seconds=seconds)
+
+    def _trace_sums(self, radar: RadarConfig, pose: np.ndarray | None, seed: int | None):
+        """The bounce loop's returns summed on the device (:meth:`trace`): ``(grid, cells,
+        hits, n_rays, seconds)`` with ``grid`` interleaved (re, im) float32 of the
+        (n_z, n_range, M) fine grid, ``cells`` interleaved (power, power x range) float64 per
+        cell, both evaluated (Dr.Jit arrays)."""
         mi, dr = self.handle.mi, self.handle.dr
         pose = check_pose(pose)
         t0 = time.perf_counter()
@@ -265,19 +314,7 @@ class RadarScene:
         dr.eval(grid, cells, hits)
         dr.sync_thread()
         t2 = time.perf_counter()
-        sums = cells.numpy().reshape(-1, 2)
-        accumulator = Accumulator(
-            grid=np.ascontiguousarray(grid.numpy()).view(np.complex64).reshape(n_z, n_r, m_fine),
-            power=sums[:, 0].copy(),
-            range_w=sums[:, 1].copy(),
-        )
-        t3 = time.perf_counter()
-        return TraceResult(
-            accumulator=accumulator,
-            n_rays=prep.n_rays,
-            hits_per_bounce=tuple(int(h) for h in hits.numpy()),
-            seconds={"rays": t1 - t0, "trace": t2 - t1, "readback": t3 - t2},
-        )
+        return grid, cells, hits, prep.n_rays, {"rays": t1 - t0, "trace": t2 - t1}
 
     @drjit_serial
     def trace_paths(
