@@ -103,7 +103,7 @@ def run_experiment_flow(plan_path: str, gpu_slots: bool = False) -> dict[str, An
         update_progress_artifact,
     )
 
-    from sim2radar.experiment.sweep import finish_sweep
+    from sim2radar.experiment.finish import finish_sweep
     from sim2radar.tasks.experiment import read_plan
 
     plan = read_plan(plan_path)

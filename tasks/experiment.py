@@ -1,6 +1,7 @@
 """The experiment sweep's work: content keys, caching, store I/O and outcome records around
 :mod:`sim2radar.experiment`; it executes a :class:`~sim2radar.experiment.plan.SweepPlan`
-(planned, and summed up at the end, by :mod:`sim2radar.experiment.sweep`). Plain functions, no
+(planned by :mod:`sim2radar.experiment.prepare`, summed up at the end by
+:mod:`sim2radar.experiment.finish`). Plain functions, no
 Prefect import: ``flows/run_experiment.py`` wraps :func:`run_pretraining` and
 :func:`run_finetuning` in its Prefect tasks.
 
@@ -43,7 +44,7 @@ from typing import Any
 
 import pyarrow as pa
 
-from sim2radar.experiment import sweep
+from sim2radar.experiment import prepare
 from sim2radar.experiment.errors import SettingError
 from sim2radar.experiment.folder import SweepFolder
 from sim2radar.experiment.plan import (
@@ -82,7 +83,7 @@ def _code_version() -> dict[str, Any]:
 
 
 def _key_of(kind: str, inputs: Mapping[str, str], key_inputs: Mapping[str, Any]) -> str:
-    """A job's content key (:data:`sim2radar.experiment.sweep.KeyFn`)."""
+    """A job's content key (:data:`sim2radar.experiment.prepare.KeyFn`)."""
     return content_key(stage=STAGES[kind], stage_version=EXPERIMENT_STAGE_VERSION,
                        inputs=dict(inputs), config={**key_inputs, "code": _code_version()})
 
@@ -108,7 +109,8 @@ def _load(ctx: SweepContext, role: str, ids: Sequence[str], cfg) -> list:
 
 # --- Preparing a sweep: its datasets from the store or folders, the plan and the sweep folder
 def _export(store: str, folder: Path, seed: int, role: str, name: str, geometry: str) -> Path:
-    """Export a store dataset for a sweep (:func:`sim2radar.experiment.sweep.open_datasets`)."""
+    """Export a store dataset for a sweep
+    (:func:`sim2radar.experiment.prepare.open_datasets`)."""
     from sim2radar.tasks.dataset import export_store_dataset
 
     dest = folder / "data" / f"{role}-{name}-{geometry}"
@@ -132,21 +134,21 @@ def prepare_sweep(datasets: Mapping[str, str | os.PathLike | None], *, profile: 
     ------
     ValueError, FileNotFoundError, DatasetError — naming the dataset, profile or field at fault.
     """
-    sweep.check_sweep_name(name)
+    prepare.check_sweep_name(name)
     folder = SweepFolder(Path(out) / name)
     sweep_dir = folder.root
     old = folder.read_sweep()
     # a sweep keeps the precision it decided first (its runs' keys depend on it)
     known = old.get("precision") if isinstance(old, dict) else None
-    setup = sweep.setup_sweep(profile, datasets, ablations=ablations, overrides=overrides,
-                              device=device, precision_table=Path(out) / PRECISION_TABLE,
-                              known_precision=known if isinstance(known, dict) else None)
-    fixed_at = sweep.settings_fixed_at(old, setup.settings, name=name, sweep_dir=sweep_dir)
+    setup = prepare.setup_sweep(profile, datasets, ablations=ablations, overrides=overrides,
+                                device=device, precision_table=Path(out) / PRECISION_TABLE,
+                                known_precision=known if isinstance(known, dict) else None)
+    fixed_at = prepare.settings_fixed_at(old, setup.settings, name=name, sweep_dir=sweep_dir)
     sweep_dir.mkdir(parents=True, exist_ok=True)
     st = open_store(store)
-    domains = sweep.open_datasets(datasets, setup.roles, functools.partial(
+    domains = prepare.open_datasets(datasets, setup.roles, functools.partial(
         _export, st.root_uri, sweep_dir, setup.profile.sweep_seed))
-    plan = sweep.build_plan(
+    plan = prepare.build_plan(
         setup, domains, name=name, sweep_dir=str(sweep_dir.resolve()), store=st.root_uri,
         fixed_at=fixed_at, key_of=_key_of,
         provenance={"versions": package_versions(), "code": _code_version(),
@@ -241,7 +243,7 @@ def plan_cost(datasets: Mapping[str, str | os.PathLike | None], *, profile: Any 
               runs_per_gpu: int | str | None = None) -> dict[str, Any]:
     """What a sweep would cost, without creating it (nothing is written to the sweeps folder;
     ``store:`` datasets are exported to a temporary folder):
-    :func:`sim2radar.experiment.sweep.sweep_cost` of the sweep :func:`prepare_sweep` would
+    :func:`sim2radar.experiment.cost.sweep_cost` of the sweep :func:`prepare_sweep` would
     plan; mixed precision as recorded for this device under ``out``, else assumed (no probe
     runs for an estimate).
 
@@ -249,9 +251,11 @@ def plan_cost(datasets: Mapping[str, str | os.PathLike | None], *, profile: Any 
     aggregate throughput (:func:`~sim2radar.experiment.packing.aggregate_throughput` of the
     fine-tuning model, used for both stages) sets one run's seconds per step, and the wall time
     is planned for N x GPUs concurrent runs (``packing`` in the result)."""
-    setup = sweep.setup_sweep(profile, datasets, ablations=ablations, overrides=overrides,
-                              device=device, precision_table=Path(out) / PRECISION_TABLE,
-                              probe=False)
+    from sim2radar.experiment.cost import sweep_cost
+
+    setup = prepare.setup_sweep(profile, datasets, ablations=ablations, overrides=overrides,
+                                device=device, precision_table=Path(out) / PRECISION_TABLE,
+                                probe=False)
     packing = None
     if runs_per_gpu is not None:
         from sim2radar.experiment.packing import decide_runs
@@ -267,9 +271,9 @@ def plan_cost(datasets: Mapping[str, str | os.PathLike | None], *, profile: Any 
         workers = (decision.runs * n_gpus,)
         packing = {**decision.to_dict(), "gpus": n_gpus}
     with tempfile.TemporaryDirectory(prefix="sim2radar-plan-") as tmp:
-        domains = sweep.open_datasets(datasets, setup.roles, functools.partial(
+        domains = prepare.open_datasets(datasets, setup.roles, functools.partial(
             _export, open_store(store).root_uri, Path(tmp), setup.profile.sweep_seed))
-        cost = sweep.sweep_cost(setup, domains, workers=workers, step_seconds=step_seconds)
+        cost = sweep_cost(setup, domains, workers=workers, step_seconds=step_seconds)
     return cost if packing is None else {**cost, "packing": packing}
 
 

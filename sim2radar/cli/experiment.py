@@ -533,7 +533,7 @@ def sweep_report(
     input."""
     import pyarrow.parquet as pq
 
-    from sim2radar.experiment.sweep import write_results
+    from sim2radar.experiment.finish import write_results
     from sim2radar.experiment.tracking import MlflowMissing, TrackingError
     from sim2radar.fileio import json_text
 

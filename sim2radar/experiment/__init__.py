@@ -7,8 +7,10 @@ fractions x paired trials.
 - :mod:`~sim2radar.experiment.subsets` — trial seeds and nested real-data subsets.
 - :mod:`~sim2radar.experiment.plan` — the typed :class:`SweepPlan`: the runs of a sweep and
   what identifies each.
-- :mod:`~sim2radar.experiment.sweep` — planning a sweep (datasets by role, the settings check,
-  costs) and finishing it (statistics, report, dashboard); ``tasks/experiment.py`` executes it.
+- a sweep's phases, one module each: :mod:`~sim2radar.experiment.prepare` (datasets by role,
+  the settings check, the plan), :mod:`~sim2radar.experiment.cost` (what it would cost:
+  ``sweep --plan``) and :mod:`~sim2radar.experiment.finish` (statistics, report, dashboard);
+  ``tasks/experiment.py`` executes it.
 - :mod:`~sim2radar.experiment.stats` — paired statistics (t-interval, Holm, d_z, bootstrap).
 - :mod:`~sim2radar.experiment.report` — Table 1 as Markdown and as artifact rows.
 - :mod:`~sim2radar.experiment.data`, :mod:`~sim2radar.experiment.runner` — datasets of a sweep

@@ -1,5 +1,6 @@
-"""What a sweep will cost before it runs: optimiser steps per run, measured seconds per step, and
-the wall time on N workers.
+"""What a sweep will cost before it runs (``sim2radar sweep --plan``): optimiser steps per run,
+measured seconds per step, and the wall time on N workers. :func:`sweep_cost` does it all for a
+prepared sweep (:func:`sim2radar.experiment.prepare.setup_sweep` and its opened datasets).
 
     jobs = sweep_jobs(pretrains, runs, n_sim_frames={"sim": 270}, batch_size=8)
     s = {"pretrain": measure_step_seconds(pre_cfg, sim_frames),
@@ -19,12 +20,16 @@ from __future__ import annotations
 import dataclasses
 import heapq
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Collection, Mapping, Sequence
+from typing import TYPE_CHECKING, Any
 
 from sim2radar.detect.precision import measure_step_seconds
-from sim2radar.experiment.plan import PretrainSpec, RunSpec
+from sim2radar.experiment.plan import PretrainSpec, RunSpec, plan_sweep
 
-__all__ = ["Job", "measure_step_seconds", "sweep_jobs", "wall_time"]
+if TYPE_CHECKING:
+    from sim2radar.experiment.prepare import SweepSetup
+
+__all__ = ["Job", "measure_step_seconds", "sweep_cost", "sweep_jobs", "wall_time"]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -108,3 +113,53 @@ def wall_time(jobs: Sequence[Job], seconds_per_step: Mapping[str, float], worker
             heapq.heappush(free, t2)
             queue.extend(waiting.pop(j2.name, []))
     return end
+
+
+def sweep_cost(setup: SweepSetup, domains: Mapping[str, Any], *,
+               workers: Collection[int] = (1, 8),
+               step_seconds: Mapping[str, float] | None = None) -> dict[str, Any]:
+    """What a sweep would cost: its jobs, their optimiser steps, seconds per step measured here
+    on the sweep's own frames with its resolved configs (or ``step_seconds`` =
+    ``{"pretrain": s, "finetune": s}``, e.g. a GPU's figures), and the expected wall time on
+    each of ``workers`` worker counts (:func:`sim2radar.experiment.cost.wall_time`).
+
+    Returns ``profile``, ``device``, ``precision`` (amp per stage), ``threads_per_run``,
+    ``jobs`` (kind -> count, steps), ``step_seconds``, ``measured`` (whether timed here),
+    ``compute_hours`` and ``wall_hours`` (workers -> hours).
+    """
+    profile, device, (pre_cfg, ft_cfg) = setup.profile, setup.device, setup.configs
+    domains = {role: domains[role] for role in setup.roles}
+    real = domains["real"]
+    train_ids = real.splits.get(profile.train_split) or []
+    if not train_ids:
+        raise ValueError(f"{real.root}/ImageSets/{profile.train_split}.txt lists no frame")
+    pretrains, runs = plan_sweep(profile, train_ids, setup.conditions)
+    held = profile.pretrain_holdout_split     # held out of every pre-training
+    n_sim = {role: len(set(ds.ids()) - set(ds.ids([held]) if held else ()))
+             for role, ds in domains.items() if role != "real"}
+    jobs = sweep_jobs(pretrains, runs, n_sim, profile.batch_size)
+    measured = step_seconds is None
+    if measured:
+        n = 3 * profile.batch_size
+        nfeat, classes = ft_cfg.model.num_point_features, ft_cfg.model.class_names
+        sec = {"finetune": measure_step_seconds(
+            ft_cfg, real.frames(train_ids[:n], nfeat, classes), device=device)}
+        if pretrains:
+            sim = domains[pretrains[0].sim_role]
+            sec["pretrain"] = measure_step_seconds(
+                pre_cfg, sim.frames(sim.ids()[:n], nfeat, classes), device=device)
+    else:
+        sec = {k: float(v) for k, v in step_seconds.items()}
+        missing = {j.kind for j in jobs} - set(sec)
+        if missing:
+            raise ValueError(f"step_seconds lacks {sorted(missing)} (give pretrain and "
+                             "finetune seconds per step)")
+    by_kind = {k: {"jobs": sum(j.kind == k for j in jobs),
+                   "steps": sum(j.steps for j in jobs if j.kind == k)}
+               for k in ("pretrain", "finetune")}
+    compute_s = sum(j.steps * sec[j.kind] for j in jobs)
+    return {"profile": profile.name, "device": device or str(ft_cfg.runtime.device or "auto"),
+            "precision": {"pretrain": pre_cfg.runtime.amp, "finetune": ft_cfg.runtime.amp},
+            "threads_per_run": profile.threads_per_run, "jobs": by_kind, "step_seconds": sec,
+            "measured": measured, "compute_hours": compute_s / 3600,
+            "wall_hours": {int(n): wall_time(jobs, sec, int(n)) / 3600 for n in workers}}

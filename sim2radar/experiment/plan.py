@@ -12,7 +12,7 @@ identifies a run; the caller hashes it (``storage.content_key``) together with t
 content keys and the code version. Settings that do not change a run's result (device, threads,
 checkpoint cadence, progress bars, data paths) are left out, so changing them recomputes nothing.
 
-:class:`SweepPlan` is a prepared sweep as the flow runs it (:mod:`sim2radar.experiment.sweep`
+:class:`SweepPlan` is a prepared sweep as the flow runs it (:mod:`sim2radar.experiment.prepare`
 builds it): the :class:`SweepContext` every task needs, each :class:`PretrainSpec` and
 :class:`RunSpec` with its content key (:class:`PlannedPretrain`, :class:`PlannedRun`) and
 ``sweep.json``'s document. It is frozen, pickles to Dask workers and round-trips through

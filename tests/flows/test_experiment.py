@@ -180,7 +180,7 @@ def test_the_diagnosis_arms_run_the_control_and_the_lower_encoder_lr(data, prefe
 def test_a_sweep_refuses_changed_settings_but_not_changed_execution(first, data):
     """The settings are fixed when the sweep is created: a rerun with a changed protocol (lr)
     is refused with the field named, one with changed execution (concurrency) runs."""
-    from sim2radar.experiment.sweep import SweepSettingsChanged
+    from sim2radar.experiment.prepare import SweepSettingsChanged
     from sim2radar.tasks.experiment import prepare_sweep
 
     sweep = json.loads((first["dir"] / "sweep.json").read_text())

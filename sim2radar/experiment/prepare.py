@@ -1,18 +1,19 @@
-"""A sweep outside its training runs: preparing it — from a profile and its opened datasets to
-the :class:`~sim2radar.experiment.plan.SweepPlan` the flow runs, or what it would cost — and
-finishing it: statistics, report and dashboard of its runs' rows.
+"""Preparing a sweep: from a profile and its opened datasets to the
+:class:`~sim2radar.experiment.plan.SweepPlan` the flow runs.
 
     datasets = {"sim": "data/sim", "real": "store:reference"}
     setup = setup_sweep("demo", datasets, overrides={"trials": 3})
     domains = open_datasets(datasets, setup.roles, export)   # export: store:NAME -> a folder
-    plan = build_plan(setup, domains, name="demo", key_of=..., ...)   # or sweep_cost(...)
-    ...                                                               # the flow runs its jobs
-    summary = finish_sweep(plan, rows)
+    plan = build_plan(setup, domains, name="demo", key_of=..., ...)
 
-The conditions, their dataset roles and the command-line flags that name those datasets come
-from the condition registry (:data:`~sim2radar.experiment.profiles.CONDITIONS`): a new condition
-is one registry entry. Every frame a sweep will read is loaded and checked (and a simulated
-dataset holding a real evaluation frame refused) before the plan exists.
+The conditions and their dataset roles come from the condition registry
+(:data:`~sim2radar.experiment.profiles.CONDITIONS`): a new condition is one registry entry.
+Every frame a sweep will read is loaded and checked (and a simulated dataset holding a real
+evaluation frame refused) before the plan exists. A sweep's settings are fixed by its first
+preparation (:func:`settings_fixed_at`).
+
+The other phases: what a prepared sweep would cost is :func:`sim2radar.experiment.cost.sweep_cost`;
+its statistics, report and dashboard at the end are :mod:`sim2radar.experiment.finish`.
 
 What stays with the caller (``tasks/experiment.py``): exporting ``store:NAME`` datasets, reading
 and writing the sweep folder's files, and hashing key inputs into content keys — the
@@ -24,7 +25,7 @@ from __future__ import annotations
 
 import dataclasses
 import os
-from collections.abc import Callable, Collection, Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
@@ -46,9 +47,9 @@ from sim2radar.experiment.plan import (
     settings_changes,
 )
 from sim2radar.experiment.profiles import ABLATIONS, CONDITIONS, ExperimentProfile, dataset_roles
-from sim2radar.vocab import STATUSES
 
 __all__ = [
+    "GROUND_TRUTH_ROLES",
     "PREREGISTRATION_FILE",
     "KeyFn",
     "PreregistrationMissing",
@@ -56,7 +57,6 @@ __all__ = [
     "SweepSetup",
     "build_plan",
     "check_sweep_name",
-    "finish_sweep",
     "open_datasets",
     "preregistration",
     "resolve_profile",
@@ -64,8 +64,6 @@ __all__ = [
     "setup_sweep",
     "stage_configs",
     "sweep_conditions",
-    "sweep_cost",
-    "write_results",
 ]
 
 #: the pre-registration's copy in a sweep folder
@@ -449,105 +447,3 @@ def build_plan(setup: SweepSetup, domains: Mapping[str, Any], *, name: str, swee
     }
     return SweepPlan(context, pretrains, tuple(runs), sweep, profile.concurrent_runs,
                      DEFAULT_METRIC)
-
-
-def sweep_cost(setup: SweepSetup, domains: Mapping[str, Any], *,
-               workers: Collection[int] = (1, 8),
-               step_seconds: Mapping[str, float] | None = None) -> dict[str, Any]:
-    """What a sweep would cost: its jobs, their optimiser steps, seconds per step measured here
-    on the sweep's own frames with its resolved configs (or ``step_seconds`` =
-    ``{"pretrain": s, "finetune": s}``, e.g. a GPU's figures), and the expected wall time on
-    each of ``workers`` worker counts (:func:`sim2radar.experiment.cost.wall_time`).
-
-    Returns ``profile``, ``device``, ``precision`` (amp per stage), ``threads_per_run``,
-    ``jobs`` (kind -> count, steps), ``step_seconds``, ``measured`` (whether timed here),
-    ``compute_hours`` and ``wall_hours`` (workers -> hours).
-    """
-    from sim2radar.experiment.cost import measure_step_seconds, sweep_jobs, wall_time
-
-    profile, device, (pre_cfg, ft_cfg) = setup.profile, setup.device, setup.configs
-    domains = {role: domains[role] for role in setup.roles}
-    real = domains["real"]
-    train_ids = real.splits.get(profile.train_split) or []
-    if not train_ids:
-        raise ValueError(f"{real.root}/ImageSets/{profile.train_split}.txt lists no frame")
-    pretrains, runs = plan_sweep(profile, train_ids, setup.conditions)
-    held = profile.pretrain_holdout_split     # held out of every pre-training
-    n_sim = {role: len(set(ds.ids()) - set(ds.ids([held]) if held else ()))
-             for role, ds in domains.items() if role != "real"}
-    jobs = sweep_jobs(pretrains, runs, n_sim, profile.batch_size)
-    measured = step_seconds is None
-    if measured:
-        n = 3 * profile.batch_size
-        nfeat, classes = ft_cfg.model.num_point_features, ft_cfg.model.class_names
-        sec = {"finetune": measure_step_seconds(
-            ft_cfg, real.frames(train_ids[:n], nfeat, classes), device=device)}
-        if pretrains:
-            sim = domains[pretrains[0].sim_role]
-            sec["pretrain"] = measure_step_seconds(
-                pre_cfg, sim.frames(sim.ids()[:n], nfeat, classes), device=device)
-    else:
-        sec = {k: float(v) for k, v in step_seconds.items()}
-        missing = {j.kind for j in jobs} - set(sec)
-        if missing:
-            raise ValueError(f"step_seconds lacks {sorted(missing)} (give pretrain and "
-                             "finetune seconds per step)")
-    by_kind = {k: {"jobs": sum(j.kind == k for j in jobs),
-                   "steps": sum(j.steps for j in jobs if j.kind == k)}
-               for k in ("pretrain", "finetune")}
-    compute_s = sum(j.steps * sec[j.kind] for j in jobs)
-    return {"profile": profile.name, "device": device or str(ft_cfg.runtime.device or "auto"),
-            "precision": {"pretrain": pre_cfg.runtime.amp, "finetune": ft_cfg.runtime.amp},
-            "threads_per_run": profile.threads_per_run, "jobs": by_kind, "step_seconds": sec,
-            "measured": measured, "compute_hours": compute_s / 3600,
-            "wall_hours": {int(n): wall_time(jobs, sec, int(n)) / 3600 for n in workers}}
-
-
-def write_results(sweep_dir: str | os.PathLike, doc: Mapping[str, Any],
-                  rows: Sequence[Mapping[str, Any]],
-                  pretrainings: Sequence[Mapping[str, Any]] = ()) -> dict[str, Any]:
-    """Write a sweep folder's ``stats.json``, ``results.md`` and ``dashboard.html`` from its
-    ``sweep.json`` document and rows (what :func:`finish_sweep` does at the end of a sweep, and
-    ``sim2radar sweep-report`` does for a published one). Returns ``stats``, ``markdown`` and
-    the paths ``results_md``, ``dashboard``."""
-    from sim2radar.experiment.dashboard import write_dashboard
-    from sim2radar.experiment.report import results_markdown
-    from sim2radar.experiment.stats import sweep_statistics
-    from sim2radar.fileio import atomic_write, write_json
-
-    sweep_dir = Path(sweep_dir)
-    stats = sweep_statistics(doc, rows, pretrainings)
-    prereg = doc.get("preregistration")
-    md = results_markdown(stats, rows, title=f"Sweep {doc.get('name', sweep_dir.name)}",
-                          real_domain_label=doc.get("real_domain", ""),
-                          proxy=doc.get("real_is_proxy"),
-                          settings={"profile": (doc.get("profile") or {}).get("name"),
-                                    "digest": doc.get("settings_digest"),
-                                    "fixed_at": doc.get("settings_fixed_at")},
-                          preregistration=prereg)
-    folder = SweepFolder(sweep_dir)
-    write_json(folder.stats_json, stats)
-    atomic_write(folder.results_md, md.encode())
-    dashboard = write_dashboard(sweep_dir, folder.dashboard_html)
-    return {"stats": stats, "markdown": md, "results_md": str(folder.results_md),
-            "dashboard": str(dashboard)}
-
-
-def finish_sweep(plan: SweepPlan, rows: Sequence[Mapping[str, Any]],
-                 pretrainings: Sequence[Mapping[str, Any]] = ()) -> dict[str, Any]:
-    """Statistics, report and dashboard of a sweep's ``experiment_runs`` rows and its
-    pre-trainings' ``experiment_pretrain`` rows; writes ``stats.json``, ``results.md`` and
-    ``dashboard.html`` into the sweep folder (:func:`write_results`).
-
-    Returns ``counts`` (runs by status), ``metric``, ``stats``, ``markdown``, ``table_rows``
-    (for a Prefect table artifact) and the paths ``sweep_dir``, ``results_md``, ``dashboard``.
-    """
-    from sim2radar.experiment.report import results_table_rows
-
-    sweep_dir, rows = Path(plan.context.sweep_dir), list(rows)
-    res = write_results(sweep_dir, plan.sweep, rows, pretrainings)
-    counts = {k: sum(r["status"] == k for r in rows) for k in STATUSES}
-    return {"name": plan.name, "sweep_dir": str(sweep_dir), "counts": counts,
-            "metric": plan.metric, "stats": res["stats"], "markdown": res["markdown"],
-            "table_rows": results_table_rows(res["stats"]), "results_md": res["results_md"],
-            "dashboard": res["dashboard"]}

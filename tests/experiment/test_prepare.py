@@ -1,4 +1,4 @@
-"""Preparing a sweep without the store or Prefect (sim2radar/experiment/sweep.py): conditions and
+"""Preparing a sweep without the store or Prefect (sim2radar/experiment/prepare.py): conditions and
 dataset roles from the condition registry, the settings a sweep is fixed to, the plan with its
 keys, context and sweep.json document, and the plan's round trip through plan.json."""
 
@@ -12,11 +12,11 @@ import pytest
 
 from sim2radar.cli.experiment import sweep_flag
 from sim2radar.datasets import make_door_frames, write_dataset, write_metadata
+from sim2radar.experiment.cost import sweep_cost
 from sim2radar.experiment.data import open_domain
 from sim2radar.experiment.errors import SettingError
 from sim2radar.experiment.plan import SweepPlan, pretrain_key_inputs, run_key_inputs
-from sim2radar.experiment.profiles import ABLATIONS, CONDITIONS, ROLES
-from sim2radar.experiment.sweep import (
+from sim2radar.experiment.prepare import (
     SweepSettingsChanged,
     build_plan,
     open_datasets,
@@ -24,8 +24,8 @@ from sim2radar.experiment.sweep import (
     settings_fixed_at,
     setup_sweep,
     sweep_conditions,
-    sweep_cost,
 )
+from sim2radar.experiment.profiles import ABLATIONS, CONDITIONS, ROLES
 
 
 def _write(root, seed, n, first_world, proxy=False):
@@ -223,7 +223,7 @@ def test_datasets_are_folders_or_exported_from_the_store(domains, tmp_path):
 
 
 def test_a_preregistered_profile_refuses_to_run_without_its_file_and_pins_it(tmp_path):
-    from sim2radar.experiment.sweep import PreregistrationMissing
+    from sim2radar.experiment.prepare import PreregistrationMissing
 
     pre = tmp_path / "preregistration.md"
     over = {"preregistered": True, "preregistration": pre}
@@ -303,7 +303,7 @@ def test_the_sweeps_plain_work_does_not_import_prefect():
     import subprocess
     import sys
 
-    code = ("import sys, sim2radar.tasks.experiment, sim2radar.experiment.sweep; "
+    code = ("import sys, sim2radar.tasks.experiment, sim2radar.experiment.prepare; "
             "print(sorted(m for m in sys.modules if m.split('.')[0] == 'prefect')[:3])")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          check=True)
