@@ -108,9 +108,9 @@ def corridor_frames(seeds=(100_000, 100_001, 100_002), n_frames: int = 3) -> dic
 
     from sim2radar.factory import LabelConfig, frame_seed, radar_visibility, scene_ray_caster
     from sim2radar.factory.seeds import frame_speed
-    from sim2radar.flows.reference_dataset import REFERENCE_SPEED_MPS
     from sim2radar.radar import RadarScene
     from sim2radar.radar.frame import simulate_scene_frame
+    from sim2radar.tasks.reference import REFERENCE_SPEED_MPS
     from sim2radar.worlds import RigConfig, generate_world, render_frame, rig_velocity, trajectory
 
     radar = load_radar_config("ti-mmwcas-reference")

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from typing import Any
 
-__all__ = ["WorkFailed", "finish", "relay", "run_flow"]
+__all__ = ["WorkFailed", "finish", "finish_run", "run_flow"]
 
 
 class WorkFailed(RuntimeError):
@@ -39,12 +39,12 @@ def finish(summary: dict[str, Any], *, failed: int, total: int, unit: str,
     return Failed(message=message, data=WorkFailed(message, summary))
 
 
-def relay(summary: dict[str, Any], unit: str) -> Any:
-    """:func:`finish` for a deployment's job flow around a subflow's summary (its
-    ``counts``): the job ends Failed too when the subflow's work failed."""
+def finish_run(summary: dict[str, Any], unit: str, detail: str = "") -> Any:
+    """:func:`finish` for a job's summary (its ``counts``): a flow's return value that ends
+    Failed when any of its ``unit`` failed."""
     counts = summary.get("counts") or {}
     return finish(summary, failed=int(counts.get("failed", 0)),
-                  total=sum(int(v) for v in counts.values()), unit=unit)
+                  total=sum(int(v) for v in counts.values()), unit=unit, detail=detail)
 
 
 def run_flow(flow: Any, **params: Any) -> Any:
@@ -57,3 +57,6 @@ def run_flow(flow: Any, **params: Any) -> Any:
     if isinstance(result, BaseException):
         raise result
     return result
+
+
+relay = finish_run  # the experiment's job flow (flows/run_experiment.py) still calls it so

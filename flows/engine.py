@@ -1,14 +1,20 @@
-"""The factory's steps as Prefect tasks: one task per step of a scene (render, depth,
-segments, materials, scene, poses, simulate), each ending **Cached** when its artifact already
-existed, so the UI shows per scene which step ran, was cached, retried or failed; and what the
-flows do with their work tasks alike (:func:`gather`): gather them as they finish, record each
-outcome in the manifest, move the progress artifact.
+"""The Prefect side of the seam :mod:`sim2radar.tasks.runner`: :class:`PrefectRunner` runs a
+job's units of work as Prefect tasks and each unit's steps (render, depth, segments,
+materials, scene, poses, simulate) as nested tasks that end **Cached** when their artifact
+already existed, so the UI shows per unit which step ran, was cached, retried or failed.
 
-The step functions themselves (:mod:`sim2radar.tasks.steps`, :mod:`sim2radar.tasks.capture`, :mod:`sim2radar.tasks.dataset`)
-take a ``run(stage, fn, *args)`` callable: plain calls without Prefect, :func:`run_as_tasks` in
-a flow. Steps are called inside their scene's task (nested task runs, in that worker), so their
-arguments never leave the process. Only ``materials`` is retried (backoff 2 s, 8 s) and only on
-network errors (the VLM server); deterministic and local-I/O failures fail at once.
+    @flow(name="simulate-dataset")
+    def simulate_dataset(request: SimulateRequest) -> dict:
+        return finish_run(simulate_scenes(request, PrefectRunner(request.run)), "scenes")
+
+The units run on the task runner of :func:`sim2radar.flows.runners.task_runner` (a thread
+pool, or a Dask cluster) that :meth:`PrefectRunner.run` opens for them; they are gathered as
+they finish: each outcome recorded in the manifest (:func:`record_task`, retried on transient
+storage errors only), logged, counted on a progress artifact and reported on the job's
+progress channel (:mod:`sim2radar.flows._progress`). Steps run inside their unit's task
+(nested task runs, in that worker), so their arguments never leave the process. Only
+``materials`` is retried (backoff 2 s, 8 s) and only on network errors (the VLM server);
+deterministic and local-I/O failures fail at once.
 """
 
 from __future__ import annotations
@@ -26,11 +32,13 @@ from sim2radar.tasks.common import (
     REMOTE_IO_RETRIES,
     REMOTE_IO_RETRY_DELAYS_S,
     Outcome,
+    open_store,
     record,
     retry_transient_io,
 )
+from sim2radar.tasks.runner import RunOptions, Units
 
-__all__ = ["STEP_NAMES", "run_as_tasks", "gather", "record_task"]
+__all__ = ["STEP_NAMES", "PrefectRunner", "run_as_tasks", "gather", "record_task"]
 
 #: Every step's task name (the Prefect UI's task names).
 STEP_NAMES = ("render", "depth", "segments", "materials", "scene", "poses", "simulate")
@@ -71,13 +79,13 @@ _TASKS["materials"] = _step_task("materials", retries=2, retry_delay_seconds=[2.
                                  retry_condition_fn=_network_error)
 
 
-def run_as_tasks(prefix: str, name_of: Callable[[str, tuple], str] | None = None):
-    """A ``run(stage, fn, *args)`` that calls ``fn(*args)`` as the step's Prefect task, named
-    ``<prefix>-<stage><name_of(stage, args)>``; a failed step raises its error, a cached one
-    returns its result."""
+def run_as_tasks(prefix: str):
+    """A step runner ``run(stage, fn, *args, label="")`` (:data:`sim2radar.tasks.runner.StepRun`)
+    that calls ``fn(*args)`` as the step's Prefect task, named ``<prefix>-<stage>[-<label>]``;
+    a failed step raises its error, a cached one returns its result."""
 
-    def run(stage: str, fn: Callable, *args) -> Any:
-        suffix = name_of(stage, args) if name_of is not None else ""
+    def run(stage: str, fn: Callable, *args, label: str = "") -> Any:
+        suffix = f"-{label}" if label else ""
         state = _TASKS[stage].with_options(task_run_name=f"{prefix}-{stage}{suffix}")(
             fn, args, return_state=True)
         result = state.result()  # raises the step's error when it failed
@@ -128,3 +136,49 @@ def gather(futures: dict, failed: Callable[[Any, BaseException | str], Outcome],
         if channel is not None:
             _progress.notify(channel, result)
     return outcomes
+
+
+@task(cache_policy=NO_CACHE, retries=0, persist_result=False)
+def unit_task(work: Callable[[Any, Callable], Outcome], item: Any, prefix: str) -> Outcome:
+    """One unit of a job (named after the job's :attr:`~sim2radar.tasks.runner.Units.task`):
+    ``work(item, run_as_tasks(prefix))``. No retries: the work is deterministic, and a failing
+    step already says which step failed."""
+    return work(item, run_as_tasks(prefix))
+
+
+class PrefectRunner:
+    """:class:`sim2radar.tasks.runner.Runner` for a flow body: the units as Prefect tasks on
+    ``options``' task runner (:class:`~sim2radar.tasks.runner.RunOptions`: threads, or Dask),
+    gathered as they finish with a progress artifact; tables as table artifacts."""
+
+    def __init__(self, options: RunOptions | None = None) -> None:
+        self.options = options or RunOptions()
+
+    def run(self, units: Units) -> list[Outcome]:
+        from prefect.artifacts import create_progress_artifact
+
+        from sim2radar.flows.runners import task_runner
+
+        open_store(units.store).manifest(units.dataset)  # validates the name before any work
+        progress_id = create_progress_artifact(
+            progress=0.0, key=_progress.artifact_key(units.job, units.dataset, "progress"),
+            description=f"{units.job} {units.dataset}: {units.what}s finished of "
+                        f"{len(units.items)}")
+        one = unit_task.with_options(name=units.task)
+        with task_runner(self.options.workers, self.options.dask_address) as engine:
+            futures = {}
+            for i, item in enumerate(units.items):
+                name = units.name(item)
+                futures[engine.submit(one.with_options(task_run_name=name),
+                                      {"work": units.work, "item": item, "prefix": name})] = i
+            done = gather(futures, lambda i, error: units.failed(units.items[i], error),
+                          store=units.store, dataset=units.dataset, progress_id=progress_id,
+                          channel=units.job, what=units.what)
+        return [done[i] for i in range(len(units.items))]
+
+    def table(self, units: Units, rows: list[dict[str, Any]], description: str) -> None:
+        from prefect.artifacts import create_table_artifact
+
+        create_table_artifact(
+            table=rows, key=_progress.artifact_key(units.job, units.dataset, f"{units.what}s"),
+            description=description)

@@ -1,7 +1,9 @@
 """The capture factory's stages as cached steps: a capture scene (one RGB view) -> depth ->
 segments -> materials -> meshes + door boxes [-> fused with the scene's other views] -> radar
-poses -> radar frames, each step keyed by content and skipped when its artifact exists. :mod:`sim2radar.flows.capture_dataset` runs every step as
-a Prefect task; ``--no-prefect`` runs the same :func:`process_capture_scene` with plain calls.
+poses -> radar frames, each step keyed by content and skipped when its artifact exists; and the
+``captures`` job's driver :func:`capture_dataset` (``sim2radar captures``; the flow
+:mod:`sim2radar.flows.capture_dataset` runs it with every step a Prefect task, ``--no-prefect``
+with plain calls: the same :func:`process_capture_scene` either way).
 
 The science is in the library (:mod:`sim2radar.reconstruct.pipeline` stage functions,
 :mod:`sim2radar.factory.captures`); this module holds keys, caching, store I/O and outcomes.
@@ -21,17 +23,20 @@ not stored: it is cheap, and the frames' keys name the views' reconstructions an
 
 from __future__ import annotations
 
+import functools
 import logging
 import time
 from collections.abc import Callable
 from typing import Any
 
 import numpy as np
+from pydantic import BaseModel, ConfigDict
 
 from sim2radar.factory.captures import (
     CaptureScene,
     CaptureSpec,
     capture_frame,
+    find_captures,
     load_capture_frame,
     radar_mount,
     read_radar_yaml,
@@ -41,12 +46,24 @@ from sim2radar.factory.captures import (
 from sim2radar.factory.seeds import frame_seed, pose_seed, scene_seed
 from sim2radar.storage import content_key, meshes_from_table
 from sim2radar.storage.frames import dataset_frame_to_table
-from sim2radar.tasks.common import Outcome, open_store
-from sim2radar.tasks.dataset import DATASET_STAGE_VERSION, _fill_frame_outcome, read_dataset_frame
-from sim2radar.tasks.steps import FrameSource, call_step, reconstruction_steps
+from sim2radar.tasks.common import Outcome, failed_scene_ids, open_store
+from sim2radar.tasks.dataset import (
+    DATASET_STAGE_VERSION,
+    _fill_frame_outcome,
+    export_all,
+    outcomes_from_manifest,
+    read_dataset_frame,
+    summarize_dataset,
+)
+from sim2radar.tasks.runner import Runner, RunOptions, StepRun, Units, call_step
+from sim2radar.tasks.steps import FrameSource, reconstruction_steps
 
 __all__ = [
     "CAPTURE_STAGES",
+    "CAPTURE_DOMAIN",
+    "CaptureRequest",
+    "capture_dataset",
+    "stage_table",
     "process_capture_scene",
     "capture_frame_key",
     "poses_stage",
@@ -57,6 +74,8 @@ log = logging.getLogger(__name__)
 
 #: The steps of one scene, in order (the Prefect task of each is named after it).
 CAPTURE_STAGES = ("depth", "segments", "materials", "scene", "poses", "simulate")
+#: How capture exports label their domain in ``dataset.json``.
+CAPTURE_DOMAIN = "simulated from RGB captures (reconstructed geometry)"
 
 
 def _source(scene: CaptureScene, spec: CaptureSpec) -> tuple[FrameSource, dict[str, str]]:
@@ -272,9 +291,9 @@ def process_capture_scene(scene: CaptureScene, spec: CaptureSpec, store: str, *,
     out = Outcome(scene.scene_id, "skipped", source=scene.folder)
     current = ["inputs"]  # the step running, for the error
 
-    def step(stage: str, fn: Callable, *args) -> Any:
+    def step(stage: str, fn: Callable, *args, label: str = "") -> Any:
         current[0] = stage
-        return run(stage, fn, *args)
+        return run(stage, fn, *args, label=label)
 
     computed = False
     try:
@@ -286,8 +305,8 @@ def process_capture_scene(scene: CaptureScene, spec: CaptureSpec, store: str, *,
         views = []
         for view, scene_from_view in scene_views(scene, spec.reconstruction.fusion.frames):
             vsrc, vkeys = _source(view, spec)
-            for name, res in reconstruction_steps(vsrc, spec.reconstruction, store,
-                                                  step).items():
+            for name, res in reconstruction_steps(vsrc, spec.reconstruction, store, step,
+                                                  view.scene_id.rsplit("/", 1)[-1]).items():
                 out.timings_s[name] = out.timings_s.get(name, 0.0) + res.seconds
                 computed |= res.status == "ok"
             views.append({"view": view.scene_id, "scene_meshes": vkeys["scene_meshes"],
@@ -308,7 +327,7 @@ def process_capture_scene(scene: CaptureScene, spec: CaptureSpec, store: str, *,
             for i in range(0, len(poses), b):
                 idx = list(range(i, min(i + b, len(poses))))
                 out.parts += step("simulate", simulate_stage, scene, spec, store, keys,
-                                   poses[i:i + b], idx, force)
+                                   poses[i:i + b], idx, force, label=f"f{idx[0]:03d}")
             out.timings_s["simulate"] = time.perf_counter() - t1
     except Exception as exc:  # noqa: BLE001 - one broken scene must not stop the others
         log.error("%s [%s] failed: %s: %s", scene.scene_id, current[0], type(exc).__name__, exc)
@@ -326,3 +345,102 @@ def process_capture_scene(scene: CaptureScene, spec: CaptureSpec, store: str, *,
         else:
             out.status = "ok" if computed else "skipped"
     return out
+
+
+# ---------------------------------------------------------------------------------------------
+# The job
+# ---------------------------------------------------------------------------------------------
+class CaptureRequest(BaseModel):
+    """One run of the ``captures`` job: a lab's capture folder -> a radar dataset.
+
+    Attributes
+    ----------
+    captures : the capture folder (one sub-folder per scene:
+        :func:`sim2radar.factory.captures.find_captures`)
+    spec : radar, reconstruction, pose sampling, labels, seed, class name
+        (:class:`~sim2radar.factory.captures.CaptureSpec`)
+    store : artifact store root (local path or fsspec URI)
+    dataset : manifest name
+    export_dir : OpenPCDet export folder, or None
+    force : recompute even when cached
+    retry_failed : only the scenes the manifest records as failed run; the export then holds
+        every frame the manifest lists
+    run : how many scenes at once, and where (:class:`~sim2radar.tasks.runner.RunOptions`)
+    """
+
+    model_config = ConfigDict(extra="forbid")
+
+    captures: str = "captures"
+    spec: CaptureSpec = CaptureSpec()
+    store: str = "out/store"
+    dataset: str = "captures"
+    export_dir: str | None = None
+    force: bool = False
+    retry_failed: bool = False
+    run: RunOptions = RunOptions()
+
+
+def stage_table(outcomes: list[Outcome]) -> list[dict[str, Any]]:
+    """One row per scene: status, frames, points per frame, wall seconds per step."""
+    rows = []
+    for o in outcomes:
+        counts = [f.measured.get("n_points", {}) for f in o.parts]
+        pts = [c["reconstructed"] for c in counts if "reconstructed" in c]
+        row = {"scene": o.id, "status": o.status,
+               "frames": sum(f.status != "failed" for f in o.parts),
+               "points_per_frame": round(sum(pts) / len(pts), 1) if pts else None}
+        for stage in CAPTURE_STAGES + ("total",):
+            row[f"{stage}_s"] = round(o.timings_s[stage], 3) if stage in o.timings_s else None
+        row["fallbacks"] = int(o.measured.get("fallbacks", 0))
+        row["error"] = o.error
+        rows.append(row)
+    return rows
+
+
+def _scene_unit(scene: CaptureScene, run: StepRun, *, request: CaptureRequest) -> Outcome:
+    return process_capture_scene(scene, request.spec, request.store, force=request.force,
+                                 run=run)
+
+
+def _failed_scene(scene: CaptureScene, error: BaseException | str) -> Outcome:
+    return Outcome.failed(scene.scene_id, error, source=scene.folder)
+
+
+def capture_dataset(request: CaptureRequest, runner: Runner) -> dict[str, Any]:
+    """The ``captures`` job: every scene of the capture folder through its steps into the
+    store, the dataset manifest and (with ``export_dir``) OpenPCDet's layout; a failing scene
+    is recorded ``failed`` with its stage and error and the others finish.
+
+    Returns
+    -------
+    dict — :func:`sim2radar.tasks.dataset.summarize_dataset`'s (+ ``stage_table``,
+    ``export``, ``wall_s``)
+    """
+    t0 = time.perf_counter()
+    scenes = find_captures(request.captures)
+    export = request.export_dir
+    if request.retry_failed:
+        failed = set(failed_scene_ids(request.store, request.dataset))
+        scenes = [s for s in scenes if s.scene_id in failed]
+        export = None  # the whole dataset is exported below, not only the retried scenes
+    units = Units(job="captures", what="scene", task="capture-scene", items=tuple(scenes),
+                  work=functools.partial(_scene_unit, request=request),
+                  failed=_failed_scene, name=lambda s: s.scene_id,
+                  store=request.store, dataset=request.dataset)
+    outcomes = runner.run(units) if scenes else []
+    st = open_store(request.store)
+    summary = summarize_dataset(st, request.dataset, request.spec, outcomes)
+    summary["unit"], summary["ground_truth"] = "scenes", False
+    summary["stage_table"] = stage_table(outcomes)
+    if scenes:
+        runner.table(units, summary["stage_table"],
+                     f"capture dataset {request.dataset}: scenes {summary['counts']} (seconds "
+                     "per step in this run; cached steps take milliseconds)")
+    if export is not None:
+        summary["export"] = export_all(st, outcomes, export, request.spec,
+                                       domain=CAPTURE_DOMAIN)
+    elif request.retry_failed and request.export_dir is not None and scenes:
+        summary["export"] = export_all(st, outcomes_from_manifest(st, request.dataset),
+                                       request.export_dir, request.spec, domain=CAPTURE_DOMAIN)
+    summary["wall_s"] = time.perf_counter() - t0
+    return summary

@@ -1,7 +1,7 @@
-"""Task helpers shared by every stage (no Prefect import: ``--no-prefect`` runs never load it;
-``flows/`` wraps these functions in Prefect tasks): the one :class:`Outcome` record with its manifest
-:func:`record` and run :func:`summarize`, the plain loop :func:`run_plain`, store handles, the
-retry policy.
+"""Task helpers shared by every stage (no Prefect import: ``--no-prefect`` runs never load it):
+the one :class:`Outcome` record with its manifest :func:`record` and run :func:`summarize`,
+store handles, the retry policy of storage I/O. How units of work run is
+:mod:`sim2radar.tasks.runner`.
 
 Plain functions (no Prefect engine needed) so tests call them directly.
 """
@@ -12,7 +12,7 @@ import dataclasses
 import logging
 import os
 import re
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Iterable, Sequence
 from typing import Any
 
 from sim2radar.fileio import jsonable
@@ -25,7 +25,6 @@ __all__ = [
     "count_statuses",
     "count_fallbacks",
     "record",
-    "run_plain",
     "summarize",
     "failed_scene_ids",
     "open_store",
@@ -162,28 +161,6 @@ def summarize(store: str | os.PathLike | ArtifactStore, dataset: str,
     summary["manifest"] = st.join(MANIFESTS, dataset)
     summary.update(extra)
     return summary
-
-
-def run_plain(items: Iterable[Any], work: Callable[[Any], Outcome],
-              failed: Callable[[Any, Exception], Outcome], store: ArtifactStore, dataset: str,
-              on_outcome: Callable[[Outcome], None] | None = None) -> list[Outcome]:
-    """A flow's semantics without the Prefect engine (notebooks, tests, ``--no-prefect``):
-    ``work(item)`` for each item one after another, recorded in the manifest as it finishes;
-    an item that raises is recorded as ``failed(item, error)`` and the others go on."""
-    open_store(store).manifest(dataset)  # validates the name before any work
-    outcomes = []
-    for item in items:
-        try:
-            outcome = work(item)
-        except Exception as exc:  # noqa: BLE001 - one broken item must not stop the others
-            # info: the outcome carries the error and the caller reports it (once)
-            log.info("%s failed: %s: %s", item, type(exc).__name__, exc)
-            outcome = failed(item, exc)
-        record(store, dataset, outcome)
-        outcomes.append(outcome)
-        if on_outcome is not None:
-            on_outcome(outcome)
-    return outcomes
 
 
 #: A frame's manifest row id: ``<scene or world id>_f<frame index, 3+ digits>``.

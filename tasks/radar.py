@@ -1,4 +1,6 @@
-"""Radar simulation of scene files into the artifact store (plain functions + Prefect tasks).
+"""Radar simulation of scene files into the artifact store: the ``simulate`` job's driver
+:func:`simulate_scenes` (``sim2radar simulate``; the flow :mod:`sim2radar.flows.simulate` runs it
+with Prefect) and its unit of work, one scene.
 
 Per scene, :func:`simulate_scene`:
 
@@ -12,11 +14,13 @@ Per scene, :func:`simulate_scene`:
 4. optionally renders one bird's-eye-view PNG per frame (from the stored table, so cached
    scenes get pictures too).
 
-Errors propagate (the Prefect task fails; the flow records it in the manifest).
+Errors propagate (the runner records the scene as ``failed`` in the manifest and the others
+finish); ``strict`` raises :class:`SceneFailures` after everything is recorded.
 """
 
 from __future__ import annotations
 
+import functools
 import logging
 import os
 import time
@@ -24,12 +28,11 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from prefect import task
-from prefect.cache_policies import NO_CACHE
+from pydantic import BaseModel, ConfigDict, Field
 
 from sim2radar.configio import DEFAULT_RADAR
 from sim2radar.factory.seeds import scene_file_frame_seed
-from sim2radar.scenes import scene_id_for
+from sim2radar.scenes import expand_scenes, scene_id_for
 from sim2radar.storage import (
     ArtifactStore,
     content_key,
@@ -37,7 +40,8 @@ from sim2radar.storage import (
     radar_frames_from_table,
     radar_frames_to_table,
 )
-from sim2radar.tasks.common import Outcome, jsonable, open_store, run_plain, summarize
+from sim2radar.tasks.common import Outcome, jsonable, open_store, summarize
+from sim2radar.tasks.runner import Runner, RunOptions, StepRun, Units
 
 __all__ = [
     "RADAR_POINTS_STAGE_VERSION",
@@ -46,8 +50,9 @@ __all__ = [
     "simulate_scene",
     "render_scene_pngs",
     "failed_outcome",
-    "simulate_scenes_plain",
-    "simulate_scene_task",
+    "SimulateRequest",
+    "SceneFailures",
+    "simulate_scenes",
 ]
 
 log = logging.getLogger(__name__)
@@ -227,39 +232,91 @@ def failed_outcome(scene_path: str | os.PathLike, error: BaseException | str) ->
     return Outcome.failed(scene_id_for(scene_path), error, source=str(scene_path))
 
 
-def simulate_scenes_plain(
-    scenes: list[str | os.PathLike],
-    radar: Any = DEFAULT_RADAR,
-    store: str | os.PathLike | ArtifactStore = "out/store",
-    dataset: str = "default",
-    *,
-    seed: int = 0,
-    png_dir: str | os.PathLike | None = None,
-    force: bool = False,
-    on_scene: Callable[[Outcome], None] | None = None,
-    simulate_fn: Callable | None = None,
-) -> dict[str, Any]:
-    """The simulate flow's semantics without the Prefect engine (notebooks, debugging,
-    ``sim2radar simulate --no-prefect``): scenes one after another, failures recorded and
-    not raised. Returns :func:`~sim2radar.tasks.common.summarize`'s dict (+ ``radar``)."""
-    st = open_store(store)
+class SimulateRequest(BaseModel):
+    """One run of the ``simulate`` job: scene files into the store.
 
-    def work(path) -> Outcome:
-        return simulate_scene(path, radar, st, seed=seed, png_dir=png_dir, force=force,
-                              simulate_fn=simulate_fn)
+    Attributes
+    ----------
+    scenes : scene YAML files, folders (every ``*.yaml`` inside), globs, bundled scene names
+        (``demo``) — :func:`sim2radar.scenes.expand_scenes`
+    radar : radar preset name or YAML path
+    store : artifact store root (local path or fsspec URI)
+    dataset : manifest name
+    seed : run seed
+    png_dir : folder for bird's-eye-view PNGs (local), or None
+    force : recompute even when artifacts exist
+    strict : raise :class:`SceneFailures` at the end if any scene failed
+    run : how many scenes at once, and where (:class:`~sim2radar.tasks.runner.RunOptions`)
+    """
 
-    outcomes = run_plain(scenes, work, failed_outcome, st, dataset, on_scene)
-    return summarize(st, dataset, outcomes, radar=str(radar))
+    model_config = ConfigDict(extra="forbid")
+
+    scenes: list[str] = Field(min_length=1)
+    radar: str = DEFAULT_RADAR
+    store: str = "out/store"
+    dataset: str = "default"
+    seed: int = 0
+    png_dir: str | None = None
+    force: bool = False
+    strict: bool = False
+    run: RunOptions = RunOptions()
 
 
-# ---------------------------------------------------------------------------------------------
-# Prefect tasks: thin wrappers. Simulation is deterministic -> no retries (fail fast with the real
-# error); manifest writes are storage I/O -> retried with backoff. Caching is by content key
-# inside simulate_scene, so Prefect's own cache is off.
-# ---------------------------------------------------------------------------------------------
-@task(name="simulate-scene", cache_policy=NO_CACHE, retries=0, persist_result=False)
-def simulate_scene_task(
-    scene_path: str, radar: str, store: str, seed: int = 0, png_dir: str | None = None, force: bool = False
-) -> Outcome:
-    """Prefect task around :func:`simulate_scene`."""
+class SceneFailures(RuntimeError):
+    """Raised by a ``strict`` run when at least one scene failed; ``.summary`` has the details."""
+
+    def __init__(self, summary: dict[str, Any]) -> None:
+        failed = [s for s in summary["outcomes"] if s["status"] == "failed"]
+        lines = [f"{s['id']}: {s['error']}" for s in failed]
+        super().__init__(f"{len(failed)} scene(s) failed:\n" + "\n".join(lines))
+        self.summary = summary
+
+
+def _check_unique_ids(scenes: list[str]) -> None:
+    seen: dict[str, str] = {}
+    for s in scenes:
+        sid = scene_id_for(s)
+        if sid in seen and os.path.abspath(seen[sid]) != os.path.abspath(s):
+            raise ValueError(
+                f"two scene files share the scene id {sid!r}: {seen[sid]} and {s}; give each a "
+                "unique 'name:' in its YAML or write them to different datasets"
+            )
+        seen[sid] = s
+
+
+def _simulate_unit(scene_path: str, run: StepRun, *, radar, store, seed, png_dir,
+                   force) -> Outcome:
     return simulate_scene(scene_path, radar, store, seed=seed, png_dir=png_dir, force=force)
+
+
+def simulate_scenes(request: SimulateRequest, runner: Runner) -> dict[str, Any]:
+    """The ``simulate`` job: every scene of ``request`` simulated into the store and recorded
+    in the dataset manifest (a second run recomputes nothing: every scene ``skipped`` by
+    content key); a broken scene (bad mesh file, unknown material) is recorded as ``failed``
+    and the others finish.
+
+    Returns
+    -------
+    dict — :func:`sim2radar.tasks.common.summarize`'s (``outcomes``: the scenes) + ``radar``
+
+    Raises
+    ------
+    SceneFailures — ``request.strict`` and a scene failed (after every scene is recorded)
+    ValueError — two scene files share a scene id
+    """
+    scenes = expand_scenes(request.scenes)
+    _check_unique_ids(scenes)
+    units = Units(job="simulate", what="scene", task="simulate-scene", items=tuple(scenes),
+                  work=functools.partial(_simulate_unit, radar=request.radar,
+                                         store=request.store, seed=request.seed,
+                                         png_dir=request.png_dir, force=request.force),
+                  failed=failed_outcome, name=scene_id_for, store=request.store,
+                  dataset=request.dataset)
+    outcomes = runner.run(units)
+    summary = summarize(request.store, request.dataset, outcomes, radar=request.radar)
+    log.info("simulate: %s into %s (dataset %s)", summary["counts"], summary["store"],
+             request.dataset)
+    if request.strict and summary["counts"]["failed"]:
+        raise SceneFailures(summary)
+    return summary
+

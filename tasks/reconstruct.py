@@ -1,4 +1,6 @@
-"""Reconstruction of RGB [+ LiDAR] frames into the artifact store (plain functions + Prefect tasks).
+"""Reconstruction of RGB [+ LiDAR] frames into the artifact store: the ``reconstruct`` job's
+driver :func:`reconstruct_images` (``sim2radar reconstruct``; the flow
+:mod:`sim2radar.flows.reconstruct` runs it with Prefect) and its unit of work, one frame.
 
 Per image, :func:`reconstruct_image`:
 
@@ -9,32 +11,33 @@ Per image, :func:`reconstruct_image`:
 3. otherwise runs the four stages and publishes both artifacts atomically with provenance
    (status ``ok``), plus the stage sheet PNG and a ``scene.yaml`` folder when asked.
 
-Errors propagate (the task fails; the flow records it as ``failed`` in the manifest). No retries:
-reconstruction is deterministic; the VLM backend retries its own HTTP calls.
+Errors propagate (the runner records the frame as ``failed`` in the manifest and the others
+finish). No retries: reconstruction is deterministic; the VLM backend retries its own HTTP
+calls.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import functools
 import logging
 import os
 import time
-from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from prefect import task
-from prefect.cache_policies import NO_CACHE
+from pydantic import BaseModel, ConfigDict, Field
 
-from sim2radar.reconstruct.pipeline import STAGE_VERSION
-from sim2radar.tasks.common import Outcome, jsonable, open_store, run_plain, summarize
+from sim2radar.reconstruct.pipeline import STAGE_VERSION, ReconstructionConfig
+from sim2radar.tasks.common import Outcome, jsonable, open_store, summarize
+from sim2radar.tasks.runner import Runner, RunOptions, StepRun, Units
 
 __all__ = [
     "RECONSTRUCTION_STAGE_VERSION",
     "ImageJob",
     "reconstruct_image",
-    "reconstruct_images_plain",
-    "reconstruct_image_task",
+    "ReconstructRequest",
+    "reconstruct_images",
     "failed_outcome",
 ]
 
@@ -75,7 +78,7 @@ def _inputs(job: ImageJob):
 def reconstruct_image(
     job: ImageJob,
     store,
-    config: dict | None = None,
+    config: ReconstructionConfig | dict | None = None,
     *,
     out_dir: str | None = None,
     force: bool = False,
@@ -88,13 +91,13 @@ def reconstruct_image(
     ----------
     job : ImageJob
     store : path/URI or :class:`storage.ArtifactStore`
-    config : dict — a :class:`ReconstructionConfig` as a dict (default: the builtin preset).
+    config : ReconstructionConfig, or its fields as a dict (default: the builtin preset).
     out_dir : str, optional — where ``sheets/<name>.png`` and ``scenes/<name>/scene.yaml`` go.
     sheet_dir : where ``<name>.png`` goes instead of ``out_dir/sheets``.
     backends : the config's backends, built once for many frames
         (:func:`sim2radar.reconstruct.build_backends`; default: built here).
     """
-    from sim2radar.reconstruct import FrameInput, ReconstructionConfig, reconstruct
+    from sim2radar.reconstruct import FrameInput, reconstruct
     from sim2radar.storage.reconstruction import reconstruction_keys, write_scene_artifacts
     from sim2radar.tasks.steps import material_fallbacks
 
@@ -134,37 +137,57 @@ def reconstruct_image(
                              "fallbacks": (provisional or {}).get("fallbacks", 0)})
 
 
-def reconstruct_images_plain(
-    jobs: list[ImageJob],
-    store,
-    dataset: str = "reconstruction",
-    config: dict | None = None,
-    *,
-    out_dir: str | None = None,
-    sheet_dir: str | os.PathLike | None = None,
-    force: bool = False,
-    backends: tuple | None = None,
-    on_frame: Callable[[Outcome], None] | None = None,
-) -> dict[str, Any]:
-    """The ``reconstruct-frames`` flow's semantics without the Prefect engine (``sim2radar
-    reconstruct``, notebooks): frames one after another, each recorded in the ``dataset``
-    manifest as ``ok``, ``skipped`` (cached) or ``failed`` (with its error) while the others
-    finish; ``on_frame(outcome)`` after each. Returns :func:`~sim2radar.tasks.common.summarize`'s
-    dict."""
-    st = open_store(store)
+class ReconstructRequest(BaseModel):
+    """One run of the ``reconstruct`` job: RGB [+ LiDAR] frames into material-labelled scenes.
 
-    def work(job: ImageJob) -> Outcome:
-        return reconstruct_image(job, st, config, out_dir=out_dir, force=force,
-                                 sheet_dir=sheet_dir, backends=backends)
+    Attributes
+    ----------
+    jobs : the frames (image, intrinsics YAML, optional LiDAR ``.npy``)
+    store : artifact store root (local path or fsspec URI)
+    dataset : manifest name
+    config : the reconstruction's backends and settings (None: the built-in preset)
+    out_dir : where ``sheets/<name>.png`` and ``scenes/<name>/scene.yaml`` go, or None
+    sheet_dir : where ``<name>.png`` goes instead of ``out_dir/sheets``
+    force : recompute frames even when cached
+    run : how many frames at once (:class:`~sim2radar.tasks.runner.RunOptions`)
+    """
 
-    return summarize(st, dataset, run_plain(jobs, work, failed_outcome, st, dataset, on_frame))
+    model_config = ConfigDict(extra="forbid")
+
+    jobs: list[ImageJob] = Field(min_length=1)
+    store: str = "out/store"
+    dataset: str = "reconstruction"
+    config: ReconstructionConfig | None = None
+    out_dir: str | None = None
+    sheet_dir: str | None = None
+    force: bool = False
+    run: RunOptions = RunOptions()
 
 
-@task(name="reconstruct-image", cache_policy=NO_CACHE, retries=0, persist_result=False)
-def reconstruct_image_task(job: ImageJob, store: str, config: dict | None = None,
-                           out_dir: str | None = None, force: bool = False) -> Outcome:
-    """Prefect wrapper of :func:`reconstruct_image` (no retries: deterministic)."""
-    return reconstruct_image(job, store, config, out_dir=out_dir, force=force)
+def _frame_unit(job: ImageJob, run: StepRun, *, request: ReconstructRequest,
+                backends: tuple | None) -> Outcome:
+    return reconstruct_image(job, request.store, request.config, out_dir=request.out_dir,
+                             force=request.force, sheet_dir=request.sheet_dir,
+                             backends=backends)
+
+
+def reconstruct_images(request: ReconstructRequest, runner: Runner, *,
+                       backends: tuple | None = None) -> dict[str, Any]:
+    """The ``reconstruct`` job: every frame of ``request`` recorded in the dataset manifest as
+    ``ok``, ``skipped`` (cached) or ``failed`` (with its error) while the others finish.
+    ``backends``: the config's backends built once for every frame (one process; a Prefect
+    run on Dask builds them per frame).
+
+    Returns
+    -------
+    dict — :func:`~sim2radar.tasks.common.summarize`'s (``outcomes``: the frames)
+    """
+    units = Units(job="reconstruct", what="frame", task="reconstruct-image",
+                  items=tuple(request.jobs),
+                  work=functools.partial(_frame_unit, request=request, backends=backends),
+                  failed=failed_outcome, name=lambda job: job.name,
+                  store=request.store, dataset=request.dataset)
+    return summarize(request.store, request.dataset, runner.run(units))
 
 
 def failed_outcome(job: ImageJob, error: BaseException | str) -> Outcome:

@@ -3,8 +3,8 @@
 procedural world's frame (:mod:`sim2radar.tasks.dataset`). Each step reads its inputs from the store,
 runs one stage of :mod:`sim2radar.reconstruct.pipeline` and writes its artifact under its
 content key (:func:`sim2radar.storage.reconstruction.stage_keys`), or returns ``skipped`` when the
-artifact exists. ``flows/_steps.py`` wraps every step in a Prefect task; plain calls run the
-same functions.
+artifact exists. A step runner (:data:`sim2radar.tasks.runner.StepRun`) calls each: plainly, or as a
+Prefect task (:func:`sim2radar.flows.engine.run_as_tasks`).
 """
 
 from __future__ import annotations
@@ -19,12 +19,13 @@ from typing import Any
 import numpy as np
 
 from sim2radar.tasks.common import open_store
+from sim2radar.tasks.runner import call_step
 
 log = logging.getLogger(__name__)
 
 __all__ = ["RECONSTRUCTION_STEPS", "FrameSource", "StageResult", "depth_stage",
            "segments_stage", "materials_stage", "scene_stage", "reconstruction_steps",
-           "call_step", "material_fallbacks"]
+           "material_fallbacks"]
 
 #: The reconstruction's steps, in order.
 RECONSTRUCTION_STEPS = ("depth", "segments", "materials", "scene")
@@ -228,19 +229,16 @@ def scene_stage(src: FrameSource, config, store: str) -> StageResult:
     return StageResult("scene", "ok", key, time.perf_counter() - t0, seconds)
 
 
-def call_step(stage: str, fn: Callable, *args) -> Any:
-    """The plain ``run`` of the step functions: call ``fn(*args)``."""
-    return fn(*args)
-
-
 def reconstruction_steps(src: FrameSource, config, store: str,
-                         run: Callable[..., Any] = call_step) -> dict[str, StageResult]:
-    """Every step of one view in order through ``run(stage, fn, *args)`` (plain calls by
-    default, Prefect tasks in a flow); a failing step raises and the ones after it do not
-    run. Returns stage -> StageResult."""
+                         run: Callable[..., Any] = call_step,
+                         label: str = "") -> dict[str, StageResult]:
+    """Every step of one view in order through ``run(stage, fn, *args, label=label)`` (plain
+    calls by default, Prefect tasks in a flow, named with ``label``: a world's frame ``f002``,
+    a capture scene's view ``v1``); a failing step raises and the ones after it do not run.
+    Returns stage -> StageResult."""
     out = {}
     for stage, fn in zip(RECONSTRUCTION_STEPS,
                          (depth_stage, segments_stage, materials_stage, scene_stage),
                          strict=True):
-        out[stage] = run(stage, fn, src, config, store)
+        out[stage] = run(stage, fn, src, config, store, label=label)
     return out

@@ -1,4 +1,6 @@
-"""Procedural worlds into the artifact store (plain functions + thin Prefect tasks).
+"""Procedural worlds into the artifact store: the ``worlds`` job's driver
+:func:`generate_worlds` (``sim2radar worlds generate``; the flow :mod:`sim2radar.flows.worlds`
+runs it with Prefect) and its unit of work, one world.
 
 Per world seed, :func:`generate_world_artifacts`:
 
@@ -20,18 +22,25 @@ centre lies in the radar's field of view and range — a ready pre-training set.
 
 from __future__ import annotations
 
+import functools
 import logging
 import os
 import time
 from typing import Any
 
+from pydantic import BaseModel, ConfigDict, Field
+
 from sim2radar.storage import ArtifactStore, content_key, meshes_to_table
-from sim2radar.tasks.common import Outcome, jsonable, open_store, run_plain, summarize
+from sim2radar.storage.worlds import world_id_for
+from sim2radar.tasks.common import Outcome, jsonable, open_store, summarize
+from sim2radar.tasks.runner import Runner, RunOptions, StepRun, Units
+from sim2radar.worlds.config import RigConfig, WorldConfig
 
 __all__ = [
     "world_keys",
     "generate_world_artifacts",
-    "generate_worlds_plain",
+    "WorldsRequest",
+    "generate_worlds",
     "failed_world",
     "world_source",
 ]
@@ -219,16 +228,55 @@ def failed_world(seed: int, error: BaseException | str) -> Outcome:
     return Outcome.failed(world_id_for(seed), error, seed=int(seed), source=world_source(seed))
 
 
-def generate_worlds_plain(seeds, n_frames: int, store="out/store", dataset: str = "worlds",
-                          world_cfg=None, rig=None, *, trajectory_seed: int = 0,
-                          force: bool = False, radar=None) -> dict[str, Any]:
-    """The worlds flow without the Prefect engine: worlds one after another; failures are
-    recorded in the manifest, not raised."""
-    st = open_store(store)
+class WorldsRequest(BaseModel):
+    """One run of the ``worlds`` job: procedural worlds rendered into the store.
 
-    def work(seed: int) -> Outcome:
-        return generate_world_artifacts(seed, n_frames, st, world_cfg, rig,
-                                        trajectory_seed=trajectory_seed, force=force,
-                                        radar=radar)
+    Attributes
+    ----------
+    seeds : world seeds (one seed -> one world)
+    n_frames : frames along each world's trajectory
+    store : artifact store root (local path or fsspec URI)
+    dataset : manifest name
+    world, rig : the generator's and the camera rig's settings
+    trajectory_seed : seed of the rig's walk
+    force : recompute even when artifacts exist
+    radar : also simulate radar point clouds per frame with this preset / YAML, or None
+    run : how many worlds at once (:class:`~sim2radar.tasks.runner.RunOptions`)
+    """
 
-    return summarize(st, dataset, run_plain(seeds, work, failed_world, st, dataset))
+    model_config = ConfigDict(extra="forbid")
+
+    seeds: list[int] = Field(min_length=1)
+    n_frames: int = Field(4, ge=1)
+    store: str = "out/store"
+    dataset: str = "worlds"
+    world: WorldConfig = WorldConfig()
+    rig: RigConfig = RigConfig()
+    trajectory_seed: int = 0
+    force: bool = False
+    radar: str | None = None
+    run: RunOptions = RunOptions()
+
+
+def _world_unit(seed: int, run: StepRun, *, request: WorldsRequest) -> Outcome:
+    return generate_world_artifacts(seed, request.n_frames, request.store, request.world,
+                                    request.rig, trajectory_seed=request.trajectory_seed,
+                                    force=request.force, radar=request.radar)
+
+
+def generate_worlds(request: WorldsRequest, runner: Runner) -> dict[str, Any]:
+    """The ``worlds`` job: every world of ``request`` generated, rendered and recorded in the
+    dataset manifest; a failing world is recorded ``failed`` and the others finish.
+
+    Returns
+    -------
+    dict — :func:`sim2radar.tasks.common.summarize`'s (``outcomes``: the worlds)
+    """
+    units = Units(job="worlds", what="world", task="generate-world",
+                  items=tuple(int(s) for s in request.seeds),
+                  work=functools.partial(_world_unit, request=request), failed=failed_world,
+                  name=world_id_for, store=request.store, dataset=request.dataset)
+    summary = summarize(request.store, request.dataset, runner.run(units))
+    log.info("generate-worlds: %s into %s (dataset %s)", summary["counts"], summary["store"],
+             request.dataset)
+    return summary

@@ -197,12 +197,15 @@ def test_the_readme_rooms_table_matches_the_layers():
 
 
 def test_the_plain_path_does_not_import_prefect():
-    """``--no-prefect`` runs use the tasks' plain functions: they must not load Prefect (about
-    1 s of a cached rerun, BENCHMARKS.md); the Prefect task wrappers live in ``flows/``."""
+    """``--no-prefect`` runs use the jobs' drivers with a plain runner: they must not load
+    Prefect (about 1 s of a cached rerun, BENCHMARKS.md); the Prefect runner lives in
+    ``flows/``."""
     import subprocess
 
     code = ("import sys, sim2radar.tasks.dataset, sim2radar.tasks.common, "
-            "sim2radar.tasks.worlds, sim2radar.tasks.steps, sim2radar.tasks.capture; "
+            "sim2radar.tasks.worlds, sim2radar.tasks.steps, sim2radar.tasks.capture, "
+            "sim2radar.tasks.radar, sim2radar.tasks.reconstruct, sim2radar.tasks.reference, "
+            "sim2radar.tasks.runner, sim2radar.cli._jobs; "
             "print(sorted(m for m in sys.modules if m.split('.')[0] == 'prefect')[:3])")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          check=True, cwd=ROOT)

@@ -32,8 +32,9 @@ def run_captures(captures: Path, *, store: str, dataset: str, settings: dict[str
 
     from sim2radar.cli._app import export_folder_lock
     from sim2radar.cli._datasets import progress_columns
-    from sim2radar.factory.captures import find_captures
-    from sim2radar.flows.capture_dataset import capture_dataset
+    from sim2radar.cli._jobs import run_job
+    from sim2radar.factory.captures import CaptureSpec, find_captures
+    from sim2radar.tasks.capture import CaptureRequest, capture_dataset
 
     n_scenes = len(find_captures(captures, warn=False))  # the flow warns once
     with export_folder_lock(export_dir), \
@@ -50,16 +51,20 @@ def run_captures(captures: Path, *, store: str, dataset: str, settings: dict[str
         from contextlib import nullcontext
 
         from sim2radar.cli._app import ServerWatch, quiet_recorded_failures
-        from sim2radar.flows._steps import STEP_NAMES
+        quiet = nullcontext()
+        if use_prefect:
+            from sim2radar.flows.engine import STEP_NAMES
 
-        quiet = (quiet_recorded_failures(["capture-scene", *STEP_NAMES], verbose)
-                 if use_prefect else nullcontext())
+            quiet = quiet_recorded_failures(["capture-scene", *STEP_NAMES], verbose)
+        request = CaptureRequest(
+            captures=str(captures), spec=CaptureSpec(**settings), store=str(store),
+            dataset=dataset, export_dir=None if export_dir is None else str(export_dir),
+            force=force, retry_failed=retry_failed,
+            run={"workers": workers, "dask_address": dask_address})
+
         def run(prefect: bool) -> dict[str, Any]:
-            return capture_dataset(captures, store, dataset, export_dir=export_dir,
-                                   force=force, workers=workers,
-                                   dask_address=dask_address if prefect else None,
-                                   use_prefect=prefect, on_scene=on_scene,
-                                   retry_failed=retry_failed, **settings)
+            return run_job("sim2radar.flows.capture_dataset:capture_dataset", capture_dataset,
+                           request, job="captures", use_prefect=prefect, on_outcome=on_scene)
 
         with quiet, ServerWatch(os.environ.get("PREFECT_API_URL") if use_prefect
                                 else None) as watch:
@@ -68,11 +73,10 @@ def run_captures(captures: Path, *, store: str, dataset: str, settings: dict[str
                                                         description="without Prefect"))
     summary["pngs"] = []
     if png_dir is not None:
-        from sim2radar.factory.captures import CaptureSpec
         from sim2radar.tasks.dataset import outcomes_from_summary, world_bev_pngs
 
         summary["pngs"] = world_bev_pngs(store, outcomes_from_summary(summary), png_dir,
-                                         CaptureSpec(**settings))
+                                         request.spec)
     return summary
 
 

@@ -68,16 +68,13 @@ def _manifest_status(summary: dict[str, Any], name: str, role: str) -> dict[str,
 
 def _reference_dataset(store: str, dataset: str, export_dir: Path, png_dir: Path | None,
                        verbose: bool, **plan: Any) -> dict[str, Any]:
-    """The reference radar's dataset of a plan (:func:`sim2radar.flows.reference_dataset.reference_run`
-    arguments) through the generate flow, exported to ``export_dir``."""
+    """The reference radar's dataset of a plan (:class:`sim2radar.tasks.reference.ReferenceRequest`
+    fields: ``first_seed``, ``worlds``, ``frames_per_world``), exported to ``export_dir``."""
     from sim2radar.cli.generate import run_generate
-    from sim2radar.flows.reference_dataset import reference_run, reference_spec
+    from sim2radar.tasks.reference import ReferenceRequest
 
-    args = reference_run(**plan)
-    args.pop("plan")
-    return run_generate(args.pop("seeds"), reference_spec(plan["frames_per_world"]),
-                        store=store, dataset=dataset, export_dir=str(export_dir),
-                        png_dir=png_dir, verbose=verbose, flow_name="reference-dataset", **args)
+    request = ReferenceRequest(store=store, dataset=dataset, export_dir=str(export_dir), **plan)
+    return run_generate(request, png_dir=png_dir, verbose=verbose)
 
 
 def run_demo(
@@ -98,6 +95,7 @@ def run_demo(
     from sim2radar.cli.generate import run_generate
     from sim2radar.evaluate.gap import write_gap_report
     from sim2radar.fileio import write_json
+    from sim2radar.tasks.dataset import GenerateRequest
 
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
@@ -106,15 +104,16 @@ def run_demo(
     typer.secho("1/5 simulated domain (ray tracer on reconstructed and ground-truth geometry)",
                 bold=True)
     spec = {"frames_per_world": frames, "rig": rig or {}}
-    sim = run_generate(list(range(worlds)), {**spec, "geometry": "both"}, store=store,
-                       dataset="demo", export_dir=str(data), png_dir=out / "bev",
-                       verbose=verbose)
+    sim = run_generate(GenerateRequest(spec={**spec, "geometry": "both"},
+                                       seeds=list(range(worlds)), store=store, dataset="demo",
+                                       export_dir=str(data)),
+                       png_dir=out / "bev", verbose=verbose)
     one_material = None
     if ablations:
-        one_material = run_generate(
-            list(range(worlds)), {**spec, "material_override": ablation_material},
-            store=store, dataset="demo-one-material", export_dir=str(data / "one_material"),
-            png_dir=None, verbose=verbose)
+        one_material = run_generate(GenerateRequest(
+            spec={**spec, "material_override": ablation_material}, seeds=list(range(worlds)),
+            store=store, dataset="demo-one-material", export_dir=str(data / "one_material")),
+            verbose=verbose)
     typer.secho("2/5 proxy-real domain (reference radar on other worlds)", bold=True)
     real = _reference_dataset(store, "reference", data / "proxy_real", out / "bev", verbose,
                               worlds=reference_worlds, frames_per_world=reference_frames)

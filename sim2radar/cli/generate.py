@@ -37,60 +37,32 @@ from sim2radar.factory.spec import (
     MAX_FRAMES_PER_WORLD,
     MAX_WORLDS,
     DatasetSpec,
-    as_spec,
     load_generate_config,
 )
+from sim2radar.tasks.dataset import GenerateRequest, generate_dataset
+from sim2radar.tasks.reference import ReferenceRequest
 
 __all__ = ["generate", "load_generate_config", "print_generate_summary", "run_generate"]
 
 
-def run_generate(seeds: list[int], spec: DatasetSpec | dict, *, export_dir: str | None = None,
-                 **options: Any) -> dict[str, Any]:
-    """:func:`_run_generate` (its options) holding the export folder's writer lock
-    (:func:`sim2radar.fileio.writer_lock`): a second run exporting to the same folder is
-    refused while this one runs."""
-    with export_folder_lock(export_dir):
-        return _run_generate(seeds, spec, export_dir=export_dir, **options)
+def run_generate(request: GenerateRequest | ReferenceRequest, *,
+                 png_dir: Path | None = None, use_prefect: bool = True,
+                 show_progress: bool = True, verbose: bool = False,
+                 export_whole_dataset: bool = False) -> dict[str, Any]:
+    """Run the ``generate`` job (or the ``reference`` job, for a
+    :class:`~sim2radar.tasks.reference.ReferenceRequest`) with a progress bar, holding the
+    export folder's writer lock (:func:`sim2radar.fileio.writer_lock`: a second run exporting
+    to the same folder is refused while this one runs); write BEV PNGs.
 
+    With ``use_prefect`` the job's flow runs (worlds on ``request.run``'s threads or Dask
+    cluster; if the Prefect server stops answering the run goes on without it); otherwise the
+    driver with a plain runner. ``export_whole_dataset`` (``--retry-failed``): the export
+    holds every frame the dataset's manifest lists, not only this run's worlds.
 
-def _run_generate(
-    seeds: list[int],
-    spec: DatasetSpec | dict,
-    *,
-    store: str,
-    dataset: str = "generated",
-    export_dir: str | None = None,
-    png_dir: Path | None = None,
-    force: bool = False,
-    strict: bool = False,
-    workers: int = 1,
-    dask_address: str | None = None,
-    use_prefect: bool = True,
-    show_progress: bool = True,
-    verbose: bool = False,
-    frames_by_seed: dict[int, int] | None = None,
-    splits: dict[str, list[str]] | None = None,
-    export_doppler: bool = False,
-    domain: str | None = None,
-    flow_name: str = "generate-dataset",
-    export_whole_dataset: bool = False,
-) -> dict[str, Any]:
-    """Run the generate-dataset flow (or its plain loop) with a progress bar; write BEV PNGs.
-
-    ``workers`` worlds run concurrently (threads); ``dask_address`` (a scheduler address such as
-    ``tcp://127.0.0.1:8786``, or ``"local"`` for a LocalCluster of ``workers`` processes) runs
-    them on Dask instead (needs ``prefect-dask``; not with ``use_prefect=False``).
-
-    ``spec`` is the run's :class:`~sim2radar.factory.spec.DatasetSpec` (or its settings);
-    ``frames_by_seed``, ``splits``, ``export_doppler``, ``domain`` and ``flow_name`` serve the
-    reference dataset (:mod:`sim2radar.flows.reference_dataset`).
-    ``export_whole_dataset`` (``--retry-failed``): the export holds every frame the dataset's
-    manifest lists, not only this run's worlds.
-
-    Returns the flow's summary (``pngs`` added); failures are counted in it, never raised
+    Returns the job's summary (``pngs`` added); failures are counted in it, never raised
     (with ``strict`` the Prefect run is marked failed; the CLI exits with status 1).
     """
-    if dask_address and not use_prefect:
+    if request.run.dask_address and not use_prefect:
         raise ValueError("--dask needs the Prefect engine: drop --no-prefect")
     if use_prefect:  # before anything imports Prefect: its settings are read at import
         from sim2radar.cli.simulate import _prefect_env
@@ -98,15 +70,22 @@ def _run_generate(
         _prefect_env(verbose)
     from rich.progress import Progress
 
-    from sim2radar.tasks.dataset import generate_dataset_plain, world_bev_pngs
+    from sim2radar.cli._jobs import run_job
+    from sim2radar.tasks.dataset import DatasetFailures, world_bev_pngs
+    from sim2radar.tasks.reference import reference_dataset
 
-    spec = as_spec(spec)
-    extras = {"frames_by_seed": frames_by_seed, "splits": splits,
-              "export_doppler": export_doppler, "domain": domain}
-    whole_export, export_dir = (export_dir, None) if export_whole_dataset else (None, export_dir)
-    with Progress(*progress_columns(), disable=not show_progress, transient=False) as progress:
+    generate = request if isinstance(request, GenerateRequest) else request.generate_request()
+    export_dir = generate.export_dir
+    if export_whole_dataset:
+        request = request.model_copy(update={"export_dir": None})
+    if isinstance(request, GenerateRequest):
+        flow, driver = "sim2radar.flows.generate_dataset:generate_dataset", generate_dataset
+    else:
+        flow, driver = "sim2radar.flows.reference_dataset:reference_dataset", reference_dataset
+    with export_folder_lock(export_dir), \
+            Progress(*progress_columns(), disable=not show_progress, transient=False) as progress:
         bar = progress.add_task("starting" + (" Prefect" if use_prefect else ""),
-                                total=len(seeds))
+                                total=len(generate.seeds))
 
         def on_world(outcome) -> None:
             pts = ",".join("/".join(str(v) for v in f.measured.get("n_points", {}).values())
@@ -114,51 +93,37 @@ def _run_generate(
             progress.update(bar, advance=1,
                             description=f"{outcome.id}: {outcome.status} ({pts} pts)")
 
+        def run(prefect: bool) -> dict[str, Any]:
+            try:   # failed worlds: Failed in Prefect, summary here
+                return run_job(flow, driver, request, job="generate", use_prefect=prefect,
+                               on_outcome=on_world)
+            except DatasetFailures as exc:  # strict: the run is marked failed in Prefect
+                return exc.summary
+
         if use_prefect:
-            from sim2radar.flows._states import run_flow
-            from sim2radar.flows.generate_dataset import (
-                DatasetFailures,
-                generate_dataset_flow,
-                progress_callback,
-            )
-            from sim2radar.flows.runners import task_runner
-
-            runner = task_runner(workers, dask_address)
             from sim2radar.cli._app import ServerWatch, quiet_recorded_failures
-            from sim2radar.flows._steps import STEP_NAMES
+            from sim2radar.flows.engine import STEP_NAMES
 
-            def with_prefect() -> dict[str, Any]:
-                try:
-                    return run_flow(  # failed worlds: Failed in Prefect, summary here
-                        generate_dataset_flow.with_options(task_runner=runner, name=flow_name),
-                        seeds=seeds, spec=spec, store=store, dataset=dataset,
-                        export_dir=export_dir, force=force, strict=strict, **extras)
-                except DatasetFailures as exc:  # strict: the run is marked failed in Prefect
-                    return exc.summary
-
-            with progress_callback(on_world), \
-                    quiet_recorded_failures(["generate-world-dataset", *STEP_NAMES], verbose), \
+            with quiet_recorded_failures(["generate-world-dataset", *STEP_NAMES], verbose), \
                     ServerWatch(os.environ.get("PREFECT_API_URL")) as watch:
                 summary = watch.run(
-                    with_prefect,
-                    lambda: generate_dataset_plain(seeds, spec, store, dataset,
-                                                   export_dir=export_dir, force=force,
-                                                   on_world=on_world, **extras),
+                    lambda: run(True), lambda: run(False),
                     lambda: progress.update(bar, completed=0, description="without Prefect"))
         else:
-            summary = generate_dataset_plain(seeds, spec, store, dataset, export_dir=export_dir,
-                                             force=force, on_world=on_world, **extras)
-    if whole_export is not None:
-        from sim2radar.tasks.dataset import export_all, outcomes_from_manifest
+            summary = run(False)
+        if export_whole_dataset and export_dir is not None:
+            from sim2radar.tasks.dataset import export_all, outcomes_from_manifest
 
-        summary["export"] = export_all(store, outcomes_from_manifest(store, dataset),
-                                       whole_export, spec, splits=splits,
-                                       with_doppler=export_doppler, domain=domain)
+            summary["export"] = export_all(
+                generate.store, outcomes_from_manifest(generate.store, generate.dataset),
+                export_dir, generate.spec, splits=generate.splits,
+                with_doppler=generate.export_doppler, domain=generate.domain)
     summary["pngs"] = []
     if png_dir is not None:
         from sim2radar.tasks.dataset import outcomes_from_summary
 
-        summary["pngs"] = world_bev_pngs(store, outcomes_from_summary(summary), png_dir, spec)
+        summary["pngs"] = world_bev_pngs(generate.store, outcomes_from_summary(summary),
+                                         png_dir, generate.spec)
     return summary
 
 
@@ -273,6 +238,9 @@ def generate(
             from sim2radar.flows.runners import task_runner
 
             task_runner(workers, dask)  # prefect-dask installed, address well-formed
+        from sim2radar.tasks.runner import RunOptions
+
+        run_options = RunOptions(workers=workers, dask_address=dask)
         # every config validated before any work (bad field -> exit 2 with its name)
         spec = DatasetSpec.model_validate({
             "frames_per_world": int(frames if frames is not None else cfg.get("frames", 4)),
@@ -304,11 +272,11 @@ def generate(
         return
     if png_dir is None and not no_png:
         png_dir = _default_png_dir(out)
-    summary = run_generate(
-        seeds, spec, store=out, dataset=dataset_name,
-        export_dir=None if export_openpcdet is None else str(export_openpcdet),
-        png_dir=None if no_png else png_dir, force=force, strict=strict, workers=workers,
-        dask_address=dask, use_prefect=not no_prefect, verbose=verbose,
-        export_whole_dataset=retry_failed,
-    )
+    request = GenerateRequest(
+        spec=spec, seeds=seeds, store=out, dataset=dataset_name,
+        export_dir=None if export_openpcdet is None else str(export_openpcdet), force=force,
+        strict=strict, run=run_options)
+    summary = run_generate(request, png_dir=None if no_png else png_dir,
+                           use_prefect=not no_prefect, verbose=verbose,
+                           export_whole_dataset=retry_failed)
     finish_generate(summary, json_out, strict, allow_failures)

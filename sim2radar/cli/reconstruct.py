@@ -53,7 +53,8 @@ def reconstruct_cmd(
     from sim2radar.reconstruct import ReconstructionConfig, build_backends
     from sim2radar.reconstruct.inputs import load_rig_calibration
     from sim2radar.storage import ArtifactStore, meshes_from_table
-    from sim2radar.tasks.reconstruct import ImageJob, reconstruct_images_plain
+    from sim2radar.tasks.reconstruct import ImageJob, ReconstructRequest, reconstruct_images
+    from sim2radar.tasks.runner import PlainRunner
 
     exit_unless_writable(str(out))
     console = _console()
@@ -127,9 +128,9 @@ def reconstruct_cmd(
 
     jobs = [ImageJob(str(image), str(intrinsics), str(lidar[i]) if lidar else None)
             for i, image in enumerate(images)]
-    summary = reconstruct_images_plain(
-        jobs, store, dataset, cfg.to_dict(), out_dir=str(base), sheet_dir=str(sheets),
-        force=force, backends=backends, on_frame=on_frame)
+    request = ReconstructRequest(jobs=jobs, store=str(out), dataset=dataset, config=cfg,
+                                 out_dir=str(base), sheet_dir=str(sheets), force=force)
+    summary = reconstruct_images(request, PlainRunner(on_frame), backends=backends)
     c = summary["counts"]
     console.print(f"[bold]{c['ok']} computed, {c['skipped']} cached (skipped), "
                   f"{c['failed']} failed[/bold] — manifest: {summary['manifest']}")

@@ -72,13 +72,18 @@ def reference(
     if not no_prefect:
         _prefect_env(verbose)
     try:
-        from sim2radar.flows.reference_dataset import reference_run, reference_spec
+        from sim2radar.tasks.reference import ReferenceRequest
+        from sim2radar.tasks.runner import RunOptions
 
-        args = reference_run(first_seed, worlds, frames, seed)
-        plan = args.pop("plan")
-        spec = reference_spec(frames, radar, seed=seed, speed_mps=speed)  # validated here
         if workers < 1:
             raise ValueError(f"--workers must be >= 1, got {workers}")
+        request = ReferenceRequest(
+            store=out, dataset=dataset, first_seed=first_seed, worlds=worlds,
+            frames_per_world=frames, radar=radar, seed=seed, speed_mps=speed, force=force,
+            strict=strict, run=RunOptions(workers=workers, dask_address=dask),
+            export_dir=None if export_openpcdet is None else str(export_openpcdet))
+        plan = request.plan()
+        request.generate_request()  # the radar and spec validated here
     except (ValueError, FileNotFoundError, ImportError) as exc:
         typer.secho(f"error: {exc}", fg="red", err=True)
         raise typer.Exit(2) from None
@@ -86,12 +91,6 @@ def reference(
         png_dir = _default_png_dir(out)
     typer.echo(f"reference dataset: {len(plan.seeds)} worlds from seed {plan.seeds[0]}, "
                f"{plan.n_frames} frames, splits {plan.split_frames()} — {DOMAIN_LABEL}")
-    summary = run_generate(
-        args.pop("seeds"), spec, store=out, dataset=dataset,
-        export_dir=None if export_openpcdet is None else str(export_openpcdet),
-        png_dir=None if no_png else png_dir, force=force, strict=strict, workers=workers,
-        dask_address=dask, use_prefect=not no_prefect, verbose=verbose,
-        flow_name="reference-dataset", **args,
-    )
-    summary["plan"] = plan.split_frames()
+    summary = run_generate(request, png_dir=None if no_png else png_dir,
+                           use_prefect=not no_prefect, verbose=verbose)
     finish_generate(summary, json_out, strict, allow_failures)

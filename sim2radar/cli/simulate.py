@@ -8,6 +8,7 @@ Prefect state goes to ``./.prefect`` unless ``PREFECT_HOME`` or ``PREFECT_API_UR
 
 from __future__ import annotations
 
+import contextlib
 import json
 import logging
 import os
@@ -81,28 +82,21 @@ def run_scenes(
             pts = "/".join(str(n) for n in outcome.measured.get("n_points", [])) or "-"
             progress.update(bar, advance=1, description=f"{outcome.id}: {outcome.status} ({pts} pts)")
 
+        from sim2radar.cli._jobs import run_job
+        from sim2radar.tasks.radar import SimulateRequest, simulate_scenes
+
+        request = SimulateRequest(
+            scenes=scene_strs, radar=str(radar), store=str(store), dataset=dataset, seed=seed,
+            png_dir=None if png_dir is None else str(png_dir), force=force,
+            run={"workers": workers, "dask_address": dask_address if use_prefect else None})
+        quiet = contextlib.nullcontext()
         if use_prefect:
             _prefect_env(verbose)
-            from sim2radar.flows.simulate import progress_callback, run_simulation
-
             # a broken scene is recorded as failed and printed in the summary: no traceback
-            with progress_callback(on_scene), quiet_recorded_failures(["simulate-scene"], verbose):
-                return run_simulation(
-                    scene_strs,
-                    radar=radar,
-                    store=store,
-                    dataset=dataset,
-                    seed=seed,
-                    png_dir=png_dir,
-                    force=force,
-                    workers=workers,
-                    dask_address=dask_address,
-                )
-        from sim2radar.tasks.radar import simulate_scenes_plain
-
-        return simulate_scenes_plain(
-            scene_strs, radar, store, dataset, seed=seed, png_dir=png_dir, force=force, on_scene=on_scene
-        )
+            quiet = quiet_recorded_failures(["simulate-scene"], verbose)
+        with quiet:
+            return run_job("sim2radar.flows.simulate:simulate_dataset", simulate_scenes, request,
+                           job="simulate", use_prefect=use_prefect, on_outcome=on_scene)
 
 
 def print_summary(summary: dict[str, Any], png_dir: Path | None) -> None:

@@ -92,16 +92,13 @@ def generate(
     exit_unless_writable(out)
     world_cfg, rig = _configs(config, width, height, spp)
     seeds = list(range(first_seed, first_seed + worlds))
-    if no_prefect:
-        from sim2radar.tasks.worlds import generate_worlds_plain
+    from sim2radar.cli._jobs import run_job
+    from sim2radar.tasks.worlds import WorldsRequest, generate_worlds
 
-        summary = generate_worlds_plain(seeds, frames, out, dataset, world_cfg, rig, force=force,
-                                        radar=radar)
-    else:
-        from sim2radar.flows.worlds import run_worlds
-
-        summary = run_worlds(seeds, frames, out, dataset, world_cfg, rig, force=force,
-                             radar=radar)
+    request = WorldsRequest(seeds=seeds, n_frames=frames, store=str(out), dataset=dataset,
+                            world=world_cfg, rig=rig, force=force, radar=radar)
+    summary = run_job("sim2radar.flows.worlds:generate_worlds_flow", generate_worlds, request,
+                      job="worlds", use_prefect=not no_prefect)
     typer.echo(json.dumps({k: summary[k] for k in ("store", "dataset", "counts")}, indent=1))
     if summary["counts"].get("failed"):
         for w in summary["outcomes"]:

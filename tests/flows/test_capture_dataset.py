@@ -47,11 +47,17 @@ def _task_runs(flow_run_name_filter: str = "capture-dataset"):
 
 
 def test_capture_folder_to_radar_dataset_stage_by_stage(prefect_server, capture_folder, tmp_path):
-    from sim2radar.flows.capture_dataset import CAPTURE_DOMAIN, capture_dataset
+    from sim2radar.flows._states import run_flow
+    from sim2radar.flows.capture_dataset import capture_dataset
+    from sim2radar.tasks.capture import CAPTURE_DOMAIN, CaptureRequest
+    from sim2radar.tasks.capture import capture_dataset as capture_plain
+    from sim2radar.tasks.runner import PlainRunner
 
     store_root, export = tmp_path / "store", tmp_path / "openpcdet"
-    first = capture_dataset(capture_folder, store_root, "lab", export_dir=export,
-                            poses={"frames": FRAMES}, frames_per_task=2)
+    request = CaptureRequest(captures=str(capture_folder), store=str(store_root), dataset="lab",
+                             export_dir=str(export),
+                             spec={"poses": {"frames": FRAMES}, "frames_per_task": 2})
+    first = run_flow(capture_dataset, request=request)  # Failed in Prefect, summary here
     assert first["counts"] == {"ok": 2, "skipped": 0, "failed": 2}
     assert first["frame_counts"] == {"ok": 2 * FRAMES, "skipped": 0, "failed": 0}
     store = ArtifactStore(store_root)
@@ -84,8 +90,7 @@ def test_capture_folder_to_radar_dataset_stage_by_stage(prefect_server, capture_
     assert table["scene_broken"]["status"] == "failed"
 
     # a second run computes nothing: every step ends Cached, the frames are read back
-    second = capture_dataset(capture_folder, store_root, "lab", export_dir=export,
-                             poses={"frames": FRAMES}, frames_per_task=2)
+    second = run_flow(capture_dataset, request=request)
     assert second["counts"] == {"ok": 0, "skipped": 2, "failed": 2}
     states = _task_runs()
     for stage in ("depth", "segments", "materials", "scene"):
@@ -93,8 +98,8 @@ def test_capture_folder_to_radar_dataset_stage_by_stage(prefect_server, capture_
     assert second["stage_table"][0]["total_s"] < first["stage_table"][0]["total_s"]
 
     # the plain loop runs the same per-scene function: the same artifact keys
-    plain = capture_dataset(capture_folder, tmp_path / "plain", "lab", use_prefect=False,
-                            poses={"frames": FRAMES}, frames_per_task=2)
+    plain = capture_plain(request.model_copy(update={"store": str(tmp_path / "plain"),
+                                                     "export_dir": None}), PlainRunner())
     keys = lambda s: sorted(f["artifacts"]["dataset_frames/reconstructed"]  # noqa: E731
                             for w in s["outcomes"] for f in w["parts"])
     assert keys(plain) == keys(first)

@@ -122,9 +122,11 @@ def test_workers_are_probed_before_use(cluster):
 
 def test_simulate_flow_on_dask_matches_threads(cluster, prefect_server, tmp_path,
                                                broken_scenes):
-    from sim2radar.flows.simulate import run_simulation
+    from sim2radar.flows._states import run_flow
+    from sim2radar.flows.simulate import SimulateRequest, simulate_dataset
     from sim2radar.storage import ArtifactStore
     from sim2radar.storage.codecs import radar_frames_from_table
+    from sim2radar.tasks.runner import RunOptions
 
     def read_points(root, key):
         return [f.points for f in radar_frames_from_table(
@@ -132,9 +134,11 @@ def test_simulate_flow_on_dask_matches_threads(cluster, prefect_server, tmp_path
 
     scenes = [_plate(tmp_path, "near", 2.0), broken_scenes["unknown"]]
     dask_root, thread_root = tmp_path / "dask", tmp_path / "threads"
-    on_dask = run_simulation(scenes, store=dask_root, dataset="d",
-                             dask_address=cluster.scheduler_address)
-    on_threads = run_simulation(scenes, store=thread_root, dataset="d", workers=1)
+    request = SimulateRequest(scenes=[str(s) for s in scenes], store=str(dask_root),
+                              dataset="d", run={"dask_address": cluster.scheduler_address})
+    on_dask = run_flow(simulate_dataset, request=request)
+    on_threads = run_flow(simulate_dataset, request=request.model_copy(
+        update={"store": str(thread_root), "run": RunOptions(workers=1)}))
     for summary in (on_dask, on_threads):
         assert summary["counts"] == {"ok": 1, "skipped": 0, "failed": 1}
     # the work ran in the worker processes, each of which chose its Mitsuba variant itself
@@ -159,10 +163,7 @@ def test_simulate_flow_on_dask_matches_threads(cluster, prefect_server, tmp_path
     # own; what reaches the workers must still unpickle there)
     before = _parquet_mtimes(dask_root)
     job = load_flow_from_entrypoint(f"{REPO}/flows/simulate.py:simulate_dataset")
-    from sim2radar.flows._states import run_flow
-
-    again = run_flow(job, scenes=[str(s) for s in scenes], store=str(dask_root), dataset="d",
-                     dask_address=cluster.scheduler_address)   # Failed (a scene failed)
+    again = run_flow(job, request=request.model_dump(mode="json"))   # Failed (a scene failed)
     assert again["counts"] == {"ok": 0, "skipped": 1, "failed": 1}
     assert _parquet_mtimes(dask_root) == before
     rows = {r["scene_id"]: r for r in ArtifactStore(dask_root).manifest("d").rows()}
@@ -172,7 +173,8 @@ def test_simulate_flow_on_dask_matches_threads(cluster, prefect_server, tmp_path
 def test_generate_flow_on_dask_matches_threads(cluster, prefect_server, tmp_path):
     from sim2radar.datasets import OpenPCDetDataset
     from sim2radar.evaluate.reconstruction import chamfer_distance
-    from sim2radar.flows.generate_dataset import generate_dataset
+    from sim2radar.flows._states import run_flow
+    from sim2radar.flows.generate_dataset import GenerateRequest, generate_dataset
     from sim2radar.radar import load_radar_config
     from sim2radar.storage import ArtifactStore
     from sim2radar.tasks import dataset as td
@@ -182,9 +184,11 @@ def test_generate_flow_on_dask_matches_threads(cluster, prefect_server, tmp_path
             "rig": RIG}
     args = dict(spec=spec, seeds=[5, 6, BROKEN_SEED], dataset="g")
     dask_root, thread_root = tmp_path / "dask", tmp_path / "threads"
-    on_dask = generate_dataset(store=dask_root / "store", export_dir=dask_root / "opd",
-                               dask_address=cluster.scheduler_address, **args)
-    on_threads = generate_dataset(store=thread_root / "store", workers=1, **args)
+    on_dask = run_flow(generate_dataset, request=GenerateRequest(
+        store=str(dask_root / "store"), export_dir=str(dask_root / "opd"),
+        run={"dask_address": cluster.scheduler_address}, **args))
+    on_threads = run_flow(generate_dataset, request=GenerateRequest(
+        store=str(thread_root / "store"), run={"workers": 1}, **args))
     for summary in (on_dask, on_threads):
         assert summary["counts"] == {"ok": 2, "skipped": 0, "failed": 1}
         assert summary["frame_counts"]["ok"] == 2
@@ -217,10 +221,10 @@ def test_generate_flow_on_dask_matches_threads(cluster, prefect_server, tmp_path
 
     # second run through the deployment entrypoint (as `prefect deploy` runs it): all cached
     before = _parquet_mtimes(dask_root / "store")
-    job = load_flow_from_entrypoint(f"{REPO}/flows/generate_dataset.py:generate_dataset_job")
-    again = job(spec={**spec, "radar": radar.model_dump(mode="json")}, first_seed=5,
-                n_worlds=2, store=str(dask_root / "store"), dataset="g",
-                dask_address=cluster.scheduler_address)
+    job = load_flow_from_entrypoint(f"{REPO}/flows/generate_dataset.py:generate_dataset")
+    again = job(request={"spec": {**spec, "radar": radar.model_dump(mode="json")},
+                         "first_seed": 5, "n_worlds": 2, "store": str(dask_root / "store"),
+                         "dataset": "g", "run": {"dask_address": cluster.scheduler_address}})
     assert again["counts"] == {"ok": 0, "skipped": 2, "failed": 0}
     assert again["frame_counts"]["skipped"] == 2
     assert _parquet_mtimes(dask_root / "store") == before

@@ -44,23 +44,25 @@ def test_generate_deployments_resolve_to_the_factory_job(monkeypatch):
     monkeypatch.chdir(REPO)
     nightly = _deployment("nightly-generate")
     flow = load_flow_from_entrypoint(nightly["entrypoint"])
-    assert flow.name == "generate-dataset-job"
-    params = flow.validate_parameters(nightly["parameters"])
-    # the spec travels whole: Prefect validates the parameter into a DatasetSpec, which
-    # resolves the configs it names (preset names, radar preset, world/rig)
-    spec = params["spec"]
-    assert params["n_worlds"] == 8 and params["export_dir"]
-    assert params["dask_address"] is None and params["workers"] == 1
+    assert flow.name == "generate-dataset"
+    request = flow.validate_parameters(nightly["parameters"])["request"]
+    # the request travels whole: Prefect validates the parameter into a GenerateRequest whose
+    # DatasetSpec resolves the configs it names (preset names, radar preset, world/rig)
+    spec = request.spec
+    assert request.seeds == list(range(8)) and request.export_dir
+    assert request.run.dask_address is None and request.run.workers == 1
     sched = CronSchedule(cron=nightly["schedules"][0]["cron"], timezone="UTC")
     assert sched.cron == "0 3 * * *"  # after nightly-radar (02:00)
     assert spec.geometries == ("reconstructed",) and spec.frames_per_world == 8
     assert spec.reconstruction.depth.name == "lidar"  # built-in backends, no weights
     on_demand = _deployment("generate-on-demand")
     assert not on_demand.get("schedules")
-    load_flow_from_entrypoint(on_demand["entrypoint"]).validate_parameters(
-        on_demand["parameters"] | {"dask_address": "tcp://127.0.0.1:8786", "workers": 2})
+    given = {"request": on_demand["parameters"]["request"]
+             | {"run": {"dask_address": "tcp://127.0.0.1:8786", "workers": 2}}}
+    assert load_flow_from_entrypoint(on_demand["entrypoint"]).validate_parameters(
+        given)["request"].run.workers == 2
     with pytest.raises(Exception, match="n_worlds"):
-        flow.validate_parameters({"n_worlds": "many"})
+        flow.validate_parameters({"request": {"n_worlds": "many"}})
     # the server enforces the deployment's parameter schema (JSON Schema of the spec's input
     # form): the parameters in the file and a spec's own JSON form must both pass it
     import jsonschema
@@ -69,13 +71,13 @@ def test_generate_deployments_resolve_to_the_factory_job(monkeypatch):
     schema = parameter_schema(flow).model_dump_for_openapi()
     for dep in (nightly, on_demand):
         jsonschema.validate(dep["parameters"], schema)
-    jsonschema.validate({"spec": spec.to_dict()}, schema)
+    jsonschema.validate({"request": {"spec": spec.to_dict(), "seeds": [0]}}, schema)
     with pytest.raises(jsonschema.ValidationError, match="frames"):
-        jsonschema.validate({"spec": {"frames": 4}}, schema)
+        jsonschema.validate({"request": {"spec": {"frames": 4}, "seeds": [0]}}, schema)
 
 
 def test_expand_scenes_folders_globs_and_files(tmp_path):
-    from sim2radar.flows.simulate import expand_scenes
+    from sim2radar.scenes import expand_scenes
 
     (tmp_path / "a").mkdir()
     (tmp_path / "a" / "one.yaml").write_text("meshes: []")
@@ -95,10 +97,9 @@ def test_the_captures_deployment_resolves_to_a_capture_spec(monkeypatch):
     monkeypatch.chdir(REPO)
     dep = _deployment("captures-on-demand")
     flow = load_flow_from_entrypoint(dep["entrypoint"])
-    assert flow.name == "capture-dataset-job"
-    params = flow.validate_parameters(dep["parameters"])
-    spec = CaptureSpec(radar=params["radar"], reconstruction=params["reconstruction"],
-                       poses=params["poses"], seed=params["seed"])
+    assert flow.name == "capture-dataset"
+    spec = flow.validate_parameters(dep["parameters"])["request"].spec
+    assert isinstance(spec, CaptureSpec)
     assert spec.poses.frames == 54 and spec.reconstruction.depth.name == "lidar"
 
 

@@ -10,13 +10,17 @@ from sim2radar.storage import ArtifactStore
 def test_flow_runs_twice_second_computes_nothing_and_failures_are_recorded(
     prefect_server, plate_scene, broken_scenes, tmp_path, count_sim
 ):
-    from sim2radar.flows.simulate import SceneFailures, progress_callback, run_simulation
+    from sim2radar.flows import _progress
+    from sim2radar.flows._states import run_flow
+    from sim2radar.flows.simulate import SceneFailures, SimulateRequest, simulate_dataset
 
     root = tmp_path / "store"
-    scenes = [plate_scene, broken_scenes["unknown"]]
+    scenes = [str(plate_scene), str(broken_scenes["unknown"])]
+    request = SimulateRequest(scenes=scenes, radar="ti-mmwcas", store=str(root), dataset="t",
+                              png_dir=str(tmp_path / "png"))
     seen = []
-    with progress_callback(lambda o: seen.append((o.id, o.status))):
-        first = run_simulation(scenes, radar="ti-mmwcas", store=root, dataset="t", png_dir=tmp_path / "png")
+    with _progress.listen("simulate", lambda o: seen.append((o.id, o.status))):
+        first = run_flow(simulate_dataset, request=request)  # Failed in Prefect, summary here
     assert first["counts"] == {"ok": 1, "skipped": 0, "failed": 1}
     assert sorted(seen) == [("plate", "ok"), ("unknown_material", "failed")]
     assert count_sim["n"] == 2  # two poses of the plate scene
@@ -31,7 +35,7 @@ def test_flow_runs_twice_second_computes_nothing_and_failures_are_recorded(
     # second run, same inputs: nothing simulated, the scene is recorded as skipped;
     # strict=True makes the flow fail at the end because one scene still fails
     with pytest.raises(SceneFailures, match="unknown_material"):
-        run_simulation(scenes, radar="ti-mmwcas", store=root, dataset="t", strict=True)
+        run_flow(simulate_dataset, request=request.model_copy(update={"strict": True}))
     assert count_sim["n"] == 2
     rows = {r["scene_id"]: r for r in store.manifest("t").rows()}
     assert rows["plate"]["status"] == "skipped" and rows["plate"]["attempts"] == 2

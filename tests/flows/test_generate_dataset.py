@@ -40,13 +40,25 @@ def _spec(**changes):
     return td.DatasetSpec(**args)
 
 
+def _plain(seeds, spec, store, dataset, **fields):
+    """The generate job without Prefect."""
+    from sim2radar.tasks.runner import PlainRunner
+
+    root = store.root if isinstance(store, ArtifactStore) else str(store)
+    return td.generate_dataset(td.GenerateRequest(spec=spec, seeds=seeds, store=root,
+                                                  dataset=dataset, **fields), PlainRunner())
+
+
+def _request(seeds, **fields):
+    return td.GenerateRequest(spec=_spec(), seeds=seeds, **fields)
+
+
 @pytest.fixture(scope="module")
 def run(tmp_path_factory):
     """One plain run: world 5 (2 frames, both geometries) + a broken world, exported."""
     root = tmp_path_factory.mktemp("generate")
     store = ArtifactStore(root / "store")
-    summary = td.generate_dataset_plain([SEED, BROKEN_SEED], _spec(), store, "gen",
-                                        export_dir=root / "opd")
+    summary = _plain([SEED, BROKEN_SEED], _spec(), store, "gen", export_dir=str(root / "opd"))
     return {"root": root, "store": store, "summary": summary,
             "outcomes": td.outcomes_from_summary(summary)}
 
@@ -129,7 +141,7 @@ def test_second_run_recomputes_nothing(run, monkeypatch):
     files = sorted(p for p in (run["root"] / "store").rglob("*.parquet")
                    if "manifests" not in p.parts)
     mtimes = [os.path.getmtime(p) for p in files]
-    again = td.generate_dataset_plain([SEED], _spec(), run["store"], "gen")
+    again = _plain([SEED], _spec(), run["store"], "gen")
     assert again["counts"]["skipped"] == 1 and again["frame_counts"]["skipped"] == 2
     assert [os.path.getmtime(p) for p in files] == mtimes
     assert again["geometry"]["ground_truth"]["points_per_frame"] == \
@@ -242,8 +254,8 @@ def test_prefect_flow_run_strict(run, prefect_server):
     from sim2radar.flows.generate_dataset import DatasetFailures, generate_dataset
 
     with pytest.raises(DatasetFailures) as info:
-        generate_dataset(_spec(), seeds=[SEED, BROKEN_SEED], store=run["root"] / "store",
-                         dataset="flow", strict=True)
+        generate_dataset(_request([SEED, BROKEN_SEED], store=str(run["root"] / "store"),
+                                  dataset="flow", strict=True))
     summary = info.value.summary
     assert summary["counts"] == {"ok": 0, "skipped": 1, "failed": 1}
     assert summary["frame_counts"]["skipped"] == 2
@@ -264,7 +276,7 @@ def test_reconstruction_fused_with_the_previous_frame_covers_more_azimuth(run, m
     assert info["views"] == 1 and info["frames"] == [0] and info["triangles_added"] > 0
     called = []
     monkeypatch.setattr(td, "reconstruction_steps", lambda *a, **k: called.append(a))
-    single = td.generate_dataset_plain(
+    single = _plain(
         [SEED], _spec(geometry="reconstructed",
                       reconstruction=ReconstructionConfig(fusion={"frames": 0})),
         run["store"], "gen-single")
@@ -286,14 +298,14 @@ def test_a_flow_whose_work_failed_ends_failed_in_prefect_with_its_summary(run, p
     Failed never fired); now the flow run is Failed, its message counts what failed, and the
     caller still gets the summary (non-strict: no exception)."""
     from sim2radar.flows._states import run_flow
-    from sim2radar.flows.generate_dataset import generate_dataset, generate_dataset_flow
+    from sim2radar.flows.generate_dataset import generate_dataset
 
-    kw = dict(seeds=[SEED, BROKEN_SEED], spec=_spec(), store=str(run["root"] / "store"),
-              dataset="flow-states")
-    state = generate_dataset_flow(**kw, return_state=True)
+    request = _request([SEED, BROKEN_SEED], store=str(run["root"] / "store"),
+                       dataset="flow-states")
+    state = generate_dataset(request, return_state=True)
     assert state.is_failed()
     assert state.message.startswith("1 of 2 worlds failed (")
-    summary = run_flow(generate_dataset_flow, **kw)
+    summary = run_flow(generate_dataset, request=request)
     assert summary["counts"]["failed"] == 1 and summary["counts"]["skipped"] == 1
-    assert generate_dataset(_spec(), seeds=[SEED], store=run["root"] / "store",
-                            dataset="flow-ok")["counts"]["failed"] == 0
+    assert generate_dataset(_request([SEED], store=str(run["root"] / "store"),
+                                     dataset="flow-ok"))["counts"]["failed"] == 0

@@ -10,19 +10,19 @@ RIG = {"width": 160, "height": 120, "spp": 4}
 
 
 def test_world_steps_are_tasks_and_a_rerun_is_cached(prefect_server, tmp_path):
-    from sim2radar.flows.generate_dataset import generate_dataset
+    from sim2radar.flows.generate_dataset import GenerateRequest, generate_dataset
 
-    kw = dict(spec={"frames_per_world": 1, "geometry": "both", "rig": RIG}, n_worlds=1,
-              store=tmp_path / "store", dataset="steps", first_seed=3)
-    first = generate_dataset(**kw)
+    request = GenerateRequest(spec={"frames_per_world": 1, "geometry": "both", "rig": RIG},
+                              seeds=[3], store=str(tmp_path / "store"), dataset="steps")
+    first = generate_dataset(request)
     assert first["counts"]["ok"] == 1 and first["frame_counts"]["ok"] == 1
     states = _task_runs("generate-dataset")
-    assert states["world-3"] == "Completed"
+    assert states["world_000003"] == "Completed"
     for step in ("render", "depth-f000", "segments-f000", "materials-f000", "scene-f000",
                  "simulate-ground_truth", "simulate-reconstructed"):
         assert states[f"world_000003-{step}"] == "Completed", step
 
-    again = generate_dataset(**kw)
+    again = generate_dataset(request)
     assert again["counts"]["skipped"] == 1
     states = _task_runs("generate-dataset")
     assert states["world_000003-render"] == "Cached"
@@ -36,10 +36,11 @@ def test_a_run_publishes_a_world_table_and_a_finished_progress_artifact(prefect_
     from prefect.client.orchestration import get_client
     from prefect.client.schemas.filters import ArtifactFilter
 
-    from sim2radar.flows.generate_dataset import generate_dataset
+    from sim2radar.flows.generate_dataset import GenerateRequest, generate_dataset
 
-    generate_dataset({"frames_per_world": 1, "geometry": "ground_truth", "rig": RIG},
-                     n_worlds=1, store=tmp_path / "store", dataset="table-run", first_seed=4)
+    generate_dataset(GenerateRequest(
+        spec={"frames_per_world": 1, "geometry": "ground_truth", "rig": RIG}, n_worlds=1,
+        first_seed=4, store=str(tmp_path / "store"), dataset="table-run"))
     with get_client(sync_client=True) as client:
         arts = {a.key: a for a in client.read_artifacts(artifact_filter=ArtifactFilter(
             key={"any_": ["generate-table-run-worlds", "generate-table-run-progress"]}))}

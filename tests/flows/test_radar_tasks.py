@@ -16,7 +16,8 @@ from sim2radar.storage import (
     meshes_from_table,
     radar_frames_from_table,
 )
-from sim2radar.tasks.radar import scene_keys, simulate_scene, simulate_scenes_plain
+from sim2radar.tasks.radar import SimulateRequest, scene_keys, simulate_scene, simulate_scenes
+from sim2radar.tasks.runner import PlainRunner
 from tests.flows._scenes import PLATE_RANGE_M, write_scene
 
 
@@ -82,10 +83,16 @@ def test_keys_change_with_config_seed_and_files_only(plate_scene, tmp_path):
     assert edited["scene_meshes"] != base["scene_meshes"] and edited["radar_points"] != base["radar_points"]
 
 
+def _simulate(scenes, store):
+    request = SimulateRequest(scenes=[str(s) for s in scenes], radar="ti-mmwcas",
+                              store=store.root, dataset="t")
+    return simulate_scenes(request, PlainRunner())
+
+
 def test_broken_scenes_fail_clearly_and_the_others_finish(plate_scene, broken_scenes, tmp_path):
     store = ArtifactStore(tmp_path / "store")
     scenes = [broken_scenes["missing"], plate_scene, broken_scenes["unknown"], broken_scenes["corrupt"]]
-    summary = simulate_scenes_plain(scenes, "ti-mmwcas", store, "t")
+    summary = _simulate(scenes, store)
     assert summary["counts"] == {"ok": 1, "skipped": 0, "failed": 3}
     rows = {r["scene_id"]: r for r in store.manifest("t").rows()}
     assert rows["plate"]["status"] == "ok" and rows["plate"]["artifacts"]["radar_points"]
@@ -99,7 +106,7 @@ def test_broken_scenes_fail_clearly_and_the_others_finish(plate_scene, broken_sc
     doc = yaml.safe_load(broken_scenes["unknown"].read_text())
     doc["meshes"][0]["material"] = "concrete"
     broken_scenes["unknown"].write_text(yaml.safe_dump(doc))
-    again = simulate_scenes_plain([plate_scene, broken_scenes["unknown"]], "ti-mmwcas", store, "t")
+    again = _simulate([plate_scene, broken_scenes["unknown"]], store)
     assert again["counts"] == {"ok": 1, "skipped": 1, "failed": 0}
     rows = {r["scene_id"]: r for r in store.manifest("t").rows()}
     assert rows["unknown_material"]["status"] == "ok" and rows["unknown_material"]["attempts"] == 2

@@ -7,7 +7,7 @@ import errno
 
 import pytest
 
-from sim2radar.flows._steps import record_task
+from sim2radar.flows.engine import record_task
 from sim2radar.storage.manifest import Manifest
 from sim2radar.tasks.common import REMOTE_IO_RETRIES, Outcome
 

@@ -262,16 +262,19 @@ def test_task_function_caches_by_content_key(tmp_path, frame):
 @pytest.mark.slow
 def test_flow_records_ok_skipped_and_failed(tmp_path, frame, monkeypatch):
     monkeypatch.setenv("PREFECT_HOME", str(tmp_path / "prefect"))
-    from sim2radar.flows.reconstruct import run_reconstruction
+    from sim2radar.flows._states import run_flow
+    from sim2radar.flows.reconstruct import reconstruct_frames
+    from sim2radar.tasks.reconstruct import ImageJob, ReconstructRequest
 
     job = _write_job(tmp_path, frame)
     (tmp_path / "broken.png").write_bytes(b"not an image")
-    images = [job.image, str(tmp_path / "broken.png")]
-    lidar = [job.lidar, job.lidar]
-    s1 = run_reconstruction(images, job.intrinsics, lidar, store=tmp_path / "store", dataset="d")
+    broken = ImageJob(str(tmp_path / "broken.png"), job.intrinsics, job.lidar)
+    request = ReconstructRequest(jobs=[job, broken], store=str(tmp_path / "store"),
+                                 dataset="d")
+    s1 = run_flow(reconstruct_frames, request=request)   # Failed in Prefect, summary here
     assert s1["counts"] == {"ok": 1, "skipped": 0, "failed": 1}
     assert "broken.png" in s1["outcomes"][1]["error"]
-    s2 = run_reconstruction(images, job.intrinsics, lidar, store=tmp_path / "store", dataset="d")
+    s2 = run_flow(reconstruct_frames, request=request)
     assert s2["counts"] == {"ok": 0, "skipped": 1, "failed": 1}
 
 

@@ -10,7 +10,13 @@ import pytest
 
 from sim2radar.storage import ArtifactStore, meshes_from_table
 from sim2radar.storage.worlds import decode_png, encode_png, frames_from_table
-from sim2radar.tasks.worlds import generate_world_artifacts, generate_worlds_plain, world_keys
+from sim2radar.tasks.runner import PlainRunner
+from sim2radar.tasks.worlds import (
+    WorldsRequest,
+    generate_world_artifacts,
+    generate_worlds,
+    world_keys,
+)
 from sim2radar.worlds import generate_world, make_world_config
 from tests.worlds._helpers import SMALL_RIG
 
@@ -82,7 +88,9 @@ def test_plain_run_records_manifest_and_failures(tmp_path, monkeypatch):
         return real(seed, *args, **kwargs)
 
     monkeypatch.setattr(tw, "generate_world_artifacts", flaky)
-    summary = generate_worlds_plain([7, 8], 1, store, "ds", SHORT, SMALL_RIG)
+    summary = generate_worlds(WorldsRequest(seeds=[7, 8], n_frames=1, store=str(store),
+                                            dataset="ds", world=SHORT, rig=SMALL_RIG),
+                              PlainRunner())
     assert summary["counts"] == {"ok": 1, "skipped": 0, "failed": 1}
     rows = {r["scene_id"]: r for r in ArtifactStore(store).manifest("ds").rows()}
     assert rows["world_000007"]["status"] == "ok"
@@ -103,14 +111,15 @@ def prefect_home():
 
 
 def test_flow_generates_and_then_skips(tmp_path, prefect_home):
-    from sim2radar.flows.worlds import run_worlds
+    from sim2radar.flows.worlds import generate_worlds_flow
 
-    store = tmp_path / "store"
-    first = run_worlds([3], 1, store, "flowds", SHORT, SMALL_RIG)
+    request = WorldsRequest(seeds=[3], n_frames=1, store=str(tmp_path / "store"),
+                            dataset="flowds", world=SHORT, rig=SMALL_RIG)
+    first = generate_worlds_flow(request)
     assert first["counts"] == {"ok": 1, "skipped": 0, "failed": 0}
-    second = run_worlds([3], 1, store, "flowds", SHORT, SMALL_RIG)
+    second = generate_worlds_flow(request)
     assert second["counts"] == {"ok": 0, "skipped": 1, "failed": 0}
-    rows = ArtifactStore(store).manifest("flowds").rows()
+    rows = ArtifactStore(tmp_path / "store").manifest("flowds").rows()
     assert [r["status"] for r in rows] == ["skipped"] and rows[0]["attempts"] == 2
 
 
