@@ -18,8 +18,12 @@ Figures, each measured here:
    (:func:`~sim2radar.experiment.cost.wall_time`, each run's step at N-sharing speed).
 4. **The radar on the device**: a ray-traced ``ti-mmwcas`` frame of a 20k-triangle corridor
    with the Mitsuba variant in use (``cuda_ad_rgb`` on a GPU) against bare ``ray_intersect``
-   of the same rays; and a reference-radar frame (signal synthesis + TI chain, torch on the
-   device) from 20,000 synthetic paths.
+   of the same rays, its detection where :func:`sim2radar.radar.frame.detection_device` puts
+   it (torch on the GPU under ``cuda_ad_rgb``: the sums stay there,
+   :mod:`sim2radar.radar.detection_torch`) and, for comparison, the same frame detected on the
+   host in NumPy and through the torch chain on the device torch picks; and a reference-radar
+   frame (signal synthesis + TI chain, torch on the device, receiver noise drawn there) from
+   20,000 synthetic paths.
 
 Run on a GPU machine without internet: see the README's "A GPU machine" for the wheels to
 carry. Record the figures in BENCHMARKS.md with the card's name.
@@ -117,22 +121,33 @@ def radar_frames() -> dict:
 
     from benchmarks._scenes import corridor
     from benchmarks.bench_signal import synthetic_paths
+    from sim2radar.hardware import torch_device
     from sim2radar.radar import RadarScene, load_radar_config
+    from sim2radar.radar.frame import simulate_scene_frame
     from sim2radar.radar.signal import simulate_signal_frame
 
     radar = load_radar_config("ti-mmwcas")
     scene = RadarScene(corridor(20_000))
     pose = np.eye(4)
     pose[:3, 3] = [0.0, 0.0, 1.0]
-    scene.simulate(radar, pose, seed=0)
+    torch_dev = str(torch_device())
+    # "auto": where detection_device puts it; None: NumPy on the host; the torch chain on the
+    # device torch picks (the GPU, or the CPU where there is none)
+    modes = {"auto": "auto", "host": None, "torch": torch_dev}
+    for mode in modes.values():
+        simulate_scene_frame(scene, radar, pose, seed=0, device=mode)
     scene.intersect_only(radar, pose, seed=0)
-    sim_s, bare_s = [], []
+    times: dict[str, list[float]] = {k: [] for k in modes}
+    bare_s, where = [], ""
     for i in range(5):
-        t0 = time.perf_counter()
-        scene.simulate(radar, pose, seed=i + 1)
-        sim_s.append(time.perf_counter() - t0)
+        for key, mode in modes.items():  # interleaved: each sees the same machine load
+            t0 = time.perf_counter()
+            f = simulate_scene_frame(scene, radar, pose, seed=i + 1, device=mode)
+            times[key].append(time.perf_counter() - t0)
+            if key == "auto":
+                where = f.stats["detection_device"]
         bare_s.append(scene.intersect_only(radar, pose, seed=i + 1)["seconds"])
-    frame, bare = statistics.median(sim_s), statistics.median(bare_s)
+    frame, bare = statistics.median(times["auto"]), statistics.median(bare_s)
     ref = load_radar_config("ti-mmwcas-reference")
     paths = synthetic_paths(20_000, seed=0)
     simulate_signal_frame(paths, ref, seed=0)
@@ -141,12 +156,18 @@ def radar_frames() -> dict:
         t0 = time.perf_counter()
         out = simulate_signal_frame(paths, ref, seed=i + 1)
         ref_s.append(time.perf_counter() - t0)
+    host_s, torch_s = statistics.median(times["host"]), statistics.median(times["torch"])
     res = {"variant": scene.variant, "frame_s": round(frame, 4), "bare_s": round(bare, 4),
-           "ratio": round(frame / bare, 2), "reference_frame_s": round(statistics.median(ref_s), 3),
+           "ratio": round(frame / bare, 2), "detection_device": where,
+           "frame_host_detection_s": round(host_s, 4),
+           "frame_torch_detection_s": round(torch_s, 4), "torch_device": torch_dev,
+           "reference_frame_s": round(statistics.median(ref_s), 3),
            "reference_device": out.stats["device"]}
-    print(f"ray-traced frame ({scene.variant}): {frame * 1000:.1f} ms vs bare ray_intersect "
-          f"{bare * 1000:.1f} ms ({frame / bare:.2f}x); reference frame (20k paths, "
-          f"{out.stats['device']}): {res['reference_frame_s']:.3f} s")
+    print(f"ray-traced frame ({scene.variant}, detection on {where}): {frame * 1000:.1f} ms vs "
+          f"bare ray_intersect {bare * 1000:.1f} ms ({frame / bare:.2f}x); detected on the host "
+          f"{host_s * 1000:.1f} ms, by torch on {torch_dev} {torch_s * 1000:.1f} ms; "
+          f"reference frame (20k paths, {out.stats['device']}): "
+          f"{res['reference_frame_s']:.3f} s")
     return res
 
 

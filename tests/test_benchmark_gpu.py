@@ -32,4 +32,8 @@ def test_the_gpu_benchmark_runs_on_a_cpu(capsys, monkeypatch):
     assert grid["best_runs"] in (1, 2) and grid["throughput_of"] == "demo"
     radar = res["radar"]
     assert radar["frame_s"] > radar["bare_s"] > 0 and radar["reference_frame_s"] > 0
+    # without CUDA the frame is detected on the host; the torch chain ran on the CPU beside it
+    assert radar["detection_device"] == "host" and radar["torch_device"] == "cpu"
+    assert radar["frame_host_detection_s"] > 0 and radar["frame_torch_detection_s"] > 0
+    assert radar["reference_device"] == "cpu" and "by torch on cpu" in out
     assert "--runs-per-gpu auto would choose" in out and "paper grid: 75 jobs" in out

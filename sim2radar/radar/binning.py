@@ -277,7 +277,7 @@ class Accumulator:
         only of the contributions on those fine azimuth points (one Doppler slab,
         :func:`sim2radar.radar.detection.doppler_bins`)."""
         g = np.asarray(self.grid)
-        if fine_mask is not None:
+        if fine_mask is not None and not np.all(fine_mask):  # (all points: the same values)
             g = g * np.asarray(fine_mask, dtype=bool)[None, None, :]
         if geometry.integer_x:
             # sum_g G[g] e^{j pi n (-1 + 2g/M)} = e^{-j pi n} M ifft(G)[n]
@@ -419,8 +419,14 @@ def add_receiver_noise(
     """
     sigma = np.where(geometry.present, math.sqrt(geometry.n_elements * noise_power / 2.0), 0.0)
     shape = aperture.shape
-    noise = sigma * (rng.standard_normal(shape) + 1j * rng.standard_normal(shape))
-    return aperture + noise
+    # sigma (re + j im), real parts drawn first, added in place (no complex temporaries)
+    re, im = rng.standard_normal(shape), rng.standard_normal(shape)
+    out = np.asarray(aperture).astype(np.complex128)
+    re *= sigma
+    im *= sigma
+    out.real += re
+    out.imag += im
+    return out
 
 
 def beamform(aperture: np.ndarray, geometry: ArrayGeometry) -> np.ndarray:
