@@ -30,6 +30,7 @@ from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from sim2radar.datasets.splits import split_groups as split_worlds
 from sim2radar.evaluate.dataset import LABEL_IOU_THRESHOLD
+from sim2radar.factory.captures import CaptureSpec
 from sim2radar.factory.export import export_frames
 from sim2radar.factory.frames import NEAR_BOX_MARGIN_M, DatasetFrame, points_near_boxes
 from sim2radar.factory.pipeline import frame_id_for, with_material
@@ -38,7 +39,6 @@ from sim2radar.factory.spec import (
     GEOMETRIES,
     MAX_WORLDS,
     DatasetSpec,
-    as_spec,
     dataset_metadata,
 )
 from sim2radar.storage import ArtifactStore, content_key, meshes_from_table
@@ -323,7 +323,7 @@ def _compare(gt: DatasetFrame, rec: DatasetFrame) -> dict[str, float]:
 
 def generate_world_dataset(
     seed: int,
-    spec: DatasetSpec | dict,
+    spec: DatasetSpec,
     store: str | os.PathLike | ArtifactStore = "out/store",
     *,
     force: bool = False,
@@ -340,7 +340,7 @@ def generate_world_dataset(
     Parameters
     ----------
     seed : int — world seed (one seed -> one world)
-    spec : DatasetSpec (or its :meth:`~DatasetSpec.to_dict`)
+    spec : DatasetSpec
     store : store root (path / URI) or ArtifactStore
     force : bool — recompute the dataset frames (world renders and reconstructions stay cached)
     keep_frames : bool — attach the decoded :class:`DatasetFrame` objects as
@@ -354,7 +354,6 @@ def generate_world_dataset(
     raises (the caller records it); a failing frame is recorded in its outcome and does not
     raise.
     """
-    spec = as_spec(spec)
     st = open_store(store)
     n_frames = spec.frames_per_world if n_frames is None else int(n_frames)
     with world_claim(st, seed, spec, n_frames):
@@ -548,7 +547,7 @@ def _provenance(spec, keys, df: DatasetFrame, geometry, rkeys) -> dict:
 # ---------------------------------------------------------------------------------------------
 # Manifest, summary
 # ---------------------------------------------------------------------------------------------
-def summarize_dataset(store, dataset: str, spec: DatasetSpec | dict,
+def summarize_dataset(store, dataset: str, spec: DatasetSpec | CaptureSpec,
                       outcomes: list[Outcome]) -> dict[str, Any]:
     """The run summary: counts, per-geometry table and per-stage seconds.
 
@@ -565,7 +564,6 @@ def summarize_dataset(store, dataset: str, spec: DatasetSpec | dict,
     """
     from sim2radar.evaluate.dataset import finite_mean, geometry_metrics, stage_seconds
 
-    spec = as_spec(spec)
     frames = [f for o in outcomes for f in o.parts]
     extra: dict[str, Any] = {"frame_counts": count_statuses(frames),
                              "geometry": geometry_metrics(frames, spec.geometries),
@@ -650,13 +648,12 @@ def export_store_dataset(store, dataset: str, geometry: str, export_dir: str | o
 
 
 def world_bev_pngs(store, outcomes: list[Outcome], png_dir: str | os.PathLike,
-                   spec: DatasetSpec | dict) -> list[str]:
+                   spec: DatasetSpec | CaptureSpec) -> list[str]:
     """One bird's-eye-view PNG per world (or capture scene) and geometry
     (:func:`sim2radar.visualize.frames_bev_png`): every frame's radar points and labels in the
     first frame's radar frame."""
     from sim2radar.visualize import frames_bev_png
 
-    spec = as_spec(spec)
     st = open_store(store)
     out = []
     for o in outcomes:
@@ -803,12 +800,11 @@ def generate_dataset(request: GenerateRequest, runner: Runner) -> dict[str, Any]
     return summary
 
 
-def export_all(store, outcomes, export_dir, spec: DatasetSpec | dict, *,
+def export_all(store, outcomes, export_dir, spec: DatasetSpec | CaptureSpec, *,
                splits: dict[str, list[str]] | None = None,
                with_doppler: bool = False, domain: str | None = None) -> dict[str, Any]:
     """Export every geometry of the run: straight into ``export_dir`` for one geometry, into
     ``export_dir/<geometry>`` for ``both``; ``domain`` labels the export (default: simulated)."""
-    spec = as_spec(spec)
     opts = {"seed": spec.seed, "label_range_m": spec.export_label_range_m, "splits": splits,
             "with_doppler": with_doppler}
     if len(spec.geometries) == 1:

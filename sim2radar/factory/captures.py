@@ -68,6 +68,12 @@ from sim2radar.factory.labels import (
     radar_visibility,
     scene_ray_caster,
 )
+from sim2radar.factory.spec import (
+    RadarSetting,
+    ReconstructionSetting,
+    resolve_radar,
+    resolve_reconstruction,
+)
 from sim2radar.vocab import MAX_ID_LENGTH, id_problem
 
 __all__ = [
@@ -151,10 +157,10 @@ class CaptureSpec(BaseModel):
     frames_per_task : int — radar poses simulated per Prefect task.
     """
 
-    model_config = ConfigDict(frozen=True, extra="forbid", arbitrary_types_allowed=True)
+    model_config = ConfigDict(frozen=True, extra="forbid", validate_default=True)
 
-    radar: Any
-    reconstruction: Any
+    radar: RadarSetting = DEFAULT_RADAR
+    reconstruction: ReconstructionSetting = None
     poses: PoseSampling = PoseSampling()
     labels: LabelConfig = LabelConfig()
     class_name: ClassName = "door"
@@ -169,8 +175,6 @@ class CaptureSpec(BaseModel):
     @model_validator(mode="before")
     @classmethod
     def _resolve(cls, data: Any) -> Any:
-        from sim2radar.factory.spec import DEFAULT_RADAR, resolve_radar, resolve_reconstruction
-
         if not isinstance(data, dict):
             return data
         data = dict(data)

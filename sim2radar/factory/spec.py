@@ -9,7 +9,7 @@ from __future__ import annotations
 import os
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
+from typing import Annotated, Any
 
 import numpy as np
 import yaml
@@ -17,6 +17,7 @@ from pydantic import (
     BaseModel,
     ConfigDict,
     Field,
+    WithJsonSchema,
     model_serializer,
     model_validator,
 )
@@ -36,11 +37,28 @@ from sim2radar.factory.labels import (
     LabelConfig,
     boxes_in_point_cloud_range,
 )
+from sim2radar.radar.config import RadarConfig
+from sim2radar.reconstruct.pipeline import ReconstructionConfig
+from sim2radar.worlds.config import RigConfig, RigMotion, WorldConfig
 
-__all__ = ["GEOMETRIES", "DEFAULT_RADAR", "DatasetSpec", "as_spec", "resolve_radar",
+__all__ = ["GEOMETRIES", "DEFAULT_RADAR", "DatasetSpec", "resolve_radar",
            "resolve_reconstruction", "dataset_metadata",
            "GENERATE_CONFIG_KEYS", "load_generate_config", "label_range",
            "MAX_FRAMES_PER_WORLD", "MAX_WORLDS"]
+
+def _named_or_fields(what: str) -> WithJsonSchema:
+    """The JSON schema of a config field's *input* form (a deployment's parameter schema,
+    which Prefect's server enforces): a name or path, or the config's fields."""
+    return WithJsonSchema({"anyOf": [{"type": "string"}, {"type": "object"}, {"type": "null"}],
+                           "description": f"{what}: a preset name, a YAML path or its fields"})
+
+
+#: A config field: typed as the resolved config, given as a name, a path or fields.
+RadarSetting = Annotated[RadarConfig, _named_or_fields("radar")]
+ReconstructionSetting = Annotated[ReconstructionConfig, _named_or_fields("reconstruction")]
+WorldSetting = Annotated[WorldConfig, _named_or_fields("world")]
+RigSetting = Annotated[RigConfig, _named_or_fields("rig")]
+MotionSetting = Annotated[RigMotion | None, _named_or_fields("motion")]
 
 #: Geometry modes: radar simulated on the world's meshes, or on meshes reconstructed from RGB.
 GEOMETRIES = ("ground_truth", "reconstructed")
@@ -90,22 +108,22 @@ class DatasetSpec(BaseModel):
     # the JSON schema (a deployment's parameter schema, which Prefect's server enforces) is
     # the input form: `geometry` may be one mode, "both" or a list; `export_label_range_m`
     # "detector"; the configs names, paths or fields
-    model_config = ConfigDict(frozen=True, extra="forbid", arbitrary_types_allowed=True,
-                              populate_by_name=True)
+    model_config = ConfigDict(frozen=True, extra="forbid", populate_by_name=True,
+                              validate_default=True)
 
     frames_per_world: int = Field(4, ge=1, le=MAX_FRAMES_PER_WORLD)
     geometries: tuple[str, ...] | str = Field(("reconstructed",), alias="geometry")
-    radar: Any = DEFAULT_RADAR
-    reconstruction: Any = None
-    world: Any = None
-    rig: Any = None
+    radar: RadarSetting = DEFAULT_RADAR
+    reconstruction: ReconstructionSetting = None
+    world: WorldSetting = None
+    rig: RigSetting = None
     seed: int = 0
     class_name: ClassName = "door"
     labels: LabelConfig = LabelConfig()
     material_override: str | None = None
     export_label_range_m: tuple[float, ...] | str | None = DEFAULT_POINT_CLOUD_RANGE_M
     render_rgb: bool = True
-    motion: Any = None
+    motion: MotionSetting = None
 
     @model_validator(mode="before")
     @classmethod
@@ -241,13 +259,6 @@ def _rig_for_radar(rig, radar):
     return rig.model_copy(update={"radar_azimuth_fov_deg": want[0],
                                   "radar_elevation_fov_deg": want[1],
                                   "radar_max_range_m": want[2]})
-
-
-def as_spec(spec: DatasetSpec | dict) -> DatasetSpec:
-    """``spec`` as a :class:`DatasetSpec` (from its :meth:`~DatasetSpec.to_dict` or settings);
-    a spec object (DatasetSpec, or a capture run's ``CaptureSpec``, which has the same export
-    fields) is returned as it is."""
-    return DatasetSpec.model_validate(spec) if isinstance(spec, dict) else spec
 
 
 def dataset_metadata(spec: DatasetSpec, geometry: str, domain: str | None = None) -> dict:
