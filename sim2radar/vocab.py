@@ -6,6 +6,8 @@ ids in masks and Parquet columns are indices into these tuples, so append-only.
 
 from __future__ import annotations
 
+from typing import Literal, get_args
+
 #: Semantic classes. Index 0 means "no label / no surface". The middle block is the paper's
 #: Grounding DINO prompt ("door, wall, floor, ceiling, window, fire extinguisher, handrail");
 #: ``clutter`` covers cabinets, radiators, bins and other furniture.
@@ -59,7 +61,8 @@ def material_id(name: str) -> int:
 
 #: What became of one unit of work (a manifest row, a sweep's run): computed, found cached
 #: (nothing recomputed) or failed with its error.
-STATUSES: tuple[str, ...] = ("ok", "skipped", "failed")
+Status = Literal["ok", "skipped", "failed"]
+STATUSES: tuple[str, ...] = get_args(Status)
 
 
 #: The longest scene or frame id (a file name holds a frame id and a suffix; file systems stop

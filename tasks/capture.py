@@ -46,7 +46,7 @@ from sim2radar.factory.captures import (
 from sim2radar.factory.seeds import frame_seed, pose_seed, scene_seed
 from sim2radar.storage import content_key, meshes_from_table
 from sim2radar.storage.frames import dataset_frame_to_table
-from sim2radar.tasks.common import Outcome, failed_scene_ids, open_store
+from sim2radar.tasks.common import Outcome, RunSummary, failed_scene_ids, open_store
 from sim2radar.tasks.dataset import (
     DATASET_STAGE_VERSION,
     _fill_frame_outcome,
@@ -251,6 +251,7 @@ def simulate_stage(scene: CaptureScene, spec: CaptureSpec, store: str, keys: dic
         except Exception as exc:  # noqa: BLE001 - one broken frame must not stop the rest
             log.error("%s failed: %s: %s", fo.id, type(exc).__name__, exc)
             fo.status, fo.error = "failed", f"[simulate] {type(exc).__name__}: {exc}"
+            fo.artifacts.pop("dataset_frames/reconstructed")  # never written
         out.append(fo)
     return out
 
@@ -406,7 +407,7 @@ def _failed_scene(scene: CaptureScene, error: BaseException | str) -> Outcome:
     return Outcome.failed(scene.scene_id, error, source=scene.folder)
 
 
-def capture_dataset(request: CaptureRequest, runner: Runner) -> dict[str, Any]:
+def capture_dataset(request: CaptureRequest, runner: Runner) -> RunSummary:
     """The ``captures`` job: every scene of the capture folder through its steps into the
     store, the dataset manifest and (with ``export_dir``) OpenPCDet's layout; a failing scene
     is recorded ``failed`` with its stage and error and the others finish.

@@ -13,15 +13,20 @@ import logging
 import os
 import re
 from collections.abc import Iterable, Sequence
-from typing import Any
+from typing import Any, NotRequired, TypedDict
 
 from sim2radar.fileio import jsonable
 from sim2radar.storage import ArtifactStore, is_transient_io_error
 from sim2radar.storage.manifest import MANIFESTS, STATUSES
+from sim2radar.vocab import Status
 
 __all__ = [
     "FRAME_ROW",
     "Outcome",
+    "Status",
+    "RunSummary",
+    "StatusCounts",
+    "FallbackCounts",
     "count_statuses",
     "count_fallbacks",
     "record",
@@ -66,7 +71,7 @@ class Outcome:
     ----------
     id : str — the manifest row's ``scene_id`` (``world_000007``, ``world_000007_f002``,
         a scene's name, an image's stem)
-    status : str — ``ok`` (computed), ``skipped`` (all cached) or ``failed``
+    status : Status — ``ok`` (computed), ``skipped`` (all cached) or ``failed``
         (:data:`~sim2radar.storage.manifest.STATUSES`)
     error : str — ``"ExceptionType: message"`` when failed (a world: or a count of failed frames)
     artifacts : dict — stage -> content key
@@ -84,7 +89,7 @@ class Outcome:
     """
 
     id: str
-    status: str
+    status: Status
     error: str = ""
     artifacts: dict[str, str] = dataclasses.field(default_factory=dict)
     timings_s: dict[str, float] = dataclasses.field(default_factory=dict)
@@ -113,13 +118,60 @@ class Outcome:
         return cls(**{**d, "parts": [cls.from_dict(p) for p in d.get("parts", ())]})
 
 
-def count_statuses(outcomes: Iterable[Outcome]) -> dict[str, int]:
+class StatusCounts(TypedDict):
+    """Units of work by what became of them."""
+
+    ok: int
+    skipped: int
+    failed: int
+
+
+class FallbackCounts(TypedDict):
+    """Material labels that fell back to ``unknown`` (:func:`count_fallbacks`)."""
+
+    segments: int
+    frames: int
+    scenes: int
+
+
+class RunSummary(TypedDict):
+    """What a job returns (its flow's result, what the CLI prints and ``--json`` writes): a
+    JSON document, so Prefect stores it as the run's result, declared here once.
+
+    The common part is :func:`summarize`'s; a job adds its own keys (each job's driver says
+    which): the ``simulate`` job ``radar``; dataset jobs (:func:`sim2radar.tasks.dataset.
+    summarize_dataset`) ``frame_counts``, ``geometry``, ``seconds_per_frame``, ``comparison``,
+    ``stage_table``, ``export``; the CLI ``pngs``; the reference job ``plan``; a capture run
+    ``unit``, ``ground_truth``, ``wall_s``.
+    """
+
+    store: str
+    dataset: str
+    counts: StatusCounts
+    fallbacks: FallbackCounts
+    outcomes: list[dict[str, Any]]  # Outcome.to_dict() each, in the order of the units
+    manifest: str
+    radar: NotRequired[str]
+    frame_counts: NotRequired[StatusCounts]
+    geometry: NotRequired[dict[str, dict[str, Any]]]
+    seconds_per_frame: NotRequired[dict[str, float]]
+    comparison: NotRequired[dict[str, Any]]
+    stage_table: NotRequired[list[dict[str, Any]]]
+    export: NotRequired[dict[str, Any]]
+    pngs: NotRequired[list[str]]
+    plan: NotRequired[dict[str, Any]]
+    unit: NotRequired[str]
+    ground_truth: NotRequired[bool]
+    wall_s: NotRequired[float]
+
+
+def count_statuses(outcomes: Iterable[Outcome]) -> StatusCounts:
     """``{ok: n, skipped: n, failed: n}``."""
     statuses = [o.status for o in outcomes]
     return {s: statuses.count(s) for s in STATUSES}
 
 
-def count_fallbacks(outcomes: Iterable[Outcome]) -> dict[str, int]:
+def count_fallbacks(outcomes: Iterable[Outcome]) -> FallbackCounts:
     """``{"segments": n, "frames": n, "scenes": n}``: segments whose material fell back to
     ``unknown`` (a VLM outage, an unusable answer; :attr:`MaterialLabel.fallback`), frames and
     scenes made from them. Their artifacts are provisional: the next run computes them again,
@@ -147,19 +199,17 @@ def record(store: str | os.PathLike | ArtifactStore, dataset: str, outcome: Outc
 
 
 def summarize(store: str | os.PathLike | ArtifactStore, dataset: str,
-              outcomes: Sequence[Outcome], **extra: Any) -> dict[str, Any]:
-    """The run summary a flow returns and the CLI prints.
-
-    ``{"store", "dataset", "counts": {ok, skipped, failed}, "outcomes": [Outcome.to_dict()],
-    "manifest"`` (where its rows are)``}`` plus ``extra``.
+              outcomes: Sequence[Outcome], **extra: Any) -> RunSummary:
+    """The run summary a job returns and the CLI prints (:class:`RunSummary`):
+    ``{"store", "dataset", "counts": {ok, skipped, failed}, "fallbacks", "outcomes":
+    [Outcome.to_dict()], "manifest"`` (where its rows are)``}`` plus the job's ``extra`` keys.
     """
     st = open_store(store)
-    summary: dict[str, Any] = {"store": st.root, "dataset": dataset,
-                               "counts": count_statuses(outcomes),
-                               "fallbacks": count_fallbacks(outcomes)}
-    summary["outcomes"] = [o.to_dict() for o in outcomes]
-    summary["manifest"] = st.join(MANIFESTS, dataset)
-    summary.update(extra)
+    summary = RunSummary(store=st.root, dataset=dataset, counts=count_statuses(outcomes),
+                         fallbacks=count_fallbacks(outcomes),
+                         outcomes=[o.to_dict() for o in outcomes],
+                         manifest=st.join(MANIFESTS, dataset))
+    summary.update(extra)  # type: ignore[typeddict-item] - the job's keys, declared above
     return summary
 
 

@@ -48,6 +48,7 @@ from sim2radar.storage.worlds import world_id_for
 from sim2radar.tasks.common import (
     FRAME_ROW,
     Outcome,
+    RunSummary,
     count_statuses,
     failed_scene_ids,
     open_store,
@@ -402,6 +403,7 @@ def _generate_world(seed: int, spec: DatasetSpec, st: ArtifactStore, force: bool
     def fail(k: int, geometry: str, error: str) -> None:
         log.error("%s [%s] failed: %s", frames_out[k].id, geometry, error)
         errors[k].append(f"[{geometry}] {error}")
+        frames_out[k].artifacts.pop(f"dataset_frames/{geometry}", None)  # never written
 
     def done(k: int, df: DatasetFrame, rkeys: dict) -> None:
         fo = frames_out[k]
@@ -548,7 +550,7 @@ def _provenance(spec, keys, df: DatasetFrame, geometry, rkeys) -> dict:
 # Manifest, summary
 # ---------------------------------------------------------------------------------------------
 def summarize_dataset(store, dataset: str, spec: DatasetSpec | CaptureSpec,
-                      outcomes: list[Outcome]) -> dict[str, Any]:
+                      outcomes: list[Outcome]) -> RunSummary:
     """The run summary: counts, per-geometry table and per-stage seconds.
 
     Returns
@@ -589,9 +591,14 @@ def export_openpcdet(store, outcomes: list[Outcome], export_dir: str | os.PathLi
     st = open_store(store)
     frames = (read_dataset_frame(st, f.artifacts[f"dataset_frames/{geometry}"])
               for o in outcomes for f in o.parts
-              if f"dataset_frames/{geometry}" in f.artifacts
-              and geometry in f.measured.get("n_points", {}))
+              if holds_frame(f, geometry))
     return export_frames(frames, export_dir, geometry, **options)
+
+
+def holds_frame(frame: Outcome, geometry: str) -> bool:
+    """The frame outcome has a ``dataset_frames`` artifact in ``geometry`` (a frame that failed
+    in a geometry lists no artifact of it)."""
+    return f"dataset_frames/{geometry}" in frame.artifacts
 
 
 def outcomes_from_manifest(store, dataset: str) -> list[Outcome]:
@@ -611,10 +618,10 @@ def outcomes_from_manifest(store, dataset: str) -> list[Outcome]:
             continue
         o = worlds.setdefault(m.group(1), Outcome(m.group(1), "skipped"))
         fo = Outcome(r["scene_id"], r["status"], index=int(m.group(2)),
-                     artifacts=dict(r["artifacts"]), measured={"n_points": {}})
+                     artifacts=dict(r["artifacts"]))
         for name, key in r["artifacts"].items():
-            if name.startswith("dataset_frames/") and st.exists("dataset_frames", key):
-                fo.measured["n_points"][name.split("/", 1)[1]] = -1  # present; count in frame
+            if name.startswith("dataset_frames/") and not st.exists("dataset_frames", key):
+                del fo.artifacts[name]
         o.parts.append(fo)
     return [worlds[w] for w in sorted(worlds)]
 
@@ -633,7 +640,7 @@ def export_store_dataset(store, dataset: str, geometry: str, export_dir: str | o
     OpenPCDet's layout, split by world with ``seed``; Doppler is exported when the frames came
     from the signal-level radar."""
     outcomes = outcomes_from_manifest(store, dataset)
-    frames = [f for o in outcomes for f in o.parts if geometry in f.measured["n_points"]]
+    frames = [f for o in outcomes for f in o.parts if holds_frame(f, geometry)]
     if not frames:
         raise ValueError(f"store dataset {dataset!r} has no {geometry!r} frames; choose the "
                          f"geometry with {dataset}:ground_truth or {dataset}:reconstructed")
@@ -659,7 +666,7 @@ def world_bev_pngs(store, outcomes: list[Outcome], png_dir: str | os.PathLike,
     for o in outcomes:
         for g in spec.geometries:
             dfs = [read_dataset_frame(st, f.artifacts[f"dataset_frames/{g}"])
-                   for f in o.parts if g in f.measured.get("n_points", {})]
+                   for f in o.parts if holds_frame(f, g)]
             if dfs:
                 path = Path(png_dir) / f"{o.id}_{_TAG[g]}.png"
                 out.append(str(frames_bev_png(dfs, path, class_name=spec.class_name,
@@ -762,7 +769,7 @@ def _world_unit(seed: int, run: StepRun, *, request: GenerateRequest) -> Outcome
                                   n_frames=request.frames_by_seed.get(int(seed)), run=run)
 
 
-def generate_dataset(request: GenerateRequest, runner: Runner) -> dict[str, Any]:
+def generate_dataset(request: GenerateRequest, runner: Runner) -> RunSummary:
     """The ``generate`` job: each world's dataset frames made (or found cached) and recorded
     in the dataset manifest, a table of seconds per step, the export; a failing world or frame
     is recorded ``failed`` and the others finish.

@@ -40,7 +40,7 @@ from sim2radar.storage import (
     radar_frames_from_table,
     radar_frames_to_table,
 )
-from sim2radar.tasks.common import Outcome, jsonable, open_store, summarize
+from sim2radar.tasks.common import Outcome, RunSummary, jsonable, open_store, summarize
 from sim2radar.tasks.runner import Runner, RunOptions, StepRun, Units
 
 __all__ = [
@@ -289,7 +289,7 @@ def _simulate_unit(scene_path: str, run: StepRun, *, radar, store, seed, png_dir
     return simulate_scene(scene_path, radar, store, seed=seed, png_dir=png_dir, force=force)
 
 
-def simulate_scenes(request: SimulateRequest, runner: Runner) -> dict[str, Any]:
+def simulate_scenes(request: SimulateRequest, runner: Runner) -> RunSummary:
     """The ``simulate`` job: every scene of ``request`` simulated into the store and recorded
     in the dataset manifest (a second run recomputes nothing: every scene ``skipped`` by
     content key); a broken scene (bad mesh file, unknown material) is recorded as ``failed``

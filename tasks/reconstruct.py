@@ -24,12 +24,11 @@ import logging
 import os
 import time
 from pathlib import Path
-from typing import Any
 
 from pydantic import BaseModel, ConfigDict, Field
 
 from sim2radar.reconstruct.pipeline import STAGE_VERSION, ReconstructionConfig
-from sim2radar.tasks.common import Outcome, jsonable, open_store, summarize
+from sim2radar.tasks.common import Outcome, RunSummary, jsonable, open_store, summarize
 from sim2radar.tasks.runner import Runner, RunOptions, StepRun, Units
 
 __all__ = [
@@ -172,7 +171,7 @@ def _frame_unit(job: ImageJob, run: StepRun, *, request: ReconstructRequest,
 
 
 def reconstruct_images(request: ReconstructRequest, runner: Runner, *,
-                       backends: tuple | None = None) -> dict[str, Any]:
+                       backends: tuple | None = None) -> RunSummary:
     """The ``reconstruct`` job: every frame of ``request`` recorded in the dataset manifest as
     ``ok``, ``skipped`` (cached) or ``failed`` (with its error) while the others finish.
     ``backends``: the config's backends built once for every frame (one process; a Prefect

@@ -24,6 +24,7 @@ from pydantic import BaseModel, ConfigDict, Field
 
 from sim2radar.factory.reference import DOMAIN_LABEL, REFERENCE_FIRST_SEED, plan_reference
 from sim2radar.factory.spec import DatasetSpec
+from sim2radar.tasks.common import RunSummary
 from sim2radar.tasks.dataset import GenerateRequest, generate_dataset
 from sim2radar.tasks.runner import Runner, RunOptions
 from sim2radar.worlds.config import WALKING_SPEED_MPS
@@ -104,7 +105,7 @@ class ReferenceRequest(BaseModel):
             export_doppler=True, domain=DOMAIN_LABEL, run=self.run)
 
 
-def reference_dataset(request: ReferenceRequest, runner: Runner) -> dict[str, Any]:
+def reference_dataset(request: ReferenceRequest, runner: Runner) -> RunSummary:
     """Build (or find cached) a reference dataset; returns the ``generate`` job's summary
     plus ``plan`` (frames per split)."""
     summary = generate_dataset(request.generate_request(), runner)

@@ -26,13 +26,12 @@ import functools
 import logging
 import os
 import time
-from typing import Any
 
 from pydantic import BaseModel, ConfigDict, Field
 
 from sim2radar.storage import ArtifactStore, content_key, meshes_to_table
 from sim2radar.storage.worlds import world_id_for
-from sim2radar.tasks.common import Outcome, jsonable, open_store, summarize
+from sim2radar.tasks.common import Outcome, RunSummary, jsonable, open_store, summarize
 from sim2radar.tasks.runner import Runner, RunOptions, StepRun, Units
 from sim2radar.worlds.config import RigConfig, WorldConfig
 
@@ -264,7 +263,7 @@ def _world_unit(seed: int, run: StepRun, *, request: WorldsRequest) -> Outcome:
                                     force=request.force, radar=request.radar)
 
 
-def generate_worlds(request: WorldsRequest, runner: Runner) -> dict[str, Any]:
+def generate_worlds(request: WorldsRequest, runner: Runner) -> RunSummary:
     """The ``worlds`` job: every world of ``request`` generated, rendered and recorded in the
     dataset manifest; a failing world is recorded ``failed`` and the others finish.
 
