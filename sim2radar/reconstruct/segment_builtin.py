@@ -47,17 +47,24 @@ No learned weights. The method, step by step:
    :class:`~sim2radar.reconstruct.facade.FacadeConfig`). A doorway cut by the image border is
    found from its one seen post and a lintel running from it to the border.
 
-The keyword options of :class:`BuiltinSegments` name the main thresholds; every other number
-the steps compare against is a field of
-:class:`~sim2radar.reconstruct.segment_builtin_thresholds.SegmenterThresholds`, grouped by step,
-with its unit (``thresholds`` option).
+The options are a frozen
+:class:`~sim2radar.reconstruct.segment_builtin_config.SegmenterConfig`: the keyword options of
+:class:`BuiltinSegments` name the main thresholds; every other number the steps compare against
+is a field of :class:`~sim2radar.reconstruct.segment_builtin_thresholds.SegmenterThresholds`,
+grouped by step, with its unit (``thresholds`` option). Each call makes a
+:class:`~sim2radar.reconstruct.segment_builtin_config.SegmentContext` (the frame in the level
+frame, its colour, its floor and ceiling levels) and passes it to the step functions; no state
+outlives the call, so one :class:`BuiltinSegments` is safe to share between threads.
 
 Where each part is:
 
-- this module — :class:`BuiltinSegments`: the options, the stage entry (steps 1–2 and the order
-  of the rest), the seed regions (3), their merge (4) and the geometric labels (5);
+- this module — :func:`segment_frame`, the stage entry (steps 1–2 and the order of the rest),
+  the seed regions (3, :func:`seed_regions`) and their merge (4, :func:`merge_regions`);
+  :class:`BuiltinSegments`, the registered backend, holds a config and calls it;
+- :mod:`~sim2radar.reconstruct.segment_builtin_config` — the config and the per-call context;
+- :mod:`~sim2radar.reconstruct.segment_builtin_labels` — the geometric labels (5);
 - :mod:`~sim2radar.reconstruct.segment_builtin_geometry` — the shape of a region
-  (:func:`region_geometry`) and label-map primitives (pure functions);
+  (:func:`region_geometry`) and label-map primitives;
 - :mod:`~sim2radar.reconstruct.segment_builtin_walls` — wall planes, furniture proud of a wall,
   pieces flush with it (5), floor and ceiling by room geometry (6);
 - :mod:`~sim2radar.reconstruct.segment_builtin_doors` — door leaves grown from their fragment
@@ -72,7 +79,6 @@ import math
 import cv2
 import numpy as np
 
-from sim2radar.boxes import DOOR_THICKNESS_M
 from sim2radar.reconstruct.backproject import (
     FloorPlane,
     find_floor,
@@ -81,8 +87,12 @@ from sim2radar.reconstruct.backproject import (
     points_from_depth,
     surface_normals,
 )
-from sim2radar.reconstruct.facade import FacadeConfig
-from sim2radar.reconstruct.segment_builtin_doors import DoorSteps
+from sim2radar.reconstruct.segment_builtin_config import SegmentContext, SegmenterConfig
+from sim2radar.reconstruct.segment_builtin_doors import (
+    facade_doors,
+    grow_doors,
+    wall_openings,
+)
 from sim2radar.reconstruct.segment_builtin_geometry import (
     SegmentGeometry,
     UnionFind,
@@ -91,9 +101,12 @@ from sim2radar.reconstruct.segment_builtin_geometry import (
     footprint_gap_m,
     region_geometry,
 )
-from sim2radar.reconstruct.segment_builtin_thresholds import (
-    SegmenterThresholds,
-    config_from_options,
+from sim2radar.reconstruct.segment_builtin_labels import door_like, label_regions
+from sim2radar.reconstruct.segment_builtin_thresholds import SegmenterThresholds
+from sim2radar.reconstruct.segment_builtin_walls import (
+    below_floor,
+    flush_with_walls,
+    proud_of_walls,
 )
 from sim2radar.reconstruct.types import (
     SEGMENT_BACKENDS,
@@ -103,15 +116,21 @@ from sim2radar.reconstruct.types import (
     Segments,
 )
 
-__all__ = ["BuiltinSegments", "SegmentGeometry", "SegmenterThresholds", "region_geometry",
-           "footprint_gap_m"]
+__all__ = ["BuiltinSegments", "SegmentContext", "SegmentGeometry", "SegmenterConfig",
+           "SegmenterThresholds", "compact_regions", "footprint_gap_m", "horizontal_level",
+           "lab_image", "merge_regions", "region_geometry", "seed_regions", "segment_frame"]
 
 
 @SEGMENT_BACKENDS.register("builtin")
-class BuiltinSegments(DoorSteps):
+class BuiltinSegments:
     """Weight-free segmentation + geometric labelling (see the module docstring).
 
-    Keyword options (all optional; defaults suit 640×480 corridor images and scale with size):
+    A holder of a frozen :class:`~sim2radar.reconstruct.segment_builtin_config.SegmenterConfig`
+    whose :meth:`segment` runs :func:`segment_frame`; it keeps nothing of a call, so one
+    instance may segment frames on any number of threads at once.
+
+    Keyword options (all optional; defaults suit 640×480 corridor images and scale with size;
+    each is a field of ``SegmenterConfig``, documented there with its unit):
     ``normal_thresh_deg`` (20), ``colour_thresh`` (ΔE 14), ``max_incidence_deg`` (84),
     ``min_region_frac`` (3e-4 of the image), ``merge_normal_deg`` (12), ``merge_offset_m``
     (0.06), ``merge_colour_thresh`` (ΔE 12), ``fill_no_depth`` (True: pixels without depth join
@@ -134,371 +153,265 @@ class BuiltinSegments(DoorSteps):
     :class:`~sim2radar.reconstruct.facade.FacadeConfig` fields) and ``thresholds`` (a dict of
     :class:`~sim2radar.reconstruct.segment_builtin_thresholds.SegmenterThresholds` fields: every
     other threshold of the steps, named with its unit).
+
+    Attributes
+    ----------
+    config : SegmenterConfig — the options.
     """
 
-    def __init__(
-        self,
-        *,
-        normal_thresh_deg: float = 20.0,
-        colour_thresh: float = 14.0,
-        max_incidence_deg: float = 84.0,
-        min_region_frac: float = 3e-4,
-        merge_normal_deg: float = 12.0,
-        merge_offset_m: float = 0.06,
-        merge_colour_thresh: float = 12.0,
-        door_width_m: tuple[float, float] = (0.55, 2.0),
-        door_height_m: tuple[float, float] = (1.85, 2.3),
-        floor_tolerance_m: float = 0.25,
-        offset_thresh_m: float = 0.015,
-        door_thickness_m: float = DOOR_THICKNESS_M,
-        fill_no_depth: bool = True,
-        below_floor_m: float = 0.08,
-        door_partial: bool = True,
-        door_bottom_max_m: float = 0.75,
-        grow_colour: float = 15.0,
-        proud_m: tuple[float, float] = (0.12, 0.7),
-        proud_split: bool = True,
-        lidar_floor: bool = True,
-        facade: bool = True,
-        facade_options: dict | None = None,
-        thresholds: dict | None = None,
-    ) -> None:
-        self.normal_thresh_deg = float(normal_thresh_deg)
-        self.colour_thresh = float(colour_thresh)
-        self.max_incidence_deg = float(max_incidence_deg)
-        self.min_region_frac = float(min_region_frac)
-        self.merge_normal_deg = float(merge_normal_deg)
-        self.merge_offset_m = float(merge_offset_m)
-        self.merge_colour_thresh = float(merge_colour_thresh)
-        self.door_width_m = tuple(float(x) for x in door_width_m)
-        self.door_height_m = tuple(float(x) for x in door_height_m)
-        self.floor_tolerance_m = float(floor_tolerance_m)
-        self.offset_thresh_m = float(offset_thresh_m)
-        self.door_thickness_m = float(door_thickness_m)
-        self.fill_no_depth = bool(fill_no_depth)
-        self.below_floor_m = float(below_floor_m)
-        self.door_partial = bool(door_partial)
-        self.door_bottom_max_m = float(door_bottom_max_m)
-        self.grow_colour = float(grow_colour)
-        self.proud_m = tuple(float(x) for x in proud_m)
-        self.proud_split = bool(proud_split)
-        self.lidar_floor = bool(lidar_floor)
-        self.facade = bool(facade)
-        self.facade_config = config_from_options(FacadeConfig, facade_options,
-                                                 "segments.options.facade_options")
-        self.thresholds = config_from_options(SegmenterThresholds, thresholds,
-                                              "segments.options.thresholds")
-        self._pixel_angle: float | None = None
+    def __init__(self, **options) -> None:
+        self.config = SegmenterConfig.from_options(**options)
 
-    # -- stage entry ------------------------------------------------------------------------
     def segment(self, frame: FrameInput, depth: DepthResult) -> Segments:
-        k = frame.intrinsics
-        depth_m = np.asarray(depth.depth_m, dtype=np.float32)
-        if depth_m.shape != frame.shape:
-            raise ReconstructionInputError(
-                f"{frame.name}: depth is {depth_m.shape} but the image is {frame.shape}"
-            )
-        points = points_from_depth(depth_m, k)
-        valid = np.isfinite(points).all(axis=-1)
-        if valid.sum() < self.thresholds.min_valid_px:
-            raise ReconstructionInputError(
-                f"{frame.name}: no segments — the depth map has {int(valid.sum())} valid pixels; "
-                "check the depth backend (LiDAR in view? model output?)"
-            )
-        h, w = frame.shape
-        normals = surface_normals(points)
-        floor = None
-        if "up_cam" in depth.info and "floor" in depth.info:
-            # the depth stage already searched for the floor (the lidar backend's floor_fill)
-            # and completed the image down to it: same up, same floor
-            up = np.asarray(depth.info["up_cam"], np.float64)
-            if depth.info["floor"]:
-                floor = FloorPlane.from_info(depth.info["floor"])
+        """Segments and geometric labels of ``frame`` on ``depth`` (:func:`segment_frame`)."""
+        return segment_frame(frame, depth, self.config)
+
+
+# -- stage entry ----------------------------------------------------------------------------
+def segment_frame(frame: FrameInput, depth: DepthResult,
+                  config: SegmenterConfig = SegmenterConfig()) -> Segments:
+    """Stage 2 of the reconstruction with the ``builtin`` method (the module docstring's steps
+    1–8) on one frame.
+
+    Parameters
+    ----------
+    frame : FrameInput — the image, intrinsics, LiDAR returns and rig calibration.
+    depth : DepthResult — metric z-depth [m] of every pixel (0 / NaN: none), and the floor the
+        depth stage found (``info["up_cam"]``, ``info["floor"]``) when it searched for it.
+    config : SegmenterConfig
+
+    Returns
+    -------
+    Segments — the segment of every pixel (-1: none, with ``fill_no_depth=False``), labels,
+    scores, up in the camera frame, the doorway boxes found (level frame,
+    ``x y z dx dy dz heading``) and ``info`` (``floor_z_m``, ``ceiling_z_m`` [m],
+    ``n_segments``).
+
+    Raises
+    ------
+    ReconstructionInputError — depth of another shape than the image, too few pixels with
+        depth, or no segment found.
+    """
+    k = frame.intrinsics
+    depth_m = np.asarray(depth.depth_m, dtype=np.float32)
+    if depth_m.shape != frame.shape:
+        raise ReconstructionInputError(
+            f"{frame.name}: depth is {depth_m.shape} but the image is {frame.shape}"
+        )
+    points = points_from_depth(depth_m, k)
+    valid = np.isfinite(points).all(axis=-1)
+    if valid.sum() < config.thresholds.min_valid_px:
+        raise ReconstructionInputError(
+            f"{frame.name}: no segments — the depth map has {int(valid.sum())} valid pixels; "
+            "check the depth backend (LiDAR in view? model output?)"
+        )
+    normals = surface_normals(points)
+    floor = None
+    if "up_cam" in depth.info and "floor" in depth.info:
+        # the depth stage already searched for the floor (the lidar backend's floor_fill)
+        # and completed the image down to it: same up, same floor
+        up = np.asarray(depth.info["up_cam"], np.float64)
+        if depth.info["floor"]:
+            floor = FloorPlane.from_info(depth.info["floor"])
+    else:
+        up = gravity_up(normals, frame.rgb, k, frame.up_cam)
+        if config.lidar_floor:
+            # the raw returns of the lowest beams measure the floor to centimetres; without
+            # them the rig's calibrated camera height gives it
+            floor = find_floor(normals, up, k, frame.lidar_points, frame.camera_height_m)
+    floor_z_known = None
+    if floor is not None:
+        floor_z_known = -floor.height_m
+        up = floor.normal
+    rot = level_from_camera(up)[:3, :3]
+    pl = points @ rot.T
+
+    lab = lab_image(frame.rgb, config)
+    regions = seed_regions(points, normals, lab, valid, k.fx, config, up)
+    nl = normals @ rot.T
+    floor_z = (horizontal_level(pl, nl, config, up=True) if floor_z_known is None
+               else floor_z_known)
+    ctx = SegmentContext(config, pl, pixel_angle_rad=1.0 / k.fx, lab=lab, rgb=frame.rgb,
+                         rotation=rot, intrinsics=k)
+    regions = merge_regions(ctx, regions, floor_z)
+    if config.fill_no_depth:
+        # pixels without depth (e.g. below the LiDAR's lowest beam) join the nearest
+        # region in the image: they get a label and material, but no 3D point
+        regions = fill_nearest(fill_columns(regions), np.ones_like(valid))
+    labels, scores, info = label_regions(ctx, regions, floor_z_known)
+    ctx = ctx.with_levels(info["floor_z_m"], info["ceiling_z_m"])
+    regions, labels, scores, proud = proud_of_walls(ctx, regions, labels, scores)
+    labels = flush_with_walls(ctx, regions, labels, skip=proud)
+    if config.door_partial:
+        regions, labels, scores = grow_doors(ctx, regions, labels, scores, skip=proud)
+    rays = points_from_depth(np.ones(frame.shape, np.float32), k) @ rot.T
+    regions, labels, scores = below_floor(ctx, regions, labels, scores, rays)
+    regions, labels, scores, openings = wall_openings(ctx, regions, labels, scores)
+    if config.facade:
+        regions, labels, scores, found = facade_doors(ctx, regions, labels, scores)
+        openings = found + openings
+    seg, labels, scores = compact_regions(regions, labels, scores)
+    if not labels:
+        raise ReconstructionInputError(f"{frame.name}: no segments found")
+    return Segments(seg, tuple(labels), np.asarray(scores, np.float32), up_cam=up,
+                    door_boxes_level=np.asarray(openings, np.float32).reshape(-1, 7),
+                    info={**info, "n_segments": len(labels)})
+
+
+# -- steps ----------------------------------------------------------------------------------
+def lab_image(rgb: np.ndarray, config: SegmenterConfig) -> np.ndarray:
+    """(H, W, 3) float32 — the image smoothed by a Gaussian of σ = max(``colour_blur_sigma_px``,
+    width / ``colour_blur_ref_width_px``) [px], in CIE-Lab (L* in [0, 100], a*/b* in about
+    [-127, 127])."""
+    cfg = config.thresholds
+    sigma = max(cfg.colour_blur_sigma_px, rgb.shape[1] / cfg.colour_blur_ref_width_px)
+    blur = cv2.GaussianBlur(rgb, (0, 0), sigma)
+    lab = cv2.cvtColor(blur.astype(np.float32) / 255.0, cv2.COLOR_RGB2LAB)
+    return lab  # L in [0, 100], a/b in about [-127, 127]
+
+
+def seed_regions(points: np.ndarray, normals: np.ndarray, lab: np.ndarray, valid: np.ndarray,
+                 focal_px: float, config: SegmenterConfig, up=None) -> np.ndarray:
+    """Seed regions (step 3): the label map (H, W) of the connected components of the pixels
+    with no edge to a neighbour.
+
+    An edge lies between neighbours whose depth jumps (relative jump above
+    tan(``max_incidence_deg``) / ``focal_px`` + ``depth_jump_rel``), whose normals turn by more
+    than ``normal_thresh_deg``, whose colours (``lab``) differ by more than ``colour_thresh``,
+    whose plane offsets n·p step by more than ``offset_thresh_m`` + 0.4 % of the depth, or whose
+    orientation classes (vertical, up, down, oblique about ``up``, camera frame) differ.
+    Components smaller than ``min_region_frac`` of the image, and the edge pixels, join their
+    nearest region; pixels without depth stay -1. ``points`` and ``normals`` are (H, W, 3) in
+    the camera frame [m].
+    """
+    cfg = config.thresholds
+    z = np.where(valid, points[..., 2], np.nan)
+    # orientation class per pixel (vertical / facing up / facing down / oblique): a hard
+    # boundary where a smoothed depth map bends gradually from a wall into the floor
+    if up is None:
+        up = np.array([0.0, -1.0, 0.0])
+    with np.errstate(invalid="ignore"):
+        nz = normals @ np.asarray(up, np.float64)
+    orient = np.full(z.shape, 3, np.int8)
+    orient[np.abs(nz) < math.sin(math.radians(cfg.orient_class_deg))] = 0
+    orient[nz > math.cos(math.radians(cfg.orient_class_deg))] = 1
+    orient[nz < -math.cos(math.radians(cfg.orient_class_deg))] = 2
+    cos_n = math.cos(math.radians(config.normal_thresh_deg))
+    jump = math.tan(math.radians(config.max_incidence_deg)) / focal_px + cfg.depth_jump_rel
+
+    def broken(sl_a, sl_b):
+        za, zb = z[sl_a], z[sl_b]
+        with np.errstate(invalid="ignore"):
+            dj = np.abs(za - zb) / np.minimum(za, zb) > jump
+            dn = np.sum(normals[sl_a] * normals[sl_b], axis=-1) < cos_n
+            dc = np.linalg.norm(lab[sl_a] - lab[sl_b], axis=-1) > config.colour_thresh
+            # plane-offset step: a door proud of / set into a coplanar wall
+            off = np.abs(np.sum(normals[sl_a] * points[sl_a], axis=-1)
+                         - np.sum(normals[sl_b] * points[sl_b], axis=-1))
+            do = off > config.offset_thresh_m + cfg.offset_step_per_m * np.minimum(za, zb)
+        do_ = orient[sl_a] != orient[sl_b]
+        return dj | dn | dc | do | do_ | ~(valid[sl_a] & valid[sl_b])
+
+    edge = np.zeros(valid.shape, bool)
+    edge[:, :-1] |= broken((slice(None), slice(None, -1)), (slice(None), slice(1, None)))
+    edge[:-1, :] |= broken((slice(None, -1), slice(None)), (slice(1, None), slice(None)))
+    core = valid & ~edge
+    n, cc, stats, _ = cv2.connectedComponentsWithStats(core.astype(np.uint8), connectivity=4)
+    min_px = max(cfg.min_region_px, int(config.min_region_frac * valid.size))
+    keep = stats[:, cv2.CC_STAT_AREA] >= min_px
+    keep[0] = False
+    lut = np.full(n, -1, np.int64)
+    lut[keep] = np.arange(int(keep.sum()))
+    labels = lut[cc]
+    return fill_nearest(labels, valid)
+
+
+def horizontal_level(pl: np.ndarray, nl: np.ndarray, config: SegmenterConfig,
+                     up: bool) -> float | None:
+    """Median height [m] of the pixels on horizontal surfaces facing up (floor, ``up``) or down
+    (ceiling); None with fewer than ``level_min_px`` of them. ``pl`` and ``nl`` are the
+    level-frame points [m] and normals (H, W, 3)."""
+    cfg = config.thresholds
+    with np.errstate(invalid="ignore"):
+        if up:
+            sel = ((nl[..., 2] > cfg.level_normal_cos)
+                   & (pl[..., 2] < -cfg.floor_below_camera_m))
         else:
-            up = gravity_up(normals, frame.rgb, k, frame.up_cam)
-            if self.lidar_floor:
-                # the raw returns of the lowest beams measure the floor to centimetres; without
-                # them the rig's calibrated camera height gives it
-                floor = find_floor(normals, up, k, frame.lidar_points, frame.camera_height_m)
-        floor_z_known = None
-        if floor is not None:
-            floor_z_known = -floor.height_m
-            up = floor.normal
-        rot = level_from_camera(up)[:3, :3]
-        pl = points @ rot.T
+            sel = ((nl[..., 2] < -cfg.level_normal_cos)
+                   & (pl[..., 2] > cfg.ceiling_above_camera_m))
+    if sel.sum() < cfg.level_min_px:
+        return None
+    return float(np.median(pl[..., 2][sel]))
 
-        lab = self._lab(frame.rgb, w)
-        regions = self._regions(points, normals, lab, valid, k.fx, up)
-        nl = normals @ rot.T
-        floor_z = self._level(pl, nl, up=True) if floor_z_known is None else floor_z_known
-        self._pixel_angle = 1.0 / k.fx
-        regions = self._merge(regions, pl, lab, valid, floor_z)
-        if self.fill_no_depth:
-            # pixels without depth (e.g. below the LiDAR's lowest beam) join the nearest
-            # region in the image: they get a label and material, but no 3D point
-            regions = fill_nearest(fill_columns(regions), np.ones_like(valid))
-        labels, scores, info = self._label(regions, pl, frame.rgb, floor_z_known)
-        regions, labels, scores, proud = self._proud_of_walls(regions, labels, scores, pl,
-                                                              info["floor_z_m"])
-        labels = self._flush_with_walls(regions, labels, pl, skip=proud)
-        if self.door_partial:
-            regions, labels, scores = self._grow_doors(regions, labels, scores, pl, lab,
-                                                       info["floor_z_m"], info["ceiling_z_m"],
-                                                       skip=proud)
-        rays = points_from_depth(np.ones(frame.shape, np.float32), k) @ rot.T
-        regions, labels, scores = self._below_floor(regions, labels, scores, pl, rays,
-                                                    info["floor_z_m"], info["ceiling_z_m"])
-        regions, labels, scores, openings = self._wall_openings(
-            regions, labels, scores, pl, info["floor_z_m"], info["ceiling_z_m"])
-        if self.facade:
-            regions, labels, scores, found = self._facade_doors(
-                regions, labels, scores, pl, rot, k, frame.rgb, info["floor_z_m"],
-                info["ceiling_z_m"])
-            openings = found + openings
-        seg, labels, scores = self._compact(regions, labels, scores)
-        if not labels:
-            raise ReconstructionInputError(f"{frame.name}: no segments found")
-        return Segments(seg, tuple(labels), np.asarray(scores, np.float32), up_cam=up,
-                        door_boxes_level=np.asarray(openings, np.float32).reshape(-1, 7),
-                        info={**info, "n_segments": len(labels)})
 
-    # -- steps ------------------------------------------------------------------------------
-    def _lab(self, rgb: np.ndarray, width: int) -> np.ndarray:
-        cfg = self.thresholds
-        sigma = max(cfg.colour_blur_sigma_px, width / cfg.colour_blur_ref_width_px)
-        blur = cv2.GaussianBlur(rgb, (0, 0), sigma)
-        lab = cv2.cvtColor(blur.astype(np.float32) / 255.0, cv2.COLOR_RGB2LAB)
-        return lab  # L in [0, 100], a/b in about [-127, 127]
-
-    def _regions(self, points, normals, lab, valid, focal_px, up=None) -> np.ndarray:
-        cfg = self.thresholds
-        z = np.where(valid, points[..., 2], np.nan)
-        # orientation class per pixel (vertical / facing up / facing down / oblique): a hard
-        # boundary where a smoothed depth map bends gradually from a wall into the floor
-        if up is None:
-            up = np.array([0.0, -1.0, 0.0])
-        with np.errstate(invalid="ignore"):
-            nz = normals @ np.asarray(up, np.float64)
-        orient = np.full(z.shape, 3, np.int8)
-        orient[np.abs(nz) < math.sin(math.radians(cfg.orient_class_deg))] = 0
-        orient[nz > math.cos(math.radians(cfg.orient_class_deg))] = 1
-        orient[nz < -math.cos(math.radians(cfg.orient_class_deg))] = 2
-        cos_n = math.cos(math.radians(self.normal_thresh_deg))
-        jump = math.tan(math.radians(self.max_incidence_deg)) / focal_px + cfg.depth_jump_rel
-
-        def broken(sl_a, sl_b):
-            za, zb = z[sl_a], z[sl_b]
-            with np.errstate(invalid="ignore"):
-                dj = np.abs(za - zb) / np.minimum(za, zb) > jump
-                dn = np.sum(normals[sl_a] * normals[sl_b], axis=-1) < cos_n
-                dc = np.linalg.norm(lab[sl_a] - lab[sl_b], axis=-1) > self.colour_thresh
-                # plane-offset step: a door proud of / set into a coplanar wall
-                off = np.abs(np.sum(normals[sl_a] * points[sl_a], axis=-1)
-                             - np.sum(normals[sl_b] * points[sl_b], axis=-1))
-                do = off > self.offset_thresh_m + cfg.offset_step_per_m * np.minimum(za, zb)
-            do_ = orient[sl_a] != orient[sl_b]
-            return dj | dn | dc | do | do_ | ~(valid[sl_a] & valid[sl_b])
-
-        edge = np.zeros(valid.shape, bool)
-        edge[:, :-1] |= broken((slice(None), slice(None, -1)), (slice(None), slice(1, None)))
-        edge[:-1, :] |= broken((slice(None, -1), slice(None)), (slice(1, None), slice(None)))
-        core = valid & ~edge
-        n, cc, stats, _ = cv2.connectedComponentsWithStats(core.astype(np.uint8), connectivity=4)
-        min_px = max(cfg.min_region_px, int(self.min_region_frac * valid.size))
-        keep = stats[:, cv2.CC_STAT_AREA] >= min_px
-        keep[0] = False
-        lut = np.full(n, -1, np.int64)
-        lut[keep] = np.arange(int(keep.sum()))
-        labels = lut[cc]
-        return fill_nearest(labels, valid)
-
-    def _level(self, pl, nl, up: bool) -> float | None:
-        """Median height of pixels on horizontal surfaces facing up (floor) or down (ceiling)."""
-        cfg = self.thresholds
-        with np.errstate(invalid="ignore"):
-            if up:
-                sel = ((nl[..., 2] > cfg.level_normal_cos)
-                       & (pl[..., 2] < -cfg.floor_below_camera_m))
-            else:
-                sel = ((nl[..., 2] < -cfg.level_normal_cos)
-                       & (pl[..., 2] > cfg.ceiling_above_camera_m))
-        if sel.sum() < cfg.level_min_px:
-            return None
-        return float(np.median(pl[..., 2][sel]))
-
-    def _door_like(self, g: SegmentGeometry, floor_z: float | None) -> bool:
-        """Door-sized vertical rectangle standing on the floor (before labelling)."""
-        if floor_z is None or g.vertical_cos > self.thresholds.door_like_max_vertical_cos:
-            return False
-        return (g.z_min_m < floor_z + self.floor_tolerance_m
-                and self.door_height_m[0] <= g.height_m <= self.door_height_m[1]
-                and g.width_m <= self.door_width_m[1])
-
-    def _merge(self, regions, pl, lab, valid, floor_z=None) -> np.ndarray:
-        n = int(regions.max()) + 1
-        if n <= 1:
-            return regions
-        for _ in range(self.thresholds.merge_passes):
-            n = int(regions.max()) + 1
-            flat = regions.ravel()
-            ok = flat >= 0
-            cnt = np.bincount(flat[ok], minlength=n).astype(np.float64)
-            geo = [None] * n
-            col = np.zeros((n, 3))
-            for c in range(3):
-                col[:, c] = np.bincount(flat[ok], lab[..., c].ravel()[ok], minlength=n)
-            col /= np.maximum(cnt, 1)[:, None]
-            # adjacent pairs
-            pairs = set()
-            for a, b in ((regions[:, :-1], regions[:, 1:]), (regions[:-1, :], regions[1:, :])):
-                m = (a != b) & (a >= 0) & (b >= 0)
-                pa, pb = a[m], b[m]
-                codes = np.unique(np.minimum(pa, pb) * n + np.maximum(pa, pb))
-                pairs.update(codes.tolist())
-            uf = UnionFind(n)
-            cos_m = math.cos(math.radians(self.merge_normal_deg))
-            merged = False
-            for code in sorted(pairs):
-                a, b = divmod(code, n)
-                if np.linalg.norm(col[a] - col[b]) > self.merge_colour_thresh:
-                    continue
-                for i in (a, b):
-                    if geo[i] is None:
-                        geo[i] = region_geometry(pl, regions == i,
-                                                 max_points=self.thresholds.quick_fit_points,
-                                                 pixel_angle_rad=self._pixel_angle)
-                ga, gb = geo[a], geo[b]
-                if ga.n_px < 3 or gb.n_px < 3:
-                    continue
-                # two door-sized rectangles side by side stay apart (neighbouring doors whose
-                # wall strip is too thin to survive; double-door leaves are joined later)
-                if self._door_like(ga, floor_z) and self._door_like(gb, floor_z):
-                    continue
-                if abs(ga.normal @ gb.normal) < cos_m:
-                    continue
-                d = gb.centroid - ga.centroid
-                if abs(ga.normal @ d) > self.merge_offset_m or abs(gb.normal @ d) > self.merge_offset_m:
-                    continue
-                uf.union(a, b)
-                merged = True
-            if not merged:
-                break
-            roots = np.array([uf.find(i) for i in range(n)])
-            _, new = np.unique(roots, return_inverse=True)
-            regions = np.where(regions >= 0, new[np.clip(regions, 0, None)], -1)
+def merge_regions(ctx: SegmentContext, regions: np.ndarray,
+                  floor_z: float | None = None) -> np.ndarray:
+    """Merge adjacent coplanar regions of alike colour (step 4; union-find, up to
+    ``merge_passes`` rounds): mean colours (``ctx.lab``) within ``merge_colour_thresh``, normals
+    within ``merge_normal_deg`` and each centroid within ``merge_offset_m`` of the other's
+    plane. Two door-sized rectangles standing on the floor at ``floor_z`` [m] stay apart
+    (:func:`~sim2radar.reconstruct.segment_builtin_labels.door_like`). Returns the label map
+    with consecutive ids."""
+    opts, cfg, pl, lab = ctx.config, ctx.thresholds, ctx.points_level, ctx.lab
+    n = int(regions.max()) + 1
+    if n <= 1:
         return regions
-
-    def _label(self, regions, pl, rgb, floor_z_known=None):
-        cfg = self.thresholds
+    for _ in range(cfg.merge_passes):
         n = int(regions.max()) + 1
-        geos = [region_geometry(pl, regions == i, pixel_angle_rad=self._pixel_angle)
-                for i in range(n)]
-        hsv = cv2.cvtColor(rgb, cv2.COLOR_RGB2HSV)
-        red = (((hsv[..., 0] < cfg.red_hue[0]) | (hsv[..., 0] > cfg.red_hue[1]))
-               & (hsv[..., 1] > cfg.red_min_saturation) & (hsv[..., 2] > cfg.red_min_value))
         flat = regions.ravel()
         ok = flat >= 0
-        value = np.bincount(flat[ok], hsv[..., 2].ravel()[ok] / 255.0, minlength=n) / np.maximum(
-            np.bincount(flat[ok], minlength=n), 1)
-        red_frac = np.bincount(flat[ok], red.ravel()[ok], minlength=n) / np.maximum(
-            np.bincount(flat[ok], minlength=n), 1)
-        cos_h = math.cos(math.radians(cfg.label_tilt_deg))
-        sin_v = math.sin(math.radians(cfg.label_tilt_deg))
-        # floor and ceiling levels: the largest up-/down-facing horizontal regions
-        ups = [g for g in geos if g.vertical_cos > cos_h and g.normal[2] > 0
-               and g.centroid[2] < -cfg.floor_below_camera_m]
-        downs = [g for g in geos if g.vertical_cos > cos_h and g.normal[2] < 0
-                 and g.centroid[2] > cfg.ceiling_above_camera_m]
-        zs = pl[..., 2][np.isfinite(pl[..., 2])]
-        if floor_z_known is not None:
-            floor_z = floor_z_known
-        elif ups:
-            floor_z = max(ups, key=lambda g: g.n_px).centroid[2]
-        else:
-            floor_z = float(np.percentile(zs, cfg.level_fallback_pct))
-        ceil_z = (max(downs, key=lambda g: g.n_px).centroid[2] if downs
-                  else float(np.percentile(zs, 100 - cfg.level_fallback_pct)))
-        tol = self.floor_tolerance_m
-        n_valid = int(np.isfinite(pl[..., 2]).sum())
-        labels, scores = [], []
-        for i, g in enumerate(geos):
-            label, score = "clutter", 0.4
-            size = max(g.width_m, g.height_m)
-            if (red_frac[i] > cfg.extinguisher_min_red_frac
-                    and size < cfg.extinguisher_max_size_m):
-                label, score = "fire_extinguisher", 0.7
-            elif g.vertical_cos > cos_h:
-                if g.normal[2] > 0 and g.centroid[2] < floor_z + tol:
-                    label, score = "floor", 0.9
-                elif g.normal[2] < 0 and g.centroid[2] > ceil_z - tol:
-                    label, score = "ceiling", 0.9
-            elif g.vertical_cos < sin_v:
-                label, score = self._vertical_label(g, floor_z, ceil_z, bool(downs),
-                                                    float(value[i]))
-            elif g.n_px > cfg.oblique_min_frac * n_valid:
-                # a large surface with an oblique fitted normal (depth bent near the image
-                # border, where the LiDAR does not reach): the structure it leans towards
-                if g.vertical_cos < cfg.oblique_wall_max_cos:
-                    label, score = "wall", 0.4
-                elif g.normal[2] > 0 and g.centroid[2] < 0:
-                    label, score = "floor", 0.4
-                elif g.normal[2] < 0 and g.centroid[2] > 0:
-                    label, score = "ceiling", 0.4
-            labels.append(label)
-            scores.append(score)
-        info = {"floor_z_m": float(floor_z), "ceiling_z_m": float(ceil_z)}
-        return labels, scores, info
+        cnt = np.bincount(flat[ok], minlength=n).astype(np.float64)
+        geo = [None] * n
+        col = np.zeros((n, 3))
+        for c in range(3):
+            col[:, c] = np.bincount(flat[ok], lab[..., c].ravel()[ok], minlength=n)
+        col /= np.maximum(cnt, 1)[:, None]
+        # adjacent pairs
+        pairs = set()
+        for a, b in ((regions[:, :-1], regions[:, 1:]), (regions[:-1, :], regions[1:, :])):
+            m = (a != b) & (a >= 0) & (b >= 0)
+            pa, pb = a[m], b[m]
+            codes = np.unique(np.minimum(pa, pb) * n + np.maximum(pa, pb))
+            pairs.update(codes.tolist())
+        uf = UnionFind(n)
+        cos_m = math.cos(math.radians(opts.merge_normal_deg))
+        merged = False
+        for code in sorted(pairs):
+            a, b = divmod(code, n)
+            if np.linalg.norm(col[a] - col[b]) > opts.merge_colour_thresh:
+                continue
+            for i in (a, b):
+                if geo[i] is None:
+                    geo[i] = region_geometry(pl, regions == i,
+                                             max_points=cfg.quick_fit_points,
+                                             pixel_angle_rad=ctx.pixel_angle_rad)
+            ga, gb = geo[a], geo[b]
+            if ga.n_px < 3 or gb.n_px < 3:
+                continue
+            # two door-sized rectangles side by side stay apart (neighbouring doors whose
+            # wall strip is too thin to survive; double-door leaves are joined later)
+            if door_like(opts, ga, floor_z) and door_like(opts, gb, floor_z):
+                continue
+            if abs(ga.normal @ gb.normal) < cos_m:
+                continue
+            d = gb.centroid - ga.centroid
+            if abs(ga.normal @ d) > opts.merge_offset_m or abs(gb.normal @ d) > opts.merge_offset_m:
+                continue
+            uf.union(a, b)
+            merged = True
+        if not merged:
+            break
+        roots = np.array([uf.find(i) for i in range(n)])
+        _, new = np.unique(roots, return_inverse=True)
+        regions = np.where(regions >= 0, new[np.clip(regions, 0, None)], -1)
+    return regions
 
-    def _vertical_label(self, g: SegmentGeometry, floor_z: float, ceil_z: float,
-                        ceiling_seen: bool, brightness: float = 1.0) -> tuple[str, float]:
-        cfg = self.thresholds
-        tol = self.floor_tolerance_m
-        on_floor = g.z_min_m < floor_z + tol
-        below_ceiling = g.z_max_m < ceil_z - cfg.below_ceiling_m or not ceiling_seen
-        w_lo, w_hi = self.door_width_m
-        h_lo, h_hi = self.door_height_m
-        if g.touches_border:  # partly out of view: accept narrower / shorter rectangles
-            w_lo, h_lo = cfg.cut_door_min_width_m, h_lo * cfg.cut_door_height_frac
-        rel_bottom = g.z_min_m - floor_z
-        # cut by the top border and by a side border, neither the height nor the width is
-        # seen: a wall close to the camera fills the same corner of the image, so the size
-        # rules below have no evidence of a door (the facade search still finds its frame)
-        sized = not ("t" in g.borders and ("l" in g.borders or "r" in g.borders))
-        if (sized and on_floor and below_ceiling and w_lo <= g.width_m <= w_hi
-                and h_lo <= g.height_m <= h_hi and g.fill > cfg.door_min_fill):
-            return "door", float(min(0.9, 0.5 + 0.4 * g.fill))
-        if (sized and self.door_partial and g.z_min_m < floor_z + cfg.fragment_max_bottom_m
-                and below_ceiling and cfg.fragment_min_width_m <= g.width_m <= w_hi
-                and cfg.fragment_min_height_m <= g.height_m <= h_hi
-                and g.z_max_m - floor_z <= h_hi + cfg.door_top_slack_m
-                and g.fill > cfg.fragment_min_fill and g.planarity < cfg.fragment_max_rms_m):
-            # a door fragment: LiDAR completion smears the leaf's lower / upper band into the
-            # wall or floor; tall, narrow, planar and near the floor (its box is completed to
-            # the floor and the doorway height by the door fit)
-            return "door", 0.4
-        rail = cfg.handrail_bottom_m
-        if (g.width_m > cfg.handrail_min_length_m and g.height_m < cfg.handrail_max_height_m
-                and rail[0] < rel_bottom < rail[1]):
-            return "handrail", 0.6
-        sill, win_w, win_h = cfg.window_bottom_m, cfg.window_width_m, cfg.window_height_m
-        if (sill[0] < rel_bottom < sill[1] and below_ceiling and win_w[0] <= g.width_m <= win_w[1]
-                and win_h[0] <= g.height_m <= win_h[1] and g.fill > cfg.window_min_fill
-                and g.planarity < cfg.window_max_rms_m):
-            if brightness >= cfg.window_min_brightness:  # glass shows daylight or reflections
-                return "window", 0.5
-            top = g.z_max_m - floor_z
-            if (sized and h_lo <= top <= h_hi + cfg.door_top_slack_m
-                    and w_lo <= g.width_m <= w_hi):
-                # the upper part of a door whose lower part was split off: door-height top
-                return "door", 0.4
-        if g.height_m > cfg.wall_min_height_m or g.width_m > cfg.wall_min_width_m:
-            return "wall", 0.8
-        return "clutter", 0.4
 
-    @staticmethod
-    def _compact(regions, labels, scores):
-        ids = np.unique(regions[regions >= 0])
-        remap = np.full(int(regions.max()) + 2, -1, np.int64)
-        remap[ids] = np.arange(len(ids))
-        seg = np.where(regions >= 0, remap[np.clip(regions, 0, None)], -1).astype(np.int32)
-        return seg, [labels[i] for i in ids], [scores[i] for i in ids]
+def compact_regions(regions: np.ndarray, labels, scores):
+    """The label map (int32) with the region ids that hold pixels renumbered 0..S-1, and
+    their labels and scores."""
+    ids = np.unique(regions[regions >= 0])
+    remap = np.full(int(regions.max()) + 2, -1, np.int64)
+    remap[ids] = np.arange(len(ids))
+    seg = np.where(regions >= 0, remap[np.clip(regions, 0, None)], -1).astype(np.int32)
+    return seg, [labels[i] for i in ids], [scores[i] for i in ids]

@@ -1,7 +1,7 @@
 """Region geometry and label-map primitives of the ``builtin`` segmenter.
 
-Pure functions over arrays, used by the steps of
-:class:`~sim2radar.reconstruct.segment_builtin.BuiltinSegments`: the shape of one region in the
+Pure functions over arrays, used by the step functions of
+:mod:`sim2radar.reconstruct.segment_builtin`: the shape of one region in the
 level frame (:class:`SegmentGeometry`, :func:`region_geometry`: plane fit, extents, fill, the
 image borders it reaches), and operations on a label map (an (H, W) int array, -1 unlabelled):
 :func:`fill_nearest`, :func:`fill_columns` and the :class:`UnionFind` the region merge uses.

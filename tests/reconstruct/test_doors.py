@@ -166,4 +166,4 @@ def test_door_thickness_is_one_constant_the_worlds_mean_doorway_depth():
     depths = [door.box_world[4] for seed in range(3) for door in generate_world(seed).doors]
     assert depths and all(lo - 1e-6 <= dy <= hi + 1e-6 for dy in depths)
     assert DoorFitConfig().thickness_m == FacadeConfig().thickness_m == DOOR_THICKNESS_M
-    assert BuiltinSegments().door_thickness_m == DOOR_THICKNESS_M
+    assert BuiltinSegments().config.door_thickness_m == DOOR_THICKNESS_M

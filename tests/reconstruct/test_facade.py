@@ -4,7 +4,7 @@ The scenes are ray-cast analytically in NumPy: a level camera 1.4 m above the fl
 2.7 m above it), vertical walls painted in CIE L*, and a door frame (two 6 cm posts from the
 floor to a 6 cm lintel whose top is at 2.1 m) 25 L* darker than the wall. The per-pixel
 level-frame points are the ray–surface intersections; the image gradients are computed as
-``BuiltinSegments._facade_doors`` computes them (Gaussian σ 0.8, L*, Sobel / 8).
+``segment_builtin_doors.facade_doors`` computes them (Gaussian σ 0.8, L*, Sobel / 8).
 """
 
 from __future__ import annotations
@@ -448,8 +448,8 @@ def test_builtin_segments_take_facade_options_and_name_unknown_fields():
     from sim2radar.reconstruct.segment_builtin import BuiltinSegments
 
     seg = BuiltinSegments(facade_options={"door_width_m": [0.8, 1.9], "lintel_cover": 0.5})
-    assert seg.facade_config.door_width_m == (0.8, 1.9)
-    assert seg.facade_config.lintel_cover == 0.5
+    assert seg.config.facade_config.door_width_m == (0.8, 1.9)
+    assert seg.config.facade_config.lintel_cover == 0.5
     with pytest.raises(ValueError, match=r"facade_options.*'post_cov'.*post_cover"):
         BuiltinSegments(facade_options={"post_cov": 0.5})
 

@@ -5,7 +5,15 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from sim2radar.reconstruct.segment_builtin import BuiltinSegments, region_geometry
+from sim2radar.reconstruct.segment_builtin import (
+    BuiltinSegments,
+    SegmentContext,
+    SegmenterConfig,
+    region_geometry,
+)
+from sim2radar.reconstruct.segment_builtin_doors import grow_doors, wall_openings, wall_planes
+from sim2radar.reconstruct.segment_builtin_labels import vertical_label
+from sim2radar.reconstruct.segment_builtin_walls import flush_with_walls, proud_of_walls, wall_plane
 from sim2radar.reconstruct.synthetic import corridor_frame
 from sim2radar.reconstruct.types import DepthResult, FrameInput, ReconstructionInputError
 from sim2radar.vocab import SEMANTIC_CLASSES, semantic_id
@@ -115,6 +123,12 @@ def _grid_points(x: np.ndarray) -> np.ndarray:
     return np.stack(np.broadcast_arrays(x, GRID_Y[None, :], GRID_Z[:, None]), -1).astype(np.float32)
 
 
+def _ctx(pl: np.ndarray, config: SegmenterConfig = SegmenterConfig(), **kw) -> SegmentContext:
+    """The segmenter's per-call context over the grid ``pl``: floor at -1.3 m, ceiling at
+    1.5 m."""
+    return SegmentContext(config, pl, floor_z_m=-1.3, ceiling_z_m=1.5, **kw)
+
+
 def _wall_with_door_fragment(door_lab):
     """A wall 4 m ahead (the grid), a 0.75 m wide door leaf up to 2.1 m above the floor; only
     its part below z = -0.3 is its own region."""
@@ -131,15 +145,12 @@ def _wall_with_door_fragment(door_lab):
 
 def test_door_leaf_is_grown_from_its_lower_fragment_by_colour():
     regions, pl, lab, door = _wall_with_door_fragment((30.0, 30.0, 20.0))
-    seg = BuiltinSegments()
-    out, labels, _ = seg._grow_doors(regions, ["wall", "clutter"], [0.8, 0.4], pl, lab,
-                                     -1.3, 1.5)
+    out, labels, _ = grow_doors(_ctx(pl, lab=lab), regions, ["wall", "clutter"], [0.8, 0.4])
     assert labels[1] == "door"
     assert _iou(out == 1, door) > 0.95  # the upper leaf joined, the wall around it did not
     # a fragment of the wall's own colour is not grown (it would swallow the wall column)
     regions, pl, lab, door = _wall_with_door_fragment((60.0, 0.0, 0.0))
-    out, labels, _ = seg._grow_doors(regions, ["wall", "clutter"], [0.8, 0.4], pl, lab,
-                                     -1.3, 1.5)
+    out, labels, _ = grow_doors(_ctx(pl, lab=lab), regions, ["wall", "clutter"], [0.8, 0.4])
     assert labels[1] == "clutter" and (out == 1).sum() == (regions == 1).sum()
 
 
@@ -155,12 +166,12 @@ def test_rectangle_cut_by_the_top_and_a_side_border_is_no_door():
     and bottom borders cut it (its width is seen); cut by the top and the left border, neither
     its height nor its width is measured — a wall near the camera fills that corner too — so
     the size rules do not call it a door."""
-    seg = BuiltinSegments()
+    cfg = SegmenterConfig()
     floor_z, ceil_z = -1.25, 1.55
-    assert seg._vertical_label(_geometry("tb"), floor_z, ceil_z, True)[0] == "door"
-    assert seg._vertical_label(_geometry(""), floor_z, ceil_z, True)[0] == "door"
+    assert vertical_label(cfg, _geometry("tb"), floor_z, ceil_z, True)[0] == "door"
+    assert vertical_label(cfg, _geometry(""), floor_z, ceil_z, True)[0] == "door"
     for borders in ("tl", "tr", "tbl"):
-        assert seg._vertical_label(_geometry(borders), floor_z, ceil_z, True)[0] == "wall"
+        assert vertical_label(cfg, _geometry(borders), floor_z, ceil_z, True)[0] == "wall"
 
 
 @pytest.mark.parametrize(("z_max", "label"), [(0.85, "door"), (0.95, "door"), (1.15, "wall")])
@@ -169,10 +180,9 @@ def test_rectangle_taller_than_a_door_is_a_wall(z_max, label):
     up to ``door_height_m[1]`` (2.3 m: standard leaves are at most 2.13 m, plus the error of a
     measured top); 2.4 m tall it is a wall's surface — with or without the image's top border
     cutting it (a wall facing the camera in a corner fills the same shape)."""
-    seg = BuiltinSegments()
     for borders in ("", "t"):
         g = _geometry(borders, z_max=z_max)
-        assert seg._vertical_label(g, -1.25, 1.55, False)[0] == label
+        assert vertical_label(SegmenterConfig(), g, -1.25, 1.55, False)[0] == label
 
 
 def _wall_with_block(front_m: float, top_m: float, turn_deg: float = 0.0):
@@ -201,9 +211,8 @@ def test_furniture_standing_proud_of_a_wall_is_clutter(front_m, top_m, turn_deg,
     furniture when below door height, or up to it but facing the same way as the wall (a
     cabinet's front: a leaf swung out of its doorway is turned by its swing); flush with the
     wall, turned, above door height or far in front of the wall it keeps its label."""
-    seg = BuiltinSegments()
     regions, pl = _wall_with_block(front_m, top_m, turn_deg)
-    _, labels, _, proud = seg._proud_of_walls(regions, ["wall", "door"], [0.8, 0.5], pl, -1.3)
+    _, labels, _, proud = proud_of_walls(_ctx(pl), regions, ["wall", "door"], [0.8, 0.5])
     assert labels[1] == label
     assert (1 in proud) == (label == "clutter")
     assert labels[0] == "wall"
@@ -216,12 +225,12 @@ def test_furniture_blended_into_its_wall_region_is_split_off():
     regions, pl = _wall_with_block(0.4, 1.5)
     block = regions == 1
     merged = np.zeros_like(regions)
-    out, labels, _, proud = BuiltinSegments()._proud_of_walls(merged, ["wall"], [0.8], pl, -1.3)
+    out, labels, _, proud = proud_of_walls(_ctx(pl), merged, ["wall"], [0.8])
     assert len(labels) == 2 and labels[1] == "clutter" and 1 in proud
     assert _iou(out == 1, block) > 0.9
     assert ((out == 0) & ~block).sum() == (~block).sum()
-    out, labels, _, _ = BuiltinSegments(proud_split=False)._proud_of_walls(
-        merged, ["wall"], [0.8], pl, -1.3)
+    out, labels, _, _ = proud_of_walls(_ctx(pl, SegmenterConfig(proud_split=False)), merged,
+                                       ["wall"], [0.8])
     assert labels == ["wall"] and (out == 0).all()
 
 
@@ -230,7 +239,7 @@ def test_small_region_on_a_wall_plane_is_wall(front_m, label):
     """A piece of wall too small to be a wall by size (a strip a handrail cut out) is ``wall``
     when it lies on a large wall's plane; standing proud of it, it stays ``clutter``."""
     regions, pl = _wall_with_block(front_m, 0.5)
-    labels = BuiltinSegments()._flush_with_walls(regions, ["wall", "clutter"], pl)
+    labels = flush_with_walls(_ctx(pl), regions, ["wall", "clutter"])
     assert labels == ["wall", label]
 
 
@@ -240,10 +249,8 @@ def test_wall_region_without_depth_is_skipped_by_the_opening_search():
     (found on a procedural frame, where it raised ``IndexError`` and failed the frame)."""
     regions, pl = _wall_with_block(0.0, 1.9)
     pl[regions == 1] = np.nan
-    seg = BuiltinSegments()
-    assert seg._wall_plane(pl, regions == 1) is None
-    out, labels, _, boxes = seg._wall_openings(regions, ["wall", "wall"], [0.8, 0.8], pl,
-                                               -1.3, 1.5)
+    assert wall_plane(_ctx(pl), regions == 1) is None
+    out, labels, _, boxes = wall_openings(_ctx(pl), regions, ["wall", "wall"], [0.8, 0.8])
     assert labels == ["wall", "wall"] and boxes == [] and (out == regions).all()
 
 
@@ -262,9 +269,7 @@ def test_open_doorway_framed_by_two_wall_regions_is_a_door(split):
         regions[:, 100:] = 1
         regions[GRID_Z >= 0.8, 60:100] = 1
     regions[door] = 2
-    seg = BuiltinSegments()
-    _, _, _, boxes = seg._wall_openings(regions, ["wall", "wall", "clutter"], [0.8] * 3, pl,
-                                        -1.3, 1.5)
+    _, _, _, boxes = wall_openings(_ctx(pl), regions, ["wall", "wall", "clutter"], [0.8] * 3)
     assert len(boxes) == 1
     assert boxes[0][3] == pytest.approx(1.0, abs=0.08)
 
@@ -278,7 +283,6 @@ def test_coplanar_wall_regions_merge_to_the_front_most_face():
     recess[:, 48:] = True  # 70 % of the columns: the leaves
     pl = _grid_points(np.where(recess, 4.08, 4.0))
     regions = np.where(recess, 0, 1)
-    seg = BuiltinSegments()
-    (plane,) = seg._wall_planes(regions, ["wall", "wall"], pl)
+    (plane,) = wall_planes(_ctx(pl), regions, ["wall", "wall"])
     assert plane.normal @ np.array([-1.0, 0.0, 0.0]) == pytest.approx(1.0, abs=1e-3)
     assert plane.offset_m == pytest.approx(-4.0, abs=0.01)

@@ -10,6 +10,7 @@ import pytest
 
 from sim2radar.reconstruct import ReconstructionConfig, build_backends
 from sim2radar.reconstruct.segment_builtin import BuiltinSegments, SegmentGeometry
+from sim2radar.reconstruct.segment_builtin_labels import vertical_label
 from sim2radar.reconstruct.segment_builtin_thresholds import SegmenterThresholds
 
 # The values the segmenter's steps used inline before they were named (the tuning on the
@@ -56,7 +57,7 @@ DOCUMENTED = {
 
 def test_defaults_are_the_documented_values():
     assert dataclasses.asdict(SegmenterThresholds()) == DOCUMENTED
-    assert BuiltinSegments().thresholds == SegmenterThresholds()
+    assert BuiltinSegments().config.thresholds == SegmenterThresholds()
 
 
 def test_every_field_is_documented_once_in_the_docstring():
@@ -97,9 +98,9 @@ def test_thresholds_from_yaml_lists_and_their_effect():
     ``wall_min_height_m`` (1 m): a wall's surface. Raised to 1.5 m (and ``wall_min_width_m`` to
     2.5 m), the same panel is clutter (a sideboard)."""
     seg = BuiltinSegments(thresholds={"window_width_m": [0.5, 2.5]})
-    assert seg.thresholds.window_width_m == (0.5, 2.5)
+    assert seg.config.thresholds.window_width_m == (0.5, 2.5)
     g = SegmentGeometry(50_000, np.array([3.0, 0.0, -0.65]), np.array([-1.0, 0.0, 0.0]), 0.01,
                         2.2, -1.25, -0.05, 0.95, "")
-    assert BuiltinSegments()._vertical_label(g, -1.25, 1.55, True)[0] == "wall"
+    assert vertical_label(BuiltinSegments().config, g, -1.25, 1.55, True)[0] == "wall"
     low = BuiltinSegments(thresholds={"wall_min_height_m": 1.5, "wall_min_width_m": 2.5})
-    assert low._vertical_label(g, -1.25, 1.55, True)[0] == "clutter"
+    assert vertical_label(low.config, g, -1.25, 1.55, True)[0] == "clutter"
