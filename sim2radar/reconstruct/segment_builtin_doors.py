@@ -37,7 +37,14 @@ def grow_doors(ctx: SegmentContext, regions: np.ndarray, labels, scores, skip=fr
     ``door_bottom_max_m``) whose mean colour differs from its wall's (ΔE > ``grow_colour``),
     the pixels within its image columns that are connected to it and of its colour
     (ΔE < ``grow_colour``) are taken; if that grown region is a door (door width, top at
-    door height, below the ceiling) it becomes a ``door`` region."""
+    door height, below the ceiling) it becomes a ``door`` region. Region ids in ``skip`` (the
+    furniture :func:`~sim2radar.reconstruct.segment_builtin_walls.proud_of_walls` found) are not
+    grown; colours are ``ctx.lab``, heights from ``ctx.floor_z_m`` up to ``ctx.ceiling_z_m``.
+
+    Returns
+    -------
+    regions, labels, scores : the label map and lists, grown leaves relabelled ``door``.
+    """
     opts, cfg, pl, lab = ctx.config, ctx.thresholds, ctx.points_level, ctx.lab
     floor_z, ceil_z = ctx.floor_z_m, ctx.ceiling_z_m
     n = len(labels)
@@ -244,7 +251,15 @@ def wall_planes(ctx: SegmentContext, regions: np.ndarray, labels) -> list[WallPl
 
 def facade_doors(ctx: SegmentContext, regions: np.ndarray, labels, scores):
     """Doorways found by their frames on the rectified wall planes
-    (:mod:`sim2radar.reconstruct.facade`); their pixels become ``door`` segments."""
+    (:mod:`sim2radar.reconstruct.facade`, options ``ctx.config.facade_config``, on the planes
+    of :func:`wall_planes`); their pixels among wall, clutter, window and door regions become
+    ``door`` segments.
+
+    Returns
+    -------
+    regions, labels, scores : the label map and lists with the doorways' segments added.
+    boxes : list of [x, y, z, dx, dy, dz, heading] — the doorway boxes (level frame) [m, rad].
+    """
     sigma = ctx.thresholds.facade_blur_sigma_px
     lab = cv2.cvtColor(cv2.GaussianBlur(ctx.rgb, (0, 0), sigma).astype(np.float32) / 255.0,
                        cv2.COLOR_RGB2LAB)[..., 0]
