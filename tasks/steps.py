@@ -77,24 +77,24 @@ class FrameSource:
         return frame, note
 
 
-_BACKENDS = threading.local()
+_BACKENDS: dict[str, tuple] = {}
+_BACKENDS_LOCK = threading.Lock()
 
 
 def _backends(config, ground_truth=None) -> tuple:
-    """The (depth, segments, materials) backends of ``config``, built once per thread (model
-    files load once; the built-in segmenter keeps per-call state, so threads do not share);
-    ``oracle`` backends are built per view with its ground truth."""
+    """The (depth, segments, materials) backends of ``config``, built once per process (model
+    files load once) and shared by its threads: a backend keeps no per-call state (what a call
+    measures comes back in its result); ``oracle`` backends are built per view with its ground
+    truth."""
     from sim2radar.reconstruct import build_backends
 
     if any(s.name == "oracle" for s in (config.depth, config.segments, config.materials)):
         return build_backends(config, ground_truth)
-    cache = getattr(_BACKENDS, "cache", None)
-    if cache is None:
-        cache = _BACKENDS.cache = {}
     key = repr(config.to_dict())
-    if key not in cache:
-        cache[key] = build_backends(config)
-    return cache[key]
+    with _BACKENDS_LOCK:
+        if key not in _BACKENDS:
+            _BACKENDS[key] = build_backends(config)
+        return _BACKENDS[key]
 
 
 def _write(st, stage: str, table, src: FrameSource, config, inputs: dict,

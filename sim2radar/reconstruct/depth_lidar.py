@@ -315,9 +315,9 @@ class LidarDepth:
     filter strength ``lambda`` and, with ``floor_fill``, ``up_cam`` (gravity up, camera frame),
     ``floor`` (``FloorPlane.to_info()`` or None; the builtin segmenter takes its up and floor
     from these two) and ``floor_filled_fraction``.
-    The per-pixel confidence map ((H, W) float32 in [0, 1], 0 in holes,
-    ``FLOOR_FILL_CONFIDENCE`` where the floor fill set the depth) of the last frame is
-    ``self.last_confidence``.
+    The result's ``confidence`` is the per-pixel confidence map ((H, W) float32 in [0, 1], 0 in
+    holes, ``FLOOR_FILL_CONFIDENCE`` where the floor fill set the depth). The backend keeps no
+    per-call state, so one instance serves many threads.
     """
 
     def __init__(self, **options) -> None:
@@ -326,7 +326,6 @@ class LidarDepth:
         except TypeError as exc:
             known = ", ".join(f.name for f in dataclasses.fields(LidarDepthConfig))
             raise ValueError(f"lidar depth backend: {exc}; known options: {known}") from None
-        self.last_confidence: np.ndarray | None = None
 
     def _floor(self, frame: FrameInput, depth_m: np.ndarray
                ) -> tuple[np.ndarray | None, FloorPlane | None]:
@@ -377,9 +376,8 @@ class LidarDepth:
             info["floor_filled_fraction"] = float((filled & (depth > 0)).mean())
             info["hole_fraction"] = float((depth <= 0).mean())
         log.debug("%s: lidar completion %s", frame.name, info)
-        self.last_confidence = conf
         valid = depth > 0
         info["confidence_mean"] = float(conf[valid].mean()) if valid.any() else 0.0
         return DepthResult(
-            depth_m=depth, info={"backend": "lidar", "n_lidar_points": n_view, **info}
-        )
+            depth_m=depth, info={"backend": "lidar", "n_lidar_points": n_view, **info},
+            confidence=conf)

@@ -691,8 +691,8 @@ class Sam2GdinoSegments:
     keep_unmatched : bool — keep segments without a matching detection as ``unknown`` (default
         True; they still carry geometry) or drop them (pixels -1).
 
-    After :meth:`segment`, ``last_detections`` holds the Grounding DINO :class:`Detections`; the
-    returned ``Segments.info`` is a JSON-able summary (mask and detection counts, detections as
+    The returned ``Segments.detections`` holds the Grounding DINO :class:`Detections` and
+    ``Segments.info`` a JSON-able summary (mask and detection counts, detections as
     ``[label, score, x0, y0, x1, y1]``).
     """
 
@@ -723,7 +723,6 @@ class Sam2GdinoSegments:
                                             "sam2-gdino option gdino"))
         self.match_iou = float(match_iou)
         self.keep_unmatched = bool(keep_unmatched)
-        self.last_detections: Detections | None = None
 
     def check(self) -> str:
         """Run one small synthetic image (96 × 128 px: a red door on a grey wall) through the SAM2
@@ -750,7 +749,6 @@ class Sam2GdinoSegments:
             )
         seg = paint_masks(masks, frame.shape, self.sam.config.min_area_px)
         dets = self.gdino.detect(frame.rgb)
-        self.last_detections = dets
         labels, scores, _ = match_masks_to_detections(seg, dets, self.match_iou)
         if not self.keep_unmatched:
             keep = [i for i, lab in enumerate(labels) if lab != "unknown"]
@@ -771,4 +769,4 @@ class Sam2GdinoSegments:
         log.info("%s: %d SAM2 segments, %d detections, %d labelled", frame.name,
                  len(labels), len(dets), sum(lab != "unknown" for lab in labels))
         return Segments(seg.astype(np.int32), tuple(labels), np.asarray(scores, np.float32),
-                        info=info)
+                        info=info, detections=dets)

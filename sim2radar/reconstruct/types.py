@@ -15,7 +15,7 @@ Every backend receives a :class:`FrameInput` and returns the stage's result data
 from __future__ import annotations
 
 import dataclasses
-from typing import Protocol
+from typing import Any, Protocol
 
 import numpy as np
 
@@ -157,10 +157,13 @@ class FrameInput:
 @dataclasses.dataclass(frozen=True, eq=False)
 class DepthResult:
     """Stage 1 output. ``depth_m`` (H, W) float32 z-depth [m], 0 where invalid; ``info`` holds
-    diagnostics (e.g. alignment scale/shift, number of LiDAR points used)."""
+    diagnostics (e.g. alignment scale/shift, number of LiDAR points used); ``confidence``
+    (H, W) float32 in [0, 1] per pixel where the backend measures one (``lidar``), else None.
+    Not stored: the depth artifact holds ``depth_m`` and ``info``."""
 
     depth_m: np.ndarray
     info: dict = dataclasses.field(default_factory=dict)
+    confidence: np.ndarray | None = None
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -178,6 +181,8 @@ class Segments:
         wall planes), ``x y z dx dy dz heading`` in the level frame of ``up_cam`` [m, rad];
         they take precedence over boxes fitted to door pixels. Empty when none.
     info : dict — JSON-able diagnostics (floor / ceiling level, detection counts, ...).
+    detections : the open-vocabulary detector's raw detections where a backend ran one
+        (``sam2-gdino``: its :class:`Detections`), else None. Not stored.
     """
 
     segment_id: np.ndarray
@@ -187,6 +192,7 @@ class Segments:
     door_boxes_level: np.ndarray = dataclasses.field(
         default_factory=lambda: np.zeros((0, 7), np.float32))
     info: dict = dataclasses.field(default_factory=dict)
+    detections: Any = None
 
     def __post_init__(self) -> None:
         if self.up_cam is not None:

@@ -51,7 +51,7 @@ def test_corridor_absrel_below_003_with_full_coverage(corridor):
     assert coverage >= 0.95
     assert res.depth_m.dtype == np.float32 and res.depth_m.shape == depth.shape
     json.dumps(res.info)  # diagnostics stay JSON-able (they go into artifact provenance)
-    conf = backend.last_confidence
+    conf = res.confidence
     assert conf.shape == depth.shape and 0 <= conf.min() and conf.max() <= 1
     assert res.info["n_lidar_points"] > 500
 

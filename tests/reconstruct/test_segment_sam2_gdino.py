@@ -120,7 +120,7 @@ def test_masks_and_labels_of_the_synthetic_scene(models, frame):
         assert iou > 0.95, (label, iou)
         assert seg.scores[i] > 0.99
     assert (seg.segment_id >= 0).all()
-    dets = backend.last_detections
+    dets = seg.detections
     assert "handrail" in dets.labels  # detected, but matched to no mask
     assert "handrail" not in seg.labels
     assert len(dets) == 7  # the decoy "cat" query never fires
