@@ -212,6 +212,27 @@ def test_the_plain_path_does_not_import_prefect():
     assert out.stdout.strip() == "[]", out.stdout
 
 
+#: The CLI modules that talk to Prefect itself (its server, its log handlers): every other
+#: Prefect import belongs in flows/.
+PREFECT_CLI_HELPERS = {"sim2radar/cli/_app.py", "sim2radar/cli/_prefect_app.py",
+                       "sim2radar/cli/server.py"}
+
+
+def test_prefect_is_imported_only_in_flows():
+    """One answer to "where does a Prefect task go?": ``flows/``. The library, the store and
+    the jobs' drivers (``tasks/``) never import Prefect; the CLI only in its server helpers."""
+    import re
+
+    pattern = re.compile(r"^\s*(from prefect\b|import prefect\b)", re.M)
+    found = []
+    for folder in ("tasks", "storage", "sim2radar"):
+        for path in sorted((ROOT / folder).rglob("*.py")):
+            rel = path.relative_to(ROOT).as_posix()
+            if rel not in PREFECT_CLI_HELPERS and pattern.search(path.read_text()):
+                found.append(rel)
+    assert not found, f"Prefect imported outside flows/: {found}"
+
+
 if __name__ == "__main__":
     mods = modules()
     edges = import_graph(mods)
