@@ -187,7 +187,7 @@ def run_experiment_flow(plan_path: str, gpu_slots: bool = False) -> dict[str, An
                 if error is None:
                     finetune(r, result)
                 else:
-                    record(failed_row(ctx, r, PretrainResult(job.key, "", 0),
+                    record(failed_row(ctx, r, PretrainResult(key=job.key, checkpoint="", n_frames=0),
                                       f"pre-training {job.id} failed: {_text(error)}"))
         else:
             record(result if error is None else failed_row(ctx, job, pretrain, _text(error)))

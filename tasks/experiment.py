@@ -29,7 +29,6 @@ the store writes are local or retried by the store itself.
 from __future__ import annotations
 
 import contextlib
-import dataclasses
 import functools
 import json
 import logging
@@ -153,15 +152,15 @@ def prepare_sweep(datasets: Mapping[str, str | os.PathLike | None], *, profile: 
         fixed_at=fixed_at, key_of=_key_of,
         provenance={"versions": package_versions(), "code": _code_version(),
                     "git": git_commit()})
-    write_json(folder.sweep_json, plan.sweep)
+    write_json(folder.sweep_json, plan.sweep.model_dump(mode="json"))
     if setup.preregistration is not None:   # the copy the results link (same digest: settings)
         atomic_write(folder.preregistration_md, setup.preregistration["text"].encode())
     if force:
         force_runs(st.root_uri, sweep_dir, plan.find_runs(force))
     # the flow takes this file's path, not the plan: a paper-sized grid's plan (run subsets,
     # 25 intensity matches) is ~1 MB, over the 512 KiB Prefect allows for a flow run's parameters
-    path = write_json(folder.plan_json, plan.to_dict()).resolve()
-    return dataclasses.replace(plan, plan_path=str(path))
+    path = write_json(folder.plan_json, plan.model_dump(mode="json")).resolve()
+    return plan.model_copy(update={"plan_path": str(path)})
 
 
 def parse_runs_per_gpu(value: int | str | None) -> int | str | None:
@@ -210,13 +209,12 @@ def pack_runs(plan: SweepPlan, runs_per_gpu: int | str, *, steps: int = 20):
     ------
     ValueError — the sweep's device is not a CUDA GPU, or a bad count.
     """
-    from sim2radar.detect.config import DetectConfig
     from sim2radar.experiment.packing import decide_runs
     from sim2radar.hardware import torch_device
 
     runs_per_gpu = parse_runs_per_gpu(runs_per_gpu)
     n_gpus = cuda_devices(plan.context.device)
-    cfg = DetectConfig.model_validate(plan.context.finetune_config)
+    cfg = plan.context.finetune_config
     device = str(torch_device(plan.context.device or cfg.runtime.device))
     decision = decide_runs(cfg, device, runs_per_gpu, steps=steps)
     SweepFolder(plan.context.sweep_dir).update_sweep(
@@ -228,10 +226,11 @@ def read_plan(plan_path: str | os.PathLike) -> SweepPlan:
     """The plan :func:`prepare_sweep` wrote (``<sweep>/plan.json``), with its ``plan_path``."""
     path = Path(plan_path)
     try:
-        return SweepPlan.from_dict(json.loads(path.read_text()), plan_path=str(path))
+        plan = SweepPlan.model_validate(json.loads(path.read_text()))
     except (OSError, ValueError, KeyError, TypeError) as exc:
         raise FileNotFoundError(f"{path}: not a sweep plan ({exc}); prepare the sweep again "
                                 "(sim2radar sweep writes it before the flow starts)") from exc
+    return plan.model_copy(update={"plan_path": str(path)})
 
 
 def plan_cost(datasets: Mapping[str, str | os.PathLike | None], *, profile: Any = "demo",
@@ -337,14 +336,13 @@ def run_pretraining(ctx: SweepContext, job: PlannedPretrain) -> PretrainResult:
     (:func:`sim2radar.experiment.learnability.check_pretraining`: its training frames, the
     held-out sim split, zero-shot on the real validation split). ``done.json`` and ``check.json``
     in its folder mark it finished; its ``experiment_pretrain`` row goes into the store."""
-    from sim2radar.detect.config import DetectConfig
     from sim2radar.detect.train import checkpoint_loads, quarantine_file
     from sim2radar.experiment.data import with_intensity
     from sim2radar.experiment.learnability import PretrainingCheck, check_pretraining
     from sim2radar.experiment.runner import pretrain_encoder
     from sim2radar.radar.intensity import IntensityMatch
 
-    spec, cfg = job.spec, DetectConfig.model_validate(ctx.pretrain_config)
+    spec, cfg = job.spec, ctx.pretrain_config
     train_ids, held_ids = _pretrain_ids(ctx, job)
     match = (IntensityMatch.from_dict(job.intensity_match) if job.intensity_match is not None
              else None)
@@ -383,11 +381,12 @@ def run_pretraining(ctx: SweepContext, job: PlannedPretrain) -> PretrainResult:
                                                      schema=schema.schema))
         st.write(STAGES["pretrain"], job.key, table, stage_version=EXPERIMENT_STAGE_VERSION,
                  provenance={"inputs": {"sim": ctx.datasets[spec.sim_role].key},
-                             "config": {"detector": ctx.pretrain_config,
-                                        "spec": job.to_dict()},
+                             "config": {"detector": ctx.pretrain_config.model_dump(mode="json"),
+                                        "spec": job.model_dump(mode="json")},
                              "seed": spec.seed, "timings_s": {"run": float(row["wall_time_s"])},
                              "extra": {"sweep": ctx.name, "train_ids": train_ids}})
-    return PretrainResult(job.key, str(ckpt), int(row["n_sim_frames"]), row)
+    return PretrainResult(key=job.key, checkpoint=str(ckpt), n_frames=int(row["n_sim_frames"]),
+                          row=row)
 
 
 def _pretrain_row(ctx: SweepContext, job: PlannedPretrain, check, done: Mapping[str, Any],
@@ -473,11 +472,10 @@ def run_finetuning(ctx: SweepContext, job: PlannedRun,
 
 def _finetune(ctx: SweepContext, st, job: PlannedRun, pretrain: PretrainResult | None,
               out: Path) -> dict[str, Any]:
-    from sim2radar.detect.config import DetectConfig
     from sim2radar.experiment.runner import finetune_and_test
 
     spec, real = job.spec, ctx.datasets["real"]
-    cfg = DetectConfig.model_validate(condition_config(ctx.finetune_config, spec.condition))
+    cfg = condition_config(ctx.finetune_config, spec.condition)
     fields = finetune_and_test(
         cfg, _load(ctx, "real", spec.train_ids, cfg),
         _load(ctx, "real", real.ids([ctx.eval_split]), cfg), out, seed=spec.seed,
@@ -490,10 +488,11 @@ def _finetune(ctx: SweepContext, st, job: PlannedRun, pretrain: PretrainResult |
            "finished_at": datetime.now(UTC).isoformat(timespec="seconds")}
     schema = get_schema("experiment_runs")
     table = schema.validate(pa.Table.from_pylist([row], schema=schema.schema))
-    described = {k: v for k, v in job.to_dict().items() if k != "train_ids"}
+    described = {k: v for k, v in job.model_dump(mode="json").items() if k != "train_ids"}
     st.write("experiment_runs", job.key, table, stage_version=EXPERIMENT_STAGE_VERSION,
              provenance={"inputs": {"real": real.key, "pretrain": row["pretrain_key"]},
-                         "config": {"detector": ctx.finetune_config, "spec": described},
+                         "config": {"detector": ctx.finetune_config.model_dump(mode="json"),
+                                    "spec": described},
                          "seed": spec.seed, "timings_s": {"run": float(row["wall_time_s"])},
                          "extra": {"sweep": ctx.name, "train_ids": list(spec.train_ids)}})
     return row

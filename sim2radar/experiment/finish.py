@@ -64,7 +64,7 @@ def finish_sweep(plan: SweepPlan, rows: Sequence[Mapping[str, Any]],
     from sim2radar.experiment.report import results_table_rows
 
     sweep_dir, rows = Path(plan.context.sweep_dir), list(rows)
-    res = write_results(sweep_dir, plan.sweep, rows, pretrainings)
+    res = write_results(sweep_dir, plan.sweep.model_dump(mode="json"), rows, pretrainings)
     counts = {k: sum(r["status"] == k for r in rows) for k in STATUSES}
     return {"name": plan.name, "sweep_dir": str(sweep_dir), "counts": counts,
             "metric": plan.metric, "stats": res["stats"], "markdown": res["markdown"],

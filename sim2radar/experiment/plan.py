@@ -15,19 +15,24 @@ checkpoint cadence, progress bars, data paths) are left out, so changing them re
 :class:`SweepPlan` is a prepared sweep as the flow runs it (:mod:`sim2radar.experiment.prepare`
 builds it): the :class:`SweepContext` every task needs, each :class:`PretrainSpec` and
 :class:`RunSpec` with its content key (:class:`PlannedPretrain`, :class:`PlannedRun`) and
-``sweep.json``'s document. It is frozen, pickles to Dask workers and round-trips through
-``plan.json`` (:meth:`SweepPlan.to_dict`, :meth:`SweepPlan.from_dict`).
+``sweep.json``'s document (:class:`~sim2radar.experiment.documents.SweepDocument`). The records
+are frozen pydantic models: they pickle to Dask workers and round-trip through ``plan.json``
+(``plan.model_dump(mode="json")``, ``SweepPlan.model_validate(doc)``) in the layout of
+:data:`PLAN_FORMAT` 3, so plans written before they were pydantic models still load.
 """
 
 from __future__ import annotations
 
-import dataclasses
 import hashlib
 import json
 import math
 from collections.abc import Mapping, Sequence
 from typing import Any
 
+from pydantic import BaseModel, ConfigDict, Field, model_serializer, model_validator
+
+from sim2radar.detect.config import DetectConfig
+from sim2radar.experiment.documents import SweepDocument
 from sim2radar.experiment.errors import SettingError
 from sim2radar.experiment.profiles import BASELINE, CONDITIONS, ExperimentProfile
 from sim2radar.experiment.subsets import real_subset, trial_seed
@@ -52,8 +57,8 @@ __all__ = [
     "settings_changes",
 ]
 
-#: version of :meth:`SweepPlan.to_dict`'s layout (``plan.json``); 1 was the untyped dict plan,
-#: 2 had no held-out split and no pre-training check
+#: version of ``plan.json``'s layout (:class:`SweepPlan`'s JSON dump); 1 was the untyped dict
+#: plan, 2 had no held-out split and no pre-training check
 PLAN_FORMAT = 3
 #: profile fields that only say how a sweep is executed or described, not what it measures
 #: (the pre-registration's path: its content's digest is part of the settings instead)
@@ -61,8 +66,13 @@ EXECUTION_FIELDS = ("name", "description", "detector", "threads_per_run", "concu
                     "preregistration")
 
 
-@dataclasses.dataclass(frozen=True)
-class PretrainSpec:
+class _Record(BaseModel):
+    """A frozen plan record (validated on construction; pickles; equal by value)."""
+
+    model_config = ConfigDict(frozen=True, extra="forbid")
+
+
+class PretrainSpec(_Record):
     """One pre-training run.
 
     Attributes
@@ -97,15 +107,8 @@ class PretrainSpec:
                                                else f"t{self.trial}")
         return name if self.fraction is None else f"{name}-f{self.fraction:g}"
 
-    def to_dict(self) -> dict[str, Any]:
-        """Plain JSON-able fields (e.g. for a Prefect task parameter)."""
-        d = dataclasses.asdict(self)
-        d["real_ids"] = list(self.real_ids)
-        return d
 
-
-@dataclasses.dataclass(frozen=True)
-class RunSpec:
+class RunSpec(_Record):
     """One fine-tuning run: a (condition, fraction, trial) cell of the grid.
 
     Attributes
@@ -134,12 +137,6 @@ class RunSpec:
     def name(self) -> str:
         """Readable id, e.g. ``sim-pretrain-f0.25-t3``."""
         return f"{self.condition}-f{self.fraction:g}-t{self.trial}"
-
-    def to_dict(self) -> dict[str, Any]:
-        """Plain JSON-able fields (``train_ids`` as a list, ``pretrain`` as a dict or None)."""
-        d = dataclasses.asdict(self)
-        d["train_ids"] = list(self.train_ids)
-        return d
 
 
 def epochs_for(n_frames: int, batch_size: int, epochs: int, min_steps: int | None) -> int:
@@ -205,10 +202,10 @@ def plan_sweep(
         seed = trial_seed(profile.sweep_seed, trial if per_trial else 0)
         key = (role, key_trial, key_fraction)
         if key not in pretrains:
-            pretrains[key] = PretrainSpec(condition, key_trial, seed, role,
-                                          profile.pretrain_epochs, key_fraction,
-                                          ids if per_subset else (),
-                                          profile.pretrain_holdout_split)
+            pretrains[key] = PretrainSpec(
+                condition=condition, trial=key_trial, seed=seed, sim_role=role,
+                epochs=profile.pretrain_epochs, fraction=key_fraction,
+                real_ids=ids if per_subset else (), holdout_split=profile.pretrain_holdout_split)
         return pretrains[key]
 
     runs: list[RunSpec] = []
@@ -219,20 +216,21 @@ def plan_sweep(
             epochs = epochs_for(len(ids), profile.batch_size, profile.finetune_epochs,
                                 profile.min_steps)
             for condition in conds:
-                runs.append(RunSpec(condition, float(fraction), trial, seed, len(ids),
-                                    pretrain_for(condition, trial, fraction, ids), epochs, ids))
+                runs.append(RunSpec(condition=condition, fraction=float(fraction), trial=trial,
+                                    seed=seed, n_real=len(ids),
+                                    pretrain=pretrain_for(condition, trial, fraction, ids),
+                                    epochs=epochs, train_ids=ids))
     return tuple(pretrains.values()), tuple(runs)
 
 
-def condition_config(finetune: Mapping[str, Any], condition: str) -> dict[str, Any]:
-    """A condition's fine-tuning ``DetectConfig`` dump: the sweep's (``finetune``), with the
+def condition_config(finetune: DetectConfig, condition: str) -> DetectConfig:
+    """A condition's fine-tuning ``DetectConfig``: the sweep's (``finetune``), with the
     condition's encoder learning-rate share (:attr:`~.profiles.Condition.encoder_lr_scale`) in
     ``optimization.encoder_lr_scale``."""
     scale = float(CONDITIONS[condition].encoder_lr_scale)
     if scale == 1.0:
-        return dict(finetune)
-    return {**finetune, "optimization": {**dict(finetune["optimization"]),
-                                         "encoder_lr_scale": scale}}
+        return finetune
+    return finetune.with_updates(optimization={"encoder_lr_scale": scale})
 
 
 def ids_digest(ids: Sequence[str]) -> str:
@@ -352,8 +350,7 @@ def settings_changes(old: Mapping[str, Any], new: Mapping[str, Any],
 # ---------------------------------------------------------------------------------------------
 # A prepared sweep: what the flow runs
 # ---------------------------------------------------------------------------------------------
-@dataclasses.dataclass(frozen=True)
-class DatasetRef:
+class DatasetRef(_Record):
     """One dataset of a sweep as a task finds it again.
 
     Attributes
@@ -374,13 +371,8 @@ class DatasetRef:
         names = list(self.splits) if splits is None else list(splits)
         return list(dict.fromkeys(i for name in names for i in self.splits.get(name, ())))
 
-    @classmethod
-    def from_dict(cls, d: Mapping[str, Any]) -> DatasetRef:
-        return cls(d["root"], d["key"], {k: tuple(v) for k, v in d["splits"].items()})
 
-
-@dataclasses.dataclass(frozen=True)
-class SweepContext:
+class SweepContext(_Record):
     """What every task of one sweep needs.
 
     Attributes
@@ -389,8 +381,8 @@ class SweepContext:
     sweep_dir : str — the sweep folder (checkpoints, runs.parquet, sweep.json, ...).
     store : str — artifact store root (path or URI).
     datasets : dict — role (:data:`~sim2radar.experiment.profiles.ROLES`) -> :class:`DatasetRef`.
-    pretrain_config, finetune_config : dict — the stages' resolved ``DetectConfig`` dumps
-        (``model_dump(mode="json")``).
+    pretrain_config, finetune_config : DetectConfig — the stages' resolved configs (in
+        ``plan.json`` as their ``model_dump(mode="json")``).
     eval_split, val_split : str — the real splits for the test and the learning curves.
     val_every : int — epochs between validation APs (0: none).
     max_val_points : int — at most this many validation APs per run.
@@ -401,25 +393,16 @@ class SweepContext:
     sweep_dir: str
     store: str
     datasets: dict[str, DatasetRef]
-    pretrain_config: dict[str, Any]
-    finetune_config: dict[str, Any]
+    pretrain_config: DetectConfig
+    finetune_config: DetectConfig
     eval_split: str = "test"
     val_split: str = "val"
     val_every: int = 0
     max_val_points: int = 12
     device: str | None = None
 
-    def to_dict(self) -> dict[str, Any]:
-        return dataclasses.asdict(self)
 
-    @classmethod
-    def from_dict(cls, d: Mapping[str, Any]) -> SweepContext:
-        return cls(**{**d, "datasets": {r: DatasetRef.from_dict(v)
-                                        for r, v in d["datasets"].items()}})
-
-
-@dataclasses.dataclass(frozen=True)
-class PlannedPretrain:
+class PlannedPretrain(_Record):
     """A pre-training of a prepared sweep.
 
     Attributes
@@ -430,6 +413,9 @@ class PlannedPretrain:
         (:meth:`~sim2radar.experiment.data.SubsetIntensityMatch.to_dict`), None without.
     conditions : tuple of str — the conditions whose runs load its encoder (``sim-pretrain``
         and ``sim-pretrain-lowlr`` share one).
+
+    In ``plan.json`` the spec's fields sit beside ``id``, ``key``, ``intensity_match`` and
+    ``conditions`` (one flat object).
     """
 
     spec: PretrainSpec
@@ -441,19 +427,21 @@ class PlannedPretrain:
     def id(self) -> str:
         return self.spec.name
 
-    def to_dict(self) -> dict[str, Any]:
-        return {**self.spec.to_dict(), "id": self.id, "key": self.key,
-                "intensity_match": self.intensity_match, "conditions": list(self.conditions)}
-
+    @model_validator(mode="before")
     @classmethod
-    def from_dict(cls, d: Mapping[str, Any]) -> PlannedPretrain:
-        names = [f.name for f in dataclasses.fields(PretrainSpec)]
-        spec = PretrainSpec(**{**{k: d[k] for k in names}, "real_ids": tuple(d["real_ids"])})
-        return cls(spec, d["key"], d["intensity_match"], tuple(d["conditions"]))
+    def _unflatten(cls, d: Any) -> Any:
+        if isinstance(d, Mapping) and "spec" not in d:     # plan.json's flat object
+            return {"spec": {k: d[k] for k in PretrainSpec.model_fields if k in d},
+                    **{k: d[k] for k in ("key", "intensity_match", "conditions") if k in d}}
+        return d
+
+    @model_serializer(mode="wrap")
+    def _flatten(self, handler) -> dict[str, Any]:
+        d = handler(self)
+        return {**d.pop("spec"), "id": self.id, **d}
 
 
-@dataclasses.dataclass(frozen=True)
-class PlannedRun:
+class PlannedRun(_Record):
     """A fine-tuning run of a prepared sweep.
 
     Attributes
@@ -462,6 +450,10 @@ class PlannedRun:
     key : str — its content key (real dataset, :func:`run_key_inputs`, code version): the
         key of its ``experiment_runs`` row in the store.
     pretrain_key : str or None — its pre-training's key (None: from scratch).
+
+    In ``plan.json`` the spec's fields sit beside ``id``, ``key``, ``pretrain_id`` and
+    ``pretrain_key``; its pre-training is named by ``pretrain_id`` (:class:`SweepPlan` finds
+    the spec among the plan's pre-trainings).
     """
 
     spec: RunSpec
@@ -476,27 +468,23 @@ class PlannedRun:
     def pretrain_id(self) -> str | None:
         return self.spec.pretrain.name if self.spec.pretrain else None
 
-    def to_dict(self) -> dict[str, Any]:
-        """The spec's fields with its pre-training named by ``pretrain_id`` and
-        ``pretrain_key``, ``id`` and ``key``."""
-        fields = {f.name: getattr(self.spec, f.name) for f in dataclasses.fields(RunSpec)
-                  if f.name != "pretrain"}
-        return {**fields, "train_ids": list(self.spec.train_ids), "id": self.id,
-                "key": self.key, "pretrain_id": self.pretrain_id,
+    @model_validator(mode="before")
+    @classmethod
+    def _unflatten(cls, d: Any) -> Any:
+        if isinstance(d, Mapping) and "spec" not in d:     # plan.json's flat object
+            spec = {k: d[k] for k in RunSpec.model_fields if k in d}
+            return {"spec": spec, "key": d["key"], "pretrain_key": d.get("pretrain_key")}
+        return d
+
+    @model_serializer(mode="wrap")
+    def _flatten(self, handler) -> dict[str, Any]:
+        d = handler(self)
+        spec = {k: v for k, v in d.pop("spec").items() if k != "pretrain"}
+        return {**spec, "id": self.id, "key": self.key, "pretrain_id": self.pretrain_id,
                 "pretrain_key": self.pretrain_key}
 
-    @classmethod
-    def from_dict(cls, d: Mapping[str, Any],
-                  pretrains: Mapping[str, PretrainSpec]) -> PlannedRun:
-        names = [f.name for f in dataclasses.fields(RunSpec) if f.name != "pretrain"]
-        pre = pretrains[d["pretrain_id"]] if d["pretrain_id"] is not None else None
-        spec = RunSpec(**{**{k: d[k] for k in names}, "pretrain": pre,
-                          "train_ids": tuple(d["train_ids"])})
-        return cls(spec, d["key"], d["pretrain_key"])
 
-
-@dataclasses.dataclass(frozen=True)
-class PretrainResult:
+class PretrainResult(_Record):
     """A finished pre-training, as the fine-tuning runs that load its encoder need it.
 
     Attributes
@@ -511,11 +499,10 @@ class PretrainResult:
     key: str
     checkpoint: str
     n_frames: int
-    row: dict[str, Any] = dataclasses.field(default_factory=dict)
+    row: dict[str, Any] = Field(default_factory=dict)
 
 
-@dataclasses.dataclass(frozen=True)
-class SweepPlan:
+class SweepPlan(_Record):
     """A prepared sweep: every pre-training and run with its key, and what they share.
 
     Attributes
@@ -523,21 +510,25 @@ class SweepPlan:
     context : SweepContext — what every task needs.
     pretrains : tuple of PlannedPretrain — in the order the flow submits them.
     runs : tuple of PlannedRun — trial by trial (:func:`plan_sweep`'s order).
-    sweep : dict — ``sweep.json``'s document (profile, conditions, datasets, provenance,
-        settings; what the dashboard reads).
+    sweep : SweepDocument — ``sweep.json``'s document (profile, conditions, datasets,
+        provenance, settings; what the dashboard reads).
     concurrent_runs : int — the profile's training runs in flight at once.
     metric : str — the AP column the statistics compare.
     plan_path : str or None — where the plan was written (``<sweep>/plan.json``), the flow's
         parameter: a paper-sized plan exceeds Prefect's 512 KiB limit on flow parameters.
+        Not part of the JSON form.
+
+    Its JSON form (``model_dump(mode="json")``, ``plan.json``) leads with ``"format":``
+    :data:`PLAN_FORMAT`; ``model_validate`` refuses another format.
     """
 
     context: SweepContext
     pretrains: tuple[PlannedPretrain, ...]
     runs: tuple[PlannedRun, ...]
-    sweep: dict[str, Any]
+    sweep: SweepDocument
     concurrent_runs: int
     metric: str
-    plan_path: str | None = None
+    plan_path: str | None = Field(default=None, exclude=True)
 
     @property
     def name(self) -> str:
@@ -570,21 +561,25 @@ class SweepPlan:
                                run=repr(self.runs[0].id), example=example)
         return list({by_name[w].key: by_name[w] for w in wanted}.values())
 
-    def to_dict(self) -> dict[str, Any]:
-        """JSON-able form (``plan.json``; :data:`PLAN_FORMAT`), without ``plan_path``."""
-        return {"format": PLAN_FORMAT, "context": self.context.to_dict(),
-                "pretrains": [p.to_dict() for p in self.pretrains],
-                "runs": [r.to_dict() for r in self.runs], "sweep": self.sweep,
-                "concurrent_runs": self.concurrent_runs, "metric": self.metric}
-
+    @model_validator(mode="before")
     @classmethod
-    def from_dict(cls, d: Mapping[str, Any], plan_path: str | None = None) -> SweepPlan:
-        """Read :meth:`to_dict`'s form; raises ValueError for another format."""
+    def _read_format(cls, d: Any) -> Any:
+        """plan.json: its format checked, each run's pre-training found by ``pretrain_id``."""
+        if not isinstance(d, Mapping) or not ("format" in d or any(
+                isinstance(r, Mapping) for r in d.get("runs", ()))):
+            return d                            # built from records, not read from JSON
         if d.get("format") != PLAN_FORMAT:
             raise ValueError(f"plan format {d.get('format', 1)}, expected {PLAN_FORMAT}: "
                              "prepare the sweep again")
-        pretrains = tuple(PlannedPretrain.from_dict(p) for p in d["pretrains"])
-        specs = {p.id: p.spec for p in pretrains}
-        return cls(SweepContext.from_dict(d["context"]), pretrains,
-                   tuple(PlannedRun.from_dict(r, specs) for r in d["runs"]), dict(d["sweep"]),
-                   int(d["concurrent_runs"]), str(d["metric"]), plan_path)
+        specs = {}
+        for p in d["pretrains"]:
+            p = p if isinstance(p, PlannedPretrain) else PlannedPretrain.model_validate(p)
+            specs[p.id] = p.spec
+        runs = [r if not isinstance(r, Mapping) or "spec" in r else
+                {**r, "pretrain": None if r.get("pretrain_id") is None
+                 else specs[r["pretrain_id"]]} for r in d["runs"]]
+        return {k: v for k, v in d.items() if k != "format"} | {"runs": runs}
+
+    @model_serializer(mode="wrap")
+    def _write_format(self, handler) -> dict[str, Any]:
+        return {"format": PLAN_FORMAT, **handler(self)}

@@ -30,6 +30,7 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
+from sim2radar.experiment.documents import SweepDocument
 from sim2radar.experiment.errors import SettingError, dataset_setting
 from sim2radar.experiment.folder import SweepFolder
 from sim2radar.experiment.plan import (
@@ -405,45 +406,47 @@ def build_plan(setup: SweepSetup, domains: Mapping[str, Any], *, name: str, swee
     if device is not None:
         pre_cfg = pre_cfg.with_updates(runtime={"device": device})
         ft_cfg = ft_cfg.with_updates(runtime={"device": device})
-    pre_dump, ft_dump = pre_cfg.model_dump(mode="json"), ft_cfg.model_dump(mode="json")
+    pre_dump = pre_cfg.model_dump(mode="json")
     specs, run_specs = plan_sweep(profile, real.splits[profile.train_split], setup.conditions)
     matches = _intensity_matches(profile, domains, specs, ft_cfg.model.num_point_features,
                                  ft_cfg.model.class_names)
     users = {p.name: tuple(dict.fromkeys(r.condition for r in run_specs
                                          if r.pretrain is not None and r.pretrain.name == p.name))
              for p in specs}
-    pretrains = tuple(PlannedPretrain(p, key_of(
-        "pretrain", {"sim": domains[p.sim_role].key},
-        pretrain_key_inputs(p, pre_dump, matches.get(p.name))), matches.get(p.name),
-        users[p.name]) for p in specs)
+    pretrains = tuple(PlannedPretrain(
+        spec=p, key=key_of("pretrain", {"sim": domains[p.sim_role].key},
+                           pretrain_key_inputs(p, pre_dump, matches.get(p.name))),
+        intensity_match=matches.get(p.name), conditions=users[p.name]) for p in specs)
     pre_key = {p.id: p.key for p in pretrains}
     runs = []
     for r in run_specs:
         pkey = pre_key[r.pretrain.name] if r.pretrain else None
-        runs.append(PlannedRun(r, key_of("finetune", {"real": real.key}, run_key_inputs(
-            r, profile, condition_config(ft_dump, r.condition), pkey)), pkey))
+        detector = condition_config(ft_cfg, r.condition).model_dump(mode="json")
+        runs.append(PlannedRun(spec=r, key=key_of("finetune", {"real": real.key}, run_key_inputs(
+            r, profile, detector, pkey)), pretrain_key=pkey))
     context = SweepContext(
         name=name, sweep_dir=sweep_dir, store=store,
-        datasets={role: DatasetRef(str(ds.root), ds.key, {k: tuple(v) for k, v in
-                                                           ds.splits.items()})
+        datasets={role: DatasetRef(root=str(ds.root), key=ds.key,
+                                   splits={k: tuple(v) for k, v in ds.splits.items()})
                   for role, ds in domains.items()},
-        pretrain_config=pre_dump, finetune_config=ft_dump, eval_split=profile.eval_split,
+        pretrain_config=pre_cfg, finetune_config=ft_cfg, eval_split=profile.eval_split,
         val_split=profile.val_split, val_every=profile.val_every,
         max_val_points=profile.max_val_points, device=device)
-    sweep = {
+    sweep = SweepDocument(**{
         "name": name, "profile": profile.model_dump(mode="json"),
         "conditions": list(dict.fromkeys(["baseline", *setup.conditions])),
         "fractions": list(profile.fractions), "trials": profile.trials, "metric": DEFAULT_METRIC,
         "datasets": {role: ds.describe() for role, ds in domains.items()},
         "real_domain": real.domain, "real_is_proxy": real.is_proxy, "intensity_match": matches,
         "n_pretrains": len(pretrains), "n_runs": len(runs),
-        "provenance": {**provenance, "configs": {"pretrain": pre_dump, "finetune": ft_dump}},
+        "provenance": {**provenance, "configs": {"pretrain": pre_dump,
+                                                 "finetune": ft_cfg.model_dump(mode="json")}},
         "settings": dict(settings), "settings_digest": protocol_digest(settings),
         "settings_fixed_at": fixed_at, "created_at": _now(),
         "precision": dict(setup.precision),
         "preregistration": None if setup.preregistration is None else {
             "file": PREREGISTRATION_FILE, "sha256": setup.preregistration["sha256"],
             "source": setup.preregistration["path"]},
-    }
-    return SweepPlan(context, pretrains, tuple(runs), sweep, profile.concurrent_runs,
-                     DEFAULT_METRIC)
+    })
+    return SweepPlan(context=context, pretrains=pretrains, runs=tuple(runs), sweep=sweep,
+                     concurrent_runs=profile.concurrent_runs, metric=DEFAULT_METRIC)

@@ -266,13 +266,17 @@ def _configs(doc: Mapping[str, Any]) -> Mapping[str, Any]:
 def _learning_rates(doc: Mapping[str, Any], condition: str) -> dict[str, Any]:
     """The fine-tuning config of ``condition`` (its encoder learning-rate share applied) and
     its learning rates: ``lr`` (the head's), ``encoder_lr_scale``, ``encoder_lr``."""
-    from sim2radar.experiment.plan import condition_config
     from sim2radar.experiment.profiles import CONDITIONS
 
     config = _configs(doc).get("finetune")
     known = condition in CONDITIONS
     if isinstance(config, Mapping) and isinstance(config.get("optimization"), Mapping):
-        config = condition_config(config, condition) if known else dict(config)
+        # the recorded dump as the run used it (plan.condition_config's change, on the dump as
+        # sweep.json holds it, whichever version of DetectConfig wrote it)
+        config = dict(config)
+        if known and CONDITIONS[condition].encoder_lr_scale != 1.0:
+            config["optimization"] = {**config["optimization"],
+                                      "encoder_lr_scale": CONDITIONS[condition].encoder_lr_scale}
         optim = config["optimization"]
         lr, scale = optim.get("lr"), optim.get("encoder_lr_scale", 1.0)
     else:
@@ -289,9 +293,10 @@ def run_name(row: Mapping[str, Any]) -> str:
     ``sim-pretrain-f0.25-t3``)."""
     from sim2radar.experiment.plan import RunSpec
 
-    return RunSpec(str(row["condition"]), float(row["fraction"]), int(row["trial"]),
-                   int(row["seed"]), int(row.get("n_real_frames") or 0), None,
-                   int(row.get("epochs") or 0)).name
+    return RunSpec(condition=str(row["condition"]), fraction=float(row["fraction"]),
+                   trial=int(row["trial"]), seed=int(row["seed"]),
+                   n_real=int(row.get("n_real_frames") or 0), pretrain=None,
+                   epochs=int(row.get("epochs") or 0)).name
 
 
 def run_params(folder: SweepSnapshot, row: Mapping[str, Any], kind: str) -> dict[str, str]:

@@ -137,13 +137,13 @@ def test_run_identity():
     with pytest.raises(ValueError, match="pretrain_key"):
         run_key_inputs(base, profile, det, pretrain_key="abc")
 
-    p = PretrainSpec("sim-pretrain", 0, 5, "sim", 20)
+    p = PretrainSpec(condition="sim-pretrain", trial=0, seed=5, sim_role="sim", epochs=20)
     k = pretrain_key_inputs(p, det, {"quantiles": [1.0, 2.0]})
     assert k != pretrain_key_inputs(p, det, None)
-    assert k != pretrain_key_inputs(PretrainSpec("sim-pretrain", 1, 6, "sim", 20), det,
+    assert k != pretrain_key_inputs(p.model_copy(update={"trial": 1, "seed": 6}), det,
                                     {"quantiles": [1.0, 2.0]})
     json.dumps(k, allow_nan=False)
-    d = runs[1].to_dict()
+    d = runs[1].model_dump(mode="json")
     assert d["pretrain"]["sim_role"] == "sim" and isinstance(d["train_ids"], list)
     json.dumps(d)
 
@@ -164,10 +164,13 @@ def test_the_diagnosis_arms_share_and_separate_what_they_should():
     cell = {r.condition: r for r in runs if r.trial == 1 and r.fraction == 0.25}
     assert cell["sim-pretrain-lowlr"].pretrain is cell["sim-pretrain"].pretrain
     assert cell["ref-pretrain"].pretrain.sim_role == "ref"
-    det = _detector()
-    low = condition_config(det, "sim-pretrain-lowlr")
-    assert low["optimization"]["encoder_lr_scale"] == 0.1 and condition_config(
-        det, "sim-pretrain") == det
+    cfg = load_profile("smoke").detector_config()
+    det = cfg.model_dump(mode="json")
+    assert condition_config(cfg, "sim-pretrain") is cfg
+    # the condition's share replaces the sweep's, nothing else: the dump its key hashes is
+    # the sweep's with that one field changed
+    low = condition_config(cfg, "sim-pretrain-lowlr").model_dump(mode="json")
+    assert low == {**det, "optimization": {**det["optimization"], "encoder_lr_scale": 0.1}}
     k_sim = run_key_inputs(cell["sim-pretrain"], profile, det, pretrain_key="p")
     k_low = run_key_inputs(cell["sim-pretrain-lowlr"], profile, low, pretrain_key="p")
     assert k_low != k_sim and k_low["detector"]["optimization"]["encoder_lr_scale"] == 0.1
@@ -175,7 +178,5 @@ def test_the_diagnosis_arms_share_and_separate_what_they_should():
     assert "encoder_lr_scale" not in k_sim["detector"]["optimization"]
     # the held-out split is part of a pre-training's identity
     p = pretrains[0]
-    import dataclasses
-
-    whole = dataclasses.replace(p, holdout_split=None)
+    whole = p.model_copy(update={"holdout_split": None})
     assert pretrain_key_inputs(p, det, None) != pretrain_key_inputs(whole, det, None)

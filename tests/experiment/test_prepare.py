@@ -12,8 +12,10 @@ import pytest
 
 from sim2radar.cli.experiment import sweep_flag
 from sim2radar.datasets import make_door_frames, write_dataset, write_metadata
+from sim2radar.detect.config import DetectConfig
 from sim2radar.experiment.cost import sweep_cost
 from sim2radar.experiment.data import open_domain
+from sim2radar.experiment.documents import SweepDocument
 from sim2radar.experiment.errors import SettingError
 from sim2radar.experiment.plan import SweepPlan, pretrain_key_inputs, run_key_inputs
 from sim2radar.experiment.prepare import (
@@ -132,30 +134,30 @@ def test_the_plan_keys_every_job_from_its_key_inputs(domains, tmp_path):
     plan = _plan(setup, domains, tmp_path)
     assert (len(plan.pretrains), len(plan.runs)) == (4, 8)     # 2 trials x 2 fractions
     ctx = plan.context
-    assert sorted(ctx.datasets) == sorted(plan.sweep["datasets"]) == ["real", "sim"]
+    assert sorted(ctx.datasets) == sorted(plan.sweep.datasets) == ["real", "sim"]
     assert ctx.datasets["real"].key == domains["real"].key and ctx.device == "cpu"
     assert ctx.datasets["real"].ids(["test"]) == domains["real"].splits["test"]
     assert ctx.datasets["sim"].ids() == domains["sim"].ids()
     for p in plan.pretrains:
         assert p.intensity_match["n_real_frames"] == len(p.spec.real_ids)   # its runs' subset
         assert p.key == _key_of("pretrain", {"sim": domains["sim"].key}, pretrain_key_inputs(
-            p.spec, ctx.pretrain_config, p.intensity_match))
+            p.spec, ctx.pretrain_config.model_dump(mode="json"), p.intensity_match))
     by_id = {p.id: p for p in plan.pretrains}
     for r in plan.runs:
         pre = by_id.get(r.pretrain_id)
         assert r.pretrain_key == (pre.key if pre else None)
         assert r.key == _key_of("finetune", {"real": domains["real"].key}, run_key_inputs(
-            r.spec, setup.profile, ctx.finetune_config, r.pretrain_key))
+            r.spec, setup.profile, ctx.finetune_config.model_dump(mode="json"), r.pretrain_key))
         if pre:
             assert r in plan.runs_after(pre)
     assert len({r.key for r in plan.runs}) == 8
     # sweep.json: what the dashboard and the report read
-    doc = plan.sweep
+    doc = plan.sweep.model_dump(mode="json")
     assert doc["conditions"] == ["baseline", "sim-pretrain"] and doc["n_runs"] == 8
     assert doc["real_is_proxy"] and doc["datasets"]["real"]["key"] == domains["real"].key
     assert sorted(doc["intensity_match"]) == sorted(by_id)
     assert doc["settings"] == setup.settings and doc["provenance"]["configs"]["finetune"] == \
-        ctx.finetune_config
+        ctx.finetune_config.model_dump(mode="json")
     assert doc["settings_fixed_at"] == "2026-01-01T00:00:00+00:00"
     # the device is no part of a run's identity
     other = _plan(setup_sweep("smoke", {"sim": "s", "real": "r"}), domains, tmp_path)
@@ -164,14 +166,19 @@ def test_the_plan_keys_every_job_from_its_key_inputs(domains, tmp_path):
 
 def test_the_plan_travels_as_json_and_pickles(domains, tmp_path):
     plan = _plan(setup_sweep("smoke", {"sim": "s", "real": "r"}), domains, tmp_path)
-    doc = json.loads(json.dumps(plan.to_dict()))
-    again = SweepPlan.from_dict(doc, plan_path="p.json")
-    assert again.plan_path == "p.json" and again == SweepPlan.from_dict(doc, "p.json")
+    doc = json.loads(json.dumps(plan.model_dump(mode="json")))
+    assert doc["format"] == 3 and "plan_path" not in doc
+    again = SweepPlan.model_validate(doc)
+    assert again == plan and again.model_dump(mode="json") == doc
     assert again.runs == plan.runs and again.pretrains == plan.pretrains
     assert again.context == plan.context and again.sweep == plan.sweep
+    assert isinstance(again.context.finetune_config, DetectConfig)
     assert pickle.loads(pickle.dumps(plan)) == plan                 # to Dask workers
+    # plan.json's layout: a run names its pre-training by id, beside its spec's fields
+    run = next(r for r in doc["runs"] if r["pretrain_id"])
+    assert "spec" not in run and "pretrain" not in run and run["id"] in {r.id for r in plan.runs}
     with pytest.raises(ValueError, match="plan format 1.*prepare the sweep again"):
-        SweepPlan.from_dict({k: v for k, v in doc.items() if k != "format"})
+        SweepPlan.model_validate({k: v for k, v in doc.items() if k != "format"})
     # --force-run names runs by id or key
     run = plan.runs[3]
     assert plan.find_runs([run.id, run.key, plan.runs[0].id]) == [run, plan.runs[0]]
@@ -312,3 +319,33 @@ def test_the_sweeps_plain_work_does_not_import_prefect():
 
     assert run_experiment.pretrain_task.name == "pretrain-encoder"
     assert run_experiment.finetune_task.name == "finetune-and-test"
+
+
+def test_a_sweep_folder_written_before_the_typed_records_still_loads():
+    """The published diagnosis study (docs/results/diagnosis, written when the plan records
+    were dataclasses with hand-written to_dict) loads as the typed records, and writes back
+    the same JSON: sweep.json byte for byte, plan.json's runs, pre-trainings and document (its
+    detector configs gain only the fields DetectConfig added since, at their defaults)."""
+    import gzip
+    from pathlib import Path
+
+    folder = Path(__file__).resolve().parents[2] / "docs" / "results" / "diagnosis"
+    sweep_doc = json.loads(gzip.decompress((folder / "sweep.json.gz").read_bytes()))
+    typed = SweepDocument.model_validate(sweep_doc)
+    assert typed.n_runs == 120 and typed.precision == {}       # written before precision
+    assert json.dumps(typed.model_dump(mode="json")) == json.dumps(sweep_doc)
+    doc = json.loads(gzip.decompress((folder / "plan.json.gz").read_bytes()))
+    plan = SweepPlan.model_validate(doc)
+    assert (len(plan.pretrains), len(plan.runs)) == (72, 120)
+    again = plan.model_dump(mode="json")
+    for part in ("format", "pretrains", "runs", "sweep", "concurrent_runs", "metric"):
+        assert again[part] == doc[part], part
+    assert list(again["runs"][0]) == list(doc["runs"][0])          # the same keys, in order
+    ctx = {k: v for k, v in doc["context"].items() if not k.endswith("_config")}
+    assert {k: again["context"][k] for k in ctx} == ctx
+    for stage in ("pretrain_config", "finetune_config"):
+        assert getattr(plan.context, stage) == DetectConfig.model_validate(doc["context"][stage])
+    # a run's pre-training is the planned one, found by its id
+    specs = {p.id: p.spec for p in plan.pretrains}
+    for r in plan.runs:
+        assert r.spec.pretrain == (specs[r.pretrain_id] if r.pretrain_id else None)

@@ -90,8 +90,9 @@ def mlflow_runs(client: MlflowClient, exp_id: str, kind: str) -> list:
 
 
 def run_id_of(row: dict) -> str:
-    return RunSpec(row["condition"], row["fraction"], row["trial"], row["seed"],
-                   row["n_real_frames"], None, row["epochs"]).name
+    return RunSpec(condition=row["condition"], fraction=row["fraction"], trial=row["trial"],
+                   seed=row["seed"], n_real=row["n_real_frames"], pretrain=None,
+                   epochs=row["epochs"]).name
 
 
 @pytest.fixture

@@ -201,8 +201,8 @@ def test_a_sweep_refuses_changed_settings_but_not_changed_execution(first, data)
                       store=first["store"], overrides={"lr": 0.5})
     plan = prepare_sweep(datasets, profile="smoke", name="t", out=first["out"],
                          store=first["store"], overrides={"concurrent_runs": 3})
-    assert plan.sweep["settings_fixed_at"] == sweep["settings_fixed_at"]
-    assert plan.sweep["settings_digest"] == sweep["settings_digest"]
+    assert plan.sweep.settings_fixed_at == sweep["settings_fixed_at"]
+    assert plan.sweep.settings_digest == sweep["settings_digest"]
     assert plan.concurrent_runs == 3
 
 
@@ -223,8 +223,10 @@ def test_content_keys_keep_their_recipe(monkeypatch):
     monkeypatch.setattr(tasks, "package_versions", lambda: {"sim2radar": "0.0.0"})
     det = {"model": {"voxel_size_m": [0.2, 0.2, 4.0]}, "augmentation": {"flip": True},
            "optimization": {"lr": 0.003, "batch_size": 4, "epochs": 2}, "runtime": {"amp": False}}
-    pre = PretrainSpec("sim-pretrain", 0, 7, "sim", 20, 0.5, ("a", "b"))
-    run = RunSpec("sim-pretrain", 0.5, 0, 7, 2, pre, 200, ("a", "b"))
+    pre = PretrainSpec(condition="sim-pretrain", trial=0, seed=7, sim_role="sim", epochs=20,
+                       fraction=0.5, real_ids=("a", "b"))
+    run = RunSpec(condition="sim-pretrain", fraction=0.5, trial=0, seed=7, n_real=2,
+                  pretrain=pre, epochs=200, train_ids=("a", "b"))
     pkey = tasks._key_of("pretrain", {"sim": "s" * 20}, pretrain_key_inputs(pre, det, {"q": [1.0]}))
     assert pkey == "41cade8d6c72e05919e1"
     assert tasks._key_of("finetune", {"real": "r" * 20}, run_key_inputs(
@@ -250,7 +252,7 @@ def test_a_paper_sized_plan_reaches_the_flow_as_a_file(data, tmp_path):
     assert path == (tmp_path / "sweeps" / "big" / "plan.json").resolve()
     assert path.stat().st_size > limit and len(plan.pretrains) >= 24
     with pytest.raises(ValueError, match="less than 524,288 bytes"):
-        validate_parameter_size({"plan": plan.to_dict()}, limit)  # what was sent before
+        validate_parameter_size({"plan": plan.model_dump(mode="json")}, limit)  # sent before
     # the plan's path, and one flag (whether training tasks claim GPU slots)
     assert list(inspect.signature(run_experiment_flow.fn).parameters) == ["plan_path",
                                                                           "gpu_slots"]
