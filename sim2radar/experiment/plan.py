@@ -27,11 +27,10 @@ import hashlib
 import json
 import math
 from collections.abc import Mapping, Sequence
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from pydantic import BaseModel, ConfigDict, Field, model_serializer, model_validator
 
-from sim2radar.detect.config import DetectConfig
 from sim2radar.experiment.documents import SweepDocument
 from sim2radar.experiment.errors import SettingError
 from sim2radar.experiment.profiles import BASELINE, CONDITIONS, ExperimentProfile
@@ -64,6 +63,22 @@ PLAN_FORMAT = 3
 #: (the pre-registration's path: its content's digest is part of the settings instead)
 EXECUTION_FIELDS = ("name", "description", "detector", "threads_per_run", "concurrent_runs",
                     "preregistration")
+
+
+if TYPE_CHECKING:
+    from sim2radar.detect.config import DetectConfig
+
+
+class _LazyDetectConfig:
+    """:class:`~sim2radar.detect.config.DetectConfig` as a field type, imported when a model
+    holding it is first used (``defer_build``): importing ``sim2radar.detect`` loads torch, which
+    ``sim2radar --help`` and the store's schemas must not pay for."""
+
+    @classmethod
+    def __get_pydantic_core_schema__(cls, source: Any, handler: Any) -> Any:
+        from sim2radar.detect.config import DetectConfig
+
+        return handler.generate_schema(DetectConfig)
 
 
 class _Record(BaseModel):
@@ -393,8 +408,10 @@ class SweepContext(_Record):
     sweep_dir: str
     store: str
     datasets: dict[str, DatasetRef]
-    pretrain_config: DetectConfig
-    finetune_config: DetectConfig
+    model_config = ConfigDict(frozen=True, extra="forbid", defer_build=True)
+
+    pretrain_config: _LazyDetectConfig
+    finetune_config: _LazyDetectConfig
     eval_split: str = "test"
     val_split: str = "val"
     val_every: int = 0
@@ -521,6 +538,8 @@ class SweepPlan(_Record):
     Its JSON form (``model_dump(mode="json")``, ``plan.json``) leads with ``"format":``
     :data:`PLAN_FORMAT`; ``model_validate`` refuses another format.
     """
+
+    model_config = ConfigDict(frozen=True, extra="forbid", defer_build=True)
 
     context: SweepContext
     pretrains: tuple[PlannedPretrain, ...]
