@@ -70,18 +70,24 @@ def heldout_seeds(n: int) -> list[int]:
 
 def _generate(seeds, frames, geometry, radar, store, name, export, *, splits=None,
               reference=False, seed=0):
+    """One dataset through the ``generate`` job's driver, worlds one after another in this
+    process (:class:`~sim2radar.tasks.runner.PlainRunner`), exported to ``export``."""
     from sim2radar.factory.spec import DatasetSpec
-    from sim2radar.tasks.dataset import generate_dataset_plain
+    from sim2radar.tasks.dataset import GenerateRequest, generate_dataset
+    from sim2radar.tasks.runner import PlainRunner
 
+    where = {"seeds": list(seeds), "store": os.fspath(store), "dataset": name,
+             "export_dir": os.fspath(export), "splits": splits}
     if reference:
         from sim2radar.factory.reference import DOMAIN_LABEL
 
         spec = DatasetSpec(frames_per_world=frames, geometry="ground_truth", radar=radar,
                            seed=seed, render_rgb=False, motion={"speed_mps": [0.5, 1.5]})
-        return generate_dataset_plain(seeds, spec, store, name, export_dir=export,
-                                      splits=splits, export_doppler=True, domain=DOMAIN_LABEL)
-    spec = DatasetSpec(frames_per_world=frames, geometry=geometry, radar=radar, seed=seed)
-    return generate_dataset_plain(seeds, spec, store, name, export_dir=export, splits=splits)
+        request = GenerateRequest(spec=spec, **where, export_doppler=True, domain=DOMAIN_LABEL)
+    else:
+        spec = DatasetSpec(frames_per_world=frames, geometry=geometry, radar=radar, seed=seed)
+        request = GenerateRequest(spec=spec, **where)
+    return generate_dataset(request, PlainRunner())
 
 
 def _labels(root: Path, fid: str) -> np.ndarray:

@@ -8,7 +8,10 @@ for each geometry mode, with the stages split out:
 
 ``ground_truth`` end-to-end = render + simulate_ground_truth; ``reconstructed`` = render +
 reconstruct + simulate_reconstructed. Also the whole run's wall time per frame (world generation
-and Parquet I/O included) and a cached re-run (content keys: nothing recomputed).
+and Parquet I/O included) and a cached re-run (content keys: nothing recomputed). Both runs go
+through the ``generate`` job's driver with a plain runner
+(:func:`sim2radar.tasks.dataset.generate_dataset` + :class:`~sim2radar.tasks.runner.PlainRunner`:
+what ``--no-prefect`` runs, without Prefect's overhead).
 
     python -m benchmarks generate
     SIM2RADAR_BENCH_GENERATE_FRAMES=6 python -m benchmarks generate
@@ -22,7 +25,8 @@ import tempfile
 import time
 
 from sim2radar.factory.spec import DatasetSpec
-from sim2radar.tasks.dataset import generate_dataset_plain
+from sim2radar.tasks.dataset import GenerateRequest, generate_dataset
+from sim2radar.tasks.runner import PlainRunner
 
 N_FRAMES = int(os.environ.get("SIM2RADAR_BENCH_GENERATE_FRAMES", "3"))
 WORLD_SEED = 0
@@ -36,11 +40,13 @@ def _median(values) -> float:
 def main() -> dict:
     spec = DatasetSpec(frames_per_world=N_FRAMES, geometry="both")
     with tempfile.TemporaryDirectory(prefix="bench-generate-") as tmp:
+        request = GenerateRequest(spec=spec, seeds=[WORLD_SEED], store=os.path.join(tmp, "store"),
+                                  dataset="bench")
         t0 = time.perf_counter()
-        summary = generate_dataset_plain([WORLD_SEED], spec, os.path.join(tmp, "store"), "bench")
+        summary = generate_dataset(request, PlainRunner())
         wall_s = time.perf_counter() - t0
         t0 = time.perf_counter()
-        again = generate_dataset_plain([WORLD_SEED], spec, os.path.join(tmp, "store"), "bench")
+        again = generate_dataset(request, PlainRunner())
         cached_s = time.perf_counter() - t0
     frames = summary["outcomes"][0]["parts"]
     failed = [f["id"] for f in frames if f["status"] == "failed"]
