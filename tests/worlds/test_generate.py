@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+import hashlib
 import math
 from collections import Counter
 
@@ -30,6 +32,45 @@ def test_same_seed_same_world_to_the_byte():
     assert a.path_world.tobytes() == b.path_world.tobytes()
     c = generate_world(12)
     assert c.describe() != a.describe()
+
+
+def _world_digests(world) -> tuple[str, str]:
+    """Short SHA-256 digests of a world's plan (layout, ceiling height, spaces, doors, path)
+    and of its objects (names, classes, table rows with appearances, vertex and face bytes)."""
+    plan, objs = hashlib.sha256(), hashlib.sha256()
+    plan.update(repr((world.layout, world.ceiling_height_m,
+                      [dataclasses.astuple(s) for s in world.spaces],
+                      [dataclasses.astuple(d) for d in world.doors])).encode())
+    plan.update(np.ascontiguousarray(world.path_world, "<f8").tobytes())
+    for mesh, obj in zip(world.meshes, world.objects, strict=True):
+        objs.update(repr((mesh.name, mesh.material, mesh.semantic,
+                          dataclasses.astuple(obj))).encode())
+        objs.update(np.ascontiguousarray(mesh.vertices, "<f4").tobytes())
+        objs.update(np.ascontiguousarray(mesh.faces, "<i4").tobytes())
+    return plan.hexdigest()[:16], objs.hexdigest()[:16]
+
+
+#: (plan, objects) digests of a few default-config worlds: l_turn (0, 1161), straight (1, 3) and
+#: t_junction (6), together holding every kind of object, open/ajar/double doors and windows.
+PINNED_WORLDS = {
+    0: ("96e18a792b2496fb", "9526e4e9367ded68"),
+    1: ("4d41fd06eeefe953", "bb8a5c3c330e117a"),
+    3: ("4aade9737a2f049e", "4994c3e5a11e8884"),
+    6: ("92bd91d2be9c288e", "b24768cddbb94f02"),
+    1161: ("7b4606a4ae83fb02", "a54c62ebc5c633e1"),
+}
+
+
+@pytest.mark.parametrize("seed", sorted(PINNED_WORLDS))
+def test_pinned_worlds_are_unchanged(seed):
+    """A seed's world is part of every artifact key (STAGE_VERSION): a reordered or added draw,
+    a step moved, a changed size or material shows here. If the change is meant, bump
+    STAGE_VERSION and re-pin; if not (a refactor), the refactor is wrong. A NumPy release that
+    changes ``Generator`` streams would show here too, and changes the worlds just as much."""
+    plan, objects = _world_digests(generate_world(seed))
+    assert (plan, objects) == PINNED_WORLDS[seed], (
+        f"world {seed}: plan {'same' if plan == PINNED_WORLDS[seed][0] else 'changed'}, "
+        f"objects {'same' if objects == PINNED_WORLDS[seed][1] else 'changed'}")
 
 
 def test_bad_seed_and_config_are_refused():
