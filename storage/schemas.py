@@ -487,12 +487,20 @@ DATASET_FRAMES = register_schema(
 
 
 # --- experiment_runs (the experiment sweep; sim2radar/experiment + tasks/experiment.py) ------
-_AP_FIELDS = [
-    field(f"ap_{metric}_r{points}_iou{iou}", pa.float64(), unit="%", nullable=True,
-          doc=f"KITTI-protocol {metric.upper()} AP, R{points}, IoU 0.{iou[1]} on the test split "
-              "(null when the run failed)")
-    for iou in ("03", "05") for metric in ("3d", "bev") for points in (11, 40)
-]
+# The row is declared once, in the library (sim2radar.experiment.rows.RUN_COLUMNS); the
+# dashboard's check of runs.parquet derives from the same declaration.
+def _declared_fields(columns) -> list[pa.Field]:
+    """Parquet fields of a row declared in the library (:class:`sim2radar.experiment.rows.
+    Column`: name, type, unit, doc, nullable)."""
+    return [field(c.name, c.arrow_type(), unit=c.unit, doc=c.doc, nullable=c.nullable)
+            for c in columns]
+
+
+def _run_columns():
+    from sim2radar.experiment.rows import RUN_COLUMNS
+
+    return RUN_COLUMNS
+
 
 EXPERIMENT_RUNS = register_schema(
     ArtifactSchema(
@@ -500,35 +508,7 @@ EXPERIMENT_RUNS = register_schema(
         version=1,
         row="one fine-tuning run of the experiment grid (condition x fraction x trial)",
         description="test-split AP, learning curves, timing and outcome of one training run",
-        schema=pa.schema([
-            field("sweep", pa.string(), doc="sweep name"),
-            field("run_key", pa.string(), doc="content key of the run (its identity)"),
-            field("condition", pa.string(),
-                  doc="baseline | sim-pretrain | sim-gt-pretrain | sim-one-material-pretrain"),
-            field("fraction", pa.float64(), doc="share of the real train split, in (0, 1]"),
-            field("n_real_frames", pa.int32(), doc="real train frames the run saw"),
-            field("n_sim_frames", pa.int32(), doc="sim frames of its pre-training (0: none)"),
-            field("sim_real_ratio", pa.float64(), nullable=True,
-                  doc="n_sim_frames / n_real_frames (null for baseline)"),
-            field("trial", pa.int32(), doc="trial index 0..trials-1"),
-            field("seed", pa.int64(), doc="trial seed: real subset, head init, shuffling"),
-            *_AP_FIELDS,
-            field("epochs", pa.int32(), doc="fine-tuning epochs"),
-            field("steps", pa.int32(), doc="optimiser steps"),
-            field("history_epoch", pa.list_(pa.int32()), doc="(E,) epoch numbers"),
-            field("history_loss", pa.list_(pa.float64()), doc="(E,) mean training loss"),
-            field("history_val_epoch", pa.list_(pa.int32()), doc="(V,) epochs with a val AP"),
-            field("history_val_ap", pa.list_(pa.float64()), unit="%",
-                  doc="(V,) 3D AP R40 IoU 0.3 on the val split"),
-            field("wall_time_s", pa.float64(), unit="s", doc="training + evaluation wall time"),
-            field("device", pa.string(), doc="torch device"),
-            field("checkpoint", pa.string(), doc="final checkpoint, relative to the sweep folder"),
-            field("pretrain_key", pa.string(), nullable=True,
-                  doc="content key of the pre-training run (null for baseline)"),
-            field("status", pa.string(), doc="ok | failed | skipped"),
-            field("error", pa.string(), doc="failure reason, empty when ok"),
-            field("finished_at", pa.string(), doc="UTC ISO-8601 time the run finished"),
-        ]),
+        schema=pa.schema(_declared_fields(_run_columns())),
     )
 )
 

@@ -20,45 +20,35 @@ fractions x paired trials.
 
 ``tasks/experiment.py`` executes a sweep (keys, store, claims) and ``flows/run_experiment.py``
 runs it as Prefect tasks; nothing here, nor in ``tasks/``, imports Prefect.
+
+The names below are imported on first use (PEP 562): importing one module of the package (the
+store's schemas import :mod:`~sim2radar.experiment.rows`) does not load the statistics' SciPy.
 """
 
-from sim2radar.experiment.plan import (
-    PretrainSpec,
-    RunSpec,
-    epochs_for,
-    plan_sweep,
-    pretrain_key_inputs,
-    run_key_inputs,
-)
-from sim2radar.experiment.profiles import (
-    ABLATIONS,
-    CONDITIONS,
-    Condition,
-    ExperimentProfile,
-    load_profile,
-)
-from sim2radar.experiment.report import results_markdown, results_table_rows
-from sim2radar.experiment.stats import DEFAULT_METRIC, holm_adjust, sweep_stats
-from sim2radar.experiment.subsets import n_real_frames, real_subset, trial_seed
+import importlib
+from typing import Any
 
-__all__ = [
-    "ABLATIONS",
-    "CONDITIONS",
-    "DEFAULT_METRIC",
-    "Condition",
-    "ExperimentProfile",
-    "PretrainSpec",
-    "RunSpec",
-    "epochs_for",
-    "holm_adjust",
-    "load_profile",
-    "n_real_frames",
-    "plan_sweep",
-    "pretrain_key_inputs",
-    "real_subset",
-    "results_markdown",
-    "results_table_rows",
-    "run_key_inputs",
-    "sweep_stats",
-    "trial_seed",
-]
+#: public name -> the module that defines it
+_EXPORTS = {
+    **dict.fromkeys(("PretrainSpec", "RunSpec", "epochs_for", "plan_sweep",
+                     "pretrain_key_inputs", "run_key_inputs"), "plan"),
+    **dict.fromkeys(("ABLATIONS", "CONDITIONS", "Condition", "ExperimentProfile",
+                     "load_profile"), "profiles"),
+    **dict.fromkeys(("results_markdown", "results_table_rows"), "report"),
+    **dict.fromkeys(("DEFAULT_METRIC", "holm_adjust", "sweep_stats"), "stats"),
+    **dict.fromkeys(("n_real_frames", "real_subset", "trial_seed"), "subsets"),
+}
+
+__all__ = sorted(_EXPORTS)
+
+
+def __getattr__(name: str) -> Any:
+    if name not in _EXPORTS:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    value = getattr(importlib.import_module(f"{__name__}.{_EXPORTS[name]}"), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted({*globals(), *_EXPORTS})

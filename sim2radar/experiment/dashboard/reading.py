@@ -39,6 +39,7 @@ from sim2radar.experiment.dashboard.labels import num
 from sim2radar.experiment.folder import SweepFolder
 from sim2radar.experiment.learnability import pretraining_table
 from sim2radar.experiment.profiles import BASELINE, CONDITIONS
+from sim2radar.experiment.rows import RUN_COLUMNS
 from sim2radar.experiment.stats import (
     AP_METRICS,
     DEFAULT_METRIC,
@@ -145,19 +146,12 @@ def _require(doc: Mapping[str, Any], keys: Sequence[str], path: Path, role: str,
                                    f"{getattr(types, '__name__', 'list')}; {_FIXES[role]}")
 
 
-#: the ``runs.parquet`` columns the dashboard reads, with the kind of value each holds. The file
-#: is an ``experiment_runs`` table (declared in storage/schemas.py; the sweep flow validates it
-#: before it writes the file); the library reads it without importing the store's layer, so it
-#: checks here what it reads. Other columns are kept and not shown.
-RUNS_COLUMNS: dict[str, str] = {
-    "run_key": "text", "condition": "text", "fraction": "number", "trial": "integer",
-    "seed": "integer", "n_real_frames": "integer", "n_sim_frames": "integer",
-    "sim_real_ratio": "number", **dict.fromkeys(AP_METRICS, "number"),
-    "epochs": "integer", "steps": "integer", "history_epoch": "integers",
-    "history_loss": "numbers", "history_val_epoch": "integers", "history_val_ap": "numbers",
-    "wall_time_s": "number", "device": "text", "checkpoint": "text", "status": "text",
-    "error": "text", "finished_at": "text",
-}
+#: the ``runs.parquet`` columns the dashboard checks, with the kind of value each holds: every
+#: column of the ``experiment_runs`` row (declared once, :data:`~sim2radar.experiment.rows.
+#: RUN_COLUMNS`; the store's schema derives from it too, and the sweep flow validates the table
+#: before it writes the file). The library reads the file without importing the store's layer,
+#: so it checks here what it reads. Other columns are kept and not shown.
+RUNS_COLUMNS: dict[str, str] = {c.name: c.kind for c in RUN_COLUMNS}
 #: columns that identify a run and its outcome: never null (non-nullable in experiment_runs)
 _RUN_IDENTITY = ("condition", "fraction", "trial", "status")
 _RUNS_FIX = "rerun `sim2radar sweep` with the same name to rewrite it"
