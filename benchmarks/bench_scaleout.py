@@ -1,7 +1,9 @@
 """Scale-out benchmark: the generate-dataset flow on N small worlds with the thread runner
 (``workers=1``) vs a Dask ``LocalCluster`` of 2 single-threaded worker processes.
 
-Three runs, each into a fresh store (nothing cached), all through the Prefect flow on one
+Three runs, each into a fresh store (nothing cached), all through the Prefect flow
+(:func:`sim2radar.flows.generate_dataset.generate_dataset` with a
+:class:`~sim2radar.tasks.dataset.GenerateRequest` whose ``run`` picks the task runner) on one
 temporary Prefect API:
 
 * ``threads``      — ``ThreadPoolTaskRunner(1)``: worlds one after another in this process
@@ -34,13 +36,17 @@ WORLD = {"corridor_length_m": [10, 14]}
 GEOMETRY = "both"
 
 
-def _run(store: str, *, first_seed: int = 0, n_worlds: int = N_WORLDS, **runner) -> tuple:
-    from sim2radar.flows.generate_dataset import generate_dataset
+def _run(store: str, *, first_seed: int = 0, n_worlds: int = N_WORLDS, **run) -> tuple:
+    """One run of the ``generate-dataset`` flow on worlds ``first_seed ..``; ``run`` holds
+    :class:`~sim2radar.tasks.runner.RunOptions` fields (``workers``, ``dask_address``)."""
+    from sim2radar.flows._states import run_flow
+    from sim2radar.flows.generate_dataset import GenerateRequest, generate_dataset
 
     t0 = time.perf_counter()
     spec = {"frames_per_world": FRAMES, "geometry": GEOMETRY, "world": WORLD, "rig": RIG}
-    summary = generate_dataset(spec, n_worlds=n_worlds, store=store, dataset="bench",
-                               first_seed=first_seed, **runner)
+    request = GenerateRequest(spec=spec, n_worlds=n_worlds, first_seed=first_seed, store=store,
+                              dataset="bench", run=run)
+    summary = run_flow(generate_dataset, request=request)
     wall_s = time.perf_counter() - t0
     if summary["counts"]["failed"]:
         raise RuntimeError(f"benchmark run failed: {summary['counts']}")
