@@ -97,8 +97,11 @@ def _mixed_dtype(device) -> Any:
 
 
 def _digest(cfg) -> str:
-    doc = {"model": cfg.model.model_dump(mode="json"),
-           "augmentation": cfg.augmentation.model_dump(mode="json"),
+    """What a stored decision is keyed by: the workload (model, augmentation, batch). The
+    order of random draws (``augmentation.random_draws``) costs nothing and is left out, so
+    the decisions measured before it existed still apply."""
+    aug = cfg.augmentation.model_dump(mode="json", exclude={"random_draws"})
+    doc = {"model": cfg.model.model_dump(mode="json"), "augmentation": aug,
            "batch_size": cfg.optimization.batch_size}
     return hashlib.sha256(json.dumps(doc, sort_keys=True).encode()).hexdigest()[:16]
 

@@ -99,3 +99,9 @@ def test_only_a_decision_that_can_be_recorded_is_measured_and_a_known_one_is_kep
     elsewhere = dict(known, device="cuda:Some GPU")
     assert precision.decide_precision(_cfg(), "cpu", table=tmp_path,
                                       known=elsewhere).source == "probe"
+
+
+def test_stored_decisions_keep_their_key_when_only_the_order_of_draws_is_new():
+    """The table's key (model, augmentation, batch) of the default config as written before
+    ``augmentation.random_draws`` existed (issue #31): the decisions measured then still apply."""
+    assert precision._digest(DetectConfig()) == "57b1173319073964"
