@@ -4,8 +4,11 @@
 
 Figures: radar_points write (validate + provenance + atomic publish) and read (+ decode) for a
 100-frame x 2000-point table; the cost of the skip path (hash scene files, compute keys, two
-exists checks); the built-in demo scene computed vs cached through the plain loop; and the same
-through the Prefect flow (first call includes starting the ephemeral Prefect API).
+exists checks); the built-in demo scene computed vs cached through the ``simulate`` job's
+driver with a plain runner (:func:`sim2radar.tasks.radar.simulate_scenes` +
+:class:`~sim2radar.tasks.runner.PlainRunner`, what ``--no-prefect`` runs); and the same through
+the Prefect flow (:func:`sim2radar.flows.simulate.simulate_dataset`; its first call includes
+starting the ephemeral Prefect API).
 """
 
 from __future__ import annotations
@@ -40,7 +43,8 @@ def main() -> dict:
         radar_frames_from_table,
         radar_frames_to_table,
     )
-    from sim2radar.tasks.radar import scene_keys, simulate_scenes_plain
+    from sim2radar.tasks.radar import SimulateRequest, scene_keys, simulate_scenes
+    from sim2radar.tasks.runner import PlainRunner
 
     out: dict = {}
     # -- store throughput ------------------------------------------------------------------
@@ -73,15 +77,16 @@ def main() -> dict:
         f"memory:// write {out['write_memory_uri_s'] * 1e3:.0f} ms"
     )
 
-    # -- demo scene through the plain loop -----------------------------------------------------
+    # -- demo scene through the plain runner ---------------------------------------------------
     scenes = [str(p) for p in demo_scene_paths()]
-    demo_store = ArtifactStore(tmp / "demo-store")
+    plain = SimulateRequest(scenes=scenes, radar="ti-mmwcas", store=str(tmp / "demo-store"),
+                            dataset="bench")
     skip_s = _median_s(lambda: [scene_keys(s, "ti-mmwcas") for s in scenes], 5)
     t0 = time.perf_counter()
-    first = simulate_scenes_plain(scenes, "ti-mmwcas", demo_store, "bench")
+    first = simulate_scenes(plain, PlainRunner())
     out["demo_plain_compute_s"] = time.perf_counter() - t0
     t0 = time.perf_counter()
-    second = simulate_scenes_plain(scenes, "ti-mmwcas", demo_store, "bench")
+    second = simulate_scenes(plain, PlainRunner())
     out["demo_plain_cached_s"] = time.perf_counter() - t0
     out["scene_keys_s"] = skip_s
     n_pts = first["outcomes"][0]["measured"]["n_points"]
@@ -95,14 +100,15 @@ def main() -> dict:
     )
 
     # -- the same through the Prefect flow -----------------------------------------------------
-    from sim2radar.flows.simulate import run_simulation
+    from sim2radar.flows._states import run_flow
+    from sim2radar.flows.simulate import simulate_dataset
 
-    flow_store = str(tmp / "flow-store")
+    flowed = plain.model_copy(update={"store": str(tmp / "flow-store")})
     t0 = time.perf_counter()
-    run_simulation(scenes, "ti-mmwcas", flow_store, "bench")
+    run_flow(simulate_dataset, request=flowed)
     out["demo_flow_first_s"] = time.perf_counter() - t0
     t0 = time.perf_counter()
-    res = run_simulation(scenes, "ti-mmwcas", flow_store, "bench")
+    res = run_flow(simulate_dataset, request=flowed)
     out["demo_flow_cached_s"] = time.perf_counter() - t0
     assert res["counts"]["skipped"] == len(scenes)
     print(
