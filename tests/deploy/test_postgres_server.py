@@ -19,6 +19,7 @@ test is skipped only on a machine without apt. 30–45 s on 2 cores.
 
 from __future__ import annotations
 
+import json
 import os
 import pwd
 import shutil
@@ -43,7 +44,7 @@ REPO = Path(__file__).resolve().parents[2]
 PREFECT_FILE = REPO / "deploy" / "prefect.yaml"
 POOL = "sim2radar-cpu"  # the work pool deploy/prefect.yaml names
 FLOW, DEPLOYMENT = "simulate-dataset", "radar-on-demand"
-GEN_FLOW, GEN_DEPLOYMENT = "generate-dataset-job", "generate-on-demand"
+GEN_FLOW, GEN_DEPLOYMENT = "generate-dataset", "generate-on-demand"
 DEMO_SCENE = "sim2radar/data/demo"  # relative to SIM2RADAR_HOME, where the worker runs
 DB_USER, DB_NAME = "sim2radar", "prefect"
 SERVER_START_S = 180.0  # Prefect server start incl. its migrations on an empty database [s]
@@ -288,17 +289,20 @@ def test_deployment_run_on_a_postgres_backed_server_completes_and_stores_the_fra
     store, png = tmp_path / "store", tmp_path / "bev"
     run_name = f"postgres-{uuid.uuid4().hex[:8]}"
     watch = ["--watch", "--watch-interval", "2", "--watch-timeout", str(RUN_TIMEOUT_S)]
+    # each deployment takes one `request` parameter, a JSON object (it replaces the
+    # deployment's default request whole: fields left out take the request model's defaults)
+    scenes = {"scenes": [DEMO_SCENE], "store": str(store), "dataset": "postgres",
+              "png_dir": str(png)}
+    world = {"n_worlds": 1, "store": str(store), "dataset": "postgres-worlds",
+             "spec": {"frames_per_world": 2, "geometry": "ground_truth",
+                      "rig": {"width": 80, "height": 60}},
+             "export_dir": str(tmp_path / "openpcdet")}
     try:
         out = _run([*prefect, "deployment", "run", f"{FLOW}/{DEPLOYMENT}",
-                    "-p", f'scenes=["{DEMO_SCENE}"]', "-p", f'store="{store}"',
-                    "-p", 'dataset="postgres"', "-p", f'png_dir="{png}"',
+                    "-p", f"request={json.dumps(scenes)}",
                     "--flow-run-name", run_name, *watch], env, timeout_s=RUN_TIMEOUT_S + 60)
         gen_out = _run([*prefect, "deployment", "run", f"{GEN_FLOW}/{GEN_DEPLOYMENT}",
-                        "-p", "n_worlds=1", "-p", f'store="{store}"',
-                        "-p", 'dataset="postgres-worlds"',
-                        "-p", 'spec={"frames_per_world": 2, "geometry": "ground_truth", '
-                              '"rig": {"width": 80, "height": 60}}',
-                        "-p", f'export_dir="{tmp_path / "openpcdet"}"',
+                        "-p", f"request={json.dumps(world)}",
                         "--flow-run-name", f"{run_name}-gen", *watch],
                        env, timeout_s=RUN_TIMEOUT_S + 60)
     except AssertionError as e:
@@ -308,22 +312,23 @@ def test_deployment_run_on_a_postgres_backed_server_completes_and_stores_the_fra
     assert "Completed" in out, out
     assert "Completed" in gen_out, gen_out
 
-    # the run, its subflow and its scene task are rows of the Postgres database ...
+    # the runs (one flow each, no subflow) and their unit and step tasks are rows of the
+    # Postgres database ...
     rows = postgres.psql(
         "SELECT f.state_type, d.name FROM flow_run f JOIN deployment d ON d.id = f.deployment_id"
         f" WHERE f.name = '{run_name}'")
     assert rows == [["COMPLETED", DEPLOYMENT]]
     flows = postgres.psql("SELECT fl.name, f.state_type FROM flow_run f JOIN flow fl"
                           " ON fl.id = f.flow_id ORDER BY fl.name")
-    assert flows == [["generate-dataset", "COMPLETED"], [GEN_FLOW, "COMPLETED"],
-                     [FLOW, "COMPLETED"], ["simulate-radar", "COMPLETED"]]
-    # the factory's steps as task runs: the world, its render and its simulate step
+    assert flows == [[GEN_FLOW, "COMPLETED"], [FLOW, "COMPLETED"]]
+    # the factory's steps as task runs, named by the manifest row: the world, its render and
+    # its simulate step
     steps = postgres.psql("SELECT name, state_type FROM task_run WHERE name LIKE 'world%'"
                           " ORDER BY name")
-    assert [name for name, _ in steps] == ["world-0", "world_000000-render",
+    assert [name for name, _ in steps] == ["world_000000", "world_000000-render",
                                            "world_000000-simulate-ground_truth"], steps
     assert {state for _, state in steps} == {"COMPLETED"}
-    tasks = postgres.psql("SELECT state_type FROM task_run WHERE name = 'simulate-corridor'")
+    tasks = postgres.psql("SELECT state_type FROM task_run WHERE name = 'demo_corridor'")
     assert tasks == [["COMPLETED"]]
     # ... and no SQLite database was made on the side
     assert not list(prefect_server.home.rglob("*.db")), list(prefect_server.home.rglob("*.db"))
