@@ -3,8 +3,12 @@ at the default settings (a 640 x 480 capture per scene, built-in reconstruction 
 prior, 54 radar poses per scene, ti-mmwcas), and the Prefect overhead of one task per step
 against the plain loop on the same scenes, in one run:
 
-* plain first run / cached rerun (``--no-prefect``: the same per-scene function, plain calls)
-* Prefect first run / cached rerun (the ``capture-dataset`` flow: a task per scene and per step)
+* plain first run / cached rerun (``--no-prefect``: the ``captures`` job's driver
+  :func:`sim2radar.tasks.capture.capture_dataset` with a
+  :class:`~sim2radar.tasks.runner.PlainRunner`: the same per-scene function, plain calls)
+* Prefect first run / cached rerun (the ``capture-dataset`` flow,
+  :func:`sim2radar.flows.capture_dataset.capture_dataset` through
+  :func:`~sim2radar.flows._states.run_flow`: a task per scene and per step)
 
 Overhead per scene = (sum of the flow's per-scene wall times - the plain loop's) / scenes; the
 per-scene wall time is measured inside the scene, so the API server's start-up is not in it
@@ -29,11 +33,20 @@ STEPS = ("depth", "segments", "materials", "scene", "poses", "simulate")
 
 
 def _run(captures: str, store: str, use_prefect: bool) -> tuple[dict, float]:
-    from sim2radar.flows.capture_dataset import capture_dataset
+    from sim2radar.tasks.capture import CaptureRequest, capture_dataset
 
     t0 = time.perf_counter()
-    summary = capture_dataset(captures, store, "bench", use_prefect=use_prefect,
-                              poses={"frames": N_FRAMES})
+    request = CaptureRequest(captures=captures, store=store, dataset="bench",
+                             spec={"poses": {"frames": N_FRAMES}})
+    if use_prefect:
+        from sim2radar.flows._states import run_flow
+        from sim2radar.flows.capture_dataset import capture_dataset as capture_flow
+
+        summary = run_flow(capture_flow, request=request)
+    else:
+        from sim2radar.tasks.runner import PlainRunner
+
+        summary = capture_dataset(request, PlainRunner())
     return summary, time.perf_counter() - t0
 
 
