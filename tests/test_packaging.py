@@ -421,9 +421,11 @@ def test_the_installed_wheel_deploys_and_a_worker_runs_a_deployment(wheel, tmp_p
             stderr=subprocess.STDOUT, start_new_session=True)
         store = tmp_path / "store"
         try:
+            # one `request` parameter: it replaces the deployment's default request whole
+            request = {"scenes": ["demo"], "store": str(store), "dataset": "wheel"}
             ran = _run([python, "-m", "prefect", "deployment", "run",
-                        "simulate-dataset/radar-on-demand", "-p", f'store="{store}"',
-                        "-p", 'dataset="wheel"', "--watch", "--watch-interval", "2",
+                        "simulate-dataset/radar-on-demand", "-p",
+                        f"request={json.dumps(request)}", "--watch", "--watch-interval", "2",
                         "--watch-timeout", "300"], cwd=elsewhere, env=env, timeout=360).stdout
         except AssertionError as exc:
             log = (tmp_path / "worker.log").read_text(errors="replace")[-4000:]
@@ -438,7 +440,7 @@ def test_the_installed_wheel_deploys_and_a_worker_runs_a_deployment(wheel, tmp_p
         deps = json.loads(_run([python, "-c", _DEPLOYMENTS_PROBE], cwd=elsewhere,
                                env=env).stdout.strip().splitlines()[-1])
         assert deps["simulate-dataset/nightly-radar"]["active"] == [True]
-        assert deps["generate-dataset-job/nightly-generate"]["active"] == [False]
+        assert deps["generate-dataset/nightly-generate"]["active"] == [False]
     finally:
         if worker is not None:
             _stop_group(worker)
