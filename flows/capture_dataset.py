@@ -15,7 +15,7 @@ batch of ``frames_per_task`` radar poses), so the UI shows per scene which stage
 deterministic and local-I/O failures fail at once. Manifest writes are retried (remote
 stores). The run publishes a progress artifact that moves as scenes finish and a table
 artifact (scenes ok/failed/skipped, frames, points per frame, seconds per stage). It is also
-the ``captures`` deployment's entrypoint.
+the ``captures-on-demand`` deployment's entrypoint.
 
 A failing scene is recorded ``failed`` with its stage and error, the others finish and the run
 ends Failed carrying its summary; a second run recomputes nothing. Scenes run one at a time by

@@ -7,7 +7,7 @@ the simulated domain's, run with :class:`~sim2radar.flows.engine.PrefectRunner`.
     summary = reference_dataset(ReferenceRequest(store="out/store",
                                                  export_dir="data/proxy_real"))  # 618 frames
 
-It is also the ``reference`` deployment's entrypoint.
+It is also the ``weekly-reference`` deployment's entrypoint.
 """
 
 from __future__ import annotations
