@@ -617,14 +617,17 @@ def _synth_narrowband(torch, radar: RadarConfig, terms: _PathTerms, w_d: np.ndar
         e = np.einsum("m,mtg->tg", w_d, e)[:, None, :]                      # (T, 1, G)
     else:
         e = np.transpose(e, (1, 0, 2))                                      # (T, M, G)
-    e_c = torch.as_tensor(e[perm // nr].astype(np.complex64), device=device)   # (C, S, G)
-    y = folded.permute(2, 0, 1)                                             # (C, G, L)
-    g_t = torch.fft.ifft(torch.bmm(e_c, y), dim=-1) * m_grid                # (C, S, L)
+    # one product per channel, the channels taken back into TX/RX order on the way in (the
+    # batches are independent: the same values as reordering the result)
+    e_c = torch.as_tensor(e[np.arange(nt * nr) // nr].astype(np.complex64), device=device)
+    inv = torch.as_tensor(np.argsort(perm), device=device)
+    y = folded.permute(2, 0, 1)[inv]                                        # (C, G, L)
+    g_t = torch.fft.ifft(torch.bmm(e_c, y), dim=-1)                         # (C, S, L)
     idx = torch.as_tensor(np.remainder(np.arange(n) - n // 2, m_grid), device=device)
-    deapod = torch.as_tensor(_deapodisation(n, w, NUFFT_OVERSAMPLING), device=device,
+    # the inverse FFT's scale M (a power of two: exact) folded into the deapodisation
+    deapod = torch.as_tensor(m_grid * _deapodisation(n, w, NUFFT_OVERSAMPLING), device=device,
                              dtype=torch.float32)
     out = g_t[..., idx] * deapod                                            # (C, S, N)
-    out = out[torch.as_tensor(np.argsort(perm), device=device)]            # channel order
     return out.reshape(nt, nr, -1, n).permute(2, 0, 1, 3).contiguous()    # (S, T, R, N)
 
 
@@ -664,8 +667,9 @@ def _thermal_noise(torch, shape: tuple[int, ...], seed: int, power_w: float, dev
         on_device = torch.device(device).type != "cpu"
     if not on_device:
         rng = np.random.default_rng(seed)
-        noise = (rng.standard_normal(shape, dtype=np.float32)
-                 + 1j * rng.standard_normal(shape, dtype=np.float32)).astype(np.complex64)
+        noise = np.empty(shape, np.complex64)  # filled in place: no complex temporaries
+        noise.real = rng.standard_normal(shape, dtype=np.float32)
+        noise.imag = rng.standard_normal(shape, dtype=np.float32)
         noise *= np.float32(scale)
         return torch.as_tensor(noise, device=device)
     gen = torch.Generator(device=device).manual_seed(int(seed))
