@@ -1,7 +1,7 @@
 """Where a training step's time goes: target assignment, augmentation, collation, the model.
 
     python -m benchmarks training                      # paper + demo models (~1-2 min, 2 cores)
-    SIM2RADAR_BENCH_STEPS=20 python -m benchmarks training
+    SIM2RADAR_BENCH_STEPS=20 SIM2RADAR_BENCH_ROUNDS=3 python -m benchmarks training
 
 The step is :func:`sim2radar.detect.train.train`'s loop body at batch 8 on synthetic corridors
 at IFR's density (2,000 points per frame), with GT sampling on: augmentation (GT sampling,
@@ -14,9 +14,13 @@ GPU, whatever of the assignment waits for the host); the issue #31 goal is <= 5 
 the GPU machine's CPU.
 
 Then the same step inside :func:`sim2radar.detect.train.train` (the profile's precision as
-``amp: auto`` resolves here) with ``runtime.prefetch_batches`` 0 (each batch made just before
-its step) and 1 (a background thread makes the next batch during the step;
-:mod:`sim2radar.detect.batches`): median seconds per step over the epochs after the first.
+``amp: auto`` resolves here) with ``runtime.loader_workers`` 0 (each batch made in this process
+just before its step), 1 and 2 (DataLoader worker processes make the batches during the steps;
+:mod:`sim2radar.detect.batches`; the same batches bit for bit): median seconds per step over
+the epochs after the first (``SIM2RADAR_BENCH_STEPS`` steps each), and the host-side time on
+the critical path — how long the training loop waits for its next batch (augmentation +
+collation in-process, or an unfinished worker's batch), mean per step [ms]; the worker counts
+take turns over ``SIM2RADAR_BENCH_ROUNDS`` rounds (default 2), medians reported.
 """
 
 from __future__ import annotations
@@ -111,17 +115,62 @@ def step_breakdown(profile: str, device: torch.device, n_steps: int) -> dict[str
     return {k: round(1000 * statistics.median(v), 1) for k, v in parts.items()}
 
 
-def prefetch_step_seconds(profile: str, device: torch.device) -> dict[str, float]:
-    """Median s/step of ``train()`` with prefetch 0 and 1 (same batches: only time differs)."""
+LOADER_WORKERS = (0, 1, 2)
+
+
+@contextlib.contextmanager
+def _timed_batch_waits(waits: list[tuple[int, float]]):
+    """Record ``(epoch, seconds)`` for every wait of ``train()``'s loop for its next batch."""
+    import sim2radar.detect.train as train_mod
+
+    real = train_mod.TrainingBatches
+
+    class Timed(real):
+        def epoch(self, epoch):
+            it = super().epoch(epoch)
+            while True:
+                t0 = time.perf_counter()
+                try:
+                    item = next(it)
+                except StopIteration:
+                    return
+                waits.append((epoch, time.perf_counter() - t0))
+                yield item
+
+    train_mod.TrainingBatches = Timed
+    try:
+        yield
+    finally:
+        train_mod.TrainingBatches = real
+
+
+def loader_step_seconds(profile: str, device: torch.device, n_steps: int,
+                        rounds: int = 2) -> dict[str, float]:
+    """``train()`` with 0, 1 and 2 DataLoader workers (same batches: only time differs),
+    interleaved over ``rounds`` rounds so a neighbour's load hits every count alike: median
+    s/step (``workers_<n>``) and median of the loop's mean wait for a batch per step [ms]
+    (``wait_ms_<n>``), each over the epochs after the first."""
     from sim2radar.datasets import make_door_frames
+    from sim2radar.detect.precision import measure_step_seconds
     from sim2radar.experiment import load_profile
-    from sim2radar.experiment.cost import measure_step_seconds
 
     cfg = load_profile(profile).detector_config("finetune")
-    frames = make_door_frames(4 * BATCH, seed=0, points_per_frame=POINTS_PER_FRAME)
-    return {f"prefetch_{n}": round(measure_step_seconds(
-        cfg.with_updates(runtime={"prefetch_batches": n}), frames, device=device), 4)
-        for n in (0, 1)}
+    frames = make_door_frames(n_steps * BATCH, seed=0, points_per_frame=POINTS_PER_FRAME)
+    step: dict[int, list[float]] = {w: [] for w in LOADER_WORKERS}
+    wait: dict[int, list[float]] = {w: [] for w in LOADER_WORKERS}
+    for _ in range(rounds):
+        for w in LOADER_WORKERS:
+            waits: list[tuple[int, float]] = []
+            with _timed_batch_waits(waits):
+                step[w].append(measure_step_seconds(
+                    cfg.with_updates(runtime={"loader_workers": w}), frames,
+                    steps_per_epoch=n_steps, epochs=3, device=device))
+            wait[w].append(statistics.fmean(t for e, t in waits if e > 0))
+    out: dict[str, float] = {}
+    for w in LOADER_WORKERS:
+        out[f"workers_{w}"] = round(statistics.median(step[w]), 4)
+        out[f"wait_ms_{w}"] = round(1000 * statistics.median(wait[w]), 1)
+    return out
 
 
 def main() -> dict:
@@ -140,11 +189,14 @@ def main() -> dict:
         res[profile] = ms
         print(f"{profile:8s} {ms['augment']:9.1f} {ms['collate']:9.1f} {ms['assign']:9.1f} "
               f"{ms['model']:9.1f} {ms['step']:9.1f} {ms['host']:9.1f}")
+    print(f"{'profile':8s} " + " ".join(f"{f'{w} workers':>17s}" for w in LOADER_WORKERS)
+          + "  [train() s/step | loop's wait for a batch, ms/step]")
     for profile in PROFILES:
-        s = prefetch_step_seconds(profile, device)
+        s = loader_step_seconds(profile, device, n_steps,
+                                int(os.environ.get("SIM2RADAR_BENCH_ROUNDS", "2")))
         res[profile].update(s)
-        print(f"{profile:8s} train() step, amp auto: prefetch 0 {s['prefetch_0']:.4f} s, "
-              f"prefetch 1 {s['prefetch_1']:.4f} s")
+        print(f"{profile:8s} " + " ".join(
+            f"{s[f'workers_{w}']:8.4f} |{s[f'wait_ms_{w}']:6.1f}  " for w in LOADER_WORKERS))
     return res
 
 
