@@ -71,9 +71,12 @@ class PrecisionDecision:
         return dataclasses.asdict(self)
 
 
-def device_name(device) -> str:
-    """A stable name of ``device``'s hardware: the GPU's name for CUDA, the CPU model and the
-    thread count for a CPU."""
+def device_name(device, threads: int | None = None) -> str:
+    """A stable name of ``device``'s hardware: the GPU's name for CUDA; for a CPU its model and
+    the threads a run trains with — ``threads`` (a config's ``runtime.num_threads``), else the
+    cores this process may use. Not torch's current thread count: a training run sets it
+    (``runtime.num_threads``) and does not restore it, so the same sweep prepared again in
+    one process would name another device and decide its precision anew."""
     import torch
 
     device = torch.device(device)
@@ -86,7 +89,8 @@ def device_name(device) -> str:
                           if ln.startswith("model name")), "")
     except OSError:
         pass
-    return f"cpu:{model or os.uname().machine}:{torch.get_num_threads()} threads"
+    n = int(threads) if threads else len(os.sched_getaffinity(0))
+    return f"cpu:{model or os.uname().machine}:{n} threads"
 
 
 def _mixed_dtype(device) -> Any:
@@ -161,7 +165,7 @@ def _decide(cfg, device, *, probe: bool) -> PrecisionDecision:
     from sim2radar.hardware import cpu_has_native_bf16
 
     device = torch.device(device)
-    name = device_name(device)
+    name = device_name(device, cfg.runtime.num_threads)
     if device.type == "cpu" and not cpu_has_native_bf16():
         return PrecisionDecision(False, "float32", name, "table",
                                  reason="this CPU has no native bfloat16 (oneDNN would emulate "
@@ -201,20 +205,19 @@ def decide_precision(cfg, device, *, table: str | os.PathLike | None = None,
 
     amp = cfg.runtime.amp
     device = torch.device(device)
+    name = device_name(device, cfg.runtime.num_threads)
     if amp is not True and amp != "auto":
-        return PrecisionDecision(False, "float32", device_name(device), "fixed",
-                                 reason="runtime.amp: false")
+        return PrecisionDecision(False, "float32", name, "fixed", reason="runtime.amp: false")
     if amp is True:
         mixed = str(_mixed_dtype(device)).removeprefix("torch.")
-        return PrecisionDecision(True, mixed, device_name(device), "fixed",
-                                 reason="runtime.amp: true")
-    if known and known.get("device") == device_name(device) and "amp" in known:
+        return PrecisionDecision(True, mixed, name, "fixed", reason="runtime.amp: true")
+    if known and known.get("device") == name and "amp" in known:
         fields = {f.name for f in dataclasses.fields(PrecisionDecision)}
         return dataclasses.replace(PrecisionDecision(**{k: v for k, v in known.items()
                                                         if k in fields}), source="recorded")
     path = None
     if table is not None:
-        path = Path(table) / f"{_slug(device_name(device))}-{_digest(cfg)}.json"
+        path = Path(table) / f"{_slug(name)}-{_digest(cfg)}.json"
         try:
             doc = json.loads(path.read_text())
             return dataclasses.replace(PrecisionDecision(**doc), source="recorded")

@@ -84,6 +84,20 @@ def test_a_real_probe_times_the_model_in_both_precisions():
     assert precision.device_name("cpu").startswith("cpu:")
 
 
+def test_the_device_name_does_not_follow_torchs_current_thread_count():
+    """A training run sets torch's thread count (runtime.num_threads) and leaves it: the same
+    sweep prepared again in that process must name the same device, or its recorded precision
+    is not found and a timed probe may flip its runs' keys."""
+    before = torch.get_num_threads()
+    name = precision.device_name("cpu")
+    try:
+        torch.set_num_threads(1 if before > 1 else 2)
+        assert precision.device_name("cpu") == name
+    finally:
+        torch.set_num_threads(before)
+    assert precision.device_name("cpu", 3).endswith(":3 threads")
+
+
 def test_only_a_decision_that_can_be_recorded_is_measured_and_a_known_one_is_kept(
         monkeypatch, tmp_path):
     """Without a table the decision is the rule (two calls always agree: a sweep's settings
@@ -92,7 +106,8 @@ def test_only_a_decision_that_can_be_recorded_is_measured_and_a_known_one_is_kep
     calls = _fake_probe(monkeypatch, {"float32": 1.0, "bfloat16": 2.0})
     first = precision.decide_precision(_cfg(), "cpu")
     assert first.source == "rule" and first.amp is True and calls == []
-    known = precision.PrecisionDecision(False, "float32", precision.device_name("cpu"),
+    known = precision.PrecisionDecision(False, "float32",
+                                        precision.device_name("cpu", _cfg().runtime.num_threads),
                                         "probe", {"float32": 1.0}, 4, "earlier").to_dict()
     got = precision.decide_precision(_cfg(), "cpu", table=tmp_path, known=known)
     assert (got.amp, got.source) == (False, "recorded") and calls == []
