@@ -559,10 +559,8 @@ def _synth_narrowband(torch, radar: RadarConfig, terms: _PathTerms, w_d: np.ndar
     n_groups = int(g0.max()) - g_min + 1
     row_len = m_grid + w
     # exact per-channel delays (eq. (2) at the frame centre) about the path's mean delay: the
-    # TX and RX parts [s], each small (array size / c), float64 before the subtraction; the
-    # channels in sub-array order (each sub-array a contiguous run of columns)
+    # TX and RX parts [s], each small (array size / c), float64 before the subtraction
     subs = _subarrays(radar, NARROWBAND_SUBARRAYS)
-    perm = np.concatenate(subs)
     dt_mean, dr_mean = terms.d_tx.mean(axis=1), terms.d_rx.mean(axis=1)
     tau0 = (dt_mean + terms.inner + dr_mean) / c                            # (P,) [s]
     del_t = (terms.d_tx - dt_mean[:, None]) / c                             # (P, T) [s]
@@ -579,7 +577,20 @@ def _synth_narrowband(torch, radar: RadarConfig, terms: _PathTerms, w_d: np.ndar
 
     a_t, b_r = factor(del_t), factor(del_r)                                # (P, T), (P, R)
     amp_arg = np.angle(terms.amp) / (2.0 * np.pi)                           # [cycles]
-    parts = []
+    # slow time: each group's tone e^{j 2 pi mu_g s} at every chirp's start s = T / T_loop
+    # [loops from the frame centre], per TX slot (the TDM offsets)
+    s_mt = slot_times_s(radar) / t_loop                                     # (M, T)
+    g_abs = np.arange(g_min, g_min + n_groups)
+    e = np.exp(2j * np.pi * np.remainder(s_mt[:, :, None] * g_abs[None, None, :] / scale,
+                                         1.0))                              # (M, T, G)
+    if integrated:
+        e = np.einsum("m,mtg->tg", w_d, e)[:, None, :]                      # (T, 1, G)
+    else:
+        e = np.transpose(e, (1, 0, 2))                                      # (T, M, G)
+    e_c = torch.as_tensor(e[np.arange(nt * nr) // nr].astype(np.complex64), device=device)
+    # per sub-array: its fast-time grid (wrapped by the kernel width), then one product per
+    # channel over the Doppler groups, written straight into the channel's row
+    chirps = torch.empty((nt * nr, e.shape[1], m_grid), dtype=torch.complex64, device=device)
     for chans in subs:
         # one tone per path and sub-array at the sub-array's mean delay (eq. (1); frequency and
         # phase as in _synth_frequency), each channel's phase exact at mid-window
@@ -599,30 +610,20 @@ def _synth_narrowband(torch, radar: RadarConfig, terms: _PathTerms, w_d: np.ndar
             (2.0 * np.pi) * np.remainder(cycles[order], 1.0), device=device,
             dtype=torch.float32))
         order_t = torch.as_tensor(order, device=device)
-        wts = (a_t[order_t][:, torch.as_tensor(chans // nr, device=device)]
-               * b_r[order_t][:, torch.as_tensor(chans % nr, device=device)] * turn[:, None])
+        # (index_select: the same rows and columns as a_t[order][:, cols], gathered faster)
+        tx_t = torch.as_tensor(chans // nr, device=device)
+        rx_t = torch.as_tensor(chans % nr, device=device)
+        wts = (a_t.index_select(1, tx_t).index_select(0, order_t)
+               * b_r.index_select(1, rx_t).index_select(0, order_t) * turn[:, None])
         v = torch.view_as_real(wts).reshape(n_paths, -1)
-        parts.append(_grid_rows(v, key[order], taps[order], dtaps[order], row_len,
-                                n_groups * row_len).reshape(-1, len(chans), 2))
-    grid = torch.view_as_complex(torch.cat(parts, dim=1)).reshape(n_groups, row_len, nt * nr)
-    folded = grid[:, :m_grid].clone()
-    folded[:, :w] += grid[:, m_grid:]
-    # slow time: each group's tone e^{j 2 pi mu_g s} at every chirp's start s = T / T_loop
-    # [loops from the frame centre], per TX slot (the TDM offsets)
-    s_mt = slot_times_s(radar) / t_loop                                     # (M, T)
-    g_abs = np.arange(g_min, g_min + n_groups)
-    e = np.exp(2j * np.pi * np.remainder(s_mt[:, :, None] * g_abs[None, None, :] / scale,
-                                         1.0))                              # (M, T, G)
-    if integrated:
-        e = np.einsum("m,mtg->tg", w_d, e)[:, None, :]                      # (T, 1, G)
-    else:
-        e = np.transpose(e, (1, 0, 2))                                      # (T, M, G)
-    # one product per channel, the channels taken back into TX/RX order on the way in (the
-    # batches are independent: the same values as reordering the result)
-    e_c = torch.as_tensor(e[np.arange(nt * nr) // nr].astype(np.complex64), device=device)
-    inv = torch.as_tensor(np.argsort(perm), device=device)
-    y = folded.permute(2, 0, 1)[inv]                                        # (C, G, L)
-    g_t = torch.fft.ifft(torch.bmm(e_c, y), dim=-1)                         # (C, S, L)
+        part = torch.view_as_complex(_grid_rows(
+            v, key[order], taps[order], dtaps[order], row_len, n_groups * row_len,
+        ).reshape(-1, len(chans), 2)).reshape(n_groups, row_len, len(chans))
+        folded = part[:, :m_grid].clone()
+        folded[:, :w] += part[:, m_grid:]
+        chans_t = torch.as_tensor(chans, device=device)
+        chirps[chans_t] = torch.bmm(e_c[chans_t], folded.permute(2, 0, 1))  # (c, S, M)
+    g_t = torch.fft.ifft(chirps, dim=-1)                                    # (C, S, M)
     idx = torch.as_tensor(np.remainder(np.arange(n) - n // 2, m_grid), device=device)
     # the inverse FFT's scale M (a power of two: exact) folded into the deapodisation
     deapod = torch.as_tensor(m_grid * _deapodisation(n, w, NUFFT_OVERSAMPLING), device=device,
