@@ -73,7 +73,8 @@ def paired_ab(real: Path, out: Path) -> dict:
     from scipy import stats
 
     from sim2radar.experiment import load_profile
-    from sim2radar.flows.run_experiment import run_experiment
+    from sim2radar.tasks.runner import PlainRunner
+    from sim2radar.tasks.sweep import SweepRequest, run_sweep
 
     demo = load_profile("demo")
     aps: dict[bool, dict[tuple[float, int], float]] = {}
@@ -81,8 +82,10 @@ def paired_ab(real: Path, out: Path) -> dict:
         overrides = {"conditions": ["baseline"], "detector_overrides": {
             **demo.detector_overrides,
             "runtime": {**demo.detector_overrides.get("runtime", {}), "amp": amp}}}
-        summary = run_experiment(real, real, profile="demo", name=f"ab-amp-{amp}".lower(),
-                                 out=out / "sweeps", store=out / "store", overrides=overrides)
+        summary = run_sweep(SweepRequest(
+            sim=str(real), real=str(real), profile="demo", name=f"ab-amp-{amp}".lower(),
+            out=str(out / "sweeps"), store=str(out / "store"), overrides=overrides),
+            PlainRunner())
         import pyarrow.parquet as pq
 
         rows = pq.read_table(Path(summary["sweep_dir"]) / "runs.parquet").to_pylist()

@@ -90,13 +90,16 @@ def _paper_grid() -> dict:
     root = Path(tempfile.mkdtemp(prefix="sim2radar-bench-grid-"))
     try:
         sim, real = _paper_data(root)
+        from sim2radar.flows._states import run_flow
         from sim2radar.flows.run_experiment import run_experiment
+        from sim2radar.tasks.sweep import SweepRequest
 
         concurrent = int(os.environ.get("SIM2RADAR_BENCH_CONCURRENT", "4"))
         t0 = time.perf_counter()
-        summary = run_experiment(sim, real, profile="paper", name="grid",
-                                 out=root / "sweeps", store=root / "store", workers=concurrent,
-                                 overrides={"concurrent_runs": concurrent, "val_every": 0})
+        summary = run_flow(run_experiment, request=SweepRequest(
+            sim=str(sim), real=str(real), profile="paper", name="grid",
+            out=str(root / "sweeps"), store=str(root / "store"), workers=concurrent,
+            overrides={"concurrent_runs": concurrent, "val_every": 0}))
         return {"paper_grid_s": time.perf_counter() - t0, "concurrent_runs": concurrent,
                 "counts": summary["counts"], "device": str(device)}
     finally:
@@ -126,16 +129,19 @@ def _paper_plan(root: Path) -> dict:
 
 
 def _paper_slice(root: Path) -> dict:
-    from sim2radar.flows.run_experiment import run_experiment
     from sim2radar.tasks.experiment import plan_cost
+    from sim2radar.tasks.runner import PlainRunner
+    from sim2radar.tasks.sweep import SweepRequest, run_sweep
 
     sim, real = (root / "sim", root / "real") if (root / "real").is_dir() else _paper_data(root)
     overrides = {"fractions": [0.05], "trials": 1, "val_every": 0, "concurrent_runs": 1}
     predicted = plan_cost({"sim": sim, "real": real}, profile="paper", store=root / "store",
                           overrides=overrides, workers=(1,))
     t0 = time.perf_counter()
-    summary = run_experiment(sim, real, profile="paper", name="slice", out=root / "sweeps",
-                             store=root / "store", overrides=overrides, workers=1)
+    summary = run_sweep(SweepRequest(sim=str(sim), real=str(real), profile="paper",
+                                     name="slice", out=str(root / "sweeps"),
+                                     store=str(root / "store"), overrides=overrides),
+                        PlainRunner())     # one run at a time, as planned (workers=1)
     return {"measured_s": time.perf_counter() - t0, "predicted_s": 3600 *
             predicted["wall_hours"][1], "counts": summary["counts"],
             "precision": predicted["precision"], "step_seconds": predicted["step_seconds"]}

@@ -57,6 +57,3 @@ def run_flow(flow: Any, **params: Any) -> Any:
     if isinstance(result, BaseException):
         raise result
     return result
-
-
-relay = finish_run  # the experiment's job flow (flows/run_experiment.py) still calls it so

@@ -19,6 +19,7 @@ deterministic and local-I/O failures fail at once.
 
 from __future__ import annotations
 
+import contextlib
 from collections.abc import Callable
 from typing import Any
 
@@ -36,9 +37,10 @@ from sim2radar.tasks.common import (
     record,
     retry_transient_io,
 )
-from sim2radar.tasks.runner import RunOptions, Units
+from sim2radar.tasks.runner import RunOptions, Units, error_text
 
-__all__ = ["STEP_NAMES", "PrefectRunner", "run_as_tasks", "gather", "record_task"]
+__all__ = ["STEP_NAMES", "PrefectRunner", "PrefectPool", "run_as_tasks", "gather", "record_task",
+           "call_task"]
 
 #: Every step's task name (the Prefect UI's task names).
 STEP_NAMES = ("render", "depth", "segments", "materials", "scene", "poses", "simulate")
@@ -176,9 +178,84 @@ class PrefectRunner:
                           channel=units.job, what=units.what)
         return [done[i] for i in range(len(units.items))]
 
-    def table(self, units: Units, rows: list[dict[str, Any]], description: str) -> None:
-        from prefect.artifacts import create_table_artifact
+    def pool(self, job: str, name: str, total: int, options: RunOptions | None = None,
+             resources: dict[str, int] | None = None):
+        """A :class:`PrefectPool` on ``options``' task runner (default the runner's)."""
+        return PrefectPool(job, name, total, options or self.options, resources)
 
-        create_table_artifact(
-            table=rows, key=_progress.artifact_key(units.job, units.dataset, f"{units.what}s"),
-            description=description)
+    def publish(self, job: str, name: str, what: str, *, description: str,
+                table: list[dict[str, Any]] | None = None,
+                markdown: str | None = None) -> None:
+        from prefect.artifacts import create_markdown_artifact, create_table_artifact
+
+        key = _progress.artifact_key(job, name, what)
+        if table is not None:
+            create_table_artifact(table=table, key=key, description=description)
+        if markdown is not None:
+            create_markdown_artifact(markdown=markdown, key=key, description=description)
+
+
+@task(cache_policy=NO_CACHE, retries=0, persist_result=False)
+def call_task(fn: Callable[..., Any], args: tuple) -> Any:
+    """One task of a :class:`PrefectPool` (named after the pool's ``task``): ``fn(*args)``."""
+    return fn(*args)
+
+
+class PrefectPool:
+    """:class:`sim2radar.tasks.runner.TaskPool` in a flow: tasks on the task runner of
+    ``options`` (threads or Dask), each claiming ``resources`` of a Dask worker; a progress
+    artifact ``<job>-<name>-progress`` moves as :meth:`report` is called and the job's progress
+    channel hears each finished unit."""
+
+    def __init__(self, job: str, name: str, total: int, options: RunOptions,
+                 resources: dict[str, int] | None) -> None:
+        self.job, self.name, self.total = job, name, total
+        self.options, self.resources = options, resources
+        self.pending: dict[Any, Any] = {}
+
+    def __enter__(self) -> PrefectPool:
+        from prefect.artifacts import create_progress_artifact
+
+        from sim2radar.flows.runners import task_runner
+
+        self.progress_id = create_progress_artifact(
+            progress=0.0, key=_progress.artifact_key(self.job, self.name, "progress"),
+            description=f"{self.job} {self.name}: finished of {self.total}")
+        self._engine = task_runner(self.options.workers, self.options.dask_address)
+        self.engine = self._engine.__enter__()
+        return self
+
+    def __exit__(self, *exc_info) -> None:
+        self._engine.__exit__(*exc_info)
+
+    def submit(self, key: Any, fn: Callable[..., Any], *args: Any, task: str,
+               name: str) -> None:
+        one = call_task.with_options(name=task, task_run_name=name)
+        with self._claim():
+            fut = self.engine.submit(one, {"fn": fn, "args": args})
+        self.pending[fut] = key
+
+    def _claim(self):
+        if not self.resources:
+            return contextlib.nullcontext()
+        import dask
+
+        return dask.annotate(resources=dict(self.resources))
+
+    def finished(self):
+        while self.pending:
+            fut = next(iter(as_completed(list(self.pending))))
+            key = self.pending.pop(fut)
+            result = fut.result(raise_on_failure=False)
+            if isinstance(result, BaseException):
+                yield key, None, error_text(result)
+            elif not fut.state.is_completed():
+                yield key, None, fut.state.message or repr(result)
+            else:
+                yield key, result, None
+
+    def report(self, item: Any, done: int, total: int) -> None:
+        from prefect.artifacts import update_progress_artifact
+
+        update_progress_artifact(self.progress_id, 100.0 * done / max(total, 1))
+        _progress.notify(self.job, item)

@@ -40,7 +40,7 @@ from typing import Any
 
 from prefect.task_runners import ThreadPoolTaskRunner
 
-__all__ = ["task_runner", "ThreadRunner", "dask_available", "local_cluster_kwargs",
+__all__ = ["task_runner", "ThreadRunner", "local_cluster_kwargs",
            "check_dask_workers", "LOCAL"]
 
 #: The ``dask_address`` value that starts a temporary local cluster.
@@ -77,16 +77,6 @@ class ThreadRunner(ThreadPoolTaskRunner):
                 self._executor.shutdown(wait=False, cancel_futures=True)
                 self._executor = None
         super().__exit__(exc_type, exc_value, traceback)
-
-
-def dask_available() -> bool:
-    """True when ``prefect_dask`` and ``distributed`` import."""
-    try:
-        import distributed  # noqa: F401
-        import prefect_dask  # noqa: F401
-    except ImportError:
-        return False
-    return True
 
 
 def local_cluster_kwargs(workers: int) -> dict[str, Any]:

@@ -434,9 +434,10 @@ def capture_dataset(request: CaptureRequest, runner: Runner) -> RunSummary:
     summary["unit"], summary["ground_truth"] = "scenes", False
     summary["stage_table"] = stage_table(outcomes)
     if scenes:
-        runner.table(units, summary["stage_table"],
-                     f"capture dataset {request.dataset}: scenes {summary['counts']} (seconds "
-                     "per step in this run; cached steps take milliseconds)")
+        runner.publish(units.job, units.dataset, "scenes", table=summary["stage_table"],
+                       description=f"capture dataset {request.dataset}: scenes "
+                                   f"{summary['counts']} (seconds per step in this run; "
+                                   "cached steps take milliseconds)")
     if export is not None:
         summary["export"] = export_all(st, outcomes, export, request.spec,
                                        domain=CAPTURE_DOMAIN)

@@ -791,9 +791,10 @@ def generate_dataset(request: GenerateRequest, runner: Runner) -> RunSummary:
     st = open_store(request.store)
     summary = summarize_dataset(st, request.dataset, request.spec, outcomes)
     summary["stage_table"] = world_table(outcomes)
-    runner.table(units, summary["stage_table"],
-                 f"dataset {request.dataset}: worlds {summary['counts']} (seconds per step, "
-                 "summed over each world's frames; cached steps take milliseconds)")
+    runner.publish(units.job, units.dataset, "worlds", table=summary["stage_table"],
+                   description=f"dataset {request.dataset}: worlds {summary['counts']} (seconds "
+                               "per step, summed over each world's frames; cached steps take "
+                               "milliseconds)")
     if request.export_dir is not None:
         summary["export"] = export_all(st, outcomes, request.export_dir, request.spec,
                                        splits=request.splits,

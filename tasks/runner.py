@@ -28,16 +28,20 @@ calls ``fn(*args)``, directly here, as the step's Prefect task (named
 
 from __future__ import annotations
 
+import collections
+import contextlib
 import dataclasses
 import logging
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import AbstractContextManager
 from typing import Any, Protocol
 
 from pydantic import BaseModel, ConfigDict, Field
 
 from sim2radar.tasks.common import Outcome, open_store, record
 
-__all__ = ["StepRun", "call_step", "Units", "Runner", "PlainRunner", "RunOptions"]
+__all__ = ["StepRun", "call_step", "Units", "Runner", "TaskPool", "PlainRunner", "PlainPool",
+           "RunOptions", "dask_installed", "error_text"]
 
 log = logging.getLogger(__name__)
 
@@ -89,9 +93,36 @@ class Runner(Protocol):
         (a unit that raised as ``units.failed(item, error)``); return the outcomes in the
         order of ``units.items``."""
 
-    def table(self, units: Units, rows: list[dict[str, Any]], description: str) -> None:
-        """Publish one row per unit (seconds per step, points per frame) where the engine
-        shows tables; a plain run has nowhere to show it and drops it."""
+    def pool(self, job: str, name: str, total: int, options: RunOptions | None = None,
+             resources: dict[str, int] | None = None) -> AbstractContextManager[TaskPool]:
+        """A :class:`TaskPool` for a job whose tasks depend on each other (the sweep: a
+        pre-training's fine-tunings start when it finishes): ``total`` tasks expected,
+        ``options`` (default the runner's) how many at once and where, ``resources`` what
+        each task claims on a Dask worker (``{"GPU_RUNS": 1}``)."""
+
+    def publish(self, job: str, name: str, what: str, *, description: str,
+                table: list[dict[str, Any]] | None = None,
+                markdown: str | None = None) -> None:
+        """Show a table (one row per unit: seconds per step, points per frame) or a Markdown
+        report where the engine shows them (Prefect artifacts keyed ``<job>-<name>-<what>``);
+        a plain run has nowhere to show them and drops them."""
+
+
+class TaskPool(Protocol):
+    """Tasks submitted one by one and collected as they finish (:meth:`Runner.pool`)."""
+
+    def submit(self, key: Any, fn: Callable[..., Any], *args: Any, task: str,
+               name: str) -> None:
+        """Run ``fn(*args)`` as a task (Prefect task name ``task``, run name ``name``);
+        ``fn`` is module-level and ``args`` pickle (Dask)."""
+
+    def finished(self) -> Iterator[tuple[Any, Any, str | None]]:
+        """``(key, result, error)`` of each task as it finishes (``error``: None, or
+        ``"Type: message"``), including tasks submitted while iterating; ends when none is
+        left."""
+
+    def report(self, item: Any, done: int, total: int) -> None:
+        """One more unit finished: the engine's progress display and the job's listeners."""
 
 
 class RunOptions(BaseModel):
@@ -137,6 +168,51 @@ class PlainRunner:
                 self.on_outcome(outcome)
         return outcomes
 
-    def table(self, units: Units, rows: list[dict[str, Any]], description: str) -> None:
+    def pool(self, job: str, name: str, total: int, options: RunOptions | None = None,
+             resources: dict[str, int] | None = None) -> AbstractContextManager[TaskPool]:
+        return contextlib.nullcontext(PlainPool(self.on_outcome))
+
+    def publish(self, job: str, name: str, what: str, *, description: str,
+                table: list[dict[str, Any]] | None = None,
+                markdown: str | None = None) -> None:
         return None
+
+
+class PlainPool:
+    """:class:`TaskPool` of a :class:`PlainRunner`: each task runs when :meth:`finished`
+    reaches it, in the order submitted, in this process."""
+
+    def __init__(self, on_outcome: Callable[[Any], None] | None = None) -> None:
+        self.queue: collections.deque = collections.deque()
+        self.on_outcome = on_outcome
+
+    def submit(self, key: Any, fn: Callable[..., Any], *args: Any, task: str,
+               name: str) -> None:
+        self.queue.append((key, fn, args, name))
+
+    def finished(self) -> Iterator[tuple[Any, Any, str | None]]:
+        while self.queue:
+            key, fn, args, name = self.queue.popleft()
+            try:
+                yield key, fn(*args), None
+            except Exception as exc:  # noqa: BLE001 - one failed task must not stop the others
+                log.info("%s failed: %s: %s", name, type(exc).__name__, exc)
+                yield key, None, error_text(exc)
+
+    def report(self, item: Any, done: int, total: int) -> None:
+        if self.on_outcome is not None:
+            self.on_outcome(item)
+
+
+def dask_installed() -> bool:
+    """True when ``prefect-dask`` and ``distributed`` are installed (``sim2radar[dask]``);
+    nothing is imported."""
+    import importlib.util
+
+    return all(importlib.util.find_spec(m) is not None for m in ("distributed", "prefect_dask"))
+
+
+def error_text(error: Any) -> str:
+    """``"Type: message"`` of an exception; anything else as text."""
+    return f"{type(error).__name__}: {error}" if isinstance(error, BaseException) else str(error)
 

@@ -199,10 +199,12 @@ def run_sweep(sim: str, real: str, *, profile: str, name: str, out: str, store: 
               verbose: bool = False, force: list[str] | None = None,
               mlflow: str | None = None, mlflow_experiment: str | None = None,
               mlflow_checkpoints: bool = False,
-              runs_per_gpu: int | str | None = None) -> dict[str, Any]:
+              runs_per_gpu: int | str | None = None,
+              use_prefect: bool = True) -> dict[str, Any]:
     """Prepare (validating every input first) and run a sweep with a progress bar; returns
-    the flow's summary. ``datasets``: the other conditions' datasets by role
-    (``{"sim-gt": ...}``).
+    the job's summary. ``datasets``: the other conditions' datasets by role
+    (``{"sim-gt": ...}``); ``use_prefect=False`` runs the training runs one after another
+    in this process without Prefect (:class:`~sim2radar.tasks.runner.PlainRunner`).
 
     ``mlflow``: a tracking URI to log the sweep to
     (:class:`~sim2radar.experiment.tracking.SweepTracker`; experiment ``mlflow_experiment``,
@@ -218,22 +220,24 @@ def run_sweep(sim: str, real: str, *, profile: str, name: str, out: str, store: 
         from sim2radar.experiment.tracking import require_mlflow
 
         require_mlflow()        # before any work: the extra is missing, say so now
-    _prefect_env(verbose)
-    from sim2radar.flows.run_experiment import (
-        packed_runner,
-        progress_callback,
-        run_experiment_flow,
-    )
-    from sim2radar.tasks.experiment import prepare_sweep
+    if use_prefect:
+        _prefect_env(verbose)
+    from sim2radar.tasks.sweep import SweepRequest, prepare
+    from sim2radar.tasks.sweep import run_sweep as sweep_job
 
-    plan = prepare_sweep({**(datasets or {}), "sim": sim, "real": real}, profile=profile,
-                         name=name, out=out, store=store, ablations=ablations,
-                         overrides=overrides, device=device, force=force or ())
+    request = SweepRequest(sim=str(sim), real=str(real), profile=str(profile), name=name,
+                           out=str(out), store=str(store),
+                           datasets={k: str(v) for k, v in (datasets or {}).items()
+                                     if v is not None},
+                           ablations=ablations, overrides=overrides, device=device,
+                           force=list(force or ()), workers=workers,
+                           dask_address=dask_address, runs_per_gpu=runs_per_gpu)
+    plan = prepare(request)     # every input validated before any training
+    request = request.model_copy(update={"plan_path": plan.plan_path})
     tracker = None
     if mlflow is not None:
         tracker = _Tracking(mlflow, plan.context.sweep_dir, mlflow_experiment or plan.name,
                             mlflow_checkpoints)
-    runner, gpu_slots = packed_runner(plan, workers, dask_address, runs_per_gpu)
     columns = [TextColumn("[bold]sweep"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
                TextColumn("{task.description}")]
     with Progress(*columns, disable=not show_progress) as progress:
@@ -249,11 +253,11 @@ def run_sweep(sim: str, real: str, *, profile: str, name: str, out: str, store: 
             if tracker is not None:
                 tracker.sync()      # runs.parquet holds the row by now
 
-        from sim2radar.flows._states import run_flow
+        from sim2radar.cli._jobs import run_job
 
-        with progress_callback(on_run):   # failed runs: Failed in Prefect, summary here
-            summary = run_flow(run_experiment_flow.with_options(task_runner=runner),
-                               plan_path=plan.plan_path, gpu_slots=gpu_slots)
+        # failed runs: Failed in Prefect, summary here
+        summary = run_job("sim2radar.flows.run_experiment:run_experiment", sweep_job, request,
+                          job="sweep", use_prefect=use_prefect, on_outcome=on_run)
     if tracker is not None:
         tracker.sync(final=True)
         summary = {**summary, "mlflow": tracker.summary()}
@@ -395,6 +399,9 @@ def sweep(
         "pip install 'sim2radar[mlflow]'. A tracker failure warns once; the sweep goes on."),
     mlflow_experiment: MlflowExperiment = None,
     mlflow_checkpoints: MlflowCheckpoints = False,
+    no_prefect: bool = typer.Option(
+        False, "--no-prefect", help="Run the training runs one after another in this "
+        "process, without the Prefect engine (no UI; the same folder, rows and results)."),
 ) -> None:
     """Run the experiment grid: baseline vs sim-pretrain (and ablations) over real-data
     fractions x trials, with paired statistics, a results table and a dashboard.
@@ -420,6 +427,9 @@ def sweep(
     try:
         if workers is not None and workers < 1:
             raise ValueError(f"--workers must be >= 1, got {workers}")
+        if no_prefect and (dask or runs_per_gpu is not None or (workers or 1) > 1):
+            raise ValueError("--no-prefect runs one training run at a time in this process: "
+                             "drop --dask, --runs-per-gpu and --workers")
         if runs_per_gpu is not None:
             from sim2radar.tasks.experiment import cuda_devices, parse_runs_per_gpu
 
@@ -455,7 +465,8 @@ def sweep(
                             overrides=overrides or None, workers=workers, dask_address=dask,
                             device=device, verbose=verbose, force=force_run, mlflow=mlflow,
                             mlflow_experiment=mlflow_experiment,
-                            mlflow_checkpoints=mlflow_checkpoints, runs_per_gpu=runs_per_gpu)
+                            mlflow_checkpoints=mlflow_checkpoints, runs_per_gpu=runs_per_gpu,
+                            use_prefect=not no_prefect)
     except (ValueError, FileNotFoundError, DatasetError, ImportError) as exc:
         typer.secho(f"error: {error_text(exc)}", fg="red", err=True)
         raise typer.Exit(2) from None

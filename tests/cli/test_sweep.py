@@ -7,7 +7,6 @@ sweep's flow is replaced here by one that finishes a constructed sweep folder's 
 
 from __future__ import annotations
 
-import json
 import socket
 import sys
 from pathlib import Path
@@ -20,6 +19,7 @@ from typer.testing import CliRunner
 
 from sim2radar.cli import app
 from sim2radar.cli.experiment import sweep_datasets
+from sim2radar.experiment.folder import SweepFolder
 from sim2radar.experiment.profiles import CONDITIONS
 
 
@@ -68,8 +68,7 @@ def _fake_flow(monkeypatch, tmp_path: Path, uri: str | None = None,
     and ends with its stats.json. With ``uri``, records after each run how many runs MLflow's
     ``experiment`` holds."""
     import sim2radar.flows._states as states
-    import sim2radar.flows.run_experiment  # noqa: F401 - imported before the patch below, so
-    import sim2radar.tasks.experiment as tasks  # its module-level run_flow stays the real one
+    import sim2radar.tasks.sweep as sweep_job
     from sim2radar.experiment.stats import sweep_statistics
     from sim2radar.fileio import write_json
     from sim2radar.flows import _progress
@@ -77,19 +76,19 @@ def _fake_flow(monkeypatch, tmp_path: Path, uri: str | None = None,
 
     seen = {"mlflow_runs_after_each": []}
 
-    def prepare_sweep(datasets, *, name, out, **kw):
-        folder = Path(out) / name
+    def prepare(request):
+        name, folder = request.name, Path(request.out) / request.name
         seen["rows"] = _constructed_sweep(folder)
         write_runs(folder, [])                    # no run finished yet
         return SimpleNamespace(name=name, context=SimpleNamespace(sweep_dir=str(folder)),
                                pretrains=(), runs=seen["rows"], concurrent_runs=1,
                                plan_path=str(folder / "plan.json"))
 
-    def run_flow(flow, plan_path, gpu_slots=False):
-        folder, rows = Path(plan_path).parent, seen["rows"]
+    def run_flow(flow, request):
+        folder, rows = Path(request.plan_path).parent, seen["rows"]
         for i, row in enumerate(rows):
             write_runs(folder, rows[: i + 1])
-            _progress.notify("run_experiment", row)
+            _progress.notify("sweep", row)
             if uri is not None:
                 from mlflow import MlflowClient
 
@@ -97,7 +96,7 @@ def _fake_flow(monkeypatch, tmp_path: Path, uri: str | None = None,
                 exp = client.get_experiment_by_name(experiment)
                 seen["mlflow_runs_after_each"].append(len(client.search_runs(
                     [exp.experiment_id], "tags.`sim2radar.kind` = 'run'", max_results=1000)))
-        doc = json.loads((folder / "sweep.json").read_text())
+        doc = SweepFolder(folder).read_sweep_document()
         stats = sweep_statistics(doc, rows, n_resamples=200)
         write_json(folder / "stats.json", stats)
         (folder / "results.md").write_text("# results\n")
@@ -106,7 +105,7 @@ def _fake_flow(monkeypatch, tmp_path: Path, uri: str | None = None,
                 "results_md": str(folder / "results.md"),
                 "dashboard": str(folder / "dashboard.html")}
 
-    monkeypatch.setattr(tasks, "prepare_sweep", prepare_sweep)
+    monkeypatch.setattr(sweep_job, "prepare", prepare)
     monkeypatch.setattr(states, "run_flow", run_flow)
     monkeypatch.chdir(tmp_path)          # a sqlite store keeps its artifacts in ./mlruns
     return seen

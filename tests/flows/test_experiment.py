@@ -48,12 +48,22 @@ def data(tmp_path_factory):
     return {"root": root, "sim": sim, "real": real}
 
 
+def _sweep(sim, real, *, datasets=None, out="out/sweeps", store="out/store", **fields):
+    """The sweep flow on a request (a failed run: Failed in Prefect, the summary here)."""
+    from sim2radar.flows._states import run_flow
+    from sim2radar.flows.run_experiment import run_experiment
+    from sim2radar.tasks.sweep import SweepRequest
+
+    request = SweepRequest(sim=str(sim), real=str(real), out=str(out), store=str(store),
+                           datasets={k: str(v) for k, v in (datasets or {}).items()}, **fields)
+    return run_flow(run_experiment, request=request)
+
+
 @pytest.fixture(scope="module")
 def first(data, prefect_server):
-    from sim2radar.flows.run_experiment import run_experiment
 
     out, store = data["root"] / "sweeps", data["root"] / "store"
-    summary = run_experiment(data["sim"], data["real"], profile="smoke", name="t", out=out,
+    summary = _sweep(data["sim"], data["real"], profile="smoke", name="t", out=out,
                              store=store)
     return {"summary": summary, "out": out, "store": store, "dir": out / "t"}
 
@@ -134,12 +144,11 @@ def test_prefect_artifacts_are_published(first):
 
 def test_a_rerun_trains_nothing(first, data, monkeypatch):
     import sim2radar.detect.train as train_mod
-    from sim2radar.flows.run_experiment import run_experiment
 
     calls = []
     real_train = train_mod.train
     monkeypatch.setattr(train_mod, "train", lambda *a, **k: calls.append(1) or real_train(*a, **k))
-    again = run_experiment(data["sim"], data["real"], profile="smoke", name="t",
+    again = _sweep(data["sim"], data["real"], profile="smoke", name="t",
                            out=first["out"], store=first["store"])
     assert again["counts"] == {"ok": 0, "skipped": 8, "failed": 0}
     assert calls == []                                     # pre-trainings found finished too
@@ -151,11 +160,10 @@ def test_a_rerun_trains_nothing(first, data, monkeypatch):
 def test_the_diagnosis_arms_run_the_control_and_the_lower_encoder_lr(data, prefect_server):
     """ref-pretrain pre-trains on its own dataset (the reference radar on the sim worlds);
     sim-pretrain-lowlr loads the sim pre-training and fine-tunes its encoder at 0.1 x lr."""
-    from sim2radar.flows.run_experiment import run_experiment
 
     ref = _write(data["root"] / "ref", 3, {"train": 8, "val": 2, "test": 2}, 0)
     out, store = data["root"] / "diag", data["root"] / "diag-store"
-    s = run_experiment(data["sim"], data["real"], profile="smoke", name="d", out=out,
+    s = _sweep(data["sim"], data["real"], profile="smoke", name="d", out=out,
                        store=store, datasets={"ref": ref},
                        overrides={"trials": 1, "fractions": [1.0], "conditions": [
                            "baseline", "sim-pretrain-lowlr", "ref-pretrain"]})
@@ -241,8 +249,9 @@ def test_a_paper_sized_plan_reaches_the_flow_as_a_file(data, tmp_path):
 
     from prefect._internal.schemas.validators import validate_parameter_size
 
-    from sim2radar.flows.run_experiment import run_experiment_flow
+    from sim2radar.flows.run_experiment import run_experiment
     from sim2radar.tasks.experiment import prepare_sweep, read_plan
+    from sim2radar.tasks.sweep import SweepRequest
 
     limit = 524_288  # Prefect 3's default server.flow_run max parameter size
     plan = prepare_sweep({"sim": data["sim"], "real": data["real"]}, profile="smoke",
@@ -253,10 +262,10 @@ def test_a_paper_sized_plan_reaches_the_flow_as_a_file(data, tmp_path):
     assert path.stat().st_size > limit and len(plan.pretrains) >= 24
     with pytest.raises(ValueError, match="less than 524,288 bytes"):
         validate_parameter_size({"plan": plan.model_dump(mode="json")}, limit)  # sent before
-    # the plan's path, and one flag (whether training tasks claim GPU slots)
-    assert list(inspect.signature(run_experiment_flow.fn).parameters) == ["plan_path",
-                                                                          "gpu_slots"]
-    validate_parameter_size({"plan_path": str(path)}, limit)  # what is sent now
+    # the request, naming the plan's path
+    assert list(inspect.signature(run_experiment.fn).parameters) == ["request"]
+    request = SweepRequest(sim=str(data["sim"]), real=str(data["real"]), plan_path=str(path))
+    validate_parameter_size({"request": request.model_dump(mode="json")}, limit)  # sent now
     assert read_plan(path) == plan                            # typed, as prepared
 
 
@@ -268,8 +277,9 @@ def test_a_frame_broken_before_or_during_a_sweep_trains_nothing_on_it(data, pref
     rerun after the fix finishes them."""
     from sim2radar.datasets import DatasetError
     from sim2radar.flows._states import run_flow
-    from sim2radar.flows.run_experiment import run_experiment_flow
+    from sim2radar.flows.run_experiment import run_experiment
     from sim2radar.tasks.experiment import prepare_sweep
+    from sim2radar.tasks.sweep import SweepRequest
 
     real = _write(tmp_path / "real", 2, {"train": 8, "val": 4, "test": 4}, 100_000, proxy=True)
     victim = real / "points" / f"{(real / 'ImageSets' / 'train.txt').read_text().split()[-1]}.npy"
@@ -280,16 +290,17 @@ def test_a_frame_broken_before_or_during_a_sweep_trains_nothing_on_it(data, pref
     victim.write_bytes(b"not a numpy file")
     with pytest.raises(DatasetError, match=f"{victim.name}: not a NumPy .npy array"):
         prepare_sweep({"sim": data["sim"], "real": real}, **kw)
-    state = run_experiment_flow(plan_path=plan.plan_path, return_state=True)
+    request = SweepRequest(sim=str(data["sim"]), real=str(real), plan_path=plan.plan_path)
+    state = run_experiment(request, return_state=True)
     assert state.is_failed() and state.message == "4 of 4 runs failed (sweep broken)"
-    s = run_flow(run_experiment_flow, plan_path=plan.plan_path)   # the summary, all the same
+    s = run_flow(run_experiment, request=request)   # the summary, all the same
     rows = pq.read_table(tmp_path / "o" / "broken" / "runs.parquet").to_pylist()
     assert s["counts"]["failed"] == len(rows) == 4 and s["counts"]["ok"] == 0
     assert all("changed while the sweep ran" in r["error"] and r["ap_3d_r40_iou03"] is None
                for r in rows)
     victim.write_bytes(good)
-    again = run_experiment_flow(
-        plan_path=prepare_sweep({"sim": data["sim"], "real": real}, **kw).plan_path)
+    again = run_experiment(request.model_copy(update={
+        "plan_path": prepare_sweep({"sim": data["sim"], "real": real}, **kw).plan_path}))
     assert again["counts"] == {"ok": 4, "skipped": 0, "failed": 0}
 
 
@@ -460,7 +471,8 @@ def test_a_killed_sweep_resumes_and_only_finishes_the_missing_runs(data, tmp_pat
     assert np.isfinite([r["ap_3d_r40_iou03"] for r in rows]).all()
 
 
-def test_a_sweep_on_a_dask_cluster_gives_the_thread_runners_results(first, data, tmp_path):
+def test_a_sweep_on_a_dask_cluster_gives_the_thread_runners_results(first, data, tmp_path,
+                                                                   monkeypatch):
     """The same smoke sweep with its runs on a 2-process LocalCluster (loopback) finishes every
     run and reports the thread runner's APs: training is seeded per run, not per process.
     The runs claim GPU slots (what ``--runs-per-gpu`` does on a cluster of GPU workers): each
@@ -469,11 +481,11 @@ def test_a_sweep_on_a_dask_cluster_gives_the_thread_runners_results(first, data,
     distributed = pytest.importorskip("distributed")
     from distributed.diagnostics.plugin import SchedulerPlugin
 
+    import sim2radar.tasks.sweep as sweep_job
     from sim2radar.experiment.packing import GPU_RESOURCE
-    from sim2radar.flows._states import run_flow
-    from sim2radar.flows.run_experiment import run_experiment_flow
-    from sim2radar.flows.runners import local_cluster_kwargs, task_runner
+    from sim2radar.flows.runners import local_cluster_kwargs
     from sim2radar.tasks.experiment import prepare_sweep
+    from sim2radar.tasks.runner import RunOptions
 
     class Restrictions(SchedulerPlugin):
         def __init__(self, scheduler):
@@ -490,9 +502,10 @@ def test_a_sweep_on_a_dask_cluster_gives_the_thread_runners_results(first, data,
                                   resources={GPU_RESOURCE: 1}) as lc:
         plugin = Restrictions(lc.scheduler)
         lc.scheduler.add_plugin(plugin, name="restrictions")
-        summary = run_flow(run_experiment_flow.with_options(
-            task_runner=task_runner(2, lc.scheduler_address)), plan_path=plan.plan_path,
-            gpu_slots=True)
+        # what --runs-per-gpu decides on a scheduler address (pack_runs needs a CUDA GPU)
+        monkeypatch.setattr(sweep_job, "sweep_options", lambda plan, request: (
+            RunOptions(workers=2, dask_address=lc.scheduler_address), {GPU_RESOURCE: 1}))
+        summary = _sweep(data["sim"], data["real"], plan_path=plan.plan_path)
     assert summary["counts"] == {"ok": 8, "skipped": 0, "failed": 0}
     assert len(plugin.seen) == 8 + len(plan.pretrains)       # every training task ...
     assert all(r == {GPU_RESOURCE: 1} for r in plugin.seen.values()), plugin.seen  # ... a slot
@@ -516,7 +529,6 @@ def test_a_dask_worker_killed_mid_run_loses_nothing(data, prefect_server, tmp_pa
     import threading
 
     from sim2radar.experiment.claims import read_events
-    from sim2radar.flows.run_experiment import run_experiment
     from sim2radar.flows.runners import local_cluster_kwargs
 
     sweep = tmp_path / "sweeps" / "kill"
@@ -541,7 +553,7 @@ def test_a_dask_worker_killed_mid_run_loses_nothing(data, prefect_server, tmp_pa
     with distributed.LocalCluster(**local_cluster_kwargs(2)) as lc:
         watcher.start()
         try:
-            summary = run_experiment(data["sim"], data["real"], profile="smoke", name="kill",
+            summary = _sweep(data["sim"], data["real"], profile="smoke", name="kill",
                                      out=tmp_path / "sweeps", store=tmp_path / "store",
                                      dask_address=lc.scheduler_address,
                                      overrides={"finetune_epochs": 30, "val_every": 0})
@@ -614,32 +626,31 @@ def test_a_truncated_run_row_heals_and_force_run_redoes_a_run(data, prefect_serv
     """Issue #24 probe 2 for sweeps: a truncated experiment_runs file is quarantined and its
     run computed again (from its final checkpoint: same AP) instead of failing on every
     rerun; ``--force-run`` redoes a run from scratch, its old row and checkpoints kept aside."""
-    from sim2radar.flows.run_experiment import run_experiment
 
     kw = dict(profile="smoke", name="h", out=tmp_path / "o", store=tmp_path / "store",
               overrides={"trials": 1, "fractions": [1.0]})
-    first = run_experiment(data["sim"], data["real"], **kw)
+    first = _sweep(data["sim"], data["real"], **kw)
     assert first["counts"] == {"ok": 2, "skipped": 0, "failed": 0}
     rows = {r["run_key"]: r for r in pq.read_table(tmp_path / "o/h/runs.parquet").to_pylist()}
     st = ArtifactStore(tmp_path / "store")
     key = next(k for k, r in rows.items() if r["condition"] == "baseline")
     path = Path(st.path("experiment_runs", key))
     path.write_bytes(path.read_bytes()[:300])
-    again = run_experiment(data["sim"], data["real"], **kw)
+    again = _sweep(data["sim"], data["real"], **kw)
     assert again["counts"] == {"ok": 1, "skipped": 1, "failed": 0}
     healed = {r["run_key"]: r for r in pq.read_table(tmp_path / "o/h/runs.parquet").to_pylist()}
     assert healed[key]["status"] == "ok" and healed[key]["error"] == ""
     assert healed[key]["ap_3d_r40_iou03"] == pytest.approx(rows[key]["ap_3d_r40_iou03"])
     assert len(st.quarantined()) == 1
 
-    forced = run_experiment(data["sim"], data["real"], **kw, force=["baseline-f1-t0"])
+    forced = _sweep(data["sim"], data["real"], **kw, force=["baseline-f1-t0"])
     assert forced["counts"] == {"ok": 1, "skipped": 1, "failed": 0}
     assert len(st.quarantined()) == 2
     assert len(list((tmp_path / "o/h/quarantine/runs").iterdir())) == 1  # old checkpoints kept
     redone = {r["run_key"]: r for r in pq.read_table(tmp_path / "o/h/runs.parquet").to_pylist()}
     assert redone[key]["steps"] == rows[key]["steps"]  # trained from scratch, all its steps
     with pytest.raises(ValueError, match="no run or pre-training of this sweep has that id"):
-        run_experiment(data["sim"], data["real"], **kw, force=["baseline-f0.33-t9"])
+        _sweep(data["sim"], data["real"], **kw, force=["baseline-f0.33-t9"])
 
 
 def test_a_truncated_checkpoint_heals_and_force_run_redoes_a_pretraining(data, prefect_server,
@@ -648,13 +659,12 @@ def test_a_truncated_checkpoint_heals_and_force_run_redoes_a_pretraining(data, p
     quarantined and trained again (same check, same encoder for its runs) instead of failing
     every run that loads it; a fine-tuning run's truncated last.pt resumes from its newest good
     epoch checkpoint; --force-run takes pre-training ids."""
-    from sim2radar.flows.run_experiment import run_experiment
 
     kw = dict(profile="smoke", name="c", out=tmp_path / "o", store=tmp_path / "store",
               overrides={"trials": 1, "fractions": [1.0], "finetune_epochs": 3,
                          "detector_overrides": {"runtime": {"checkpoint_every": 1,
                                                             "keep_checkpoints": 3}}})
-    first = run_experiment(data["sim"], data["real"], **kw)
+    first = _sweep(data["sim"], data["real"], **kw)
     assert first["counts"] == {"ok": 2, "skipped": 0, "failed": 0}
     sweep = tmp_path / "o" / "c"
     (pre_dir,) = list((sweep / "pretrain").iterdir())
@@ -666,7 +676,7 @@ def test_a_truncated_checkpoint_heals_and_force_run_redoes_a_pretraining(data, p
     st.quarantine(st.path("experiment_runs", rows["sim-pretrain"]["run_key"]), "test")
     run_dir = sweep / "runs" / rows["sim-pretrain"]["run_key"]
     (run_dir / "last.pt").write_bytes((run_dir / "last.pt").read_bytes()[:500])
-    again = run_experiment(data["sim"], data["real"], **kw)
+    again = _sweep(data["sim"], data["real"], **kw)
     assert again["counts"] == {"ok": 1, "skipped": 1, "failed": 0}
     assert (pre_dir / "quarantine").is_dir() and ckpt.is_file()
     after = json.loads((pre_dir / "check.json").read_text())
@@ -676,6 +686,6 @@ def test_a_truncated_checkpoint_heals_and_force_run_redoes_a_pretraining(data, p
         rows["sim-pretrain"]["ap_3d_r40_iou03"])              # resumed: the same run
     assert any(p.name.startswith("last.pt.") for p in (run_dir / "quarantine").iterdir())
     pre_id = next(iter(pq.read_table(sweep / "pretrainings.parquet").to_pylist()))["pretrain_id"]
-    run_experiment(data["sim"], data["real"], **kw, force=[pre_id])
+    _sweep(data["sim"], data["real"], **kw, force=[pre_id])
     assert len(list((sweep / "quarantine" / "pretrain").iterdir())) == 1
     assert json.loads((pre_dir / "check.json").read_text())["sim_ap"] == before["sim_ap"]
