@@ -18,9 +18,9 @@ gradient-norm clipping at 10. Randomness: ``torch.manual_seed(seed)`` fixes the 
 weights; epoch ``e`` draws its frame order from ``numpy.random.default_rng([seed, e])`` and
 batch ``k``'s augmentation from child ``k`` of ``SeedSequence([seed, e])``
 (:mod:`sim2radar.detect.batches`, made in ``runtime.loader_workers`` DataLoader workers), so a
-resumed run continues exactly as an uninterrupted one, whatever the worker count. An ``on_epoch_end``
-hook (e.g. validation AP) runs with torch's random state saved and restored, so it cannot change
-the training either.
+resumed run continues exactly as an uninterrupted one, whatever the worker count. An
+``on_epoch_end`` hook (e.g. validation AP) runs with torch's random state saved and restored,
+so it cannot change the training either.
 """
 
 from __future__ import annotations
