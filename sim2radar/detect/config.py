@@ -270,10 +270,10 @@ class RuntimeConfig(_Frozen):
     prefetch_batches: int | None = Field(None, ge=0, le=8, exclude=True)
     progress: bool = True
 
-    @field_validator("loader_workers")
+    @field_validator("loader_workers", mode="before")
     @classmethod
-    def _workers(cls, v: int | str) -> int | str:
-        if isinstance(v, int) and not 0 <= v <= 64:
+    def _workers(cls, v: Any) -> Any:
+        if isinstance(v, bool) or (isinstance(v, int) and not 0 <= v <= 64):
             raise ValueError(f"must be 'auto' or an int in [0, 64], got {v}")
         return v
 

@@ -150,8 +150,9 @@ def test_worker_count_setting():
     assert RuntimeConfig().loader_workers == "auto"
     with pytest.raises(ValueError, match="loader_workers"):
         RuntimeConfig(loader_workers=-1)
-    with pytest.raises(ValueError, match="loader_workers"):
-        RuntimeConfig(loader_workers="many")
+    for bad in ("many", True):
+        with pytest.raises(ValueError, match="loader_workers"):
+            RuntimeConfig(loader_workers=bad)
 
 
 def test_old_prefetch_setting_loads_with_a_warning_and_is_not_written():
