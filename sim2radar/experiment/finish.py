@@ -15,6 +15,7 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
+from sim2radar.experiment.documents import SweepDocument, parse_document
 from sim2radar.experiment.folder import SweepFolder
 from sim2radar.experiment.plan import SweepPlan
 from sim2radar.vocab import STATUSES
@@ -22,29 +23,38 @@ from sim2radar.vocab import STATUSES
 __all__ = ["finish_sweep", "write_results"]
 
 
-def write_results(sweep_dir: str | os.PathLike, doc: Mapping[str, Any],
+def write_results(sweep_dir: str | os.PathLike, doc: SweepDocument | Mapping[str, Any],
                   rows: Sequence[Mapping[str, Any]],
                   pretrainings: Sequence[Mapping[str, Any]] = ()) -> dict[str, Any]:
     """Write a sweep folder's ``stats.json``, ``results.md`` and ``dashboard.html`` from its
     ``sweep.json`` document and rows (what :func:`finish_sweep` does at the end of a sweep, and
     ``sim2radar sweep-report`` does for a published one). Returns ``stats``, ``markdown`` and
-    the paths ``results_md``, ``dashboard``."""
+    the paths ``results_md``, ``dashboard``.
+
+    ``doc``: the :class:`~sim2radar.experiment.documents.SweepDocument`
+    (:meth:`~.folder.SweepFolder.read_sweep_document`), or sweep.json's raw JSON value, read as
+    the document here.
+
+    Raises
+    ------
+    DocumentError — a raw ``doc`` that is not the sweep's document.
+    """
     from sim2radar.experiment.dashboard import write_dashboard
     from sim2radar.experiment.report import results_markdown
     from sim2radar.experiment.stats import sweep_statistics
     from sim2radar.fileio import atomic_write, write_json
 
     sweep_dir = Path(sweep_dir)
-    stats = sweep_statistics(doc, rows, pretrainings)
-    prereg = doc.get("preregistration")
-    md = results_markdown(stats, rows, title=f"Sweep {doc.get('name', sweep_dir.name)}",
-                          real_domain_label=doc.get("real_domain", ""),
-                          proxy=doc.get("real_is_proxy"),
-                          settings={"profile": (doc.get("profile") or {}).get("name"),
-                                    "digest": doc.get("settings_digest"),
-                                    "fixed_at": doc.get("settings_fixed_at")},
-                          preregistration=prereg)
     folder = SweepFolder(sweep_dir)
+    if not isinstance(doc, SweepDocument):
+        doc = parse_document(SweepDocument, doc, folder.sweep_json, folder.SWEEP_FIX)
+    stats = sweep_statistics(doc, rows, pretrainings)
+    md = results_markdown(stats, rows, title=f"Sweep {doc.name}",
+                          real_domain_label=doc.real_domain, proxy=doc.real_is_proxy,
+                          settings={"profile": doc.profile.get("name"),
+                                    "digest": doc.settings_digest,
+                                    "fixed_at": doc.settings_fixed_at},
+                          preregistration=doc.preregistration)
     write_json(folder.stats_json, stats)
     atomic_write(folder.results_md, md.encode())
     dashboard = write_dashboard(sweep_dir, folder.dashboard_html)
@@ -64,7 +74,7 @@ def finish_sweep(plan: SweepPlan, rows: Sequence[Mapping[str, Any]],
     from sim2radar.experiment.report import results_table_rows
 
     sweep_dir, rows = Path(plan.context.sweep_dir), list(rows)
-    res = write_results(sweep_dir, plan.sweep.model_dump(mode="json"), rows, pretrainings)
+    res = write_results(sweep_dir, plan.sweep, rows, pretrainings)
     counts = {k: sum(r["status"] == k for r in rows) for k in STATUSES}
     return {"name": plan.name, "sweep_dir": str(sweep_dir), "counts": counts,
             "metric": plan.metric, "stats": res["stats"], "markdown": res["markdown"],

@@ -2,7 +2,9 @@
 
     folder = SweepFolder("out/sweeps/demo")
     folder.sweep_json, folder.runs_table, folder.run_dir(key), folder.pretrain_dir(key)
-    folder.read_sweep()          # sweep.json as a dict, or None before the sweep is prepared
+    folder.read_sweep_document()     # sweep.json as a SweepDocument, None before it is prepared
+    folder.write_sweep_document(doc), folder.update_sweep(packing=...)
+    folder.read_progress(), folder.write_progress(SweepProgress(...))   # progress.json
 
 What lives there (``<out>/<name>/``)::
 
@@ -31,7 +33,10 @@ import dataclasses
 import json
 import os
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from sim2radar.experiment.documents import SweepDocument, SweepProgress
 
 __all__ = ["SweepFolder"]
 
@@ -142,9 +147,95 @@ class SweepFolder:
         return self.root / "quarantine" / kind / f"{key}.{stamp}"
 
     # --- documents -------------------------------------------------------------------------
+    #: what a damaged document's message tells its reader to do
+    SWEEP_FIX = ("delete it (and the sweep folder's runs if they are not wanted) or choose a new "
+                 "sweep name")
+    PROGRESS_FIX = "delete it: the sweep writes it again when its next job finishes"
+
+    def _read_document(self, path: Path, kind: type, fix: str) -> Any:
+        """``path``'s document as ``kind`` (or its ``.gz`` copy's: a published sweep), None
+        when neither exists; :class:`~.documents.DocumentError` when it cannot be read as
+        one."""
+        from sim2radar.experiment.documents import DocumentError, parse_document
+        from sim2radar.fileio import json_text
+
+        try:
+            text = json_text(path)
+            if text is None:
+                return None
+            value = json.loads(text)
+        except json.JSONDecodeError as exc:
+            raise DocumentError(path, f"not valid JSON ({exc.msg} at line {exc.lineno}, column "
+                                f"{exc.colno})", fix) from None
+        except (OSError, UnicodeDecodeError) as exc:
+            raise DocumentError(path, f"cannot be read ({exc})", fix) from None
+        return parse_document(kind, value, path, fix)
+
+    def read_sweep_document(self) -> SweepDocument | None:
+        """sweep.json (or the ``sweep.json.gz`` a published sweep keeps) as its
+        :class:`~.documents.SweepDocument`, or None when it does not exist yet (a sweep not
+        prepared).
+
+        Raises
+        ------
+        DocumentError (a ValueError) — it exists but is not the sweep's document: not JSON,
+            not an object, a field of another type, or settings deleted (or nulled) from a file
+            that had them; its ``problem`` says which in one line.
+        """
+        from sim2radar.experiment.documents import SweepDocument
+
+        return self._read_document(self.sweep_json, SweepDocument, self.SWEEP_FIX)
+
+    def write_sweep_document(self, doc: SweepDocument) -> Path:
+        """Write sweep.json (atomically; the bytes :func:`~sim2radar.fileio.write_json` writes
+        for the fields ``doc`` holds, in their order)."""
+        from sim2radar.fileio import write_json
+
+        return write_json(self.sweep_json, doc.model_dump(mode="json"))
+
+    def update_sweep(self, **fields: Any) -> Path:
+        """Add or replace top-level fields of sweep.json (written atomically; a new field goes
+        last, a replaced one stays in its place), checked as a
+        :class:`~.documents.SweepDocument`.
+
+        Raises
+        ------
+        FileNotFoundError — no sweep.json: the sweep was not prepared.
+        DocumentError — sweep.json, or it with ``fields``, is not the sweep's document.
+        """
+        from sim2radar.experiment.documents import SweepDocument, parse_document
+
+        doc = self.read_sweep_document()
+        if doc is None:
+            raise FileNotFoundError(f"{self.sweep_json}: not found; prepare the sweep before "
+                                    "recording anything in it")
+        return self.write_sweep_document(parse_document(
+            SweepDocument, {**doc.model_dump(mode="json"), **fields}, self.sweep_json,
+            self.SWEEP_FIX))
+
+    def read_progress(self) -> SweepProgress | None:
+        """progress.json as its :class:`~.documents.SweepProgress`, or None when the sweep has
+        not written one (no job finished yet, or a sweep from before the file).
+
+        Raises
+        ------
+        DocumentError — it exists but is not the sweep's progress.
+        """
+        from sim2radar.experiment.documents import SweepProgress
+
+        return self._read_document(self.progress_json, SweepProgress, self.PROGRESS_FIX)
+
+    def write_progress(self, progress: SweepProgress) -> Path:
+        """Write progress.json (atomically, the fields ``progress`` holds in their order: a
+        live dashboard polling it never reads half a file)."""
+        from sim2radar.fileio import write_json
+
+        return write_json(self.progress_json, progress.model_dump(mode="json"))
+
     def read_sweep(self) -> Any:
-        """sweep.json's JSON value (the sweep's document, a dict, unless the file was edited),
-        or None when it does not exist yet.
+        """sweep.json's raw JSON value (a dict, unless the file was edited), or None when it
+        does not exist yet; the typed read is :meth:`read_sweep_document`. Kept for
+        ``prepare_sweep`` in ``tasks/experiment.py`` until it reads the typed document.
 
         Raises
         ------
@@ -153,13 +244,4 @@ class SweepFolder:
         try:
             return json.loads(self.sweep_json.read_text()) if self.sweep_json.is_file() else None
         except (OSError, ValueError) as exc:
-            raise ValueError(f"{self.sweep_json}: unreadable ({exc}); delete it (and the sweep "
-                             "folder's runs if they are not wanted) or choose a new sweep "
-                             "name") from None
-
-    def update_sweep(self, **fields: Any) -> Path:
-        """Add or replace top-level fields of sweep.json (written atomically)."""
-        from sim2radar.fileio import write_json
-
-        doc = self.read_sweep()
-        return write_json(self.sweep_json, {**(doc if isinstance(doc, dict) else {}), **fields})
+            raise ValueError(f"{self.sweep_json}: unreadable ({exc}); {self.SWEEP_FIX}") from None

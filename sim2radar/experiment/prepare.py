@@ -30,7 +30,7 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
-from sim2radar.experiment.documents import SweepDocument
+from sim2radar.experiment.documents import SweepDocument, parse_document
 from sim2radar.experiment.errors import SettingError, dataset_setting
 from sim2radar.experiment.folder import SweepFolder
 from sim2radar.experiment.plan import (
@@ -288,7 +288,7 @@ class SweepSettingsChanged(SettingError):
     """A sweep folder's settings were fixed by its first preparation and now differ."""
 
 
-def settings_fixed_at(old: Mapping[str, Any] | None, settings: Mapping[str, Any], *,
+def settings_fixed_at(old: SweepDocument | Any, settings: Mapping[str, Any], *,
                       name: str, sweep_dir: str | os.PathLike) -> str:
     """When the settings of sweep ``name`` were fixed: now for a new sweep (``old``, its
     earlier ``sweep.json``, None), the first preparation's time otherwise.
@@ -298,32 +298,30 @@ def settings_fixed_at(old: Mapping[str, Any] | None, settings: Mapping[str, Any]
     tuning the protocol toward the answer). A folder written before settings were recorded
     adopts the current ones.
 
+    Parameters
+    ----------
+    old : the folder's :class:`~.documents.SweepDocument`
+        (:meth:`~.folder.SweepFolder.read_sweep_document`, which refuses a damaged file), or
+        None; or sweep.json's raw JSON value (:meth:`~.folder.SweepFolder.read_sweep`), read
+        as the document here.
+    settings : :func:`~.plan.protocol_settings` of the sweep being prepared.
+
     Raises
     ------
     SweepSettingsChanged — the settings differ from ``old``'s, listing what changed.
+    DocumentError — a raw ``old`` that is not the sweep's document (not an object, settings
+        null or not an object, a settings digest without settings).
     """
     if old is None:
         return _now()
-    if not isinstance(old, Mapping):
-        raise SweepSettingsChanged(
-            "{file} holds {kind}, not the sweep's document; delete the sweep folder (or "
-            "restore its sweep.json) to start again", file=str(SweepFolder(sweep_dir).sweep_json),
-            kind=type(old).__name__)
-    if "settings" not in old:
-        if "settings_digest" in old:        # written with settings, which are now gone
-            raise SweepSettingsChanged(
-                "{file} has a settings digest ({digest}) but no settings: the file was edited; "
-                "restore it, or start a new sweep name", file=str(SweepFolder(sweep_dir).sweep_json),
-                digest=str(old["settings_digest"]))
-        return str(old.get("created_at") or _now())   # a folder from before settings existed
-    if not isinstance(old["settings"], Mapping):
-        raise SweepSettingsChanged(
-            "{file}: field 'settings' is {value}, not the settings document the sweep wrote; "
-            "restore the file, or start a new sweep name",
-            file=str(SweepFolder(sweep_dir).sweep_json), value=repr(old["settings"]))
-    if protocol_digest(old["settings"]) == protocol_digest(settings):
-        return str(old.get("settings_fixed_at") or old.get("created_at") or _now())
-    changes = settings_changes(old["settings"], settings)
+    if not isinstance(old, SweepDocument):
+        folder = SweepFolder(sweep_dir)
+        old = parse_document(SweepDocument, old, folder.sweep_json, folder.SWEEP_FIX)
+    if old.settings is None:                     # a folder from before settings existed
+        return str(old.created_at or _now())
+    if protocol_digest(old.settings) == protocol_digest(settings):
+        return str(old.settings_fixed_at or old.created_at or _now())
+    changes = settings_changes(old.settings, settings)
     shown = "\n  ".join(changes[:12]) + (f"\n  ... and {len(changes) - 12} more"
                                           if len(changes) > 12 else "")
     raise SweepSettingsChanged(
@@ -331,8 +329,8 @@ def settings_fixed_at(old: Mapping[str, Any] | None, settings: Mapping[str, Any]
         "{digest}); what changed:\n  {shown}\nOne sweep's runs all use the settings fixed "
         "before its first run: start a new sweep name ({name}) for the new settings, or delete "
         "the folder to discard the old sweep.", sweep=repr(name), folder=str(sweep_dir),
-        fixed_at=str(old.get("settings_fixed_at") or old.get("created_at")),
-        digest=protocol_digest(old["settings"]), shown=shown)
+        fixed_at=str(old.settings_fixed_at or old.created_at),
+        digest=protocol_digest(old.settings), shown=shown)
 
 
 def _check_datasets(profile: ExperimentProfile, domains: Mapping[str, Any]) -> None:

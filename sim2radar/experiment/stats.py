@@ -65,6 +65,7 @@ import numpy as np
 from scipy import optimize
 from scipy import stats as sps
 
+from sim2radar.experiment.documents import SweepDocument
 from sim2radar.experiment.profiles import BASELINE, CONDITIONS, default_primary_fractions
 
 __all__ = [
@@ -762,25 +763,26 @@ def _pooled_notes(fractions: Sequence[float], condition: str | None, alpha: floa
     ]
 
 
-def sweep_statistics(doc: Mapping[str, Any], rows: Iterable[Mapping[str, Any]] | Any,
+def sweep_statistics(doc: SweepDocument, rows: Iterable[Mapping[str, Any]] | Any,
                      pretrainings: Sequence[Mapping[str, Any]] = (), *,
                      conditions: Sequence[str] | None = None,
                      n_resamples: int = N_RESAMPLES) -> dict[str, Any]:
-    """The statistics of a sweep (``stats.json``) from its ``sweep.json`` document, its runs'
-    rows and its pre-trainings' rows: :func:`sweep_stats` with the
-    profile's primary endpoint, and the pre-training table
+    """The statistics of a sweep (``stats.json``) from its ``sweep.json`` document
+    (:class:`~sim2radar.experiment.documents.SweepDocument`), its runs' rows and its
+    pre-trainings' rows: :func:`sweep_stats` on the document's metric (default
+    :data:`DEFAULT_METRIC`) with the profile's primary endpoint, and the pre-training table
     (:func:`~sim2radar.experiment.learnability.pretraining_table`) under ``pretrainings``."""
     from sim2radar.experiment.learnability import pretraining_table
 
     rows = as_rows(rows)
-    profile = dict(doc.get("profile") or {})
-    conditions = list(conditions if conditions is not None else doc.get("conditions") or
+    profile = dict(doc.profile)
+    conditions = list(conditions if conditions is not None else doc.conditions or
                       dict.fromkeys(str(r["condition"]) for r in rows))
-    fractions = profile.get("fractions") or doc.get("fractions") or []
+    fractions = profile.get("fractions") or doc.fractions
     primary = profile.get("primary_fractions") or (
         default_primary_fractions(fractions) if fractions else None)
-    stats = sweep_stats(rows, doc.get("metric", DEFAULT_METRIC), conditions=conditions,
-                        primary_fractions=primary,
+    metric = doc.metric if "metric" in doc.model_fields_set else DEFAULT_METRIC
+    stats = sweep_stats(rows, metric, conditions=conditions, primary_fractions=primary,
                         primary_condition=profile.get("primary_condition", "sim-pretrain"),
                         n_resamples=n_resamples)
     stats["pretrainings"] = pretraining_table(

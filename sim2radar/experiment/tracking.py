@@ -53,6 +53,7 @@ from pathlib import Path
 from typing import Any, Literal
 
 from sim2radar.experiment.dashboard.labels import num
+from sim2radar.experiment.documents import DocumentError, SweepDocument
 from sim2radar.experiment.folder import SweepFolder
 from sim2radar.experiment.stats import stats_count_runs
 from sim2radar.fileio import json_text, jsonable
@@ -136,7 +137,7 @@ class SweepSnapshot:
     ----------
     path : Path — the sweep folder.
     name : str — the sweep's name (``sweep.json``'s, else the folder's).
-    doc : dict — ``sweep.json`` (or its ``.gz`` copy).
+    doc : SweepDocument — ``sweep.json`` (or its ``.gz`` copy).
     runs : list of dict — ``runs.parquet`` rows (empty: no run finished yet).
     pretrainings : list of dict — ``pretrainings.parquet`` rows (empty: none).
     stats : dict or None — ``stats.json`` when it counts exactly the runs of ``runs.parquet``
@@ -145,7 +146,7 @@ class SweepSnapshot:
 
     path: Path
     name: str
-    doc: dict[str, Any]
+    doc: SweepDocument
     runs: list[dict[str, Any]]
     pretrainings: list[dict[str, Any]]
     stats: dict[str, Any] | None = None
@@ -182,17 +183,14 @@ def read_sweep_folder(folder: str | os.PathLike) -> SweepSnapshot:
     layout = SweepFolder(path)
     sweep_json = layout.sweep_json
     try:
-        text = json_text(sweep_json)
-        doc = None if text is None else json.loads(text)
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
-        raise ValueError(f"{sweep_json}: cannot be read ({exc}); rerun `sim2radar sweep` with "
-                         "the same name to rewrite it") from None
-    if not isinstance(doc, dict):
-        raise ValueError(f"{sweep_json}: " + ("not found" if doc is None else
-                                              f"holds {type(doc).__name__}, not an object")
-                         + "; a sweep folder holds the sweep.json `sim2radar sweep` writes "
-                         "before its first run")
-    name = str(doc.get("name") or path.name)
+        doc = layout.read_sweep_document()
+    except DocumentError as exc:
+        raise ValueError(f"{sweep_json}: {exc.problem}; rerun `sim2radar sweep` with the same "
+                         "name to rewrite it") from None
+    if doc is None:
+        raise ValueError(f"{sweep_json}: not found; a sweep folder holds the sweep.json "
+                         "`sim2radar sweep` writes before its first run")
+    name = doc.name or path.name
     if not name or not all(c.isalnum() or c in "-_." for c in name):
         raise ValueError(f"{sweep_json}: sweep name {name!r} has characters other than "
                          "letters, digits, '-', '_' and '.'; it names the sweep's MLflow runs")
@@ -236,11 +234,10 @@ def _detector_params(config: Any) -> dict[str, str]:
     return out
 
 
-def _dataset_params(doc: Mapping[str, Any], roles: Iterable[str]) -> dict[str, str]:
+def _dataset_params(doc: SweepDocument, roles: Iterable[str]) -> dict[str, str]:
     out = {}
-    datasets = doc.get("datasets") or {}
     for role in roles:
-        ds = datasets.get(role) if isinstance(datasets, Mapping) else None
+        ds = doc.datasets.get(role)
         if isinstance(ds, Mapping):
             for field in ("path", "key", "domain", "n_frames"):
                 if ds.get(field) is not None:
@@ -248,22 +245,26 @@ def _dataset_params(doc: Mapping[str, Any], roles: Iterable[str]) -> dict[str, s
     return out
 
 
-def _sweep_params(doc: Mapping[str, Any]) -> dict[str, str]:
+def _held(doc: SweepDocument, fields: Iterable[str]) -> dict[str, Any]:
+    """The ``fields`` ``doc`` holds with a value (not null): a field an older sweep.json lacks
+    is not logged at its default."""
+    return {f: doc.held(f) for f in fields if doc.held(f) is not None}
+
+
+def _sweep_params(doc: SweepDocument) -> dict[str, str]:
     """Params every run of the sweep shares: its profile (less its description), settings
     digest and metric (so runs compare across sweeps)."""
-    profile = {k: v for k, v in dict(doc.get("profile") or {}).items() if k != "description"}
+    profile = {k: v for k, v in doc.profile.items() if k != "description"}
     out = _flatten("profile", profile, {})
-    for field in ("settings_digest", "metric"):
-        if doc.get(field) is not None:
-            out[field] = _param_text(doc[field])
+    out.update({k: _param_text(v) for k, v in _held(doc, ("settings_digest", "metric")).items()})
     return out
 
 
-def _configs(doc: Mapping[str, Any]) -> Mapping[str, Any]:
-    return ((doc.get("provenance") or {}).get("configs") or {})
+def _configs(doc: SweepDocument) -> Mapping[str, Any]:
+    return doc.provenance.get("configs") or {}
 
 
-def _learning_rates(doc: Mapping[str, Any], condition: str) -> dict[str, Any]:
+def _learning_rates(doc: SweepDocument, condition: str) -> dict[str, Any]:
     """The fine-tuning config of ``condition`` (its encoder learning-rate share applied) and
     its learning rates: ``lr`` (the head's), ``encoder_lr_scale``, ``encoder_lr``."""
     from sim2radar.experiment.profiles import CONDITIONS
@@ -280,7 +281,7 @@ def _learning_rates(doc: Mapping[str, Any], condition: str) -> dict[str, Any]:
         optim = config["optimization"]
         lr, scale = optim.get("lr"), optim.get("encoder_lr_scale", 1.0)
     else:
-        lr = (doc.get("profile") or {}).get("lr")
+        lr = doc.profile.get("lr")
         scale = CONDITIONS[condition].encoder_lr_scale if known else None
     out = {"config": config, "lr": lr, "encoder_lr_scale": scale}
     if lr is not None and scale is not None:
@@ -328,7 +329,7 @@ def run_params(folder: SweepSnapshot, row: Mapping[str, Any], kind: str) -> dict
         out["conditions"] = ",".join(row.get("conditions") or ())
         optim = config.get("optimization") if isinstance(config, Mapping) else None
         out["lr"] = _param_text(optim.get("lr") if isinstance(optim, Mapping)
-                                else (doc.get("profile") or {}).get("lr"))
+                                else doc.profile.get("lr"))
     return out
 
 
@@ -403,8 +404,8 @@ def _run_dir(folder: SweepSnapshot, row: Mapping[str, Any], kind: str) -> Path |
     return None
 
 
-def _git_tags(doc: Mapping[str, Any]) -> dict[str, str]:
-    commit = (doc.get("provenance") or {}).get("git")
+def _git_tags(doc: SweepDocument) -> dict[str, str]:
+    commit = doc.provenance.get("git")
     if not isinstance(commit, str) or not commit:
         return {}
     return {"sim2radar.git_commit": commit, TAG_GIT: commit.removesuffix("-dirty")}
@@ -659,21 +660,20 @@ class SweepTracker:
         doc = folder.doc
         tags = {TAG_SWEEP: folder.name, TAG_KIND: "sweep",
                 "sim2radar.sweep_dir": str(folder.path.resolve()),
-                "sim2radar.real_domain": str(doc.get("real_domain") or ""),
+                "sim2radar.real_domain": doc.real_domain,
                 **_git_tags(doc)}
-        description = (doc.get("profile") or {}).get("description")
+        description = doc.profile.get("description")
         if description:
             tags["mlflow.note.content"] = str(description)[:5000]
         run = self._call("creating the sweep's parent run", self._client.create_run,
                          self._experiment_id, run_name=f"sweep {folder.name}", tags=tags,
-                         start_time=_ms(doc.get("created_at")))
+                         start_time=_ms(doc.created_at))
         params = _sweep_params(doc)
-        for field in ("conditions", "fractions", "trials", "n_runs", "n_pretrains",
-                      "real_domain", "real_is_proxy", "settings_fixed_at"):
-            if doc.get(field) is not None:
-                params[field] = _param_text(doc[field])
-        params.update(_dataset_params(doc, list(doc.get("datasets") or ())))
-        versions = (doc.get("provenance") or {}).get("versions") or {}
+        params.update({k: _param_text(v) for k, v in _held(doc, (
+            "conditions", "fractions", "trials", "n_runs", "n_pretrains", "real_domain",
+            "real_is_proxy", "settings_fixed_at")).items()})
+        params.update(_dataset_params(doc, list(doc.datasets)))
+        versions = doc.provenance.get("versions") or {}
         params.update(_flatten("version", versions, {}) if versions else {})
         self._call("logging the sweep's settings", self._client.log_batch, run.info.run_id,
                    params=[Param(k, v) for k, v in params.items()])
@@ -781,7 +781,7 @@ def _sweep_status(folder: SweepSnapshot) -> str:
     rows = [*folder.runs, *folder.pretrainings]
     if any(r.get("status") == "failed" for r in rows):
         return "FAILED"
-    planned = folder.doc.get("n_runs")
+    planned = folder.doc.held("n_runs")
     if isinstance(planned, int) and len({r["run_key"] for r in folder.runs}) < planned:
         return "KILLED"
     return "FINISHED"
@@ -800,7 +800,7 @@ def _parent_metrics(folder: SweepSnapshot) -> dict[str, float]:
     out: dict[str, float | None] = {
         "runs_finished": sum(r.get("status") != "failed" for r in runs),
         "runs_failed": sum(r.get("status") == "failed" for r in runs),
-        "runs_planned": num(folder.doc.get("n_runs")),
+        "runs_planned": num(folder.doc.held("n_runs")),
         "pretrainings_finished": sum(r.get("status") != "failed" for r in pre),
         "pretrainings_failed": sum(r.get("status") == "failed" for r in pre),
     }

@@ -188,9 +188,10 @@ def make_sweep(folder: Path, *, conditions=("baseline", "sim-pretrain"),
             "provenance": {"versions": {"python": "3.11.2", "torch": "2.13.0"},
                            "code": {"stage_version": 1, "sim2radar": "0.1.0"},
                            "configs": {"finetune": {"model": {"name": "pointpillars"}}}},
-            "created_at": "2026-11-20T09:00:00+00:00",
-            "settings_fixed_at": "2026-11-20T08:00:00+00:00",
+            "settings": {"profile": {"name": "smoke", "trials": trials}},
             "settings_digest": "0123456789abcdef0123",
+            "settings_fixed_at": "2026-11-20T08:00:00+00:00",
+            "created_at": "2026-11-20T09:00:00+00:00",
         }
         (folder / "sweep.json").write_text(json.dumps(sweep))
     if extras:

@@ -15,8 +15,9 @@ from sim2radar.datasets import make_door_frames, write_dataset, write_metadata
 from sim2radar.detect.config import DetectConfig
 from sim2radar.experiment.cost import sweep_cost
 from sim2radar.experiment.data import open_domain
-from sim2radar.experiment.documents import SweepDocument
+from sim2radar.experiment.documents import DocumentError, SweepDocument
 from sim2radar.experiment.errors import SettingError
+from sim2radar.experiment.folder import SweepFolder
 from sim2radar.experiment.plan import SweepPlan, pretrain_key_inputs, run_key_inputs
 from sim2radar.experiment.prepare import (
     SweepSettingsChanged,
@@ -103,10 +104,15 @@ def test_conditions_and_dataset_roles_come_from_the_registry():
 def test_a_sweeps_settings_are_fixed_by_its_first_preparation(tmp_path):
     settings = setup_sweep("smoke", {"sim": "s", "real": "r"}).settings
     first = settings_fixed_at(None, settings, name="t", sweep_dir=tmp_path)
-    old = {"settings": settings, "settings_fixed_at": first, "created_at": "earlier"}
+    old = SweepDocument(name="t", settings=settings, settings_fixed_at=first,
+                        created_at="earlier")
     assert settings_fixed_at(old, settings, name="t", sweep_dir=tmp_path) == first
+    # the raw JSON value (what SweepFolder.read_sweep gives) is read as the document
+    assert settings_fixed_at(old.model_dump(mode="json"), settings, name="t",
+                             sweep_dir=tmp_path) == first
     # a folder from before settings were recorded adopts the current ones
-    assert settings_fixed_at({"created_at": "c"}, settings, name="t", sweep_dir=tmp_path) == "c"
+    assert settings_fixed_at(SweepDocument(name="t", created_at="c"), settings, name="t",
+                             sweep_dir=tmp_path) == "c"
     changed = setup_sweep("smoke", {"sim": "s", "real": "r"}, overrides={"lr": 0.5}).settings
     with pytest.raises(SweepSettingsChanged, match=r"(?s)profile\.lr: 0\.003 -> 0\.5.*new sweep "
                        r"name \(the sweep name\)") as err:
@@ -120,13 +126,20 @@ def test_a_sweeps_settings_are_fixed_by_its_first_preparation(tmp_path):
 def test_a_damaged_sweep_json_is_refused_in_one_line_not_skipped(tmp_path):
     """Issue #33 probe 6: a sweep.json of [], settings null or a string, or one whose settings
     were deleted (but whose digest remains) is refused with one line; it never silently skips
-    the changed-settings check."""
+    the changed-settings check. The typed read refuses them
+    (tests/experiment/test_folder.py); so does the settings check given the raw JSON value."""
     settings = setup_sweep("smoke", {"sim": "s", "real": "r"}).settings
-    for doc, match in (([], "holds list"), ({"settings": None}, "field 'settings' is None"),
-                       ({"settings": "abc"}, "field 'settings' is 'abc'"),
-                       ({"settings_digest": "d", "created_at": "c"}, "settings digest.*edited")):
-        with pytest.raises(SweepSettingsChanged, match=match):
+    for doc, match in (([], "holds list"), ({"name": "t", "settings": None},
+                                            "field 'settings' is None"),
+                       ({"name": "t", "settings": "abc"}, "field 'settings' is 'abc'"),
+                       ({"name": "t", "settings_digest": "d", "created_at": "c"},
+                        "settings digest.*edited")):
+        with pytest.raises(DocumentError, match=match) as info:
             settings_fixed_at(doc, settings, name="t", sweep_dir=tmp_path)
+        assert "\n" not in str(info.value) and "sweep.json: " in str(info.value)
+        (tmp_path / "sweep.json").write_text(json.dumps(doc))
+        with pytest.raises(DocumentError, match=match):
+            SweepFolder(tmp_path).read_sweep_document()
 
 
 def test_the_plan_keys_every_job_from_its_key_inputs(domains, tmp_path):
@@ -247,7 +260,7 @@ def test_a_preregistered_profile_refuses_to_run_without_its_file_and_pins_it(tmp
     assert setup.preregistration["text"].startswith("# Question")
     # the file's path is not a setting (another checkout), its content is
     first = settings_fixed_at(None, setup.settings, name="t", sweep_dir=tmp_path)
-    old = {"settings": setup.settings, "settings_fixed_at": first}
+    old = SweepDocument(name="t", settings=setup.settings, settings_fixed_at=first)
     moved = tmp_path / "elsewhere.md"
     moved.write_text(pre.read_text())
     again = setup_sweep("smoke", {"sim": "s", "real": "r"},
@@ -306,19 +319,16 @@ def test_labels_differing_only_in_case_or_no_label_at_all_are_refused_up_front(d
 
 def test_the_sweeps_plain_work_does_not_import_prefect():
     """The sweep's plain functions (prepare, ``--plan``'s cost, one training run, the tables)
-    live in ``tasks/experiment.py`` without Prefect; its Prefect tasks are in ``flows/``."""
+    and its driver live in ``tasks/`` without Prefect; its flow is in ``flows/``."""
     import subprocess
     import sys
 
-    code = ("import sys, sim2radar.tasks.experiment, sim2radar.experiment.prepare; "
+    code = ("import sys, sim2radar.tasks.experiment, sim2radar.tasks.sweep, "
+            "sim2radar.experiment.prepare; "
             "print(sorted(m for m in sys.modules if m.split('.')[0] == 'prefect')[:3])")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          check=True)
     assert out.stdout.strip() == "[]", out.stdout
-    from sim2radar.flows import run_experiment
-
-    assert run_experiment.pretrain_task.name == "pretrain-encoder"
-    assert run_experiment.finetune_task.name == "finetune-and-test"
 
 
 def test_a_sweep_folder_written_before_the_typed_records_still_loads():

@@ -19,6 +19,7 @@ import pyarrow.parquet as pq
 import pytest
 from mlflow import MlflowClient
 
+from sim2radar.experiment.folder import SweepFolder
 from sim2radar.experiment.plan import RunSpec
 from sim2radar.experiment.stats import sweep_statistics
 from sim2radar.experiment.tracking import (
@@ -72,7 +73,7 @@ def make_tracked_sweep(folder: Path, *, ran=CONDITIONS, failed=(FAILED,)) -> Pat
 
 def write_stats(folder: Path) -> dict:
     """stats.json of the folder's rows, as the end of a sweep writes it."""
-    doc = json.loads((folder / "sweep.json").read_text())
+    doc = SweepFolder(folder).read_sweep_document()
     stats = sweep_statistics(doc, pq.read_table(folder / "runs.parquet").to_pylist(),
                              pq.read_table(folder / "pretrainings.parquet").to_pylist(),
                              n_resamples=200)

@@ -117,7 +117,7 @@ def welch_interval(mean_a: float | None, sd_a: float | None, n_a: int, mean_b: f
 
 
 def _metric(data: SweepData) -> str:
-    return str((data.stats or {}).get("metric") or (data.sweep or {}).get("metric")
+    return str((data.stats or {}).get("metric") or (data.sweep.metric if data.sweep is not None else "")
                or DEFAULT_METRIC)
 
 
@@ -152,11 +152,12 @@ def _comparisons(stats: Mapping[str, Any]) -> dict[tuple[str, float], Mapping[st
 
 def _side(data: SweepData) -> dict[str, Any]:
     """One sweep as the comparison page names it."""
-    doc = data.sweep or {}
-    profile = doc.get("profile") if isinstance(doc.get("profile"), Mapping) else {}
-    prov = doc.get("provenance") if isinstance(doc.get("provenance"), Mapping) else {}
-    return {"name": str(doc.get("name") or data.folder.name), "folder": str(data.folder),
-            "profile": profile.get("name"), "created_at": doc.get("created_at"),
+    doc = data.sweep
+    profile = doc.profile if doc is not None else {}
+    prov = doc.provenance if doc is not None else {}
+    return {"name": (doc.name if doc is not None else "") or data.folder.name,
+            "folder": str(data.folder), "profile": profile.get("name"),
+            "created_at": doc.created_at if doc is not None else None,
             "metric": _metric(data), "runs": len(data.runs),
             "failed": sum(r.get("status") == "failed" for r in data.runs),
             "git": prov.get("git") if isinstance(prov.get("git"), str) else None,
@@ -195,7 +196,8 @@ def _settings_of(data: SweepData) -> dict[str, str] | None:
     fitted intensity maps and its time stamps (``*_at``), and the trial seeds of its runs."""
     if data.sweep is None:
         return None
-    flat = {k: v for k, v in _flatten({k: v for k, v in data.sweep.items()
+    written = data.sweep.model_dump(mode="json")          # the fields its file holds
+    flat = {k: v for k, v in _flatten({k: v for k, v in written.items()
                                        if k not in _NOT_SETTINGS}).items()
             if not k.rsplit(".", 1)[-1].endswith("_at")}
     seeds = {int(r["trial"]): r.get("seed") for r in data.runs if r.get("trial") is not None}

@@ -36,6 +36,7 @@ from sim2radar.experiment.dashboard.reading import (
     load_sweep,
 )
 from sim2radar.experiment.dashboard.runs import run_folder, run_folders, run_views, runs_table
+from sim2radar.experiment.documents import SweepDocument
 from sim2radar.experiment.profiles import BASELINE
 from sim2radar.experiment.report import (
     UNDECLARED,
@@ -61,16 +62,16 @@ __all__ = [
 ]
 
 
-def banner(sweep: Mapping[str, Any] | None) -> dict[str, str]:
+def banner(sweep: SweepDocument | None) -> dict[str, str]:
     """The page's banner on the real domain: ``{"kind": "proxy" | "measured" | "undeclared" |
     "declared" | "unknown", "text"}`` from ``sweep.json`` (None: unknown)."""
     if sweep is None:
         return {"kind": "unknown", "text": "Real domain unknown: sweep.json is missing, so this "
                 "page cannot say whether the 'real' data is measured radar or a proxy. Treat "
                 "the results as unverified."}
-    real = (sweep.get("datasets") or {}).get("real") or {}
-    domain = str(sweep.get("real_domain") or real.get("domain") or UNDECLARED)
-    kind = domain_kind(domain, sweep.get("real_is_proxy"))
+    real = sweep.datasets.get("real") or {}
+    domain = str(sweep.real_domain or real.get("domain") or UNDECLARED)
+    kind = domain_kind(domain, sweep.real_is_proxy)
     if kind == "proxy":
         return {"kind": "proxy", "text": f"PROXY real domain — {domain}. The 'real' radar of "
                 "this sweep is a stand-in for measured radar (the reference radar simulation). "
@@ -88,21 +89,22 @@ def banner(sweep: Mapping[str, Any] | None) -> dict[str, str]:
 
 
 def _progress(data: SweepData, conds: Sequence[str]) -> dict[str, Any]:
-    sweep, prog = data.sweep or {}, data.progress or {}
+    sweep, prog = data.sweep, data.progress
     counts = {s: sum(r.get("status") == s for r in data.runs) for s in ("ok", "skipped",
                                                                         "failed")}
     planned = None
-    if sweep.get("n_runs") is not None:
-        planned = int(sweep["n_runs"])
-    elif sweep.get("fractions") and sweep.get("trials"):
-        planned = len(conds) * len(sweep["fractions"]) * int(sweep["trials"])
-    total = prog.get("total_runs") if prog.get("total_runs") is not None else planned
+    if sweep is not None and sweep.held("n_runs") is not None:
+        planned = sweep.n_runs
+    elif sweep is not None and sweep.fractions and sweep.trials:
+        planned = len(conds) * len(sweep.fractions) * sweep.trials
+    total = prog.total_runs if prog is not None else planned
     finished = len(data.runs)
     total = max(int(total), finished) if total is not None else finished
-    running = prog.get("running") or []
-    n_pre = prog.get("total_pretrainings")
-    n_pre = int(n_pre) if n_pre is not None else int(sweep.get("n_pretrains") or 0)
-    pre_done = max(len(data.pretrainings), int(prog.get("pretrainings_finished") or 0))
+    running = prog.running if prog is not None else []
+    # a progress.json from before pre-trainings were counted: the planned ones (sweep.json)
+    n_pre = prog.held("total_pretrainings") if prog is not None else None
+    n_pre = n_pre if n_pre is not None else (sweep.n_pretrains if sweep is not None else 0)
+    pre_done = max(len(data.pretrainings), prog.pretrainings_finished if prog is not None else 0)
     state = ("no run planned" if total == 0 else "complete" if finished >= total
              else "running" if finished else "pre-training" if pre_done < n_pre
              else "running" if pre_done else "not started")
@@ -110,7 +112,8 @@ def _progress(data: SweepData, conds: Sequence[str]) -> dict[str, Any]:
             "pretrainings_finished": pre_done, "pretrainings_total": max(n_pre, pre_done),
             "skipped": counts["skipped"], "failed": counts["failed"],
             "running": [r if isinstance(r, str) else json.dumps(jsonable(r)) for r in running],
-            "updated_at": prog.get("updated_at"), "state": state}
+            "updated_at": prog.held("updated_at") if prog is not None else None,
+            "state": state}
 
 
 #: summary columns shown left-aligned (text); every other column is a number
@@ -334,9 +337,8 @@ def _pretrainings(stats: Mapping[str, Any], rows: Sequence[Mapping[str, Any]],
 
 
 def _generation(data: SweepData) -> dict[str, Any]:
-    sweep = data.sweep or {}
     datasets = []
-    for role, d in (sweep.get("datasets") or {}).items():
+    for role, d in (data.sweep.datasets if data.sweep is not None else {}).items():
         if not isinstance(d, Mapping):
             continue
         splits = d.get("splits") or {}
@@ -358,27 +360,26 @@ def _generation(data: SweepData) -> dict[str, Any]:
     return jsonable({"datasets": datasets, "generation": gen})
 
 
-def _with_datasets(config: Any, sweep: Mapping[str, Any]) -> Any:
+def _with_datasets(config: Any, sweep: SweepDocument) -> Any:
     """A detector config as the sweep used it: its ``data.root`` is the config file's
     placeholder (each run reads the sweep's datasets), so it shows the datasets instead."""
     if not isinstance(config, Mapping) or not isinstance(config.get("data"), Mapping):
         return config
-    roots = {role: d.get("path") for role, d in (sweep.get("datasets") or {}).items()
-             if isinstance(d, Mapping)}
+    roots = {role: d.get("path") for role, d in sweep.datasets.items()}
     return {**config, "data": {**config["data"], "root": f"(not used: the sweep's datasets "
                                                          f"{roots})"}}
 
 
-def _provenance(sweep: Mapping[str, Any] | None) -> dict[str, Any] | None:
+def _provenance(sweep: SweepDocument | None) -> dict[str, Any] | None:
     if sweep is None:
         return None
-    prov = sweep.get("provenance") or {}
+    prov = sweep.provenance
     code = prov.get("code")
     git = prov.get("git")
     return jsonable({
-        "created_at": sweep.get("created_at"),
-        "settings_fixed_at": sweep.get("settings_fixed_at"),
-        "settings_digest": sweep.get("settings_digest"),
+        "created_at": sweep.created_at,
+        "settings_fixed_at": sweep.settings_fixed_at,
+        "settings_digest": sweep.settings_digest,
         "versions": prov.get("versions") or {},
         "code": code if isinstance(code, Mapping) else ({"code": code} if code else {}),
         "git": git if isinstance(git, str) else (json.dumps(jsonable(git)) if git else None),
@@ -386,11 +387,10 @@ def _provenance(sweep: Mapping[str, Any] | None) -> dict[str, Any] | None:
                     for k, v in (prov.get("configs") or {}).items()},
         "datasets": {role: {"path": d.get("path"), "key": d.get("key"),
                             "domain": d.get("domain")}
-                     for role, d in (sweep.get("datasets") or {}).items()
-                     if isinstance(d, Mapping)},
-        "profile": json.dumps(jsonable(sweep.get("profile") or {}), indent=1),
-        "intensity_match": json.dumps(jsonable(sweep.get("intensity_match")), indent=1)
-        if sweep.get("intensity_match") else None,
+                     for role, d in sweep.datasets.items()},
+        "profile": json.dumps(jsonable(sweep.profile), indent=1),
+        "intensity_match": json.dumps(jsonable(sweep.intensity_match), indent=1)
+        if sweep.intensity_match else None,
     })
 
 
@@ -435,25 +435,26 @@ def dashboard_data(sweep: SweepData) -> dict[str, Any]:
     the folder cannot be read).
     No NaN anywhere (``json.dumps(..., allow_nan=False)`` works).
     """
-    sweep_doc = sweep.sweep or {}
+    sweep_doc = sweep.sweep
     stats = sweep.stats or {"cells": [], "comparisons": [], "conditions": [], "fractions": [],
                             "notes": [], "alpha": 0.05, "metric": DEFAULT_METRIC}
     conds = list(dict.fromkeys([*stats.get("conditions", []),
                                 *conditions_of(sweep.sweep, sweep.runs)]))
     if BASELINE in conds:
         conds = [BASELINE, *(c for c in conds if c != BASELINE)]
-    metric = str(stats.get("metric") or sweep_doc.get("metric") or DEFAULT_METRIC)
-    profile = sweep_doc.get("profile") or {}
+    metric = str(stats.get("metric") or (sweep_doc.metric if sweep_doc is not None else "")
+                 or DEFAULT_METRIC)
+    profile = sweep_doc.profile if sweep_doc is not None else {}
     gen = _generation(sweep)
-    name = str(sweep_doc.get("name") or sweep.folder.name)
+    name = (sweep_doc.name if sweep_doc is not None else "") or sweep.folder.name
     folders = run_folders(sweep.runs, sweep.folder.name)
     data = {
         "name": name,
         "folder": str(sweep.folder),
         "metric": metric,
         "metric_label": metric_label(metric),
-        "created_at": sweep_doc.get("created_at"),
-        "profile": profile.get("name") if isinstance(profile, Mapping) else None,
+        "created_at": sweep_doc.created_at if sweep_doc is not None else None,
+        "profile": profile.get("name"),
         "banner": banner(sweep.sweep),
         "progress": _progress(sweep, conds),
         "conditions": [{"name": c, "label": condition_label(c), "color": colour(c, conds)}

@@ -17,6 +17,11 @@ What the sweep folder holds (written by ``flows/run_experiment.py`` and ``sim2ra
     progress.json     {"total_runs", "finished", "failed", "total_pretrainings",
                       "pretrainings_finished", "running", "updated_at"}  optional
 
+``sweep.json`` and ``progress.json`` are read as their types
+(:class:`~sim2radar.experiment.documents.SweepDocument`, :class:`~sim2radar.experiment.
+documents.SweepProgress`) by :class:`~sim2radar.experiment.folder.SweepFolder`; the other JSON
+files are open-ended and checked here for the parts the page reads.
+
 ``runs.parquet`` and ``pretrainings.parquet`` are read with pyarrow and checked against the
 columns the page reads (:data:`RUNS_COLUMNS`, :data:`PRETRAIN_COLUMNS`): the library does not
 import the store (``sim2radar.storage``), whose layer is above it. Of the gap report's PNGs
@@ -36,6 +41,7 @@ from typing import Any
 
 from sim2radar.experiment.dashboard.gap import png_fallbacks
 from sim2radar.experiment.dashboard.labels import num
+from sim2radar.experiment.documents import DocumentError, SweepDocument, SweepProgress
 from sim2radar.experiment.folder import SweepFolder
 from sim2radar.experiment.learnability import pretraining_table
 from sim2radar.experiment.profiles import BASELINE, CONDITIONS
@@ -79,7 +85,7 @@ class SweepData:
     ----------
     folder : Path — the sweep folder.
     runs : list of dict — ``experiment_runs`` rows, in file order (empty: no run finished yet).
-    sweep : dict or None — ``sweep.json``.
+    sweep : SweepDocument or None — ``sweep.json``.
     stats : dict or None — the statistics
         (:func:`~sim2radar.experiment.stats.sweep_statistics`' structure): ``stats.json`` when
         it matches the runs, else recomputed from ``runs`` and ``pretrainings``.
@@ -91,20 +97,20 @@ class SweepData:
     gap_images : dict[str, str] — figure name -> ``data:image/png;base64,...`` of the PNGs
         that ``gap.json`` names, that exist and whose figure it holds no numbers for
         (:func:`~.gap.png_fallbacks`).
-    progress : dict or None — ``progress.json``.
+    progress : SweepProgress or None — ``progress.json``.
     warnings : list of str — what was missing or ignored, one line each.
     """
 
     folder: Path
     runs: list[dict[str, Any]]
-    sweep: dict[str, Any] | None = None
+    sweep: SweepDocument | None = None
     stats: dict[str, Any] | None = None
     stats_source: str = ""
     pretrainings: list[dict[str, Any]] = dataclasses.field(default_factory=list)
     generation: dict[str, Any] | None = None
     gap: dict[str, Any] | None = None
     gap_images: dict[str, str] = dataclasses.field(default_factory=dict)
-    progress: dict[str, Any] | None = None
+    progress: SweepProgress | None = None
     warnings: list[str] = dataclasses.field(default_factory=list)
 
 
@@ -118,6 +124,16 @@ _FIXES = {
     "gap": "rerun `sim2radar gap SIM REAL --out <sweep>/gap`, or delete the gap folder",
     "progress": "delete it: the dashboard counts finished runs from runs.parquet",
 }
+
+
+def _read_document(folder: Path, role: str) -> SweepDocument | SweepProgress | None:
+    """``sweep.json`` (``role`` ``sweep``) or ``progress.json`` (``progress``) as its type;
+    None where the file does not exist."""
+    layout = SweepFolder(folder)
+    try:
+        return layout.read_sweep_document() if role == "sweep" else layout.read_progress()
+    except DocumentError as exc:
+        raise SweepFolderError(f"{exc.path}: {exc.problem}; {_FIXES[role]}") from None
 
 
 def _read_json(folder: Path, role: str) -> dict[str, Any] | None:
@@ -243,9 +259,9 @@ def _png_data_uri(path: Path) -> str | None:
     return "data:image/png;base64," + base64.b64encode(data).decode("ascii")
 
 
-def conditions_of(sweep: Mapping[str, Any] | None, runs: Sequence[Mapping[str, Any]]) -> list[str]:
+def conditions_of(sweep: SweepDocument | None, runs: Sequence[Mapping[str, Any]]) -> list[str]:
     """Planned conditions (sweep.json) then any others found in the runs, baseline first."""
-    planned = list((sweep or {}).get("conditions") or [])
+    planned = list(sweep.conditions) if sweep is not None else []
     found = [c for c in CONDITIONS if any(r.get("condition") == c for r in runs)]
     found += sorted({str(r["condition"]) for r in runs} - set(CONDITIONS))
     conds = list(dict.fromkeys([*planned, *found]))
@@ -264,25 +280,26 @@ def _numbers(value: Any) -> bool:
     return isinstance(value, list) and all(num(v) is not None for v in value)
 
 
-def _statistics_doc(sweep: Mapping[str, Any] | None, folder: Path) -> dict[str, Any]:
+def _statistics_doc(sweep: SweepDocument | None, folder: Path) -> SweepDocument:
     """``sweep.json`` as :func:`~sim2radar.experiment.stats.sweep_statistics` reads it: its
-    ``metric`` checked (default :data:`DEFAULT_METRIC`), its ``profile`` a dict whose
-    ``fractions``, ``primary_fractions`` and ``learnability_thresholds`` (condition -> held-out
-    sim AP [%]) hold numbers; ``{"metric": ..., "profile": {}}`` without ``sweep.json``.
+    ``metric`` checked (default :data:`DEFAULT_METRIC`), its ``profile``'s ``fractions``,
+    ``primary_fractions`` and ``learnability_thresholds`` (condition -> held-out sim AP [%])
+    and its own ``fractions`` finite numbers; a document of the folder's name with the default
+    metric and no profile without ``sweep.json``.
 
     Raises
     ------
     SweepFolderError — a field of another kind, naming ``sweep.json`` and the fix.
     """
     path = folder / FILES["sweep"]
-    doc = dict(sweep or {})
-    metric = str(doc.get("metric") or DEFAULT_METRIC)
+    doc = sweep if sweep is not None else SweepDocument(name=folder.name)
+    metric = doc.metric or DEFAULT_METRIC
     if metric not in AP_METRICS:
         raise SweepFolderError(f"{path}: field 'metric' is {metric!r}, not one of "
                                f"{list(AP_METRICS)}; {_FIXES['sweep']}")
-    profile = doc.get("profile")
-    profile = dict(profile) if isinstance(profile, Mapping) else {}
-    for where, holder in (("", doc), ("profile.", profile)):
+    profile = dict(doc.profile)
+    written = {k: doc.held(k) for k in ("fractions", "primary_fractions")}
+    for where, holder in (("", written), ("profile.", profile)):
         for key in ("fractions", "primary_fractions"):
             if holder.get(key) is not None and not _numbers(holder[key]):
                 raise SweepFolderError(f"{path}: field '{where}{key}' is not a list of numbers; "
@@ -297,7 +314,7 @@ def _statistics_doc(sweep: Mapping[str, Any] | None, folder: Path) -> dict[str, 
             profile["primary_condition"], str):
         raise SweepFolderError(f"{path}: field 'profile.primary_condition' is not a condition "
                                f"name; {_FIXES['sweep']}")
-    return {**doc, "metric": metric, "profile": profile}
+    return doc.model_copy(update={"metric": metric, "profile": profile})
 
 
 def _check_stats(stats: Mapping[str, Any], path: Path) -> None:
@@ -349,7 +366,7 @@ def load_sweep(folder: str | os.PathLike, *, require_runs: bool = True) -> Sweep
         raise SweepFolderError(f"{folder}: no such sweep folder; give the folder of a sweep "
                                "(e.g. out/sweeps/demo) or its name under --root")
     runs_path = folder / FILES["runs"]
-    sweep = _read_json(folder, "sweep")
+    sweep = _read_document(folder, "sweep")
     if runs_path.is_file():
         runs = _read_runs(folder)
     elif require_runs or sweep is None:
@@ -376,7 +393,7 @@ def load_sweep(folder: str | os.PathLike, *, require_runs: bool = True) -> Sweep
             stats_source = (f"computed from {FILES['runs']} ({FILES['stats']} counts other runs: "
                             "written before the latest runs finished)")
         elif pretrainings and _pretrainings_stale(stats, pretrainings):
-            profile = _statistics_doc(sweep, folder)["profile"]
+            profile = _statistics_doc(sweep, folder).profile
             stats["pretrainings"] = pretraining_table(
                 pretrainings, profile.get("learnability_thresholds"), _pretrained(conds))
             stats_source += (f" (pre-training table from {FILES['pretrainings']}: "
@@ -393,7 +410,7 @@ def load_sweep(folder: str | os.PathLike, *, require_runs: bool = True) -> Sweep
     generation = _read_json(folder, "generation")
     if generation is not None:
         _require(generation, ("datasets",), folder / FILES["generation"], "generation")
-    progress = _read_json(folder, "progress")
+    progress = _read_document(folder, "progress")
 
     gap = _read_json(folder, "gap")
     images: dict[str, str] = {}
