@@ -565,7 +565,7 @@ def sweep_report(
             typer.echo(f"published {', '.join(copied) or 'nothing new'} to {publish}")
             folder = publish
         layout = SweepFolder(folder)
-        doc = json.loads(json_text(layout.sweep_json))
+        doc = layout.read_sweep_document()
         rows = pq.read_table(layout.runs_table).to_pylist()
         pre_path = layout.pretrainings_table
         pre = pq.read_table(pre_path).to_pylist() if pre_path.is_file() else []
