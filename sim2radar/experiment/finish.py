@@ -15,7 +15,7 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
-from sim2radar.experiment.documents import SweepDocument, parse_document
+from sim2radar.experiment.documents import SweepDocument
 from sim2radar.experiment.folder import SweepFolder
 from sim2radar.experiment.plan import SweepPlan
 from sim2radar.vocab import STATUSES
@@ -23,7 +23,7 @@ from sim2radar.vocab import STATUSES
 __all__ = ["finish_sweep", "write_results"]
 
 
-def write_results(sweep_dir: str | os.PathLike, doc: SweepDocument | Mapping[str, Any],
+def write_results(sweep_dir: str | os.PathLike, doc: SweepDocument,
                   rows: Sequence[Mapping[str, Any]],
                   pretrainings: Sequence[Mapping[str, Any]] = ()) -> dict[str, Any]:
     """Write a sweep folder's ``stats.json``, ``results.md`` and ``dashboard.html`` from its
@@ -31,13 +31,8 @@ def write_results(sweep_dir: str | os.PathLike, doc: SweepDocument | Mapping[str
     ``sim2radar sweep-report`` does for a published one). Returns ``stats``, ``markdown`` and
     the paths ``results_md``, ``dashboard``.
 
-    ``doc``: the :class:`~sim2radar.experiment.documents.SweepDocument`
-    (:meth:`~.folder.SweepFolder.read_sweep_document`), or sweep.json's raw JSON value, read as
-    the document here.
-
-    Raises
-    ------
-    DocumentError — a raw ``doc`` that is not the sweep's document.
+    ``doc``: the :class:`~sim2radar.experiment.documents.SweepDocument` (the plan's, or
+    :meth:`~.folder.SweepFolder.read_sweep_document`'s).
     """
     from sim2radar.experiment.dashboard import write_dashboard
     from sim2radar.experiment.report import results_markdown
@@ -46,8 +41,6 @@ def write_results(sweep_dir: str | os.PathLike, doc: SweepDocument | Mapping[str
 
     sweep_dir = Path(sweep_dir)
     folder = SweepFolder(sweep_dir)
-    if not isinstance(doc, SweepDocument):
-        doc = parse_document(SweepDocument, doc, folder.sweep_json, folder.SWEEP_FIX)
     stats = sweep_statistics(doc, rows, pretrainings)
     md = results_markdown(stats, rows, title=f"Sweep {doc.name}",
                           real_domain_label=doc.real_domain, proxy=doc.real_is_proxy,
