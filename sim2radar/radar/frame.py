@@ -124,7 +124,9 @@ def detection_device(variant: str):
 
 class TracedScene(Protocol):
     """What :func:`simulate_scene_frame` needs of a scene: the ray tracer's two outputs and two
-    counters for the frame's stats (:class:`~sim2radar.radar.raytrace.RadarScene` has them)."""
+    counters for the frame's stats (:class:`~sim2radar.radar.raytrace.RadarScene` has them; to
+    detect on a torch device it also needs ``trace_on_device``, returning a
+    :class:`DeviceTrace`)."""
 
     n_triangles: int
     variant: str  # the Mitsuba variant that traces it
