@@ -136,9 +136,9 @@ def prepare_sweep(datasets: Mapping[str, str | os.PathLike | None], *, profile: 
     prepare.check_sweep_name(name)
     folder = SweepFolder(Path(out) / name)
     sweep_dir = folder.root
-    old = folder.read_sweep()
+    old = folder.read_sweep_document()       # a damaged sweep.json is refused, in one line
     # a sweep keeps the precision it decided first (its runs' keys depend on it)
-    known = old.get("precision") if isinstance(old, dict) else None
+    known = old.held("precision") if old is not None else None
     setup = prepare.setup_sweep(profile, datasets, ablations=ablations, overrides=overrides,
                                 device=device, precision_table=Path(out) / PRECISION_TABLE,
                                 known_precision=known if isinstance(known, dict) else None)
@@ -152,7 +152,7 @@ def prepare_sweep(datasets: Mapping[str, str | os.PathLike | None], *, profile: 
         fixed_at=fixed_at, key_of=_key_of,
         provenance={"versions": package_versions(), "code": _code_version(),
                     "git": git_commit()})
-    write_json(folder.sweep_json, plan.sweep.model_dump(mode="json"))
+    folder.write_sweep_document(plan.sweep)
     if setup.preregistration is not None:   # the copy the results link (same digest: settings)
         atomic_write(folder.preregistration_md, setup.preregistration["text"].encode())
     if force:

@@ -44,9 +44,9 @@ from typing import Any
 
 from pydantic import BaseModel, ConfigDict, Field
 
+from sim2radar.experiment.documents import SweepProgress
 from sim2radar.experiment.folder import SweepFolder
 from sim2radar.experiment.plan import PlannedPretrain, PretrainResult, SweepPlan
-from sim2radar.fileio import write_json
 from sim2radar.tasks.experiment import (
     failed_pretrain_row,
     failed_row,
@@ -160,11 +160,11 @@ class _Tally:
 
     def write_progress(self) -> None:
         failed = sum(r["status"] == "failed" for r in self.rows.values())
-        write_json(self.folder.progress_json, {
-            "total_runs": len(self.plan.runs), "finished": len(self.rows), "failed": failed,
-            "total_pretrainings": len(self.plan.pretrains),
-            "pretrainings_finished": len(self.pretrainings),
-            "updated_at": datetime.now(UTC).isoformat(timespec="seconds")})
+        self.folder.write_progress(SweepProgress(
+            total_runs=len(self.plan.runs), finished=len(self.rows), failed=failed,
+            total_pretrainings=len(self.plan.pretrains),
+            pretrainings_finished=len(self.pretrainings),
+            updated_at=datetime.now(UTC).isoformat(timespec="seconds")))
 
     def pretraining(self, row: dict) -> None:
         self.pretrainings[row["pretrain_key"]] = row

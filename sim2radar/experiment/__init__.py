@@ -10,7 +10,8 @@ fractions x paired trials.
 - a sweep's phases, one module each: :mod:`~sim2radar.experiment.prepare` (datasets by role,
   the settings check, the plan), :mod:`~sim2radar.experiment.cost` (what it would cost:
   ``sweep --plan``) and :mod:`~sim2radar.experiment.finish` (statistics, report, dashboard);
-  ``tasks/experiment.py`` executes it.
+  ``tasks/experiment.py`` executes one pre-training or fine-tuning, ``tasks/sweep.py`` the
+  whole sweep (the ``sweep`` job's driver).
 - :mod:`~sim2radar.experiment.stats` — paired statistics (t-interval, Holm, d_z, bootstrap).
 - :mod:`~sim2radar.experiment.report` — Table 1 as Markdown and as artifact rows.
 - :mod:`~sim2radar.experiment.data`, :mod:`~sim2radar.experiment.runner` — datasets of a sweep
@@ -18,8 +19,9 @@ fractions x paired trials.
 - :mod:`~sim2radar.experiment.tracking` — a sweep folder mirrored into MLflow (import it
   directly; MLflow is the optional ``mlflow`` extra).
 
-``tasks/experiment.py`` executes a sweep (keys, store, claims) and ``flows/run_experiment.py``
-runs it as Prefect tasks; nothing here, nor in ``tasks/``, imports Prefect.
+``tasks/experiment.py`` executes a sweep's runs (keys, store, claims), ``tasks/sweep.py`` drives
+the sweep on a runner, and ``flows/run_experiment.py`` runs that driver with Prefect; nothing
+here, nor in ``tasks/``, imports Prefect.
 
 The names below are imported on first use (PEP 562): importing one module of the package (the
 store's schemas import :mod:`~sim2radar.experiment.rows`) does not load the statistics' SciPy.

@@ -231,17 +231,3 @@ class SweepFolder:
         from sim2radar.fileio import write_json
 
         return write_json(self.progress_json, progress.model_dump(mode="json"))
-
-    def read_sweep(self) -> Any:
-        """sweep.json's raw JSON value (a dict, unless the file was edited), or None when it
-        does not exist yet; the typed read is :meth:`read_sweep_document`. Kept for
-        ``prepare_sweep`` in ``tasks/experiment.py`` until it reads the typed document.
-
-        Raises
-        ------
-        ValueError — it exists but cannot be read as JSON (the message names the file and fix).
-        """
-        try:
-            return json.loads(self.sweep_json.read_text()) if self.sweep_json.is_file() else None
-        except (OSError, ValueError) as exc:
-            raise ValueError(f"{self.sweep_json}: unreadable ({exc}); {self.SWEEP_FIX}") from None

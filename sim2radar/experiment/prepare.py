@@ -30,7 +30,7 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
-from sim2radar.experiment.documents import SweepDocument, parse_document
+from sim2radar.experiment.documents import SweepDocument
 from sim2radar.experiment.errors import SettingError, dataset_setting
 from sim2radar.experiment.folder import SweepFolder
 from sim2radar.experiment.plan import (
@@ -302,21 +302,15 @@ def settings_fixed_at(old: SweepDocument | Any, settings: Mapping[str, Any], *,
     ----------
     old : the folder's :class:`~.documents.SweepDocument`
         (:meth:`~.folder.SweepFolder.read_sweep_document`, which refuses a damaged file), or
-        None; or sweep.json's raw JSON value (:meth:`~.folder.SweepFolder.read_sweep`), read
-        as the document here.
+        None.
     settings : :func:`~.plan.protocol_settings` of the sweep being prepared.
 
     Raises
     ------
     SweepSettingsChanged — the settings differ from ``old``'s, listing what changed.
-    DocumentError — a raw ``old`` that is not the sweep's document (not an object, settings
-        null or not an object, a settings digest without settings).
     """
     if old is None:
         return _now()
-    if not isinstance(old, SweepDocument):
-        folder = SweepFolder(sweep_dir)
-        old = parse_document(SweepDocument, old, folder.sweep_json, folder.SWEEP_FIX)
     if old.settings is None:                     # a folder from before settings existed
         return str(old.created_at or _now())
     if protocol_digest(old.settings) == protocol_digest(settings):

@@ -107,9 +107,6 @@ def test_a_sweeps_settings_are_fixed_by_its_first_preparation(tmp_path):
     old = SweepDocument(name="t", settings=settings, settings_fixed_at=first,
                         created_at="earlier")
     assert settings_fixed_at(old, settings, name="t", sweep_dir=tmp_path) == first
-    # the raw JSON value (what SweepFolder.read_sweep gives) is read as the document
-    assert settings_fixed_at(old.model_dump(mode="json"), settings, name="t",
-                             sweep_dir=tmp_path) == first
     # a folder from before settings were recorded adopts the current ones
     assert settings_fixed_at(SweepDocument(name="t", created_at="c"), settings, name="t",
                              sweep_dir=tmp_path) == "c"
@@ -126,20 +123,17 @@ def test_a_sweeps_settings_are_fixed_by_its_first_preparation(tmp_path):
 def test_a_damaged_sweep_json_is_refused_in_one_line_not_skipped(tmp_path):
     """Issue #33 probe 6: a sweep.json of [], settings null or a string, or one whose settings
     were deleted (but whose digest remains) is refused with one line; it never silently skips
-    the changed-settings check. The typed read refuses them
-    (tests/experiment/test_folder.py); so does the settings check given the raw JSON value."""
-    settings = setup_sweep("smoke", {"sim": "s", "real": "r"}).settings
+    the changed-settings check: the typed read (SweepFolder.read_sweep_document, which
+    prepare_sweep uses) refuses them."""
     for doc, match in (([], "holds list"), ({"name": "t", "settings": None},
                                             "field 'settings' is None"),
                        ({"name": "t", "settings": "abc"}, "field 'settings' is 'abc'"),
                        ({"name": "t", "settings_digest": "d", "created_at": "c"},
                         "settings digest.*edited")):
-        with pytest.raises(DocumentError, match=match) as info:
-            settings_fixed_at(doc, settings, name="t", sweep_dir=tmp_path)
-        assert "\n" not in str(info.value) and "sweep.json: " in str(info.value)
         (tmp_path / "sweep.json").write_text(json.dumps(doc))
-        with pytest.raises(DocumentError, match=match):
+        with pytest.raises(DocumentError, match=match) as info:
             SweepFolder(tmp_path).read_sweep_document()
+        assert "\n" not in str(info.value) and "sweep.json: " in str(info.value)
 
 
 def test_the_plan_keys_every_job_from_its_key_inputs(domains, tmp_path):
