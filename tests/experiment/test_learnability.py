@@ -20,21 +20,26 @@ from sim2radar.experiment.runner import pretrain_encoder
 
 @pytest.fixture(scope="module")
 def checkpoints(tmp_path_factory):
-    """The smoke detector pre-trained on 16 synthetic door frames for 1 and for 20 epochs."""
+    """The smoke detector pre-trained on 16 synthetic door frames for 1 and for 40 epochs.
+
+    40, not 20: with the per-batch random draws of the data loader (issue #31) 20 epochs
+    reached 0.4-12.4 held-out AP over seeds 0-7 (1.9 at seed 0), too close to the 5-AP
+    threshold for a test of the check; 40 epochs reached 6.4-19.2 over seeds 0-3 (19.2 at
+    seed 0). Before that change 20 epochs gave 4.7-12.6 (11.4 at seed 0)."""
     cfg = load_profile("smoke").detector_config("pretrain")
     train = make_door_frames(16, seed=1, points_per_frame=300)
     root = tmp_path_factory.mktemp("learn")
     return {ep: pretrain_encoder(cfg, train, root / f"ep{ep}", seed=0, epochs=ep)
-            for ep in (1, 20)}
+            for ep in (1, 40)}
 
 
 def test_a_pretraining_that_learned_scores_on_held_out_frames(checkpoints):
-    """Frames of other (synthetic) scenes, their own labels: 20 epochs learn doors (measured:
-    11 AP), one epoch does not (0 AP); the threshold states whether it was met."""
+    """Frames of other (synthetic) scenes, their own labels: 40 epochs learn doors (measured:
+    19 AP), one epoch does not (0 AP); the threshold states whether it was met."""
     held_out = make_door_frames(8, seed=5, points_per_frame=300)
     real = make_door_frames(4, seed=9, points_per_frame=300)
     short = check_pretraining(checkpoints[1], held_out, real, threshold=5.0)
-    long = check_pretraining(checkpoints[20], held_out, real, threshold=5.0)
+    long = check_pretraining(checkpoints[40], held_out, real, threshold=5.0)
     assert long.sim_ap > short.sim_ap + 5.0
     assert long.met is True and short.met is False
     assert long.sim[PRIMARY_AP] == long.sim_ap and long.sim_frames == 8 and long.real_frames == 4
@@ -50,7 +55,7 @@ def test_empty_sets_and_no_threshold(checkpoints):
 
 def test_the_training_frames_check_and_the_round_trip(checkpoints):
     train = make_door_frames(16, seed=1, points_per_frame=300)
-    c = check_pretraining(checkpoints[20], [], [], train_frames=train)
+    c = check_pretraining(checkpoints[40], [], [], train_frames=train)
     assert c.train_frames == 16 and c.train_ap == c.train[PRIMARY_AP] > 0
     again = PretrainingCheck.from_dict(json.loads(json.dumps(c.to_dict())))
     assert again.train_ap == c.train_ap and again.train == c.train
