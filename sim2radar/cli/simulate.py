@@ -92,6 +92,8 @@ def run_scenes(
         quiet = contextlib.nullcontext()
         if use_prefect:
             _prefect_env(verbose)
+            import sim2radar.flows.simulate  # noqa: F401 - Prefect's logging set up first
+
             # a broken scene is recorded as failed and printed in the summary: no traceback
             quiet = quiet_recorded_failures(["simulate-scene"], verbose)
         with quiet:
