@@ -73,7 +73,7 @@ def _generate(seeds, frames, geometry, radar, store, name, export, *, splits=Non
     """One dataset through the ``generate`` job's driver, worlds one after another in this
     process (:class:`~sim2radar.tasks.runner.PlainRunner`), exported to ``export``."""
     from sim2radar.factory.spec import DatasetSpec
-    from sim2radar.tasks.dataset import GenerateRequest, generate_dataset
+    from sim2radar.tasks.generate import GenerateRequest, generate_dataset
     from sim2radar.tasks.runner import PlainRunner
 
     where = {"seeds": list(seeds), "store": os.fspath(store), "dataset": name,

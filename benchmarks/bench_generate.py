@@ -10,7 +10,7 @@ for each geometry mode, with the stages split out:
 reconstruct + simulate_reconstructed. Also the whole run's wall time per frame (world generation
 and Parquet I/O included) and a cached re-run (content keys: nothing recomputed). Both runs go
 through the ``generate`` job's driver with a plain runner
-(:func:`sim2radar.tasks.dataset.generate_dataset` + :class:`~sim2radar.tasks.runner.PlainRunner`:
+(:func:`sim2radar.tasks.generate.generate_dataset` + :class:`~sim2radar.tasks.runner.PlainRunner`:
 what ``--no-prefect`` runs, without Prefect's overhead).
 
     python -m benchmarks generate
@@ -25,7 +25,7 @@ import tempfile
 import time
 
 from sim2radar.factory.spec import DatasetSpec
-from sim2radar.tasks.dataset import GenerateRequest, generate_dataset
+from sim2radar.tasks.generate import GenerateRequest, generate_dataset
 from sim2radar.tasks.runner import PlainRunner
 
 N_FRAMES = int(os.environ.get("SIM2RADAR_BENCH_GENERATE_FRAMES", "3"))

@@ -3,7 +3,7 @@
 
 Three runs, each into a fresh store (nothing cached), all through the Prefect flow
 (:func:`sim2radar.flows.generate_dataset.generate_dataset` with a
-:class:`~sim2radar.tasks.dataset.GenerateRequest` whose ``run`` picks the task runner) on one
+:class:`~sim2radar.tasks.generate.GenerateRequest` whose ``run`` picks the task runner) on one
 temporary Prefect API:
 
 * ``threads``      — ``ThreadPoolTaskRunner(1)``: worlds one after another in this process

@@ -12,12 +12,12 @@ re-simulates without re-reconstructing), then one ``simulate`` step per geometry
 frame is recorded ``failed`` and the others finish; a failing world raises for its caller to
 record. Manifest rows: one per world (``world_000007``), one per frame
 (``world_000007_f002``). :mod:`sim2radar.flows.generate_dataset` runs every step as a Prefect
-task; a plain run calls the same functions (:mod:`sim2radar.tasks.runner`).
+task; a plain run calls the same functions (:mod:`sim2radar.tasks.runner`). The ``generate``
+job's driver, which runs this per world, is :mod:`sim2radar.tasks.generate`.
 """
 
 from __future__ import annotations
 
-import functools
 import logging
 import os
 import time
@@ -26,7 +26,6 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from sim2radar.datasets.splits import split_groups as split_worlds
 from sim2radar.evaluate.dataset import LABEL_IOU_THRESHOLD
@@ -37,7 +36,6 @@ from sim2radar.factory.pipeline import frame_id_for, with_material
 from sim2radar.factory.seeds import frame_seed
 from sim2radar.factory.spec import (
     GEOMETRIES,
-    MAX_WORLDS,
     DatasetSpec,
     dataset_metadata,
 )
@@ -54,9 +52,9 @@ from sim2radar.tasks.common import (
     open_store,
     summarize,
 )
-from sim2radar.tasks.runner import Runner, RunOptions, StepRun, Units, call_step
+from sim2radar.tasks.runner import call_step
 from sim2radar.tasks.steps import reconstruction_steps
-from sim2radar.tasks.worlds import failed_world, world_source
+from sim2radar.tasks.worlds import world_source
 
 __all__ = [
     "DATASET_STAGE_VERSION",
@@ -72,10 +70,6 @@ __all__ = [
     "export_openpcdet",
     "split_worlds",
     "summarize_dataset",
-    "GenerateRequest",
-    "DatasetFailures",
-    "generate_dataset",
-    "world_table",
     "world_bev_pngs",
     "outcomes_from_manifest",
     "export_store_dataset",
@@ -386,7 +380,6 @@ def world_claim(st: ArtifactStore, seed: int, spec: DatasetSpec, n_frames: int):
 def _generate_world(seed: int, spec: DatasetSpec, st: ArtifactStore, force: bool,
                     keep_frames: bool, n_frames: int, run: Callable[..., Any]) -> Outcome:
     """The body of :func:`generate_world_dataset`, under its world's claim."""
-    from sim2radar.storage.worlds import world_id_for
 
     t_start = time.perf_counter()
     world_id = world_id_for(seed)
@@ -672,140 +665,6 @@ def world_bev_pngs(store, outcomes: list[Outcome], png_dir: str | os.PathLike,
                 out.append(str(frames_bev_png(dfs, path, class_name=spec.class_name,
                                               title=f"{o.id} [{g}]")))
     return out
-
-
-# ---------------------------------------------------------------------------------------------
-# The job
-# ---------------------------------------------------------------------------------------------
-class GenerateRequest(BaseModel):
-    """One run of the ``generate`` job: worlds x frames -> dataset frames, optionally exported.
-
-    Attributes
-    ----------
-    spec : the run's :class:`~sim2radar.factory.spec.DatasetSpec` (frames per world,
-        geometries, radar, reconstruction, world, rig, seed, class name, ...)
-    seeds : world seeds (one seed -> one world); left empty, the worlds
-        ``first_seed .. first_seed + n_worlds - 1`` (a deployment's parameters say so)
-    n_worlds, first_seed : the seeds' range when ``seeds`` is empty (ignored otherwise)
-    store : artifact store root (local path or fsspec URI)
-    dataset : manifest name
-    export_dir : OpenPCDet export folder, or None
-    force : recompute dataset frames even when cached
-    strict : raise :class:`DatasetFailures` at the end if anything failed or fell back
-    frames_by_seed : frames of particular worlds (default ``spec.frames_per_world``)
-    splits : export splits, split name -> world ids (None: seeded split by world)
-    export_doppler : export points with a 5th column, Doppler [m/s]
-    domain : how the export labels its domain in ``dataset.json`` (None: simulated)
-    run : how many worlds at once, and where (:class:`~sim2radar.tasks.runner.RunOptions`)
-    """
-
-    model_config = ConfigDict(extra="forbid")
-
-    spec: DatasetSpec = DatasetSpec()
-    seeds: list[int] = []
-    n_worlds: int = Field(4, ge=1, le=MAX_WORLDS)
-    first_seed: int = 0
-    store: str = "out/store"
-    dataset: str = "generated"
-    export_dir: str | None = None
-    force: bool = False
-    strict: bool = False
-    frames_by_seed: dict[int, int] = {}
-    splits: dict[str, list[str]] | None = None
-    export_doppler: bool = False
-    domain: str | None = None
-    run: RunOptions = RunOptions()
-
-    @model_validator(mode="after")
-    def _world_range(self) -> GenerateRequest:
-        if not self.seeds:
-            self.seeds = list(range(self.first_seed, self.first_seed + self.n_worlds))
-        return self
-
-
-class DatasetFailures(RuntimeError):
-    """Raised by a ``strict`` run when a world or frame failed or a material fell back;
-    ``.summary`` has the details."""
-
-    def __init__(self, summary: dict[str, Any]) -> None:
-        lines = []
-        for w in summary["outcomes"]:
-            if w["status"] != "failed":
-                continue
-            lines.append(f"{w['id']}: {w['error']}")
-            lines += [f"  {f['id']}: {f['error']}" for f in w["parts"]
-                      if f["status"] == "failed"]
-        fb = (summary.get("fallbacks") or {}).get("segments", 0)
-        head = f"{summary['counts']['failed']} world(s) failed"
-        if fb:
-            head += f", {fb} segment material(s) fell back to unknown"
-        super().__init__(f"{head}:\n" + "\n".join(lines))
-        self.summary = summary
-
-
-def world_table(outcomes: list[Outcome]) -> list[dict[str, Any]]:
-    """One row per world: status, frames, radar points per frame (each geometry), seconds per
-    step summed over the world's frames (render, reconstruct, simulate per geometry) and the
-    world's total, the error."""
-    rows = []
-    for o in outcomes:
-        row: dict[str, Any] = {"world": o.id, "status": o.status,
-                               "frames": sum(f.status != "failed" for f in o.parts)}
-        counts = [f.measured.get("n_points", {}) for f in o.parts]
-        for g in sorted({g for c in counts for g in c}):
-            pts = [c[g] for c in counts if g in c]
-            row[f"points_per_frame_{g}"] = round(sum(pts) / len(pts), 1)
-        for stage in sorted({s for f in o.parts for s in f.timings_s}):
-            row[f"{stage}_s"] = round(sum(f.timings_s.get(stage, 0.0) for f in o.parts), 3)
-        row["total_s"] = round(o.timings_s.get("total", 0.0), 3)
-        row["fallbacks"] = int(o.measured.get("fallbacks", 0))
-        row["error"] = o.error
-        rows.append(row)
-    return rows
-
-
-def _world_unit(seed: int, run: StepRun, *, request: GenerateRequest) -> Outcome:
-    return generate_world_dataset(seed, request.spec, request.store, force=request.force,
-                                  n_frames=request.frames_by_seed.get(int(seed)), run=run)
-
-
-def generate_dataset(request: GenerateRequest, runner: Runner) -> RunSummary:
-    """The ``generate`` job: each world's dataset frames made (or found cached) and recorded
-    in the dataset manifest, a table of seconds per step, the export; a failing world or frame
-    is recorded ``failed`` and the others finish.
-
-    Returns
-    -------
-    dict — :func:`summarize_dataset`'s (+ ``stage_table``, ``export`` when exported)
-
-    Raises
-    ------
-    DatasetFailures — ``request.strict`` and a world failed or a material fell back (after
-        everything is recorded and exported)
-    """
-    units = Units(job="generate", what="world", task="generate-world-dataset",
-                  items=tuple(int(s) for s in request.seeds),
-                  work=functools.partial(_world_unit, request=request), failed=failed_world,
-                  name=world_id_for, store=request.store, dataset=request.dataset)
-    outcomes = runner.run(units)
-    st = open_store(request.store)
-    summary = summarize_dataset(st, request.dataset, request.spec, outcomes)
-    summary["stage_table"] = world_table(outcomes)
-    runner.publish(units.job, units.dataset, "worlds", table=summary["stage_table"],
-                   description=f"dataset {request.dataset}: worlds {summary['counts']} (seconds "
-                               "per step, summed over each world's frames; cached steps take "
-                               "milliseconds)")
-    if request.export_dir is not None:
-        summary["export"] = export_all(st, outcomes, request.export_dir, request.spec,
-                                       splits=request.splits,
-                                       with_doppler=request.export_doppler,
-                                       domain=request.domain)
-        log.info("exported to %s: %s", request.export_dir, summary["export"])
-    log.info("generate: worlds %s, frames %s into %s (dataset %s)", summary["counts"],
-             summary["frame_counts"], st.root, request.dataset)
-    if request.strict and (summary["counts"]["failed"] or summary["fallbacks"]["segments"]):
-        raise DatasetFailures(summary)
-    return summary
 
 
 def export_all(store, outcomes, export_dir, spec: DatasetSpec | CaptureSpec, *,

@@ -6,7 +6,7 @@ domain's, exported in OpenPCDet's custom layout and labelled as a proxy for meas
     from sim2radar.tasks.runner import PlainRunner
     summary = reference_dataset(ReferenceRequest(export_dir="data/proxy_real"), PlainRunner())
 
-It is the ``generate`` job (:func:`sim2radar.tasks.dataset.generate_dataset`: one unit per
+It is the ``generate`` job (:func:`sim2radar.tasks.generate.generate_dataset`: one unit per
 world, one cached ``dataset_frames`` artifact per frame, failures recorded in the manifest
 while the others finish) with the reference radar preset (``fidelity: signal``),
 ``ground_truth`` geometry, no RGB rendering, the plan of
@@ -25,7 +25,7 @@ from pydantic import BaseModel, ConfigDict, Field
 from sim2radar.factory.reference import DOMAIN_LABEL, REFERENCE_FIRST_SEED, plan_reference
 from sim2radar.factory.spec import DatasetSpec
 from sim2radar.tasks.common import RunSummary
-from sim2radar.tasks.dataset import GenerateRequest, generate_dataset
+from sim2radar.tasks.generate import GenerateRequest, generate_dataset
 from sim2radar.tasks.runner import Runner, RunOptions
 from sim2radar.worlds.config import WALKING_SPEED_MPS
 

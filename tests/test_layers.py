@@ -205,7 +205,8 @@ def test_the_plain_path_does_not_import_prefect():
     code = ("import sys, sim2radar.tasks.dataset, sim2radar.tasks.common, "
             "sim2radar.tasks.worlds, sim2radar.tasks.steps, sim2radar.tasks.capture, "
             "sim2radar.tasks.radar, sim2radar.tasks.reconstruct, sim2radar.tasks.reference, "
-            "sim2radar.tasks.runner, sim2radar.cli._jobs; "
+            "sim2radar.tasks.runner, sim2radar.tasks.generate, sim2radar.tasks.sweep, "
+            "sim2radar.cli._jobs; "
             "print(sorted(m for m in sys.modules if m.split('.')[0] == 'prefect')[:3])")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          check=True, cwd=ROOT)

@@ -95,7 +95,7 @@ def run_demo(
     from sim2radar.cli.generate import run_generate
     from sim2radar.evaluate.gap import write_gap_report
     from sim2radar.fileio import write_json
-    from sim2radar.tasks.dataset import GenerateRequest
+    from sim2radar.tasks.generate import GenerateRequest
 
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)

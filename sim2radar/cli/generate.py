@@ -39,7 +39,7 @@ from sim2radar.factory.spec import (
     DatasetSpec,
     load_generate_config,
 )
-from sim2radar.tasks.dataset import GenerateRequest, generate_dataset
+from sim2radar.tasks.generate import GenerateRequest, generate_dataset
 from sim2radar.tasks.reference import ReferenceRequest
 
 __all__ = ["generate", "load_generate_config", "print_generate_summary", "run_generate"]
@@ -71,7 +71,8 @@ def run_generate(request: GenerateRequest | ReferenceRequest, *,
     from rich.progress import Progress
 
     from sim2radar.cli._jobs import run_job
-    from sim2radar.tasks.dataset import DatasetFailures, world_bev_pngs
+    from sim2radar.tasks.dataset import world_bev_pngs
+    from sim2radar.tasks.generate import DatasetFailures
     from sim2radar.tasks.reference import reference_dataset
 
     generate = request if isinstance(request, GenerateRequest) else request.generate_request()

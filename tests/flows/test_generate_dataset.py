@@ -17,6 +17,7 @@ from sim2radar.datasets import OpenPCDetDataset
 from sim2radar.radar import load_radar_config
 from sim2radar.storage import ArtifactStore
 from sim2radar.tasks import dataset as td
+from sim2radar.tasks import generate as tg
 from sim2radar.tasks.common import record
 from sim2radar.worlds import (
     generate_world,
@@ -45,12 +46,12 @@ def _plain(seeds, spec, store, dataset, **fields):
     from sim2radar.tasks.runner import PlainRunner
 
     root = store.root if isinstance(store, ArtifactStore) else str(store)
-    return td.generate_dataset(td.GenerateRequest(spec=spec, seeds=seeds, store=root,
+    return tg.generate_dataset(tg.GenerateRequest(spec=spec, seeds=seeds, store=root,
                                                   dataset=dataset, **fields), PlainRunner())
 
 
 def _request(seeds, **fields):
-    return td.GenerateRequest(spec=_spec(), seeds=seeds, **fields)
+    return tg.GenerateRequest(spec=_spec(), seeds=seeds, **fields)
 
 
 @pytest.fixture(scope="module")
