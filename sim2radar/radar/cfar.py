@@ -65,6 +65,7 @@ import numpy as np
 __all__ = [
     "CFAR_KINDS",
     "EDGE_MODES",
+    "cfar_window",
     "ca_cfar_mask",
     "caso_false_alarm_rate",
     "cfar_1d",
@@ -246,6 +247,36 @@ def cfar_threshold_factor(kind: str, n_train: float, pfa: float, *, looks: int =
 
 
 # -- detectors ----------------------------------------------------------------------------
+def cfar_window(n_len: int, *, kind: str, guard: int, train: int, edges: str,
+                discard: tuple[int, int] = (0, 0)) -> tuple[int, int, int, int, int]:
+    """The window of one CFAR pass over an axis of ``n_len`` cells, checked: ``(guard,
+    train, span = guard + train, lo, hi)`` with ``lo``/``hi`` the cells never tested at the
+    start / end (``ti`` edges). Shared by :func:`cfar_1d` and its torch twin
+    (:func:`sim2radar.radar.detection_torch.cfar_1d`).
+
+    Raises
+    ------
+    ValueError — an unknown kind or edge mode, fewer than 1 reference or a negative guard
+        cell, or a window that does not fit the cells tested.
+    """
+    if kind not in CFAR_KINDS:
+        raise ValueError(f"unknown CFAR kind {kind!r}; known: {', '.join(CFAR_KINDS)}")
+    if edges not in EDGE_MODES:
+        raise ValueError(f"unknown CFAR edge mode {edges!r}; known: {', '.join(EDGE_MODES)}")
+    if int(train) < 1 or int(guard) < 0:
+        raise ValueError(f"CFAR needs train >= 1 and guard >= 0 cells, got {train}, {guard}")
+    g, n = int(guard), int(train)
+    span = g + n
+    lo, hi = (int(discard[0]), int(discard[1])) if edges == "ti" else (0, 0)
+    length = max(n_len - lo - hi, 0)
+    if length < 1 or (edges == "wrap" and 2 * span + 1 > n_len) or (edges == "ti"
+                                                                    and span > length):
+        raise ValueError(f"CFAR window of {2 * span + 1} cells (guard {g}, reference {n} per "
+                         f"side) does not fit the {length} cells tested; reduce the CFAR's "
+                         "guard or reference cells")
+    return g, n, span, lo, hi
+
+
 def cfar_1d(power: np.ndarray, *, axis: int = -1, kind: str = "caso", guard: int,
             train: int, alpha: float, edges: str = "wrap", discard: tuple[int, int] = (0, 0),
             rank: float = 0.75, candidates: np.ndarray | None = None
@@ -271,24 +302,12 @@ def cfar_1d(power: np.ndarray, *, axis: int = -1, kind: str = "caso", guard: int
     interference : float array like ``power`` — the estimate ``Z`` per cell (NaN where not
         tested).
     """
-    if kind not in CFAR_KINDS:
-        raise ValueError(f"unknown CFAR kind {kind!r}; known: {', '.join(CFAR_KINDS)}")
-    if edges not in EDGE_MODES:
-        raise ValueError(f"unknown CFAR edge mode {edges!r}; known: {', '.join(EDGE_MODES)}")
-    if int(train) < 1 or int(guard) < 0:
-        raise ValueError(f"CFAR needs train >= 1 and guard >= 0 cells, got {train}, {guard}")
     p = np.moveaxis(np.asarray(power, dtype=np.float64), axis, -1)
     n_len = p.shape[-1]
-    g, n = int(guard), int(train)
-    span = g + n
-    lo, hi = (int(discard[0]), int(discard[1])) if edges == "ti" else (0, 0)
+    g, n, span, lo, hi = cfar_window(n_len, kind=kind, guard=guard, train=train, edges=edges,
+                                     discard=discard)
     v = p[..., lo:n_len - hi]
     length = v.shape[-1]
-    if length < 1 or (edges == "wrap" and 2 * span + 1 > n_len) or (edges == "ti"
-                                                                    and span > length):
-        raise ValueError(f"CFAR window of {2 * span + 1} cells (guard {g}, reference {n} per "
-                         f"side) does not fit the {length} cells tested; reduce the CFAR's "
-                         "guard or reference cells")
     if edges == "wrap":
         padded = np.concatenate([v[..., length - span:], v, v[..., :span]], axis=-1)
     else:  # TI: copies (same order) of the truncated vector's own first and last cells

@@ -112,19 +112,12 @@ def cfar_1d(power, *, axis: int, kind: str, guard: int, train: int, alpha: float
     detection mask."""
     import torch
 
-    if kind not in np_cfar.CFAR_KINDS or edges not in np_cfar.EDGE_MODES:
-        raise ValueError(f"unknown CFAR kind {kind!r} or edge mode {edges!r}")
     p = torch.movedim(power, axis, -1)
     n_len = p.shape[-1]
-    g, n = int(guard), int(train)
-    span = g + n
-    lo, hi = (int(discard[0]), int(discard[1])) if edges == "ti" else (0, 0)
+    g, n, span, lo, hi = np_cfar.cfar_window(n_len, kind=kind, guard=guard, train=train,
+                                             edges=edges, discard=discard)
     v = p[..., lo:n_len - hi]
     length = v.shape[-1]
-    if length < 1 or (edges == "wrap" and 2 * span + 1 > n_len) or (edges == "ti"
-                                                                    and span > length):
-        raise ValueError(f"CFAR window of {2 * span + 1} cells does not fit the {length} "
-                         "cells tested; reduce the CFAR's guard or reference cells")
     if edges == "wrap":
         padded = torch.cat([v[..., length - span:], v, v[..., :span]], dim=-1)
     else:
