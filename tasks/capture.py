@@ -419,11 +419,9 @@ def capture_dataset(request: CaptureRequest, runner: Runner) -> RunSummary:
     """
     t0 = time.perf_counter()
     scenes = find_captures(request.captures)
-    export = request.export_dir
     if request.retry_failed:
         failed = set(failed_scene_ids(request.store, request.dataset))
         scenes = [s for s in scenes if s.scene_id in failed]
-        export = None  # the whole dataset is exported below, not only the retried scenes
     units = Units(job="captures", what="scene", task="capture-scene", items=tuple(scenes),
                   work=functools.partial(_scene_unit, request=request),
                   failed=_failed_scene, name=lambda s: s.scene_id,
@@ -438,11 +436,11 @@ def capture_dataset(request: CaptureRequest, runner: Runner) -> RunSummary:
                        description=f"capture dataset {request.dataset}: scenes "
                                    f"{summary['counts']} (seconds per step in this run; "
                                    "cached steps take milliseconds)")
-    if export is not None:
-        summary["export"] = export_all(st, outcomes, export, request.spec,
+    if request.export_dir is not None and (scenes or not request.retry_failed):
+        # a retry exports the whole dataset its manifest lists, not only the retried scenes
+        exported = (outcomes_from_manifest(st, request.dataset) if request.retry_failed
+                    else outcomes)
+        summary["export"] = export_all(st, exported, request.export_dir, request.spec,
                                        domain=CAPTURE_DOMAIN)
-    elif request.retry_failed and request.export_dir is not None and scenes:
-        summary["export"] = export_all(st, outcomes_from_manifest(st, request.dataset),
-                                       request.export_dir, request.spec, domain=CAPTURE_DOMAIN)
     summary["wall_s"] = time.perf_counter() - t0
     return summary

@@ -25,7 +25,12 @@ from pydantic import BaseModel, ConfigDict, Field, model_validator
 from sim2radar.factory.spec import MAX_WORLDS, DatasetSpec
 from sim2radar.storage.worlds import world_id_for
 from sim2radar.tasks.common import Outcome, RunSummary, open_store
-from sim2radar.tasks.dataset import export_all, generate_world_dataset, summarize_dataset
+from sim2radar.tasks.dataset import (
+    export_all,
+    generate_world_dataset,
+    outcomes_from_manifest,
+    summarize_dataset,
+)
 from sim2radar.tasks.runner import Runner, RunOptions, StepRun, Units
 from sim2radar.tasks.worlds import failed_world
 
@@ -53,6 +58,8 @@ class GenerateRequest(BaseModel):
     splits : export splits, split name -> world ids (None: seeded split by world)
     export_doppler : export points with a 5th column, Doppler [m/s]
     domain : how the export labels its domain in ``dataset.json`` (None: simulated)
+    export_manifest : export every frame the dataset's manifest lists, not only this run's
+        worlds (``generate --retry-failed`` runs only the worlds that failed)
     run : how many worlds at once, and where (:class:`~sim2radar.tasks.runner.RunOptions`)
     """
 
@@ -71,6 +78,7 @@ class GenerateRequest(BaseModel):
     splits: dict[str, list[str]] | None = None
     export_doppler: bool = False
     domain: str | None = None
+    export_manifest: bool = False
     run: RunOptions = RunOptions()
 
     @model_validator(mode="after")
@@ -153,7 +161,9 @@ def generate_dataset(request: GenerateRequest, runner: Runner) -> RunSummary:
                                "per step, summed over each world's frames; cached steps take "
                                "milliseconds)")
     if request.export_dir is not None:
-        summary["export"] = export_all(st, outcomes, request.export_dir, request.spec,
+        exported = (outcomes_from_manifest(st, request.dataset) if request.export_manifest
+                    else outcomes)
+        summary["export"] = export_all(st, exported, request.export_dir, request.spec,
                                        splits=request.splits,
                                        with_doppler=request.export_doppler,
                                        domain=request.domain)

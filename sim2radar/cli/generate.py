@@ -47,8 +47,7 @@ __all__ = ["generate", "load_generate_config", "print_generate_summary", "run_ge
 
 def run_generate(request: GenerateRequest | ReferenceRequest, *,
                  png_dir: Path | None = None, use_prefect: bool = True,
-                 show_progress: bool = True, verbose: bool = False,
-                 export_whole_dataset: bool = False) -> dict[str, Any]:
+                 show_progress: bool = True, verbose: bool = False) -> dict[str, Any]:
     """Run the ``generate`` job (or the ``reference`` job, for a
     :class:`~sim2radar.tasks.reference.ReferenceRequest`) with a progress bar, holding the
     export folder's writer lock (:func:`sim2radar.fileio.writer_lock`: a second run exporting
@@ -56,8 +55,7 @@ def run_generate(request: GenerateRequest | ReferenceRequest, *,
 
     With ``use_prefect`` the job's flow runs (worlds on ``request.run``'s threads or Dask
     cluster; if the Prefect server stops answering the run goes on without it); otherwise the
-    driver with a plain runner. ``export_whole_dataset`` (``--retry-failed``): the export
-    holds every frame the dataset's manifest lists, not only this run's worlds.
+    driver with a plain runner.
 
     Returns the job's summary (``pngs`` added); failures are counted in it, never raised
     (with ``strict`` the Prefect run is marked failed; the CLI exits with status 1).
@@ -77,8 +75,6 @@ def run_generate(request: GenerateRequest | ReferenceRequest, *,
 
     generate = request if isinstance(request, GenerateRequest) else request.generate_request()
     export_dir = generate.export_dir
-    if export_whole_dataset:
-        request = request.model_copy(update={"export_dir": None})
     if isinstance(request, GenerateRequest):
         flow, driver = "sim2radar.flows.generate_dataset:generate_dataset", generate_dataset
     else:
@@ -112,13 +108,6 @@ def run_generate(request: GenerateRequest | ReferenceRequest, *,
                     lambda: progress.update(bar, completed=0, description="without Prefect"))
         else:
             summary = run(False)
-        if export_whole_dataset and export_dir is not None:
-            from sim2radar.tasks.dataset import export_all, outcomes_from_manifest
-
-            summary["export"] = export_all(
-                generate.store, outcomes_from_manifest(generate.store, generate.dataset),
-                export_dir, generate.spec, splits=generate.splits,
-                with_doppler=generate.export_doppler, domain=generate.domain)
     summary["pngs"] = []
     if png_dir is not None:
         from sim2radar.tasks.dataset import outcomes_from_summary
@@ -276,8 +265,7 @@ def generate(
     request = GenerateRequest(
         spec=spec, seeds=seeds, store=out, dataset=dataset_name,
         export_dir=None if export_openpcdet is None else str(export_openpcdet), force=force,
-        strict=strict, run=run_options)
+        strict=strict, run=run_options, export_manifest=retry_failed)
     summary = run_generate(request, png_dir=None if no_png else png_dir,
-                           use_prefect=not no_prefect, verbose=verbose,
-                           export_whole_dataset=retry_failed)
+                           use_prefect=not no_prefect, verbose=verbose)
     finish_generate(summary, json_out, strict, allow_failures)
