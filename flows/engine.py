@@ -39,7 +39,7 @@ from sim2radar.tasks.common import (
 )
 from sim2radar.tasks.runner import RunOptions, Units, error_text
 
-__all__ = ["STEP_NAMES", "PrefectRunner", "PrefectPool", "run_as_tasks", "gather", "record_task",
+__all__ = ["STEP_NAMES", "PrefectRunner", "PrefectPool", "run_as_tasks", "record_task",
            "call_task"]
 
 #: Every step's task name (the Prefect UI's task names).
@@ -105,47 +105,21 @@ def record_task(store: str, dataset: str, outcome: Outcome) -> list[dict]:
     return record(store, dataset, outcome)
 
 
-def gather(futures: dict, failed: Callable[[Any, BaseException | str], Outcome], *,
-           store: str, dataset: str, progress_id=None, channel: str | None = None,
-           what: str = "") -> dict:
-    """Work tasks' outcomes as they finish (``futures``: future -> the work's identity): a task
-    that did not return an :class:`Outcome` becomes ``failed(identity, error)``; each outcome is
-    recorded in the ``dataset`` manifest (:func:`record_task`), logged,
-    counted on the progress artifact ``progress_id`` and reported on the progress ``channel``
-    (each when given). Returns identity -> outcome."""
-    from prefect.artifacts import update_progress_artifact
-
-    logger = get_run_logger()
-    outcomes: dict = {}
-    for fut in as_completed(list(futures)):
-        ident = futures[fut]
-        result = fut.result(raise_on_failure=False)
-        if not isinstance(result, Outcome):
-            error = result if isinstance(result, BaseException) else (
-                fut.state.message or repr(result))
-            result = failed(ident, error)
-        record_task(store, dataset, result)
-        name = f"{what} {result.id}".strip()
-        if result.status == "failed":
-            logger.error("%s FAILED: %s", name, result.error)
-        elif result.parts:
-            logger.info("%s: %s, %d frames", name, result.status, len(result.parts))
-        else:
-            logger.info("%s: %s", name, result.status)
-        outcomes[ident] = result
-        if progress_id is not None:
-            update_progress_artifact(progress_id, 100.0 * len(outcomes) / max(len(futures), 1))
-        if channel is not None:
-            _progress.notify(channel, result)
-    return outcomes
-
-
-@task(cache_policy=NO_CACHE, retries=0, persist_result=False)
-def unit_task(work: Callable[[Any, Callable], Outcome], item: Any, prefix: str) -> Outcome:
-    """One unit of a job (named after the job's :attr:`~sim2radar.tasks.runner.Units.task`):
-    ``work(item, run_as_tasks(prefix))``. No retries: the work is deterministic, and a failing
-    step already says which step failed."""
+def _run_unit(work: Callable[[Any, Callable], Outcome], item: Any, prefix: str) -> Outcome:
+    """One unit of a job, in its task: ``work(item, run_as_tasks(prefix))``, its steps nested
+    tasks named ``<prefix>-<stage>[-<label>]``."""
     return work(item, run_as_tasks(prefix))
+
+
+def _log_outcome(what: str, outcome: Outcome) -> None:
+    logger = get_run_logger()
+    name = f"{what} {outcome.id}".strip()
+    if outcome.status == "failed":
+        logger.error("%s FAILED: %s", name, outcome.error)
+    elif outcome.parts:
+        logger.info("%s: %s, %d frames", name, outcome.status, len(outcome.parts))
+    else:
+        logger.info("%s: %s", name, outcome.status)
 
 
 class PrefectRunner:
@@ -157,26 +131,24 @@ class PrefectRunner:
         self.options = options or RunOptions()
 
     def run(self, units: Units) -> list[Outcome]:
-        from prefect.artifacts import create_progress_artifact
-
-        from sim2radar.flows.runners import task_runner
-
+        """Each unit a task on a :class:`PrefectPool` (no retries: the work is deterministic,
+        and a failing step already says which step failed); as each finishes its outcome (a
+        unit that raised: ``units.failed``) is recorded in the manifest (:func:`record_task`),
+        logged and reported."""
         open_store(units.store).manifest(units.dataset)  # validates the name before any work
-        progress_id = create_progress_artifact(
-            progress=0.0, key=_progress.artifact_key(units.job, units.dataset, "progress"),
-            description=f"{units.job} {units.dataset}: {units.what}s finished of "
-                        f"{len(units.items)}")
-        one = unit_task.with_options(name=units.task)
-        with task_runner(self.options.workers, self.options.dask_address) as engine:
-            futures = {}
+        total, done = len(units.items), {}
+        with self.pool(units.job, units.dataset, total) as pool:
             for i, item in enumerate(units.items):
                 name = units.name(item)
-                futures[engine.submit(one.with_options(task_run_name=name),
-                                      {"work": units.work, "item": item, "prefix": name})] = i
-            done = gather(futures, lambda i, error: units.failed(units.items[i], error),
-                          store=units.store, dataset=units.dataset, progress_id=progress_id,
-                          channel=units.job, what=units.what)
-        return [done[i] for i in range(len(units.items))]
+                pool.submit(i, _run_unit, units.work, item, name, task=units.task, name=name)
+            for i, result, error in pool.finished():
+                outcome = result if error is None and isinstance(result, Outcome) else (
+                    units.failed(units.items[i], error or repr(result)))
+                record_task(units.store, units.dataset, outcome)
+                _log_outcome(units.what, outcome)
+                done[i] = outcome
+                pool.report(outcome, len(done), total)
+        return [done[i] for i in range(total)]
 
     def pool(self, job: str, name: str, total: int, options: RunOptions | None = None,
              resources: dict[str, int] | None = None):
