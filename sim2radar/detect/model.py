@@ -84,6 +84,52 @@ class PFNLayer(nn.Module):
             return y_max
         return torch.cat([y, y_max.expand(-1, m, -1)], dim=2)
 
+    def forward_points(
+        self, x: torch.Tensor, pillar: torch.Tensor, n_pillars: int, n_slots: int,
+        full: torch.Tensor,
+    ) -> torch.Tensor:
+        """The last layer's (P, C_out) output from the pillars' real points only.
+
+        :meth:`forward` runs on every one of the P * M slots, most of them padding (IFR's
+        ~2,000 points per frame fill ~1.6 of a pillar's 32 slots). A padded slot's features are
+        zero and the linear layer has no bias, so its pre-norm value is exactly 0: the batch
+        statistics over all P * M rows and each pillar's max follow from the real rows alone,
+        with the padded rows counted analytically. Same parameters, running statistics and
+        (up to float rounding; statistics in float32) the same outputs and gradients as
+        :meth:`forward` on the padded tensor.
+
+        Parameters
+        ----------
+        x : (n, C_in) features of the real points.
+        pillar : (n,) int64 — each point's pillar index in ``[0, n_pillars)``.
+        n_pillars, n_slots : P and M of the padded tensor the layer stands in for.
+        full : (P,) bool — pillars with all M slots real (no padded slot joins their max).
+        """
+        if not self.last_vfe:
+            raise ValueError("forward_points is the last PFN layer's: earlier layers feed "
+                             "their padded slots' (non-zero) outputs to the next layer")
+        norm = self.norm
+        y = self.linear(x)
+        dtype = y.dtype  # autocast's, which the canvas and the backbone then use
+        y = y.float()
+        if norm.training:
+            rows = n_pillars * n_slots
+            mean = y.sum(dim=0) / rows
+            var = ((y - mean).square().sum(dim=0) + (rows - y.shape[0]) * mean.square()) / rows
+            with torch.no_grad():  # nn.BatchNorm1d's update: unbiased variance, momentum
+                norm.running_mean.lerp_(mean, norm.momentum)
+                norm.running_var.lerp_(var * (rows / max(rows - 1, 1)), norm.momentum)
+                norm.num_batches_tracked.add_(1)
+        else:
+            mean, var = norm.running_mean, norm.running_var
+        scale = norm.weight * torch.rsqrt(var + norm.eps)
+        shift = norm.bias - mean * scale
+        z = F.relu(y * scale + shift)
+        index = pillar[:, None].expand_as(z)
+        out = z.new_full((n_pillars, z.shape[1]), -math.inf)
+        out = out.scatter_reduce(0, index, z, reduce="amax", include_self=True)
+        return torch.where(full[:, None], out, torch.maximum(out, F.relu(shift))).to(dtype)
+
 
 class PillarVFE(nn.Module):
     """Pillar feature net (OpenPCDet ``PillarVFE``, USE_NORM, absolute xyz, no distance).
@@ -104,6 +150,9 @@ class PillarVFE(nn.Module):
             for i in range(len(channels) - 1)
         )
         self.out_channels = channels[-1]
+        #: run a one-layer PFN on every padded slot (OpenPCDet's way) instead of on the
+        #: pillars' real points (:meth:`PFNLayer.forward_points`; same result, less work)
+        self.dense_pfn = False
 
     def forward(
         self, voxels: torch.Tensor, num_points: torch.Tensor, coords: torch.Tensor
@@ -111,8 +160,8 @@ class PillarVFE(nn.Module):
         """(P, M, C) pillars, (P,) counts, (P, 4) coords -> (P, out_channels) features."""
         m = voxels.shape[1]
         xyz = voxels[..., :3]
-        counts = num_points.to(voxels.dtype).clamp(min=1).view(-1, 1, 1)
-        f_cluster = xyz - xyz.sum(dim=1, keepdim=True) / counts
+        counts = num_points.to(voxels.dtype).clamp(min=1)
+        point_mean = xyz.sum(dim=1) / counts[:, None]  # padded slots hold zeros
         vx, vy, vz = self.voxel_size_m
         r = self.point_cloud_range_m
         centre = torch.stack(
@@ -121,9 +170,17 @@ class PillarVFE(nn.Module):
              coords[:, 1].to(voxels.dtype) * vz + (vz / 2 + r[2])],
             dim=1,
         )
-        f_center = xyz - centre[:, None, :]
-        features = torch.cat([voxels, f_cluster, f_center], dim=-1)
         mask = torch.arange(m, device=voxels.device)[None, :] < num_points[:, None]
+        if len(self.pfn_layers) == 1 and not self.dense_pfn:
+            pillar, slot = mask.nonzero(as_tuple=True)
+            points = voxels[pillar, slot]
+            xyz = points[:, :3]
+            features = torch.cat(
+                [points, xyz - point_mean[pillar], xyz - centre[pillar]], dim=1)
+            return self.pfn_layers[0].forward_points(
+                features, pillar, voxels.shape[0], m, num_points >= m)
+        features = torch.cat(
+            [voxels, xyz - point_mean[:, None, :], xyz - centre[:, None, :]], dim=-1)
         features = features * mask[..., None].to(features.dtype)
         for pfn in self.pfn_layers:
             features = pfn(features)
@@ -145,7 +202,7 @@ class PointPillarScatter(nn.Module):
     def forward(self, features: torch.Tensor, coords: torch.Tensor, batch_size: int):
         flat = (coords[:, 0] * self.ny + coords[:, 2]) * self.nx + coords[:, 3]
         canvas = features.new_zeros(batch_size * self.ny * self.nx, features.shape[1])
-        canvas = canvas.index_copy(0, flat, features)
+        canvas.index_copy_(0, flat, features)
         return canvas.view(batch_size, self.ny, self.nx, -1).permute(0, 3, 1, 2)
 
 
@@ -162,8 +219,11 @@ class BaseBEVBackbone(nn.Module):
             cfg.layer_nums, cfg.layer_strides, cfg.num_filters, cfg.upsample_strides,
             cfg.num_upsample_filters, strict=True,
         ):
+            # OpenPCDet pads with nn.ZeroPad2d(1) before an unpadded strided conv: the same
+            # zeros, but a copy of the canvas (and its backward) per block. The conv pads
+            # itself here; an Identity keeps the parameter names (blocks.i.1.weight...).
             layers: list[nn.Module] = [
-                nn.ZeroPad2d(1), nn.Conv2d(c_in, c, 3, stride=stride, padding=0, bias=False),
+                nn.Identity(), nn.Conv2d(c_in, c, 3, stride=stride, padding=1, bias=False),
                 _bn2d(c, mom), nn.ReLU(),
             ]
             for _ in range(n_layers):
@@ -214,17 +274,21 @@ class AnchorHeadSingle(nn.Module):
         nn.init.zeros_(self.conv_box.bias)
 
     def forward(self, x: torch.Tensor) -> dict[str, torch.Tensor]:
+        # The three 1x1 convolutions run as one over their stacked weights (the same sums;
+        # one pass over the 384-channel map forward and backward instead of three).
         b = x.shape[0]
+        convs = [self.conv_cls, self.conv_box]
+        if self.conv_dir_cls is not None:
+            convs.append(self.conv_dir_cls)
+        y = F.conv2d(x, torch.cat([c.weight for c in convs]), torch.cat([c.bias for c in convs]))
+        parts = y.split([c.out_channels for c in convs], dim=1)
 
         def flat(t: torch.Tensor, k: int) -> torch.Tensor:
             return t.permute(0, 2, 3, 1).reshape(b, -1, k)
 
-        out = {
-            "cls_preds": flat(self.conv_cls(x), self.num_classes),
-            "box_preds": flat(self.conv_box(x), 7),
-        }
+        out = {"cls_preds": flat(parts[0], self.num_classes), "box_preds": flat(parts[1], 7)}
         if self.conv_dir_cls is not None:
-            out["dir_preds"] = flat(self.conv_dir_cls(x), self.num_dir_bins)
+            out["dir_preds"] = flat(parts[2], self.num_dir_bins)
         return out
 
 

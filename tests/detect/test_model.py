@@ -83,3 +83,75 @@ def test_encoder_split_and_shape_check():
     bad["vfe.pfn_layers.0.linear.weight"] = torch.zeros(64, 11)
     with pytest.raises(ValueError, match="shapes differ"):
         PointPillars().load_encoder(bad)
+
+
+def _pillars(n_frames: int, points_per_frame: int, seed: int):
+    from sim2radar.detect.voxelize import voxelize
+
+    frames = make_door_frames(n_frames, seed=seed, points_per_frame=points_per_frame)
+    pts, _ = collate([f.points for f in frames], [f.boxes for f in frames],
+                     [f.names for f in frames], ("door",))
+    c = PointPillars().cfg
+    return voxelize(pts, n_frames, c.point_cloud_range_m, c.voxel_size_m,
+                    c.max_points_per_voxel, c.max_voxels_train)
+
+
+@pytest.mark.parametrize("crowded", [False, True])
+def test_pillar_net_on_real_points_matches_the_padded_net(crowded):
+    """The one-layer PFN run on the pillars' real points (padded rows counted analytically)
+    equals OpenPCDet's run over all P * 32 slots, computed in float64: outputs, gradients,
+    running statistics and eval-mode outputs. ``crowded`` stacks every point into a few
+    pillars so some have all 32 slots real (no padded slot joins their max)."""
+    import copy
+
+    pil = _pillars(3, 2500, seed=4)
+    voxels, num_points, coords = pil.voxels, pil.num_points, pil.coords
+    if crowded:  # 40 pillars, each with all 32 slots taken by copies of its points
+        keep = torch.arange(40)
+        voxels = voxels[keep][:, :1].expand(-1, 32, -1).clone()
+        voxels[..., :3] += 0.01 * torch.rand_like(voxels[..., :3])
+        num_points, coords = torch.full((40,), 32), coords[keep]
+        num_points[::3] = 5  # a mix of full and padded pillars
+        voxels[::3, 5:] = 0
+    torch.manual_seed(1)
+    sparse = PointPillars().vfe.train()
+    with torch.no_grad():
+        sparse.pfn_layers[0].norm.weight.uniform_(0.5, 1.5)
+        sparse.pfn_layers[0].norm.bias.uniform_(-0.5, 0.5)
+    dense = copy.deepcopy(sparse).double()
+    dense.dense_pfn = True
+    assert (num_points >= 32).any() == crowded
+
+    out = sparse(voxels, num_points, coords)
+    ref = dense(voxels.double(), num_points, coords)
+    torch.testing.assert_close(out.double(), ref, rtol=1e-5, atol=1e-5)
+    weight = torch.randn(ref.shape, dtype=torch.float64)
+    (out * weight.float()).sum().backward()
+    (ref * weight).sum().backward()
+    for (name, p), q in zip(sparse.named_parameters(), dense.parameters(), strict=True):
+        torch.testing.assert_close(p.grad.double(), q.grad, rtol=1e-4, atol=1e-4 * q.grad.abs().max().item(), msg=name)
+    for (name, b), c in zip(sparse.named_buffers(), dense.buffers(), strict=True):
+        torch.testing.assert_close(b.double(), c.double(), rtol=1e-5, atol=1e-6, msg=name)
+    assert sparse.pfn_layers[0].norm.num_batches_tracked.item() == 1
+    sparse.eval(), dense.eval()
+    torch.testing.assert_close(sparse(voxels, num_points, coords).double(),
+                               dense(voxels.double(), num_points, coords), rtol=1e-5, atol=1e-5)
+
+
+def test_detection_head_runs_its_three_convolutions_as_one():
+    """The head stacks conv_cls / conv_box / conv_dir_cls (OpenPCDet's names, kept in the state
+    dict) into one 1x1 convolution: each output equals its own convolution's."""
+    torch.manual_seed(0)
+    head = PointPillars().dense_head
+    x = torch.randn(2, head.conv_cls.in_channels, 6, 5)
+    out = head(x)
+
+    def flat(t, k):
+        return t.permute(0, 2, 3, 1).reshape(2, -1, k)
+
+    torch.testing.assert_close(out["cls_preds"], flat(head.conv_cls(x), 1))
+    torch.testing.assert_close(out["box_preds"], flat(head.conv_box(x), 7))
+    torch.testing.assert_close(out["dir_preds"], flat(head.conv_dir_cls(x), 2))
+    names = set(PointPillars().state_dict())
+    assert {"dense_head.conv_cls.weight", "dense_head.conv_dir_cls.bias",
+            "backbone_2d.blocks.0.1.weight", "backbone_2d.blocks.0.2.running_var"} <= names
