@@ -113,6 +113,9 @@ class PFNLayer(nn.Module):
         dtype = y.dtype  # autocast's, which the canvas and the backbone then use
         y = y.float()
         if norm.training:
+            if n_pillars == 0:  # nn.BatchNorm1d refuses an empty batch in training alike
+                raise ValueError("no point of the batch lies inside model.point_cloud_range_m: "
+                                 "a training step needs at least one pillar")
             rows = n_pillars * n_slots
             mean = y.sum(dim=0) / rows
             var = ((y - mean).square().sum(dim=0) + (rows - y.shape[0]) * mean.square()) / rows

@@ -155,3 +155,16 @@ def test_detection_head_runs_its_three_convolutions_as_one():
     names = set(PointPillars().state_dict())
     assert {"dense_head.conv_cls.weight", "dense_head.conv_dir_cls.bias",
             "backbone_2d.blocks.0.1.weight", "backbone_2d.blocks.0.2.running_var"} <= names
+
+
+def test_a_batch_without_pillars_is_refused_in_training_and_empty_in_eval():
+    """No point inside the range: training refuses the batch (BatchNorm statistics of zero
+    rows would be NaN and poison the running statistics); evaluation gives no features."""
+    vfe = PointPillars().vfe
+    empty = (torch.zeros(0, 32, 4), torch.zeros(0, dtype=torch.long),
+             torch.zeros(0, 4, dtype=torch.long))
+    before = vfe.pfn_layers[0].norm.running_mean.clone()
+    with pytest.raises(ValueError, match="point_cloud_range_m"):
+        vfe.train()(*empty)
+    torch.testing.assert_close(vfe.pfn_layers[0].norm.running_mean, before)
+    assert vfe.eval()(*empty).shape == (0, 64)
