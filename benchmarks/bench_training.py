@@ -20,7 +20,9 @@ just before its step), 1 and 2 (DataLoader worker processes make the batches dur
 the epochs after the first (``SIM2RADAR_BENCH_STEPS`` steps each), and the host-side time on
 the critical path — how long the training loop waits for its next batch (augmentation +
 collation in-process, or an unfinished worker's batch), mean per step [ms]; the worker counts
-take turns over ``SIM2RADAR_BENCH_ROUNDS`` rounds (default 2), medians reported.
+take turns over ``SIM2RADAR_BENCH_ROUNDS`` rounds (default 2), medians reported. On a CPU
+with two or more cores, last, the demo model on one thread with 0 and 1 workers: the worker
+then has a core of its own, as on a GPU machine, and the wait left is the hand-over's.
 """
 
 from __future__ import annotations
@@ -145,29 +147,32 @@ def _timed_batch_waits(waits: list[tuple[int, float]]):
 
 
 def loader_step_seconds(profile: str, device: torch.device, n_steps: int,
-                        rounds: int = 2) -> dict[str, float]:
+                        rounds: int = 2, threads: int | None = None,
+                        workers: tuple[int, ...] = LOADER_WORKERS) -> dict[str, float]:
     """``train()`` with 0, 1 and 2 DataLoader workers (same batches: only time differs),
     interleaved over ``rounds`` rounds so a neighbour's load hits every count alike: median
     s/step (``workers_<n>``) and median of the loop's mean wait for a batch per step [ms]
-    (``wait_ms_<n>``), each over the epochs after the first."""
+    (``wait_ms_<n>``), each over the epochs after the first. ``threads``: the model's torch
+    threads (``runtime.num_threads``; None: the machine's)."""
     from sim2radar.datasets import make_door_frames
     from sim2radar.detect.precision import measure_step_seconds
     from sim2radar.experiment import load_profile
 
     cfg = load_profile(profile).detector_config("finetune")
     frames = make_door_frames(n_steps * BATCH, seed=0, points_per_frame=POINTS_PER_FRAME)
-    step: dict[int, list[float]] = {w: [] for w in LOADER_WORKERS}
-    wait: dict[int, list[float]] = {w: [] for w in LOADER_WORKERS}
+    step: dict[int, list[float]] = {w: [] for w in workers}
+    wait: dict[int, list[float]] = {w: [] for w in workers}
     for _ in range(rounds):
-        for w in LOADER_WORKERS:
+        for w in workers:
             waits: list[tuple[int, float]] = []
             with _timed_batch_waits(waits):
                 step[w].append(measure_step_seconds(
-                    cfg.with_updates(runtime={"loader_workers": w}), frames,
+                    cfg.with_updates(runtime={"loader_workers": w, "num_threads": threads}),
+                    frames,
                     steps_per_epoch=n_steps, epochs=3, device=device))
             wait[w].append(statistics.fmean(t for e, t in waits if e > 0))
     out: dict[str, float] = {}
-    for w in LOADER_WORKERS:
+    for w in workers:
         out[f"workers_{w}"] = round(statistics.median(step[w]), 4)
         out[f"wait_ms_{w}"] = round(1000 * statistics.median(wait[w]), 1)
     return out
@@ -197,6 +202,16 @@ def main() -> dict:
         res[profile].update(s)
         print(f"{profile:8s} " + " ".join(
             f"{s[f'workers_{w}']:8.4f} |{s[f'wait_ms_{w}']:6.1f}  " for w in LOADER_WORKERS))
+    if device.type == "cpu" and (os.cpu_count() or 1) >= 2:
+        # The GPU machine's case on this CPU: the model on one thread, a core left for the
+        # worker, so the wait left is the data path's own (hand-over), not core contention.
+        s = loader_step_seconds("demo", device, n_steps,
+                                int(os.environ.get("SIM2RADAR_BENCH_ROUNDS", "2")),
+                                threads=1, workers=(0, 1))
+        res["demo_1_thread"] = s
+        print(f"{'demo, 1 model thread (a core spare for the worker)':8s}: " + " ".join(
+            f"{w} workers {s[f'workers_{w}']:.4f} s | {s[f'wait_ms_{w}']:.1f} ms"
+            for w in (0, 1)))
     return res
 
 

@@ -129,26 +129,29 @@ class _Batches(Dataset):
     def __len__(self) -> int:
         return -(-len(self.frames) // self.batch_size)
 
-    def __getitem__(self, key: tuple[int, int]) -> tuple[torch.Tensor, torch.Tensor, int]:
+    def __getitem__(self, key: tuple[int, int]):
+        """``(epoch, k, points, gt_boxes, n_frames)``: the batch with its key."""
         epoch, k = key
         if self._order is None or self._order[0] != epoch:  # one permutation per epoch
             self._order = (epoch, epoch_order(self.seed, epoch, len(self.frames)))
-        return make_batch(self.frames, self._order[1], k, self.batch_size, self.aug_cfg,
-                          self.mcfg, self.db, batch_generator(self.seed, epoch, k))
+        return (epoch, k, *make_batch(self.frames, self._order[1], k, self.batch_size,
+                                      self.aug_cfg, self.mcfg, self.db,
+                                      batch_generator(self.seed, epoch, k)))
 
 
-class _EpochSampler(Sampler):
-    """Yields ``(epoch, 0) ... (epoch, n - 1)`` for the epoch last set (in the main process,
-    so persistent workers need no message about which epoch it is)."""
+class _RunSampler(Sampler):
+    """Yields ``(e, 0) ... (e, n - 1)`` for every epoch ``e`` in ``[first, last)`` as last set
+    (in the main process, so persistent workers need no message about which epoch it is): one
+    pass over the rest of the run, which the workers prefetch across epoch boundaries."""
 
     def __init__(self, n_batches: int):
-        self.n_batches, self.epoch = int(n_batches), 0
+        self.n_batches, self.first, self.last = int(n_batches), 0, 1
 
     def __len__(self) -> int:
-        return self.n_batches
+        return self.n_batches * (self.last - self.first)
 
     def __iter__(self) -> Iterator[tuple[int, int]]:
-        return iter([(self.epoch, k) for k in range(self.n_batches)])
+        return iter([(e, k) for e in range(self.first, self.last) for k in range(self.n_batches)])
 
 
 def _as_is(item):
@@ -195,6 +198,11 @@ class TrainingBatches:
     workers : worker processes (0: made in this process when asked).
     prefetch_factor : batches each worker prepares ahead (``workers > 0``).
     context : multiprocessing start method for the workers (None: the process default).
+    epochs : the run's epoch count, or None. Given, the batches stream from the first epoch
+        asked for to the last of the run, so the workers prepare the next epoch's first
+        batches while this one's last steps run (short epochs, e.g. a small fine-tuning
+        fraction's one or two steps, otherwise wait for a batch at every epoch start); None:
+        one epoch at a time. The same batches either way.
 
     Use as a context manager (or call :meth:`close`): leaving it stops the workers. An
     exception raised while a worker makes a batch is raised by :meth:`epoch` at that batch.
@@ -202,14 +210,18 @@ class TrainingBatches:
 
     def __init__(self, frames: Sequence, batch_size: int, aug_cfg, mcfg,
                  db: GTDatabase | None, seed: int, device: torch.device | str = "cpu", *,
-                 workers: int = 0, prefetch_factor: int = 2, context: str | None = None):
+                 workers: int = 0, prefetch_factor: int = 2, context: str | None = None,
+                 epochs: int | None = None):
         if workers < 0:
             raise ValueError(f"workers must be >= 0, got {workers}")
         self.device = torch.device(device)
         self.workers = int(workers)
         self._pin = self.device.type == "cuda"
+        self._epochs = epochs
         dataset = _Batches(frames, batch_size, aug_cfg, mcfg, db, seed)
-        self._sampler = _EpochSampler(len(dataset))
+        self._sampler = _RunSampler(len(dataset))
+        self._stream: Iterator | None = None
+        self._next: tuple[int, int] | None = None   # the key the stream yields next
         parallel = self.workers > 0
         self._loader: DataLoader | None = DataLoader(
             dataset, batch_size=None, sampler=self._sampler, num_workers=self.workers,
@@ -220,19 +232,30 @@ class TrainingBatches:
 
     def __len__(self) -> int:
         """Batches per epoch."""
-        return len(self._sampler)
+        return self._sampler.n_batches
 
     def epoch(self, epoch: int) -> Iterator[tuple[torch.Tensor, torch.Tensor, int]]:
         """Epoch ``epoch``'s (0-based) batches ``(points, gt_boxes, n_frames)`` on the device,
         in order (:func:`collate`'s shapes)."""
         if self._loader is None:
             raise RuntimeError("TrainingBatches is closed")
-        self._sampler.epoch = int(epoch)
-        for pts, gt, n in self._loader:
+        epoch = int(epoch)
+        if self._next != (epoch, 0):  # first call, another epoch, or an epoch left unfinished
+            self._sampler.first = epoch
+            self._sampler.last = max(epoch + 1, self._epochs or 0)
+            self._next, self._stream = (epoch, 0), iter(self._loader)
+        for k in range(self._sampler.n_batches):
+            e, k_got, pts, gt, n = next(self._stream)
+            if (e, k_got) != (epoch, k):
+                raise RuntimeError(f"batch stream out of order: got ({e}, {k_got}), "
+                                   f"expected ({epoch}, {k})")
+            self._next = (epoch, k + 1) if k + 1 < self._sampler.n_batches else (epoch + 1, 0)
             if self.device.type != "cpu":
                 pts = pts.to(self.device, non_blocking=self._pin)
                 gt = gt.to(self.device, non_blocking=self._pin)
             yield pts, gt, n
+        if self._next[0] >= self._sampler.last:  # the stream is spent
+            self._next = self._stream = None
 
     def close(self) -> None:
         """Stop the worker processes (idempotent)."""

@@ -511,7 +511,7 @@ def _train(config, train_ids, out_dir: Path, init_encoder_from, seed, *, data_di
     model.train()
     batches = TrainingBatches(frames, bs, cfg.augmentation, mcfg, db, cfg.seed, dev,
                               workers=resolve_loader_workers(rt.loader_workers, dev),
-                              prefetch_factor=rt.loader_prefetch)
+                              prefetch_factor=rt.loader_prefetch, epochs=opt_cfg.epochs)
     with batches:
         for epoch in range(start_epoch, opt_cfg.epochs):
             history.append(_train_epoch(epoch, batches, model, optimizer, scheduler, scaler,

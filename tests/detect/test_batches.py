@@ -23,12 +23,13 @@ def _cfg():
     return small_config(optimization=dict(batch_size=3, epochs=2))
 
 
-def _batches(frames, cfg, workers, epochs=(0, 1), seed=3, **kw):
-    """Every batch of ``epochs`` as made with ``workers`` workers."""
+def _batches(frames, cfg, workers, epochs=(0, 1), seed=3, epochs_total=None, **kw):
+    """Every batch of ``epochs`` as made with ``workers`` workers (``epochs_total``: the run's
+    epoch count, streamed across epochs; None: one epoch at a time)."""
     mcfg = cfg.model
     db = build_gt_database(frames, mcfg.class_names, cfg.augmentation.min_points_in_gt)
     with TrainingBatches(frames, 3, cfg.augmentation, mcfg, db, seed, "cpu", workers=workers,
-                         **kw) as tb:
+                         epochs=epochs_total, **kw) as tb:
         return [list(tb.epoch(e)) for e in epochs]
 
 
@@ -173,3 +174,24 @@ def test_a_run_from_before_the_new_draws_is_not_resumed(tmp_path):
     torch.save(ckpt, res.checkpoint)
     with pytest.raises(ValueError, match="before issue #31"):
         train(cfg, out_dir=tmp_path / "run", frames=frames, seed=0, epochs=1, resume=True)
+
+
+@pytest.mark.parametrize("workers", [0, 2])
+def test_a_run_long_stream_gives_the_per_epoch_batches(workers):
+    """Told the run's epoch count, the batches stream across epoch boundaries (the workers
+    prepare the next epoch's first batches during this one's last steps): the same batches as
+    one epoch at a time, also when the run starts late (a resume), revisits an epoch, or
+    leaves one unfinished."""
+    cfg = _cfg()
+    frames = make_door_frames(7, seed=2, points_per_frame=250)
+    per_epoch = _batches(frames, cfg, 0, epochs=(0, 1, 2, 3))
+    assert _same(_batches(frames, cfg, workers, epochs=(0, 1, 2, 3), epochs_total=4), per_epoch)
+    assert _same(_batches(frames, cfg, workers, epochs=(2, 3), epochs_total=4), per_epoch[2:])
+    mcfg = cfg.model
+    db = build_gt_database(frames, mcfg.class_names, cfg.augmentation.min_points_in_gt)
+    with TrainingBatches(frames, 3, cfg.augmentation, mcfg, db, 3, "cpu", workers=workers,
+                         epochs=4) as tb:
+        first = tb.epoch(0)
+        next(first)                     # epoch 0 left after one batch
+        assert _same([list(tb.epoch(1)), list(tb.epoch(1)), list(tb.epoch(3))],
+                     [per_epoch[1], per_epoch[1], per_epoch[3]])
