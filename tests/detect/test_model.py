@@ -96,12 +96,15 @@ def _pillars(n_frames: int, points_per_frame: int, seed: int):
                     c.max_points_per_voxel, c.max_voxels_train)
 
 
+@pytest.mark.parametrize("device", ["cpu", pytest.param("cuda", marks=pytest.mark.gpu)])
 @pytest.mark.parametrize("crowded", [False, True])
-def test_pillar_net_on_real_points_matches_the_padded_net(crowded):
+def test_pillar_net_on_real_points_matches_the_padded_net(crowded, device):
     """The one-layer PFN run on the pillars' real points (padded rows counted analytically)
     equals OpenPCDet's run over all P * 32 slots, computed in float64: outputs, gradients,
     running statistics and eval-mode outputs. ``crowded`` stacks every point into a few
-    pillars so some have all 32 slots real (no padded slot joins their max)."""
+    pillars so some have all 32 slots real (no padded slot joins their max). On ``cuda`` the
+    real-point path (its scatter-max on the GPU) is checked against the float64 padded net on
+    the CPU."""
     import copy
 
     pil = _pillars(3, 2500, seed=4)
@@ -122,19 +125,22 @@ def test_pillar_net_on_real_points_matches_the_padded_net(crowded):
     dense.dense_pfn = True
     assert (num_points >= 32).any() == crowded
 
-    out = sparse(voxels, num_points, coords)
+    sparse.to(device)
+    on = [t.to(device) for t in (voxels, num_points, coords)]
+    out = sparse(*on)
     ref = dense(voxels.double(), num_points, coords)
-    torch.testing.assert_close(out.double(), ref, rtol=1e-5, atol=1e-5)
+    torch.testing.assert_close(out.double().cpu(), ref, rtol=1e-5, atol=1e-5)
     weight = torch.randn(ref.shape, dtype=torch.float64)
-    (out * weight.float()).sum().backward()
+    (out * weight.float().to(device)).sum().backward()
     (ref * weight).sum().backward()
     for (name, p), q in zip(sparse.named_parameters(), dense.parameters(), strict=True):
-        torch.testing.assert_close(p.grad.double(), q.grad, rtol=1e-4, atol=1e-4 * q.grad.abs().max().item(), msg=name)
+        torch.testing.assert_close(p.grad.double().cpu(), q.grad, rtol=1e-4,
+                                   atol=1e-4 * q.grad.abs().max().item(), msg=name)
     for (name, b), c in zip(sparse.named_buffers(), dense.buffers(), strict=True):
-        torch.testing.assert_close(b.double(), c.double(), rtol=1e-5, atol=1e-6, msg=name)
+        torch.testing.assert_close(b.double().cpu(), c.double(), rtol=1e-5, atol=1e-6, msg=name)
     assert sparse.pfn_layers[0].norm.num_batches_tracked.item() == 1
     sparse.eval(), dense.eval()
-    torch.testing.assert_close(sparse(voxels, num_points, coords).double(),
+    torch.testing.assert_close(sparse(*on).double().cpu(),
                                dense(voxels.double(), num_points, coords), rtol=1e-5, atol=1e-5)
 
 
