@@ -24,7 +24,9 @@ sweep run's key.
 asks (the same DataLoader code path, no second loop). ``workers > 0``: that many persistent
 worker processes (one torch and, where threadpoolctl is installed, one BLAS thread each, so
 they do not oversubscribe the cores the model uses) each prepare ``prefetch_factor`` batches
-ahead, so augmentation and collation leave the step's critical path. The frames and the
+ahead — across epoch boundaries when told the run's epoch count (``epochs=``, as
+:func:`~sim2radar.detect.train.train` does), so an epoch's first batch is ready when the loop
+asks for it — and augmentation and collation leave the step's critical path. The frames and the
 GT-sampling database reach the workers once per :class:`TrainingBatches`: shared
 copy-on-write under the ``fork`` start method (Linux's default before Python 3.14), pickled
 once per worker under ``spawn``/``forkserver``. On CUDA the batches are collated into pinned
