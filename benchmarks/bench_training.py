@@ -1,7 +1,9 @@
 """Where a training step's time goes: target assignment, augmentation, collation, the model.
 
-    python -m benchmarks training                      # paper + demo models (~1-2 min, 2 cores)
+    python -m benchmarks training                      # paper + demo models (~2 min, 2 cores)
     SIM2RADAR_BENCH_STEPS=20 SIM2RADAR_BENCH_ROUNDS=3 python -m benchmarks training
+    SIM2RADAR_BENCH_PROFILES=demo SIM2RADAR_BENCH_STEPS=2 SIM2RADAR_BENCH_ROUNDS=1 \
+        python -m benchmarks training                  # CI-sized (tests/test_benchmark_training.py)
 
 The step is :func:`sim2radar.detect.train.train`'s loop body at batch 8 on synthetic corridors
 at IFR's density (2,000 points per frame), with GT sampling on: augmentation (GT sampling,
@@ -185,10 +187,12 @@ def main() -> dict:
     n_steps = int(os.environ.get("SIM2RADAR_BENCH_STEPS", "6" if device.type == "cpu" else "30"))
     print(f"device {device}, torch {torch.__version__}, {torch.get_num_threads()} threads, "
           f"batch {BATCH}, {POINTS_PER_FRAME} points per frame, median of {n_steps} steps")
+    profiles = tuple(p for p in os.environ.get("SIM2RADAR_BENCH_PROFILES", ",".join(PROFILES))
+                     .split(",") if p)
     res: dict = {"device": str(device), "steps": n_steps}
     print(f"{'profile':8s} {'augment':>9s} {'collate':>9s} {'assign':>9s} {'model':>9s} "
           f"{'step':>9s} {'host':>9s}  [ms per step]")
-    for profile in PROFILES:
+    for profile in profiles:
         ms = step_breakdown(profile, device, n_steps)
         ms["host"] = round(ms["augment"] + ms["collate"], 1)
         res[profile] = ms
@@ -196,7 +200,7 @@ def main() -> dict:
               f"{ms['model']:9.1f} {ms['step']:9.1f} {ms['host']:9.1f}")
     print(f"{'profile':8s} " + " ".join(f"{f'{w} workers':>17s}" for w in LOADER_WORKERS)
           + "  [train() s/step | loop's wait for a batch, ms/step]")
-    for profile in PROFILES:
+    for profile in profiles:
         s = loader_step_seconds(profile, device, n_steps,
                                 int(os.environ.get("SIM2RADAR_BENCH_ROUNDS", "2")))
         res[profile].update(s)
@@ -205,9 +209,13 @@ def main() -> dict:
     if device.type == "cpu" and (os.cpu_count() or 1) >= 2:
         # The GPU machine's case on this CPU: the model on one thread, a core left for the
         # worker, so the wait left is the data path's own (hand-over), not core contention.
-        s = loader_step_seconds("demo", device, n_steps,
-                                int(os.environ.get("SIM2RADAR_BENCH_ROUNDS", "2")),
-                                threads=1, workers=(0, 1))
+        threads = torch.get_num_threads()
+        try:
+            s = loader_step_seconds("demo", device, n_steps,
+                                    int(os.environ.get("SIM2RADAR_BENCH_ROUNDS", "2")),
+                                    threads=1, workers=(0, 1))
+        finally:  # a training run sets torch's thread count and leaves it
+            torch.set_num_threads(threads)
         res["demo_1_thread"] = s
         print(f"{'demo, 1 model thread (a core spare for the worker)':8s}: " + " ".join(
             f"{w} workers {s[f'workers_{w}']:.4f} s | {s[f'wait_ms_{w}']:.1f} ms"
