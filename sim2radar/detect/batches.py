@@ -161,9 +161,25 @@ def _as_is(item):
     return item
 
 
-def _one_thread(worker_id: int) -> None:
+def _init_worker(worker_id: int) -> None:
     """DataLoader ``worker_init_fn``: one torch thread and one BLAS/OpenMP thread per worker,
-    so the workers do not oversubscribe the cores the model's threads use."""
+    so the workers do not oversubscribe the cores the model's threads use; and none of the
+    parent's thread-exit hooks.
+
+    A worker forked from a process that ran a Prefect flow inherits the hooks Prefect's
+    background services registered with ``threading`` (drain the event and log queues at
+    exit). A worker leaving at the end of training ran them, where the services were never
+    started: Prefect's drain asserted, the worker exited with status 1, and torch failed the
+    training run ("DataLoader worker exited unexpectedly") — every run of a sweep with workers
+    (``loader_workers: auto`` gives 2 on CUDA). Those hooks belong to the parent's threads;
+    the worker drops them. (``threading._threading_atexits`` is CPython's list behind
+    ``threading._register_atexit``; under spawn/forkserver it starts empty anyway.)
+    """
+    import threading
+
+    hooks = getattr(threading, "_threading_atexits", None)
+    if hooks is not None:
+        hooks.clear()
     torch.set_num_threads(1)
     try:
         from threadpoolctl import threadpool_limits
@@ -229,7 +245,7 @@ class TrainingBatches:
             dataset, batch_size=None, sampler=self._sampler, num_workers=self.workers,
             collate_fn=_as_is, pin_memory=self._pin, persistent_workers=parallel,
             prefetch_factor=prefetch_factor if parallel else None,
-            worker_init_fn=_one_thread if parallel else None,
+            worker_init_fn=_init_worker if parallel else None,
             multiprocessing_context=context if parallel else None)
 
     def __len__(self) -> int:
