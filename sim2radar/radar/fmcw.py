@@ -481,19 +481,20 @@ def _synth_time(torch, radar: RadarConfig, terms: _PathTerms, slow_gain: np.ndar
 
 
 def _grid_rows(v, key: np.ndarray, taps: np.ndarray, doppler_taps: np.ndarray, row_len: int,
-               n_rows: int, rows_of_v: np.ndarray | None = None):
-    """``Y[key_p + i row_len + j] += doppler_taps[p, i] taps[p, j] v[rows_of_v[p]]`` for every
-    path ``p``, Doppler tap ``i`` and fast-time tap ``j``: one sparse (CSR) x dense product, the
-    sparse matrix built by counting (no sort; ``key`` sorted ascending).
+               n_rows: int):
+    """``Y[key_p + i row_len + j] += doppler_taps[p, i] taps[p, j] v[p]`` for every path ``p``,
+    Doppler tap ``i`` and fast-time tap ``j``: one sparse (CSR) x dense product. The paths are
+    put in ``key`` order (a stable sort, so a row sums its paths in that order); the sparse
+    matrix is built by counting and reads ``v``'s rows through its column indices, so ``v``
+    stays in path order.
 
-    v : (P, C2) float32 torch; key : (P,) int64 sorted; taps : (P, w) float32;
-    doppler_taps : (P, w_d) float32; rows_of_v : (P,) int64, the row of ``v`` path ``p`` (in
-    ``key``'s order) reads (None: row ``p``; a permutation lets ``v`` stay unsorted: the
-    product then gathers its rows, the sums and their order unchanged); returns (n_rows, C2)
-    float32 torch.
+    v : (P, C2) float32 torch; key : (P,) int64; taps : (P, w) float32;
+    doppler_taps : (P, w_d) float32; returns (n_rows, C2) float32 torch.
     """
     import torch
 
+    order = np.argsort(key, kind="stable")
+    key, taps, doppler_taps = key[order], taps[order], doppler_taps[order]
     n_paths, w = taps.shape
     w_d = doppler_taps.shape[1]
     # entry (p, i, j) lands in row key_p + i row_len + j; rows are unique per (p, i, j) pair
@@ -520,8 +521,7 @@ def _grid_rows(v, key: np.ndarray, taps: np.ndarray, doppler_taps: np.ndarray, r
     nnz = int(crow[-1])
     col = np.empty(nnz, np.int64)
     val = np.empty(nnz, np.float32)
-    src = np.arange(n_paths) if rows_of_v is None else rows_of_v
-    col[pos.ravel()] = np.broadcast_to(src, rows.shape).ravel()
+    col[pos.ravel()] = np.broadcast_to(order, rows.shape).ravel()
     val[pos.ravel()] = (doppler_taps[:, :, None] * taps[:, None, :]).reshape(n_paths, -1).T.ravel()
     with warnings.catch_warnings():  # "CSR support is in beta": the product is what we use
         warnings.simplefilter("ignore", UserWarning)
@@ -608,18 +608,15 @@ def _synth_narrowband(torch, radar: RadarConfig, terms: _PathTerms, w_d: np.ndar
         l0 = np.ceil(u - 0.5 * w)
         taps = _es_kernel(l0[:, None] + np.arange(w)[None, :] - u[:, None], w).astype(np.float32)
         key = (g0 - g_min) * row_len + np.remainder(l0.astype(np.int64), m_grid)
-        order = np.argsort(key, kind="stable")
         turn = torch.polar(torch.as_tensor(np.abs(terms.amp), device=device,
                                            dtype=torch.float32), torch.as_tensor(
             (2.0 * np.pi) * np.remainder(cycles, 1.0), device=device, dtype=torch.float32))
-        # the weights in path order; the sparse product reads them in key order (rows_of_v)
         tx_t = torch.as_tensor(chans // nr, device=device)
         rx_t = torch.as_tensor(chans % nr, device=device)
         wts = a_t.index_select(1, tx_t) * b_r.index_select(1, rx_t) * turn[:, None]
         v = torch.view_as_real(wts).reshape(n_paths, -1)
         part = torch.view_as_complex(_grid_rows(
-            v, key[order], taps[order], dtaps[order], row_len, n_groups * row_len,
-            rows_of_v=order,
+            v, key, taps, dtaps, row_len, n_groups * row_len,
         ).reshape(-1, len(chans), 2)).reshape(n_groups, row_len, len(chans))
         folded = part[:, :m_grid].clone()
         folded[:, :w] += part[:, m_grid:]
