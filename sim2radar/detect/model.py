@@ -162,9 +162,8 @@ class PillarVFE(nn.Module):
     ) -> torch.Tensor:
         """(P, M, C) pillars, (P,) counts, (P, 4) coords -> (P, out_channels) features."""
         m = voxels.shape[1]
-        xyz = voxels[..., :3]
         counts = num_points.to(voxels.dtype).clamp(min=1)
-        point_mean = xyz.sum(dim=1) / counts[:, None]  # padded slots hold zeros
+        point_mean = voxels[..., :3].sum(dim=1) / counts[:, None]  # padded slots hold zeros
         vx, vy, vz = self.voxel_size_m
         r = self.point_cloud_range_m
         centre = torch.stack(
@@ -173,17 +172,18 @@ class PillarVFE(nn.Module):
              coords[:, 1].to(voxels.dtype) * vz + (vz / 2 + r[2])],
             dim=1,
         )
+
+        def decorated(points, mean, centre):  # raw columns, offsets to pillar mean and centre
+            xyz = points[..., :3]
+            return torch.cat([points, xyz - mean, xyz - centre], dim=-1)
+
         mask = torch.arange(m, device=voxels.device)[None, :] < num_points[:, None]
         if len(self.pfn_layers) == 1 and not self.dense_pfn:
             pillar, slot = mask.nonzero(as_tuple=True)
-            points = voxels[pillar, slot]
-            xyz = points[:, :3]
-            features = torch.cat(
-                [points, xyz - point_mean[pillar], xyz - centre[pillar]], dim=1)
+            features = decorated(voxels[pillar, slot], point_mean[pillar], centre[pillar])
             return self.pfn_layers[0].forward_points(
                 features, pillar, voxels.shape[0], m, num_points >= m)
-        features = torch.cat(
-            [voxels, xyz - point_mean[:, None, :], xyz - centre[:, None, :]], dim=-1)
+        features = decorated(voxels, point_mean[:, None, :], centre[:, None, :])
         features = features * mask[..., None].to(features.dtype)
         for pfn in self.pfn_layers:
             features = pfn(features)
