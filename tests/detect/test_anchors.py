@@ -95,16 +95,12 @@ def _assign_frame_by_frame(anchors, gt_boxes, matched, unmatched):
     return labels, targets, weights
 
 
-@pytest.mark.parametrize("seed", range(6))
-def test_batched_assignment_equals_frame_by_frame(seed):
-    """Random scenes on the default anchor grid: doors near anchors (exact, shifted, rotated by
-    0/90 degrees and in between), boxes far outside, a second class, padding between boxes
-    (an unknown class collates to 0), frames without boxes: identical labels, bit-identical
-    targets and weights."""
+def _random_scenes(seed: int, batch: int = 6, m: int = 9):
+    """Doors near the default grid's anchors (exact, shifted, rotated by 0/90 degrees and in
+    between), boxes far outside, a second class, padding between boxes (an unknown class
+    collates to 0) and a last frame without boxes: (anchors, gt (batch, m, 8))."""
     g = torch.Generator().manual_seed(seed)
-    cfg = ModelConfig()
-    anchors = generate_anchors(cfg)
-    batch, m = 6, 9
+    anchors = generate_anchors(ModelConfig())
     gt = torch.zeros(batch, m, 8)
     for b in range(batch - 1):  # the last frame stays empty
         n = int(torch.randint(1, m + 1, (1,), generator=g))
@@ -121,9 +117,32 @@ def test_batched_assignment_equals_frame_by_frame(seed):
         gt[b, :n, 7] = torch.randint(1, 3, (n,), generator=g).float()
         if n > 3:
             gt[b, 2, 7] = 0  # an unknown class between known ones
+    return anchors, gt
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_batched_assignment_equals_frame_by_frame(seed):
+    """Random scenes on the default anchor grid (:func:`_random_scenes`): identical labels,
+    bit-identical targets and weights."""
+    anchors, gt = _random_scenes(seed)
+    batch = gt.shape[0]
     for thresholds in ((0.5, 0.35), (0.6, 0.45)):
         want = _assign_frame_by_frame(anchors, gt, *thresholds)
         got = assign_targets(anchors, gt, *thresholds)
         assert torch.equal(got[0], want[0])
         assert torch.equal(got[1], want[1]) and torch.equal(got[2], want[2])
         assert (got[0] > 0).sum() >= batch - 1  # every frame with a box has a positive
+
+
+@pytest.mark.gpu
+@pytest.mark.parametrize("seed", range(3))
+def test_assignment_on_cuda_equals_the_host(seed):
+    """The same scenes assigned on the GPU: the same labels and weights (the IoU thresholds and
+    the forced matches pick the same anchors) and the same regression targets to float32
+    rounding of the device's transcendental functions (log, atan2)."""
+    anchors, gt = _random_scenes(seed)
+    for thresholds in ((0.5, 0.35), (0.6, 0.45)):
+        want = assign_targets(anchors, gt, *thresholds)
+        got = [t.cpu() for t in assign_targets(anchors.cuda(), gt.cuda(), *thresholds)]
+        assert torch.equal(got[0], want[0]) and torch.equal(got[2], want[2])
+        torch.testing.assert_close(got[1], want[1], rtol=0, atol=1e-6)
