@@ -361,3 +361,30 @@ def test_thermal_noise_on_the_host_keeps_numpys_stream_and_on_a_device_its_power
     assert abs(np.mean(dev)) < 5 * math.sqrt(power_w / n)
     again = _thermal_noise(torch, shape, 7, power_w, "cpu", on_device=True).numpy()
     assert again.tobytes() == dev.astype(np.complex64).tobytes()
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_sparse_grid_equals_a_dense_scatter(seed):
+    """The narrowband synthesis's CSR gridding (``Y[key_p + j] += taps[p, j] v[p]``) against
+    ``np.add.at``: keys shared by many paths, keys at the first and the last allowed row, rows
+    no path reaches; the same sums to float32 rounding (a row adds its paths in key order)."""
+    from sim2radar.radar.fmcw import _grid_rows
+
+    rng = np.random.default_rng(seed)
+    n_paths, w, n_rows = 500, 7, 300
+    key = rng.integers(0, n_rows - w + 1, n_paths)
+    key[(key >= 100) & (key < 150)] += 60  # rows 106..149: reached by no path
+    key[:40] = 17                        # one crowded key
+    key[40], key[41] = 0, n_rows - w     # both ends
+    taps = rng.random((n_paths, w)).astype(np.float32)
+    v = rng.standard_normal((n_paths, 6)).astype(np.float32)
+    want = np.zeros((n_rows, 6), np.float64)
+    for j in range(w):
+        np.add.at(want, key + j, taps[:, j, None].astype(np.float64) * v)
+    got = _grid_rows(torch.as_tensor(v), torch.as_tensor(key), torch.as_tensor(taps), n_rows)
+    assert got.shape == (n_rows, 6) and got.dtype == torch.float32
+    np.testing.assert_allclose(got.numpy(), want, rtol=0, atol=1e-5)
+    reached = np.zeros(n_rows, bool)
+    for j in range(w):
+        reached[key + j] = True
+    assert np.all(got.numpy()[~reached] == 0) and (~reached).any()
