@@ -388,3 +388,15 @@ def test_sparse_grid_equals_a_dense_scatter(seed):
     for j in range(w):
         reached[key + j] = True
     assert np.all(got.numpy()[~reached] == 0) and (~reached).any()
+
+
+def test_element_distances_equal_numpys_norm():
+    """Path-end-to-element distances summed coordinate by coordinate: the values of
+    ``np.linalg.norm`` over the (P, E, 3) differences, bit for bit."""
+    from sim2radar.radar.fmcw import _distances_m
+
+    rng = np.random.default_rng(0)
+    points = rng.uniform(-8.0, 8.0, (1000, 3))
+    elements = rng.uniform(-0.1, 0.1, (16, 3))
+    want = np.linalg.norm(points[:, None, :] - elements[None, :, :], axis=2)
+    assert np.array_equal(_distances_m(points, elements), want)
