@@ -610,8 +610,12 @@ def _synth_narrowband(torch, radar: RadarConfig, terms: _PathTerms, w_d: np.ndar
     taps_at = torch.arange(w, dtype=torch.float64, device=device)
     group_row = (g0 - g_lo) * row_len
     # per sub-array: its fast-time grid (wrapped by the kernel width), then one product per
-    # channel over the Doppler groups, written straight into the channel's row
-    chirps = torch.empty((nt * nr, e.shape[1], m_grid), dtype=torch.complex64, device=device)
+    # channel over the Doppler groups, written straight into the sub-array's rows of `chirps`
+    # (the channels in sub-array order, `perm`; put back in order with the fast-time samples)
+    perm = np.concatenate(subs)
+    n_slow = e.shape[1]
+    chirps = torch.empty((nt * nr, n_slow, m_grid), dtype=torch.complex64, device=device)
+    start = 0
     for chans in subs:
         # one tone per path and sub-array at the sub-array's mean delay (eq. (1); frequency and
         # phase as in _synth_frequency), each channel's phase exact at mid-window
@@ -633,14 +637,21 @@ def _synth_narrowband(torch, radar: RadarConfig, terms: _PathTerms, w_d: np.ndar
             -1, len(chans), 2)).reshape(n_groups, row_len, len(chans))
         folded = part[:, :m_grid].clone()
         folded[:, :w] += part[:, m_grid:]
-        chirps[chans_t] = torch.bmm(e_c[chans_t], folded.permute(2, 0, 1))  # (c, S, M)
-    g_t = torch.fft.ifft(chirps, dim=-1)                                    # (C, S, M)
-    idx = torch.as_tensor(np.remainder(np.arange(n) - n // 2, m_grid), device=device)
+        torch.bmm(e_c[chans_t], folded.permute(2, 0, 1),
+                  out=chirps[start:start + len(chans)])                     # (c, S, M)
+        start += len(chans)
+    g_t = torch.fft.ifft(chirps, dim=-1).permute(1, 0, 2)                   # (S, C perm, M)
     # the inverse FFT's scale M (a power of two: exact) folded into the deapodisation
     deapod = torch.as_tensor(m_grid * _deapodisation(n, w, NUFFT_OVERSAMPLING), device=device,
                              dtype=torch.float32)
-    out = g_t[..., idx] * deapod                                            # (C, S, N)
-    return out.reshape(nt, nr, -1, n).permute(2, 0, 1, 3).contiguous()    # (S, T, R, N)
+    # fast-time sample k is grid bin k - n//2 (mod M): the grid's last n//2 bins, then its
+    # first n - n//2, each channel back in its place
+    h = n // 2
+    inv = torch.as_tensor(np.argsort(perm), device=device)
+    out = torch.empty((n_slow, nt * nr, n), dtype=torch.complex64, device=device)
+    torch.mul(g_t[:, inv, m_grid - h:], deapod[:h], out=out[..., :h])
+    torch.mul(g_t[:, inv, :n - h], deapod[h:], out=out[..., h:])
+    return out.reshape(n_slow, nt, nr, n)                                   # (S, T, R, N)
 
 
 def _leakage(radar: RadarConfig) -> np.ndarray:
