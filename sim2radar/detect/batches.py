@@ -246,7 +246,11 @@ class TrainingBatches:
             collate_fn=_as_is, pin_memory=self._pin, persistent_workers=parallel,
             prefetch_factor=prefetch_factor if parallel else None,
             worker_init_fn=_init_worker if parallel else None,
-            multiprocessing_context=context if parallel else None)
+            multiprocessing_context=context if parallel else None,
+            # each iterator draws a base seed (for the workers' torch seeds, which nothing
+            # here uses): from the run's own generator, not torch's global one that runs in
+            # other threads of this process share
+            generator=torch.Generator().manual_seed(int(seed)))
 
     def __len__(self) -> int:
         """Batches per epoch."""

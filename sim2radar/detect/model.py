@@ -16,7 +16,10 @@ Shapes for the default config (B frames, P pillars, M = 32 points per pillar):
 
 from __future__ import annotations
 
+import contextlib
 import math
+import threading
+from collections.abc import Iterator
 from dataclasses import dataclass
 
 import torch
@@ -48,6 +51,7 @@ __all__ = [
     "PillarVFE",
     "PointPillarScatter",
     "PointPillars",
+    "seeded_model",
 ]
 
 #: Submodules that make up the transferable encoder (paper §5.1).
@@ -486,3 +490,43 @@ class PointPillars(nn.Module):
                              "another model config?): " + "; ".join(bad[:5]))
         self.load_state_dict({k: state_dict[k] for k in own}, strict=False)
         return list(own)
+
+
+#: One model is built at a time: :func:`seeded_model` points torch.nn.init at its own generator
+#: for the duration of the build.
+_BUILD_LOCK = threading.Lock()
+
+
+@contextlib.contextmanager
+def _initialisers_drawing_from(generator: torch.Generator) -> Iterator[None]:
+    """torch.nn.init's random initialisers (which every module's ``reset_parameters`` and
+    :meth:`AnchorHeadSingle.init_weights` call) draw from ``generator`` unless given one."""
+    names = ("uniform_", "normal_", "trunc_normal_", "kaiming_uniform_", "kaiming_normal_",
+             "xavier_uniform_", "xavier_normal_", "orthogonal_", "sparse_")
+    saved = {name: getattr(nn.init, name) for name in names}
+
+    def bound(init):
+        def draw(*args, **kwargs):
+            kwargs.setdefault("generator", generator)
+            return init(*args, **kwargs)
+        return draw
+
+    try:
+        for name, init in saved.items():
+            setattr(nn.init, name, bound(init))
+        yield
+    finally:
+        for name, init in saved.items():
+            setattr(nn.init, name, init)
+
+
+def seeded_model(cfg: ModelConfig | None, seed: int) -> PointPillars:
+    """``PointPillars(cfg)`` with its initial weights drawn from a generator of its own seeded
+    with ``seed``: the weights ``torch.manual_seed(seed)`` then ``PointPillars(cfg)`` gives, but
+    untouched by anything else that uses torch's global generator meanwhile — another training
+    run in a thread of this process saving and restoring that generator's state around its
+    epoch hook, a DataLoader drawing its base seed, a hook of its own (those interleavings
+    once gave a run other initial weights than its seed's; tests/detect/test_train.py). The
+    global generator is neither read nor advanced."""
+    with _BUILD_LOCK, _initialisers_drawing_from(torch.Generator().manual_seed(int(seed))):
+        return PointPillars(cfg)

@@ -14,8 +14,10 @@ same (the weights are drawn before the encoder is loaded; the data order does no
 Optimisation follows OpenPCDet's ``adam_onecycle``: AdamW (betas 0.9/0.99, decoupled weight
 decay on every parameter), one-cycle learning rate (cosine warm-up from lr/10 to lr over 40 %
 of the steps, cosine decay to lr/1e5) with inverse momentum (beta1 0.95 -> 0.85 -> 0.95),
-gradient-norm clipping at 10. Randomness: ``torch.manual_seed(seed)`` fixes the initial
-weights; epoch ``e`` draws its frame order from ``numpy.random.default_rng([seed, e])`` and
+gradient-norm clipping at 10. Randomness: the seed fixes the initial weights (the weights
+``torch.manual_seed(seed)`` gives, drawn from a generator of the run's own,
+:func:`~sim2radar.detect.model.seeded_model`, so runs training at once in threads of one
+process cannot change each other's); epoch ``e`` draws its frame order from ``numpy.random.default_rng([seed, e])`` and
 batch ``k``'s augmentation from child ``k`` of ``SeedSequence([seed, e])``
 (:mod:`sim2radar.detect.batches`, made in ``runtime.loader_workers`` DataLoader workers), so a
 resumed run continues exactly as an uninterrupted one, whatever the worker count. An
@@ -44,7 +46,7 @@ from sim2radar.datasets.openpcdet import Frame, OpenPCDetDataset
 from sim2radar.detect.augment import GTDatabase, build_gt_database
 from sim2radar.detect.batches import TrainingBatches, collate, resolve_loader_workers
 from sim2radar.detect.config import DetectConfig, load_config
-from sim2radar.detect.model import ENCODER_MODULES, Detections, PointPillars
+from sim2radar.detect.model import ENCODER_MODULES, Detections, PointPillars, seeded_model
 from sim2radar.evaluate.ap import evaluate_detections
 from sim2radar.fileio import atomic_write_with
 from sim2radar.hardware import autocast_dtype
@@ -65,10 +67,6 @@ __all__ = [
 
 CHECKPOINT_VERSION = 1
 log = logging.getLogger(__name__)
-#: Serialises "seed torch's global RNG, build the model": training runs in threads of one process
-#: (the experiment sweep's thread runner) would otherwise interleave the two and draw each
-#: other's initial weights.
-_INIT_LOCK = threading.Lock()
 
 
 @dataclass(frozen=True)
@@ -431,9 +429,7 @@ def _train(config, train_ids, out_dir: Path, init_encoder_from, seed, *, data_di
     if cfg.augmentation.gt_sampling:
         db = build_gt_database(frames, mcfg.class_names, cfg.augmentation.min_points_in_gt)
 
-    with _INIT_LOCK:  # seed and draw the initial weights without another thread in between
-        torch.manual_seed(cfg.seed)
-        model = PointPillars(mcfg)
+    model = seeded_model(mcfg, cfg.seed)  # torch's global generator is not involved
     loaded_encoder: list[str] = []
     if encoder_ckpt is not None:
         loaded_encoder = load_encoder_from(model, encoder_ckpt)

@@ -443,3 +443,77 @@ def test_the_batchnorm_warning_is_said_once_per_process(tmp_path, caplog):
         logger.removeHandler(caplog.handler)
     said = {id(r) for r in caplog.records if "will not settle" in r.getMessage()}
     assert len(said) == 1       # (caplog may see a record twice: through root and our handler)
+
+
+def test_the_initial_weights_come_from_the_seed_alone():
+    """seeded_model gives the weights torch.manual_seed(seed) + PointPillars(cfg) gives, while
+    another thread keeps saving, drawing from and restoring torch's global generator (what a
+    concurrent run's epoch hook and batch loader do); the global generator is not advanced."""
+    import hashlib
+    import threading
+
+    from sim2radar.detect.model import seeded_model
+
+    cfg = small_config().model
+
+    def digest(model):
+        h = hashlib.sha256()
+        for v in model.state_dict().values():
+            h.update(v.numpy().tobytes())
+        return h.hexdigest()
+
+    torch.manual_seed(11)
+    want = digest(PointPillars(cfg))
+    state = torch.get_rng_state()
+    assert digest(seeded_model(cfg, 11)) == want
+    assert torch.equal(torch.get_rng_state(), state)
+    stop = threading.Event()
+
+    def busy():
+        while not stop.is_set():
+            with torch.random.fork_rng(devices=[]):
+                torch.rand(8)
+    other = threading.Thread(target=busy)
+    other.start()
+    try:
+        got = [digest(seeded_model(cfg, 11)) for _ in range(10)]
+    finally:
+        stop.set()
+        other.join()
+    assert got == [want] * 10
+
+
+def test_runs_in_threads_train_as_they_would_alone(tmp_path):
+    """Two runs at once in threads of one process (the sweep's thread runner, 2 runs at a time
+    in the demo): each ends with the weights it ends with alone, while the other's epoch hook
+    and batch loader touch torch's global generator at every epoch."""
+    import threading
+
+    frames = make_door_frames(2, seed=1, points_per_frame=300)
+    cfg = small_config(optimization=dict(batch_size=2, epochs=1))
+
+    def weights(res):
+        return torch.load(res.checkpoint, weights_only=False)["model"]
+
+    def hook(epoch, model):
+        return {"x": 1.0}
+
+    settings = {5: dict(epochs=1, on_epoch_end=None), 6: dict(epochs=30, on_epoch_end=hook)}
+    alone = [weights(train(cfg, out_dir=tmp_path / f"alone{s}", frames=frames, seed=s, **kw))
+             for s, kw in settings.items()]
+    got: dict = {}
+
+    def run(seed, n):
+        for i in range(n):
+            res = train(cfg, out_dir=tmp_path / f"t{seed}_{i}", frames=frames, seed=seed,
+                        **settings[seed])
+            got.setdefault(seed, []).append(weights(res))
+
+    a = threading.Thread(target=run, args=(6, 1))
+    a.start()
+    run(5, 10)
+    a.join()
+    for seed, want in zip((5, 6), alone, strict=True):
+        for w in got[seed]:
+            for k, v in want.items():
+                torch.testing.assert_close(w[k], v, rtol=0, atol=0)
