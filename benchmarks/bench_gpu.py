@@ -23,7 +23,9 @@ Figures, each measured here:
    :mod:`sim2radar.radar.detection_torch`) and, for comparison, the same frame detected on the
    host in NumPy and through the torch chain on the device torch picks; and a reference-radar
    frame (signal synthesis + TI chain, torch on the device, receiver noise drawn there) from
-   20,000 synthetic paths.
+   20,000 synthetic paths. Each frame's time is also split into its stages: the ray-traced
+   frame's own timers (``stats['seconds']``: rays, trace, readback, beamform, detect), and the
+   reference frame's synthesis and processing, each ended by a device synchronisation.
 
 Run on a GPU machine without internet: see the README's "A GPU machine" for the wheels to
 carry. Record the figures in BENCHMARKS.md with the card's name.
@@ -138,6 +140,7 @@ def radar_frames() -> dict:
         simulate_scene_frame(scene, radar, pose, seed=0, device=mode)
     scene.intersect_only(radar, pose, seed=0)
     times: dict[str, list[float]] = {k: [] for k in modes}
+    stages: dict[str, list[float]] = {}
     bare_s, where = [], ""
     for i in range(5):
         for key, mode in modes.items():  # interleaved: each sees the same machine load
@@ -146,29 +149,67 @@ def radar_frames() -> dict:
             times[key].append(time.perf_counter() - t0)
             if key == "auto":
                 where = f.stats["detection_device"]
+                for stage, seconds in f.stats["seconds"].items():
+                    stages.setdefault(stage, []).append(seconds)
         bare_s.append(scene.intersect_only(radar, pose, seed=i + 1)["seconds"])
     frame, bare = statistics.median(times["auto"]), statistics.median(bare_s)
     ref = load_radar_config("ti-mmwcas-reference")
     paths = synthetic_paths(20_000, seed=0)
     simulate_signal_frame(paths, ref, seed=0)
-    ref_s = []
+    ref_s, ref_parts = [], {"synthesis": [], "processing": []}
     for i in range(3):
         t0 = time.perf_counter()
         out = simulate_signal_frame(paths, ref, seed=i + 1)
         ref_s.append(time.perf_counter() - t0)
+        for part, seconds in reference_split(paths, ref, seed=i + 1).items():
+            ref_parts[part].append(seconds)
     host_s, torch_s = statistics.median(times["host"]), statistics.median(times["torch"])
+    split = {k: round(statistics.median(v) * 1000, 2) for k, v in stages.items()}
+    ref_split = {k: round(statistics.median(v) * 1000, 1) for k, v in ref_parts.items()}
     res = {"variant": scene.variant, "frame_s": round(frame, 4), "bare_s": round(bare, 4),
            "ratio": round(frame / bare, 2), "detection_device": where,
+           "frame_stages_ms": split,
            "frame_host_detection_s": round(host_s, 4),
            "frame_torch_detection_s": round(torch_s, 4), "torch_device": torch_dev,
            "reference_frame_s": round(statistics.median(ref_s), 3),
+           "reference_stages_ms": ref_split,
            "reference_device": out.stats["device"]}
     print(f"ray-traced frame ({scene.variant}, detection on {where}): {frame * 1000:.1f} ms vs "
           f"bare ray_intersect {bare * 1000:.1f} ms ({frame / bare:.2f}x); detected on the host "
           f"{host_s * 1000:.1f} ms, by torch on {torch_dev} {torch_s * 1000:.1f} ms; "
           f"reference frame (20k paths, {out.stats['device']}): "
           f"{res['reference_frame_s']:.3f} s")
+    print("  ray-traced frame's stages [ms]: "
+          + ", ".join(f"{k} {v:.2f}" for k, v in split.items())
+          + "; reference frame's [ms, each ended by a device sync]: "
+          + ", ".join(f"{k} {v:.1f}" for k, v in ref_split.items()))
     return res
+
+
+def reference_split(paths, radar, seed: int) -> dict[str, float]:
+    """Seconds of a reference frame's two halves, IF synthesis (:func:`~sim2radar.radar.fmcw.
+    synthesize_if`) and the TI chain (:func:`~sim2radar.radar.processing.process_if`), each
+    ended by a device synchronisation: the frame's own timers do not wait for the GPU, so they
+    put the synthesis's queued kernels in the processing's time."""
+    from sim2radar.hardware import torch_device
+    from sim2radar.radar.fmcw import synthesize_if
+    from sim2radar.radar.processing import process_if
+
+    device = torch_device()
+    t0 = time.perf_counter()
+    cube = synthesize_if(paths, radar, seed=seed, device=device)
+    _sync(device)
+    t1 = time.perf_counter()
+    process_if(cube, radar)
+    _sync(device)
+    return {"synthesis": t1 - t0, "processing": time.perf_counter() - t1}
+
+
+def _sync(device) -> None:
+    import torch
+
+    if torch.device(device).type == "cuda":
+        torch.cuda.synchronize(device)
 
 
 def main() -> dict:

@@ -36,4 +36,13 @@ def test_the_gpu_benchmark_runs_on_a_cpu(capsys, monkeypatch):
     assert radar["detection_device"] == "host" and radar["torch_device"] == "cpu"
     assert radar["frame_host_detection_s"] > 0 and radar["frame_torch_detection_s"] > 0
     assert radar["reference_device"] == "cpu" and "by torch on cpu" in out
+    # the stages: the ray-traced frame's own timers add up to its total; the reference frame's
+    # two synchronised halves each take time
+    stages = radar["frame_stages_ms"]
+    assert {"trace", "detect", "total"} <= set(stages)
+    parts = sum(v for k, v in stages.items() if k != "total")
+    assert parts <= stages["total"] * 1.05 and parts >= 0.5 * stages["total"]
+    assert set(radar["reference_stages_ms"]) == {"synthesis", "processing"}
+    assert all(v > 0 for v in radar["reference_stages_ms"].values())
+    assert "reference frame's [ms" in out
     assert "--runs-per-gpu auto would choose" in out and "paper grid: 75 jobs" in out
