@@ -527,6 +527,8 @@ def seeded_model(cfg: ModelConfig | None, seed: int) -> PointPillars:
     run in a thread of this process saving and restoring that generator's state around its
     epoch hook, a DataLoader drawing its base seed, a hook of its own (those interleavings
     once gave a run other initial weights than its seed's; tests/detect/test_train.py). The
-    global generator is neither read nor advanced."""
+    global generator is neither read nor advanced. Build every model of a process through
+    this function (:func:`~sim2radar.detect.train.load_checkpoint` does): a module built
+    elsewhere during a build would draw its initial weights from this build's generator."""
     with _BUILD_LOCK, _initialisers_drawing_from(torch.Generator().manual_seed(int(seed))):
         return PointPillars(cfg)

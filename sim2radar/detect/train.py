@@ -217,7 +217,10 @@ def load_checkpoint(path: str | Path, device=None) -> tuple[PointPillars, Detect
     """Rebuild the model of a checkpoint (eval mode) and its config."""
     ckpt = _read_checkpoint(path)
     cfg = DetectConfig.model_validate(ckpt["config"])
-    model = PointPillars(cfg.model)
+    # built like a training run's model (one build at a time, its own generator: a run
+    # building in another thread meanwhile keeps its seed's weights); the checkpoint's
+    # weights then replace the initial ones
+    model = seeded_model(cfg.model, cfg.seed)
     model.load_state_dict(ckpt["model"])
     dev = torch.device(device) if device is not None else _resolve_device(cfg, None)
     return model.to(dev).eval(), cfg

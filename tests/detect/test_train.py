@@ -445,16 +445,19 @@ def test_the_batchnorm_warning_is_said_once_per_process(tmp_path, caplog):
     assert len(said) == 1       # (caplog may see a record twice: through root and our handler)
 
 
-def test_the_initial_weights_come_from_the_seed_alone():
+def test_the_initial_weights_come_from_the_seed_alone(tmp_path):
     """seeded_model gives the weights torch.manual_seed(seed) + PointPillars(cfg) gives, while
     another thread keeps saving, drawing from and restoring torch's global generator (what a
-    concurrent run's epoch hook and batch loader do); the global generator is not advanced."""
+    concurrent run's epoch hook and batch loader do) and rebuilding a finished run's model from
+    its checkpoint; the global generator is not advanced."""
     import hashlib
     import threading
 
     from sim2radar.detect.model import seeded_model
 
     cfg = small_config().model
+    done = train(small_config(), out_dir=tmp_path / "done",
+                 frames=make_door_frames(2, seed=1, points_per_frame=300), epochs=1, seed=2)
 
     def digest(model):
         h = hashlib.sha256()
@@ -473,6 +476,7 @@ def test_the_initial_weights_come_from_the_seed_alone():
         while not stop.is_set():
             with torch.random.fork_rng(devices=[]):
                 torch.rand(8)
+            load_checkpoint(done.checkpoint)
     other = threading.Thread(target=busy)
     other.start()
     try:
