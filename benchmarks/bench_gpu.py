@@ -191,6 +191,7 @@ def reference_split(paths, radar, seed: int) -> dict[str, float]:
     synthesize_if`) and the TI chain (:func:`~sim2radar.radar.processing.process_if`), each
     ended by a device synchronisation: the frame's own timers do not wait for the GPU, so they
     put the synthesis's queued kernels in the processing's time."""
+    from benchmarks.bench_training import _sync
     from sim2radar.hardware import torch_device
     from sim2radar.radar.fmcw import synthesize_if
     from sim2radar.radar.processing import process_if
@@ -203,13 +204,6 @@ def reference_split(paths, radar, seed: int) -> dict[str, float]:
     process_if(cube, radar)
     _sync(device)
     return {"synthesis": t1 - t0, "processing": time.perf_counter() - t1}
-
-
-def _sync(device) -> None:
-    import torch
-
-    if torch.device(device).type == "cuda":
-        torch.cuda.synchronize(device)
 
 
 def main() -> dict:

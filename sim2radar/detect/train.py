@@ -17,10 +17,11 @@ of the steps, cosine decay to lr/1e5) with inverse momentum (beta1 0.95 -> 0.85 
 gradient-norm clipping at 10. Randomness: the seed fixes the initial weights (the weights
 ``torch.manual_seed(seed)`` gives, drawn from a generator of the run's own,
 :func:`~sim2radar.detect.model.seeded_model`, so runs training at once in threads of one
-process cannot change each other's); epoch ``e`` draws its frame order from ``numpy.random.default_rng([seed, e])`` and
-batch ``k``'s augmentation from child ``k`` of ``SeedSequence([seed, e])``
-(:mod:`sim2radar.detect.batches`, made in ``runtime.loader_workers`` DataLoader workers), so a
-resumed run continues exactly as an uninterrupted one, whatever the worker count. An
+process cannot change each other's); epoch ``e`` draws its frame order from
+``numpy.random.default_rng([seed, e])`` and batch ``k``'s augmentation from child ``k`` of
+``SeedSequence([seed, e])`` (:mod:`sim2radar.detect.batches`, made in
+``runtime.loader_workers`` DataLoader workers), so a resumed run continues exactly as an
+uninterrupted one, whatever the worker count. An
 ``on_epoch_end`` hook (e.g. validation AP) runs with torch's random state saved and restored,
 so it cannot change the training either.
 """

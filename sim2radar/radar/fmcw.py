@@ -298,17 +298,12 @@ class IFCube:
 
 
 # -- NUFFT helpers ------------------------------------------------------------------------
-def _es_kernel(x, width: int):
+def _es_kernel(x: np.ndarray, width: int) -> np.ndarray:
     """Exponential-of-semicircle kernel ``exp(beta (sqrt(1 - (2x/w)^2) - 1))`` on ``|x| <= w/2``
-    (x in grid units; Barnett et al. 2019). Works on numpy arrays and torch tensors."""
+    (x in grid units; Barnett et al. 2019), zero outside."""
     beta = NUFFT_BETA_PER_WIDTH * width
     z = 2.0 * x / width
-    if isinstance(x, np.ndarray):
-        return np.exp(beta * (np.sqrt(np.clip(1.0 - z * z, 0.0, None)) - 1.0)) * (np.abs(z) <= 1)
-    import torch
-
-    arg = torch.clamp(1.0 - z * z, min=0.0)
-    return torch.exp(beta * (torch.sqrt(arg) - 1.0)) * (arg > 0)
+    return np.exp(beta * (np.sqrt(np.clip(1.0 - z * z, 0.0, None)) - 1.0)) * (np.abs(z) <= 1)
 
 
 def _es_kernel_inplace(torch, x, width: int):
