@@ -823,8 +823,11 @@ def test_cli_serve_prints_the_url_serves_and_stops_on_ctrl_c(sweep_dir):
         status, body = _get_with_host(port, "/data.json", f"rebind.example:{port}")
         assert status == 403 and body.startswith(b"forbidden: Host 'rebind.example:")
         proc.send_signal(signal.SIGINT)
-        assert proc.wait(timeout=10) == 0
-        assert "stopped" in proc.stdout.read()
+        # communicate drains both pipes (a child blocked on a full stderr pipe never exits);
+        # 30 s: a fresh clone's suite on 2 shared cores once took over 10 s to reap it
+        out, err = proc.communicate(timeout=30)
+        assert proc.returncode == 0, err
+        assert "stopped" in out, (out, err)
     finally:
         if proc.poll() is None:
             proc.kill()
