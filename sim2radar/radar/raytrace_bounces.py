@@ -280,8 +280,10 @@ def interactions(
     def cmul(a, b):
         return a[0] * b[0] - a[1] * b[1], a[0] * b[1] + a[1] * b[0]
 
-    def power(c):
-        return dr.squared_norm(c[0]) + dr.squared_norm(c[1])
+    def power(c):  # |C|^2 per ray (squared_norm of a scalar Float would sum over the rays)
+        if prep.polarized:
+            return dr.squared_norm(c[0]) + dr.squared_norm(c[1])
+        return c[0] * c[0] + c[1] * c[1]
 
     for bounce in range(radar.max_bounces):
         if bounce > 0:

@@ -105,6 +105,21 @@ def test_dihedral_returns_strongly_only_with_two_bounces(mmwcas):
     assert abs(math.atan2(best[1], best[0])) <= mmwcas.azimuth_resolution_rad
 
 
+def test_a_ray_whose_surface_sends_nothing_on_is_not_traced_further(mmwcas):
+    """A ray is continued only while its own carried power |C|^2 stays above 1e-10: a plate
+    that scatters everything diffusely (S = 1, no specular field sent on) ends the rays that
+    hit it first. In the symmetric dihedral half the rays hit that plate first, so bounce 1
+    sees half the hits of the all-metal dihedral (a power summed over all rays instead of per
+    ray would continue every ray: the same hits as all-metal)."""
+    radar = mmwcas.with_updates(max_bounces=2,
+                                scattering={"coefficients": {"metal": 0.0, "wood": 1.0}})
+    metal = RadarScene(dihedral(3.5)).trace(radar, seed=1).hits_per_bounce
+    wood_left = [dihedral(3.5, material="wood")[0], dihedral(3.5)[1]]
+    mixed = RadarScene(wood_left).trace(radar, seed=1).hits_per_bounce
+    assert mixed[0] == metal[0] > 0
+    assert mixed[1] / metal[1] == pytest.approx(0.5, abs=0.1)
+
+
 def test_metal_returns_stronger_than_wood_at_the_same_place(mmwcas):
     metal = simulate_frame([facing_plate(3.0, material="metal")], mmwcas, return_cube=True)
     wood = simulate_frame([facing_plate(3.0, material="wood")], mmwcas, return_cube=True)
