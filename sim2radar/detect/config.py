@@ -257,6 +257,11 @@ class RuntimeConfig(_Frozen):
     checkpoint_every: int = 10
     #: keep this many epoch checkpoints besides ``last.pt``
     keep_checkpoints: int = 2
+    #: write ``last.pt`` at most every this many seconds of training (0: after every epoch).
+    #: An epoch checkpoint (``checkpoint_every``) and the final epoch always write it too, so a
+    #: killed run resumes losing at most this long (plus the epoch under way). Short epochs
+    #: (a CPU demo: ~60 ms) made the per-epoch write a sixth of a run's time (issue #31)
+    last_every_s: float = Field(30.0, ge=0.0)
     #: torch DataLoader worker processes that augment and collate the training batches ahead
     #: of the model's step (0: in this process, each just before its step); the same batches
     #: bit for bit for any count (sim2radar.detect.batches). "auto": 0 on a CPU, where workers

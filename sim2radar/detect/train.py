@@ -29,10 +29,12 @@ so it cannot change the training either.
 from __future__ import annotations
 
 import contextlib
+import functools
 import json
 import logging
 import math
 import pickle
+import shutil
 import threading
 import time
 from collections.abc import Callable, Mapping, Sequence
@@ -127,6 +129,13 @@ def _save(path: Path, payload: dict[str, Any]) -> None:
 
 
 def _versions() -> dict[str, str]:
+    return dict(_installed_versions())
+
+
+@functools.cache
+def _installed_versions() -> dict[str, str]:
+    """The versions a checkpoint records, read once per process (reading package metadata
+    took ~2 ms, paid on every checkpoint)."""
     import importlib.metadata as md
 
     out = {}
@@ -485,7 +494,18 @@ def _train(config, train_ids, out_dir: Path, init_encoder_from, seed, *, data_di
         model.compile_dense()
     (out_dir / "config.json").write_text(json.dumps(cfg.model_dump(mode="json"), indent=1))
 
-    def checkpoint(epoch: int) -> Path:
+    last_written = time.monotonic()
+
+    def checkpoint(epoch: int, *, force: bool = False) -> Path:
+        """Write ``last.pt`` after ``epoch`` when it is due (``runtime.last_every_s``), after
+        the first epoch this call trains (a disk that cannot take it fails at once), at an
+        epoch checkpoint, at the final epoch or when ``force``d; an epoch checkpoint is a copy
+        of it."""
+        nonlocal last_written
+        keep = epoch % rt.checkpoint_every == 0 or epoch == opt_cfg.epochs
+        due = time.monotonic() - last_written >= rt.last_every_s
+        if not (force or keep or due or epoch == start_epoch + 1):
+            return last
         payload = {
             "version": CHECKPOINT_VERSION, "model": model.state_dict(),
             "optimizer": optimizer.state_dict(), "scheduler": scheduler.state_dict(),
@@ -495,8 +515,10 @@ def _train(config, train_ids, out_dir: Path, init_encoder_from, seed, *, data_di
             "versions": _versions(),
         }
         _save(last, payload)
-        if epoch % rt.checkpoint_every == 0 or epoch == opt_cfg.epochs:
-            _save(out_dir / f"epoch_{epoch}.pt", payload)
+        last_written = time.monotonic()
+        if keep:
+            atomic_write_with(out_dir / f"epoch_{epoch}.pt",
+                              lambda tmp: shutil.copyfile(last, tmp))
             old = sorted(out_dir.glob("epoch_*.pt"), key=lambda p: int(p.stem.split("_")[1]))
             for p in old[: max(0, len(old) - rt.keep_checkpoints)]:
                 p.unlink()
@@ -521,7 +543,7 @@ def _train(config, train_ids, out_dir: Path, init_encoder_from, seed, *, data_di
     if progress is not None:
         progress.close()
     if not last.is_file():  # zero epochs left to run: still leave a checkpoint
-        checkpoint(start_epoch)
+        checkpoint(start_epoch, force=True)
     (out_dir / "history.json").write_text(json.dumps(
         {"history": history, "encoder_loaded": loaded_encoder}, indent=1))
     return TrainResult(checkpoint=last, out_dir=out_dir, epochs=opt_cfg.epochs,

@@ -1,8 +1,9 @@
 """One training run of the sweep, as plain functions: pre-train an encoder, or fine-tune (from
 scratch or from a pre-trained encoder) and test.
 
-Both resume: the run folder keeps ``last.pt`` after every epoch (:func:`sim2radar.detect.train.
-train` with ``resume=True``), so a run killed half-way continues from its last epoch, and a run
+Both resume: the run folder keeps ``last.pt`` (written at most every ``runtime.last_every_s``,
+at every epoch checkpoint and at the end; :func:`sim2radar.detect.train.train` with
+``resume=True``), so a run killed half-way continues from its last checkpoint, and a run
 whose training finished but whose test was not recorded only re-tests. A finished pre-training
 leaves ``done.json`` beside its checkpoint.
 

@@ -94,8 +94,8 @@ def test_training_with_workers_gives_the_same_run_and_resumes_exactly(tmp_path, 
     monkeypatch.setattr(tr, "_save", spy)
     runs = {}
     for w in (0, 2):
-        res = train(cfg.with_updates(runtime={"loader_workers": w}), out_dir=tmp_path / f"w{w}",
-                    frames=frames, seed=0)
+        res = train(cfg.with_updates(runtime={"loader_workers": w, "last_every_s": 0}),
+                    out_dir=tmp_path / f"w{w}", frames=frames, seed=0)
         runs[w] = (_losses(res.history), torch.load(res.checkpoint, weights_only=True)["model"])
     assert runs[0][0] == runs[2][0]                       # every loss, to the last bit
     assert all(torch.equal(runs[0][1][k], runs[2][1][k]) for k in runs[0][1])

@@ -88,11 +88,52 @@ def _state_after_epochs(cfg, frames, seed, n, out_dir, **kw):
             saved.append(torch.load(path, weights_only=False))
 
     tr._save = spy
-    try:
-        train(cfg, out_dir=out_dir, frames=frames, seed=seed, **kw)
+    try:  # last.pt after every epoch, whatever the epoch's length
+        train(cfg.with_updates(runtime={"last_every_s": 0}), out_dir=out_dir, frames=frames,
+              seed=seed, **kw)
     finally:
         tr._save = orig
     return saved[n - 1]
+
+
+def test_last_checkpoint_is_written_when_due_and_a_killed_run_resumes_from_it(tmp_path,
+                                                                              monkeypatch):
+    """``runtime.last_every_s``: last.pt after the first epoch, at every epoch checkpoint and at
+    the end, not between (none is due within an hour); an epoch checkpoint holds the same
+    bytes as that last.pt. A run killed in epoch 4 resumes from epoch 3 to the uninterrupted
+    run's weights, bit for bit."""
+    import sim2radar.detect.train as tr
+
+    frames = make_door_frames(4, seed=1, points_per_frame=300)
+    cfg = small_config(optimization=dict(batch_size=2, epochs=5),
+                       runtime=dict(last_every_s=3600.0, checkpoint_every=3, keep_checkpoints=5))
+    written, real_save = [], tr._save
+
+    def spy(path, payload):
+        real_save(path, payload)
+        written.append((path.name, payload["epoch"]))
+
+    monkeypatch.setattr(tr, "_save", spy)
+    full = train(cfg, out_dir=tmp_path / "full", frames=frames, seed=3)
+    assert written == [("last.pt", 1), ("last.pt", 3), ("last.pt", 5)]
+    assert sorted(p.name for p in (tmp_path / "full").glob("epoch_*.pt")) == ["epoch_3.pt",
+                                                                             "epoch_5.pt"]
+    assert (tmp_path / "full" / "epoch_5.pt").read_bytes() == full.checkpoint.read_bytes()
+
+    def killed_in_epoch_4(epoch, model):
+        if epoch == 4:
+            raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        train(cfg, out_dir=tmp_path / "killed", frames=frames, seed=3,
+              on_epoch_end=killed_in_epoch_4)
+    assert torch.load(tmp_path / "killed" / "last.pt", weights_only=False)["epoch"] == 3
+    res = train(cfg, out_dir=tmp_path / "killed", frames=frames, seed=3, resume=True)
+    assert [{k: v for k, v in h.items() if k != "hook_seconds"} for h in _losses(res.history)] \
+        == _losses(full.history)
+    final = torch.load(full.checkpoint, weights_only=False)["model"]
+    resumed = torch.load(res.checkpoint, weights_only=False)["model"]
+    assert all(torch.equal(resumed[k], v) for k, v in final.items())
 
 
 def test_a_truncated_last_checkpoint_is_quarantined_and_the_run_resumes_from_an_epoch_one(
