@@ -71,18 +71,24 @@ def step_times(device: str, profiles: tuple[str, ...], steps: int) -> dict:
     return out
 
 
-def runs_per_device(device: str, profile: str, dtype: str, counts: tuple[int, ...],
+def runs_per_device(device: str, profile: str, dtype: str, counts: tuple[int, ...] | None,
                     steps: int, threads: int) -> dict:
     """Aggregate optimiser steps/s of N concurrent training processes on the device
-    (:func:`sim2radar.experiment.packing.aggregate_throughput`), and what ``--runs-per-gpu
-    auto`` would choose from them."""
+    (:func:`sim2radar.experiment.packing.aggregate_throughput`) for ``counts`` — None: the
+    counts ``--runs-per-gpu auto`` probes (:func:`~sim2radar.experiment.packing.probe_runs`:
+    1/2/4/8, then doubling while it pays) — and what ``auto`` would choose from them."""
     from sim2radar.experiment import load_profile
-    from sim2radar.experiment.packing import aggregate_throughput, choose_runs
+    from sim2radar.experiment.packing import aggregate_throughput, choose_runs, probe_runs
 
     cfg = load_profile(profile).detector_config("finetune").with_updates(
         runtime={"amp": dtype != "float32", "num_threads": threads})
     t0 = time.perf_counter()
-    per_n = aggregate_throughput(cfg, device, counts, steps=steps)
+    if counts is None:
+        per_n, note = probe_runs(cfg, device, steps=steps)
+        if note:
+            print(f"the probe stopped: {note}")
+    else:
+        per_n = aggregate_throughput(cfg, device, counts, steps=steps)
     out = {n: {"steps_per_s": v} for n, v in per_n.items()}
     for n, v in per_n.items():
         print(f"{n} run(s) on {device}: {v:.1f} steps/s in aggregate ({n / v:.4f} s per step "
@@ -219,7 +225,7 @@ def main() -> dict:
                              steps=20 if gpu else 2)
     best = res["step"]["paper" if gpu else "demo"]["auto_chooses"]
     res["runs_per_device"] = runs_per_device(
-        device, "paper" if gpu else "demo", best, (1, 2, 4, 8) if gpu else (1, 2),
+        device, "paper" if gpu else "demo", best, None if gpu else (1, 2),
         steps=30 if gpu else 3, threads=2 if gpu else 1)
     res["paper_grid"] = paper_grid(res["runs_per_device"], "paper" if gpu else "demo")
     res["radar"] = radar_frames()

@@ -202,7 +202,8 @@ def pack_runs(plan: SweepPlan, runs_per_gpu: int | str, *, steps: int = 20):
     """How many of ``plan``'s training runs share each GPU
     (:class:`~sim2radar.experiment.packing.PackingDecision`): ``runs_per_gpu`` as given, or
     for ``"auto"`` measured (:func:`~sim2radar.experiment.packing.aggregate_throughput` of the
-    sweep's fine-tuning model, 1/2/4/8 processes, :func:`~.packing.choose_runs`). The decision
+    sweep's fine-tuning model, 1/2/4/8 processes and doubling while it pays,
+    :func:`~.packing.probe_runs`, :func:`~.packing.choose_runs`). The decision
     is recorded in the sweep's ``sweep.json`` (``packing``, with the number of GPUs).
 
     Raises

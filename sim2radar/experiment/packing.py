@@ -13,6 +13,12 @@ smallest N within reach of the best.
 The rule (fixed before a measurement): a larger N is taken only when it gives at least
 :data:`MIN_GAIN` (10 %) more aggregate steps per second than the best smaller N — more
 processes cost memory and make each run slower, so a marginal gain is not worth them.
+
+``auto`` (:func:`probe_runs`) measures :data:`PROBE_COUNTS` and keeps doubling N while the
+last doubling still gained :data:`MIN_GAIN`, up to :data:`MAX_PROBE_RUNS`: on one H100 the
+paper model went 61.8 / 86.1 / 126.4 / 205.1 steps/s for 1 / 2 / 4 / 8 runs, still rising, so
+a fixed (1, 2, 4, 8) stopped where the curve had not. A count whose probe fails (the device
+out of memory) ends the climb; the counts measured before it decide.
 """
 
 from __future__ import annotations
@@ -26,8 +32,8 @@ import sys
 from collections.abc import Mapping, Sequence
 from typing import Any
 
-__all__ = ["GPU_RESOURCE", "MIN_GAIN", "PROBE_COUNTS", "PackingDecision",
-           "aggregate_throughput", "choose_runs", "decide_runs"]
+__all__ = ["GPU_RESOURCE", "MAX_PROBE_RUNS", "MIN_GAIN", "PROBE_COUNTS", "PackingDecision",
+           "aggregate_throughput", "choose_runs", "decide_runs", "probe_runs"]
 
 #: the Dask worker resource a packed sweep's training task claims one unit of: start a GPU
 #: worker with ``dask worker ADDRESS --nthreads N --resources GPU_RUNS=N`` to run N at once
@@ -35,8 +41,10 @@ GPU_RESOURCE = "GPU_RUNS"
 
 #: a larger number of runs per device must beat the best smaller one by this fraction
 MIN_GAIN = 0.10
-#: runs per device tried by ``auto``
+#: runs per device ``auto`` always measures
 PROBE_COUNTS = (1, 2, 4, 8)
+#: ``auto`` doubles past :data:`PROBE_COUNTS` up to this many runs per device
+MAX_PROBE_RUNS = 32
 
 #: one training process of the probe: prints its median seconds per step as JSON
 _WORKER = r"""
@@ -116,6 +124,27 @@ def aggregate_throughput(cfg, device: str, counts: Sequence[int] = PROBE_COUNTS,
     return out
 
 
+def probe_runs(cfg, device: str, *, steps: int = 20, measure=None
+               ) -> tuple[dict[int, float], str]:
+    """``auto``'s measurements: aggregate steps per second for :data:`PROBE_COUNTS`, then for
+    twice the largest count while the last doubling gained at least :data:`MIN_GAIN`, up to
+    :data:`MAX_PROBE_RUNS`. Returns ``(steps_per_s, note)``; ``note`` says why the climb
+    stopped at a failed count ("" otherwise). ``measure(counts) -> {n: steps/s}`` replaces
+    :func:`aggregate_throughput` (tests)."""
+    if measure is None:
+        def measure(counts):
+            return aggregate_throughput(cfg, device, counts, steps=steps)
+    per_n = dict(measure(PROBE_COUNTS))
+    n = max(per_n)
+    while 2 * n <= MAX_PROBE_RUNS and per_n[n] >= (1.0 + MIN_GAIN) * per_n.get(n // 2, 0.0):
+        try:
+            per_n.update(measure((2 * n,)))
+        except RuntimeError as exc:
+            return per_n, f"{2 * n} runs failed ({str(exc).splitlines()[-1][:200]})"
+        n *= 2
+    return per_n, ""
+
+
 def choose_runs(steps_per_s: Mapping[int, float], min_gain: float = MIN_GAIN
                 ) -> PackingDecision:
     """The runs per device to use: walking up the measured counts, a larger N replaces the
@@ -135,11 +164,15 @@ def choose_runs(steps_per_s: Mapping[int, float], min_gain: float = MIN_GAIN
 
 def decide_runs(cfg, device: str, runs_per_gpu: int | str, *, measure: bool = False,
                 steps: int = 20) -> PackingDecision:
-    """The runs per device for ``--runs-per-gpu``: ``"auto"`` measured over
-    :data:`PROBE_COUNTS` and chosen (:func:`choose_runs`); a count as given, its aggregate
-    throughput measured too when ``measure`` (a plan needs the figure, a sweep does not)."""
+    """The runs per device for ``--runs-per-gpu``: ``"auto"`` measured (:func:`probe_runs`)
+    and chosen (:func:`choose_runs`); a count as given, its aggregate throughput measured too
+    when ``measure`` (a plan needs the figure, a sweep does not)."""
     if runs_per_gpu == "auto":
-        return choose_runs(aggregate_throughput(cfg, device, PROBE_COUNTS, steps=steps))
+        per_n, note = probe_runs(cfg, device, steps=steps)
+        decision = choose_runs(per_n)
+        if note:
+            decision = dataclasses.replace(decision, reason=f"{decision.reason}; {note}")
+        return decision
     n = int(runs_per_gpu)
     if measure:
         return dataclasses.replace(choose_runs(aggregate_throughput(cfg, device, (n,),

@@ -5,8 +5,8 @@ from __future__ import annotations
 import pytest
 
 from sim2radar.cli.experiment import sweep_flag
-from sim2radar.experiment import load_profile
-from sim2radar.experiment.packing import aggregate_throughput, choose_runs
+from sim2radar.experiment import load_profile, packing
+from sim2radar.experiment.packing import aggregate_throughput, choose_runs, probe_runs
 from sim2radar.tasks.experiment import cuda_devices, parse_runs_per_gpu
 
 
@@ -21,6 +21,46 @@ def test_a_larger_count_only_for_ten_percent_more_aggregate_throughput(measured,
     assert decision.runs == runs and decision.source == "probe"
     assert decision.seconds_per_step() == pytest.approx(runs / measured[runs])
     assert decision.to_dict()["steps_per_s"] == {str(k): v for k, v in measured.items()}
+
+
+def _device(curve, fails_at=None):
+    """A fake device: ``measure(counts)`` reads ``curve`` and records what was asked."""
+    asked = []
+
+    def measure(counts):
+        asked.extend(counts)
+        if fails_at in counts:
+            raise RuntimeError(f"runs-per-device probe ({fails_at} processes on cuda) failed "
+                               "with exit status 1:\ntorch.OutOfMemoryError: CUDA out of memory")
+        return {n: curve[n] for n in counts}
+    return measure, asked
+
+
+def test_auto_keeps_doubling_while_a_doubling_still_pays():
+    """The H100's curve was still rising at 8 runs (+62 % over 4): auto goes on to 16 and 32
+    (the cap) and takes 16, as 32 adds under 10 %."""
+    curve = {1: 61.8, 2: 86.1, 4: 126.4, 8: 205.1, 16: 300.0, 32: 310.0, 64: 400.0}
+    measure, asked = _device(curve)
+    per_n, note = probe_runs(None, "cuda", measure=measure)
+    assert asked == [1, 2, 4, 8, 16, 32] and note == ""
+    assert choose_runs(per_n).runs == 16
+    # a curve flat from 4 to 8 asks for nothing more
+    measure, asked = _device({1: 24.0, 2: 41.0, 4: 52.0, 8: 56.0})
+    assert set(probe_runs(None, "cuda", measure=measure)[0]) == {1, 2, 4, 8}
+    assert asked == [1, 2, 4, 8]
+
+
+def test_a_count_the_device_cannot_hold_ends_the_climb_and_is_said(monkeypatch):
+    curve = {1: 61.8, 2: 86.1, 4: 126.4, 8: 205.1}
+    measure, asked = _device(curve, fails_at=16)
+    per_n, note = probe_runs(None, "cuda", measure=measure)
+    assert per_n == curve and asked == [1, 2, 4, 8, 16]
+    assert note.startswith("16 runs failed") and "out of memory" in note
+    # decide_runs("auto") chooses among the measured counts and records why it stopped
+    monkeypatch.setattr(packing, "aggregate_throughput",
+                        lambda cfg, device, counts, steps: measure(counts))
+    decision = packing.decide_runs(None, "cuda", "auto")
+    assert decision.runs == 8 and "16 runs failed" in decision.reason
 
 
 def test_aggregate_throughput_runs_concurrent_training_processes():
