@@ -124,21 +124,16 @@ def aggregate_throughput(cfg, device: str, counts: Sequence[int] = PROBE_COUNTS,
     return out
 
 
-def probe_runs(cfg, device: str, *, steps: int = 20, measure=None
-               ) -> tuple[dict[int, float], str]:
-    """``auto``'s measurements: aggregate steps per second for :data:`PROBE_COUNTS`, then for
-    twice the largest count while the last doubling gained at least :data:`MIN_GAIN`, up to
-    :data:`MAX_PROBE_RUNS`. Returns ``(steps_per_s, note)``; ``note`` says why the climb
-    stopped at a failed count ("" otherwise). ``measure(counts) -> {n: steps/s}`` replaces
-    :func:`aggregate_throughput` (tests)."""
-    if measure is None:
-        def measure(counts):
-            return aggregate_throughput(cfg, device, counts, steps=steps)
-    per_n = dict(measure(PROBE_COUNTS))
+def probe_runs(cfg, device: str, *, steps: int = 20) -> tuple[dict[int, float], str]:
+    """``auto``'s measurements (:func:`aggregate_throughput`): aggregate steps per second for
+    :data:`PROBE_COUNTS`, then for twice the largest count while the last doubling gained at
+    least :data:`MIN_GAIN`, up to :data:`MAX_PROBE_RUNS`. Returns ``(steps_per_s, note)``;
+    ``note`` says why the climb stopped at a failed count ("" otherwise)."""
+    per_n = dict(aggregate_throughput(cfg, device, PROBE_COUNTS, steps=steps))
     n = max(per_n)
     while 2 * n <= MAX_PROBE_RUNS and per_n[n] >= (1.0 + MIN_GAIN) * per_n.get(n // 2, 0.0):
         try:
-            per_n.update(measure((2 * n,)))
+            per_n.update(aggregate_throughput(cfg, device, (2 * n,), steps=steps))
         except RuntimeError as exc:
             return per_n, f"{2 * n} runs failed ({str(exc).splitlines()[-1][:200]})"
         n *= 2

@@ -23,42 +23,42 @@ def test_a_larger_count_only_for_ten_percent_more_aggregate_throughput(measured,
     assert decision.to_dict()["steps_per_s"] == {str(k): v for k, v in measured.items()}
 
 
-def _device(curve, fails_at=None):
-    """A fake device: ``measure(counts)`` reads ``curve`` and records what was asked."""
+def _device(monkeypatch, curve, fails_at=None):
+    """A fake device behind :func:`aggregate_throughput`: it reads ``curve``; returns the list
+    of the counts asked for."""
     asked = []
 
-    def measure(counts):
+    def measure(cfg, device, counts, steps):
         asked.extend(counts)
         if fails_at in counts:
             raise RuntimeError(f"runs-per-device probe ({fails_at} processes on cuda) failed "
                                "with exit status 1:\ntorch.OutOfMemoryError: CUDA out of memory")
         return {n: curve[n] for n in counts}
-    return measure, asked
+    monkeypatch.setattr(packing, "aggregate_throughput", measure)
+    return asked
 
 
-def test_auto_keeps_doubling_while_a_doubling_still_pays():
+def test_auto_keeps_doubling_while_a_doubling_still_pays(monkeypatch):
     """The H100's curve was still rising at 8 runs (+62 % over 4): auto goes on to 16 and 32
     (the cap) and takes 16, as 32 adds under 10 %."""
     curve = {1: 61.8, 2: 86.1, 4: 126.4, 8: 205.1, 16: 300.0, 32: 310.0, 64: 400.0}
-    measure, asked = _device(curve)
-    per_n, note = probe_runs(None, "cuda", measure=measure)
+    asked = _device(monkeypatch, curve)
+    per_n, note = probe_runs(None, "cuda")
     assert asked == [1, 2, 4, 8, 16, 32] and note == ""
     assert choose_runs(per_n).runs == 16
     # a curve flat from 4 to 8 asks for nothing more
-    measure, asked = _device({1: 24.0, 2: 41.0, 4: 52.0, 8: 56.0})
-    assert set(probe_runs(None, "cuda", measure=measure)[0]) == {1, 2, 4, 8}
+    asked = _device(monkeypatch, {1: 24.0, 2: 41.0, 4: 52.0, 8: 56.0})
+    assert set(probe_runs(None, "cuda")[0]) == {1, 2, 4, 8}
     assert asked == [1, 2, 4, 8]
 
 
 def test_a_count_the_device_cannot_hold_ends_the_climb_and_is_said(monkeypatch):
     curve = {1: 61.8, 2: 86.1, 4: 126.4, 8: 205.1}
-    measure, asked = _device(curve, fails_at=16)
-    per_n, note = probe_runs(None, "cuda", measure=measure)
+    asked = _device(monkeypatch, curve, fails_at=16)
+    per_n, note = probe_runs(None, "cuda")
     assert per_n == curve and asked == [1, 2, 4, 8, 16]
     assert note.startswith("16 runs failed") and "out of memory" in note
     # decide_runs("auto") chooses among the measured counts and records why it stopped
-    monkeypatch.setattr(packing, "aggregate_throughput",
-                        lambda cfg, device, counts, steps: measure(counts))
     decision = packing.decide_runs(None, "cuda", "auto")
     assert decision.runs == 8 and "16 runs failed" in decision.reason
 
