@@ -14,8 +14,10 @@ Figures, each measured here:
    the chosen precision; aggregate optimiser steps per second = N x steps / wall time.
 3. **The paper grid's planned wall time**: its jobs (``paper`` profile: 5 fractions x 5
    trials, baseline + sim-pretrain, 371 real training frames, 270 sim frames; optimiser steps
-   from :func:`sim2radar.experiment.cost.sweep_jobs`) replayed on the best N
-   (:func:`~sim2radar.experiment.cost.wall_time`, each run's step at N-sharing speed).
+   from :func:`sim2radar.experiment.cost.sweep_jobs`) replayed on each measured N
+   (:func:`~sim2radar.experiment.cost.wall_time`: longest chain first, as the sweep
+   dispatches; each run's step at the measured speed of the runs sharing the device at that
+   moment).
 4. **The radar on the device**: a ray-traced ``ti-mmwcas`` frame of a 20k-triangle corridor
    with the Mitsuba variant in use (``cuda_ad_rgb`` on a GPU) against bare ``ray_intersect``
    of the same rays, its detection where :func:`sim2radar.radar.frame.detection_device` puts
@@ -112,9 +114,11 @@ def paper_grid(per_n: dict, measured: str) -> dict:
     jobs = sweep_jobs(pretrains, runs, {"sim": PAPER_SIM_FRAMES}, profile.batch_size)
     total = sum(j.steps for j in jobs)
     plans = {}
-    for n, fig in per_n.items():
-        s = n / fig["steps_per_s"]          # one run's step while n share the device
-        plans[n] = round(wall_time(jobs, {"pretrain": s, "finetune": s}, workers=n) / 60, 1)
+    agg = {n: fig["steps_per_s"] for n, fig in per_n.items()}
+    for n, v in agg.items():
+        s = n / v                           # one run's step while n share the device
+        plans[n] = round(wall_time(jobs, {"pretrain": s, "finetune": s}, workers=n,
+                                   throughput=agg) / 60, 1)
     best = min(plans, key=plans.get)
     print(f"paper grid: {len(jobs)} jobs, {total} optimiser steps; planned "
           + ", ".join(f"{n} per device {m:.1f} min" for n, m in plans.items())

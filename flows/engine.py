@@ -201,18 +201,22 @@ class PrefectPool:
         self._engine.__exit__(*exc_info)
 
     def submit(self, key: Any, fn: Callable[..., Any], *args: Any, task: str,
-               name: str) -> None:
+               name: str, priority: int = 0) -> None:
         one = call_task.with_options(name=task, task_run_name=name)
-        with self._claim():
+        with self._claim(priority):
             fut = self.engine.submit(one, {"fn": fn, "args": args})
         self.pending[fut] = key
 
-    def _claim(self):
-        if not self.resources:
+    def _claim(self, priority: int):
+        """Dask annotations of a task: the worker resources it claims, its priority."""
+        notes = {"resources": dict(self.resources)} if self.resources else {}
+        if self.options.dask_address and priority:
+            notes["priority"] = int(priority)
+        if not notes:
             return contextlib.nullcontext()
         import dask
 
-        return dask.annotate(resources=dict(self.resources))
+        return dask.annotate(**notes)
 
     def finished(self):
         while self.pending:

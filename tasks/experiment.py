@@ -250,13 +250,14 @@ def plan_cost(datasets: Mapping[str, str | os.PathLike | None], *, profile: Any 
     ``runs_per_gpu`` (a count or ``"auto"``, CUDA only): the runs sharing each GPU's measured
     aggregate throughput (:func:`~sim2radar.experiment.packing.aggregate_throughput` of the
     fine-tuning model, used for both stages) sets one run's seconds per step, and the wall time
-    is planned for N x GPUs concurrent runs (``packing`` in the result)."""
+    is planned for N x GPUs concurrent runs, faster per run while fewer share a GPU as the
+    measured counts say (``packing`` in the result)."""
     from sim2radar.experiment.cost import sweep_cost
 
     setup = prepare.setup_sweep(profile, datasets, ablations=ablations, overrides=overrides,
                                 device=device, precision_table=Path(out) / PRECISION_TABLE,
                                 probe=False)
-    packing = None
+    packing, sharing = None, {}
     if runs_per_gpu is not None:
         from sim2radar.experiment.packing import decide_runs
         from sim2radar.hardware import torch_device
@@ -270,10 +271,11 @@ def plan_cost(datasets: Mapping[str, str | os.PathLike | None], *, profile: Any 
         step_seconds = {"pretrain": s, "finetune": s}
         workers = (decision.runs * n_gpus,)
         packing = {**decision.to_dict(), "gpus": n_gpus}
+        sharing = {"throughput": decision.steps_per_s, "devices": n_gpus}
     with tempfile.TemporaryDirectory(prefix="sim2radar-plan-") as tmp:
         domains = prepare.open_datasets(datasets, setup.roles, functools.partial(
             _export, open_store(store).root_uri, Path(tmp), setup.profile.sweep_seed))
-        cost = sweep_cost(setup, domains, workers=workers, step_seconds=step_seconds)
+        cost = sweep_cost(setup, domains, workers=workers, step_seconds=step_seconds, **sharing)
     return cost if packing is None else {**cost, "packing": packing}
 
 

@@ -112,9 +112,10 @@ class TaskPool(Protocol):
     """Tasks submitted one by one and collected as they finish (:meth:`Runner.pool`)."""
 
     def submit(self, key: Any, fn: Callable[..., Any], *args: Any, task: str,
-               name: str) -> None:
+               name: str, priority: int = 0) -> None:
         """Run ``fn(*args)`` as a task (Prefect task name ``task``, run name ``name``);
-        ``fn`` is module-level and ``args`` pickle (Dask)."""
+        ``fn`` is module-level and ``args`` pickle (Dask). On Dask a waiting task of higher
+        ``priority`` starts first."""
 
     def finished(self) -> Iterator[tuple[Any, Any, str | None]]:
         """``(key, result, error)`` of each task as it finishes (``error``: None, or
@@ -187,7 +188,7 @@ class PlainPool:
         self.on_outcome = on_outcome
 
     def submit(self, key: Any, fn: Callable[..., Any], *args: Any, task: str,
-               name: str) -> None:
+               name: str, priority: int = 0) -> None:
         self.queue.append((key, fn, args, name))
 
     def finished(self) -> Iterator[tuple[Any, Any, str | None]]:

@@ -11,9 +11,11 @@ The flow :func:`sim2radar.flows.run_experiment.run_experiment` runs the same dri
 Prefect (``sim2radar sweep``; the ``sweep-on-demand`` deployment). The driver prepares the
 sweep (:func:`sim2radar.tasks.experiment.prepare_sweep`: every input validated, every run
 keyed, ``sweep.json`` and ``plan.json`` written) unless the request names a plan already
-prepared, then hands the training runs to the runner's task pool: the runs from scratch at
-once, a pre-trained condition's runs when their pre-training finishes (a failed pre-training
-fails its runs with its error). Every training run is keyed by content (a finished run is
+prepared, then hands the training runs to the runner's task pool as they become ready: the
+pre-trainings and the runs from scratch at once, a pre-trained condition's runs when their
+pre-training finishes (a failed pre-training fails its runs with its error); the ready job
+with the longest chain of optimiser steps ahead goes first (:class:`Dispatch`), so the
+full-data runs do not start last and run alone at the end. Every training run is keyed by content (a finished run is
 ``skipped`` on a rerun, a run killed half-way resumes from its last checkpoint:
 :mod:`sim2radar.tasks.experiment`). As runs finish, the sweep folder's ``runs.parquet``,
 ``pretrainings.parquet`` and ``progress.json`` are rewritten (the dashboard's ``--serve`` mode
@@ -38,7 +40,9 @@ The sweep folder (``<out>/<name>/``)::
 
 from __future__ import annotations
 
+import heapq
 import logging
+from collections.abc import Callable
 from datetime import UTC, datetime
 from typing import Any
 
@@ -60,7 +64,7 @@ from sim2radar.tasks.experiment import (
 )
 from sim2radar.tasks.runner import Runner, RunOptions, TaskPool, dask_installed
 
-__all__ = ["SweepRequest", "run_sweep", "prepare", "sweep_options"]
+__all__ = ["Dispatch", "SweepRequest", "run_sweep", "prepare", "slots", "sweep_options"]
 
 log = logging.getLogger(__name__)
 
@@ -205,6 +209,7 @@ def run_sweep(request: SweepRequest, runner: Runner) -> dict[str, Any]:
     ValueError, FileNotFoundError, DatasetError — a bad input (naming the dataset, profile or
         field), before any training.
     """
+    from sim2radar.experiment.cost import chain_steps, plan_jobs  # torch: not at import
     from sim2radar.experiment.finish import finish_sweep
 
     plan = read_plan(request.plan_path) if request.plan_path else prepare(request)
@@ -212,29 +217,33 @@ def run_sweep(request: SweepRequest, runner: Runner) -> dict[str, Any]:
     options, resources = sweep_options(plan, request)
     with runner.pool("sweep", plan.name, len(plan.runs), options, resources) as pool:
         tally = _Tally(plan, pool)
+        queue = Dispatch(pool, chain_steps(plan_jobs(plan)), slots(options))
 
         def finetune(run, pretrain: PretrainResult | None) -> None:
-            pool.submit((run, pretrain), run_finetuning, ctx, run, pretrain,
-                        task="finetune-and-test", name=run.id)
+            queue.add((run, pretrain), run_finetuning, ctx, run, pretrain,
+                      task="finetune-and-test", name=run.id)
 
         for p in plan.pretrains:
-            pool.submit((p, None), run_pretraining, ctx, p, task="pretrain-encoder", name=p.id)
-        for r in plan.runs:   # the runs from scratch start at once
+            queue.add((p, None), run_pretraining, ctx, p, task="pretrain-encoder", name=p.id)
+        for r in plan.runs:   # the runs from scratch are ready at once
             if r.pretrain_id is None:
                 finetune(r, None)
+        queue.fill()
         for (job, pretrain), result, error in pool.finished():
+            queue.done()
             if not isinstance(job, PlannedPretrain):
                 tally.run(result if error is None else failed_row(ctx, job, pretrain, error))
-                continue
-            tally.pretraining(result.row if error is None and result.row
-                              else failed_pretrain_row(ctx, job, error or "no check"))
-            for r in plan.runs_after(job):   # a pre-training's runs start when it finishes
-                if error is None:
-                    finetune(r, result)
-                else:
-                    tally.run(failed_row(ctx, r, PretrainResult(key=job.key, checkpoint="",
-                                                                n_frames=0),
-                                         f"pre-training {job.id} failed: {error}"))
+            else:
+                tally.pretraining(result.row if error is None and result.row
+                                  else failed_pretrain_row(ctx, job, error or "no check"))
+                for r in plan.runs_after(job):   # a pre-training's runs are ready when it ends
+                    if error is None:
+                        finetune(r, result)
+                    else:
+                        tally.run(failed_row(ctx, r, PretrainResult(key=job.key, checkpoint="",
+                                                                    n_frames=0),
+                                             f"pre-training {job.id} failed: {error}"))
+            queue.fill()
     summary = finish_sweep(plan, tally.ordered(), list(tally.pretrainings.values()))
     runner.publish("sweep", plan.name, "results", table=summary["table_rows"],
                    description=f"sweep {plan.name}: {summary['metric']} per cell")
@@ -243,6 +252,46 @@ def run_sweep(request: SweepRequest, runner: Runner) -> dict[str, Any]:
     log.info("sweep %s: %s runs; results %s; dashboard %s", plan.name, summary["counts"],
              summary["results_md"], summary["dashboard"])
     return {k: v for k, v in summary.items() if k not in ("markdown", "table_rows")}
+
+
+def slots(options: RunOptions) -> int | None:
+    """Training runs the sweep hands its pool at once: the pool's ``workers`` for threads and
+    a local Dask cluster (so a job that becomes ready later can still start before the
+    shorter ones ready earlier); None (every ready job at once, ordered by Dask priority) for a
+    scheduler address, whose workers decide how many run."""
+    return options.workers if options.dask_address in (None, "local") else None
+
+
+class Dispatch:
+    """Ready training jobs handed to a :class:`~sim2radar.tasks.runner.TaskPool` longest chain
+    of optimiser steps first (:func:`sim2radar.experiment.cost.chain_steps`; ties in the order
+    made ready), at most ``slots`` in flight (None: no limit, the chain as each task's
+    priority). :func:`sim2radar.experiment.cost.wall_time` replays this order.
+
+    Call :meth:`add` for each job as it becomes ready, :meth:`fill` to hand jobs over, and
+    :meth:`done` when the pool reports one finished.
+    """
+
+    def __init__(self, pool: TaskPool, chain: dict[str, int], slots: int | None) -> None:
+        self.pool, self.chain, self.slots = pool, chain, slots
+        self.ready: list[tuple] = []
+        self.seq = self.in_flight = 0
+
+    def add(self, key: Any, fn: Callable[..., Any], *args: Any, task: str, name: str) -> None:
+        """``fn(*args)`` is ready to run (the pool's :meth:`~TaskPool.submit` arguments)."""
+        heapq.heappush(self.ready, (-self.chain[name], self.seq, key, fn, args, task, name))
+        self.seq += 1
+
+    def fill(self) -> None:
+        """Hand the longest ready jobs to the pool while it has a free slot."""
+        while self.ready and (self.slots is None or self.in_flight < self.slots):
+            neg, _, key, fn, args, task, name = heapq.heappop(self.ready)
+            self.pool.submit(key, fn, *args, task=task, name=name, priority=-neg)
+            self.in_flight += 1
+
+    def done(self) -> None:
+        """One handed-over job finished."""
+        self.in_flight -= 1
 
 
 def _ap(v: float | None) -> str:

@@ -13,7 +13,7 @@ import pytest
 from sim2radar.cli.experiment import sweep_flag
 from sim2radar.datasets import make_door_frames, write_dataset, write_metadata
 from sim2radar.detect.config import DetectConfig
-from sim2radar.experiment.cost import sweep_cost
+from sim2radar.experiment.cost import plan_jobs, sweep_cost
 from sim2radar.experiment.data import open_domain
 from sim2radar.experiment.documents import DocumentError, SweepDocument
 from sim2radar.experiment.errors import SettingError
@@ -207,7 +207,7 @@ def test_a_plan_refuses_a_real_dataset_without_its_splits(domains, tmp_path):
         _plan(setup, domains, tmp_path)
 
 
-def test_cost_with_given_seconds_per_step(domains):
+def test_cost_with_given_seconds_per_step(domains, tmp_path):
     setup = setup_sweep("smoke", {"sim": "s", "real": "r"})
     cost = sweep_cost(setup, domains, workers=(1, 2),
                       step_seconds={"pretrain": 2.0, "finetune": 1.0})
@@ -217,6 +217,15 @@ def test_cost_with_given_seconds_per_step(domains):
     assert cost["compute_hours"] == pytest.approx((8 * 2 + 24) / 3600)
     assert cost["wall_hours"][1] == pytest.approx(cost["compute_hours"])
     assert cost["wall_hours"][2] < cost["wall_hours"][1] and not cost["measured"]
+    # runs sharing one device, measured twice as fast alone: the tail shortens, the work not
+    alone, shared = (sweep_cost(setup, domains, workers=(3,), step_seconds={
+        "pretrain": 2.0, "finetune": 1.0}, throughput=t) for t in (None, {1: 3.0, 3: 3.0}))
+    assert shared["compute_hours"] == alone["compute_hours"]
+    assert shared["wall_hours"][3] < alone["wall_hours"][3]
+    # the prepared plan's jobs (what the sweep dispatches by) have the same steps
+    jobs = plan_jobs(_plan(setup, domains, tmp_path))
+    assert sum(j.steps for j in jobs if j.kind == "pretrain") == 8
+    assert sum(j.steps for j in jobs if j.kind == "finetune") == 24
 
 
 def test_datasets_are_folders_or_exported_from_the_store(domains, tmp_path):
@@ -284,6 +293,8 @@ def test_pretrainings_hold_out_the_sims_split_and_the_plan_names_their_condition
     for r in low:       # the same pre-training, another run
         twin = sim[(r.spec.fraction, r.spec.trial)]
         assert r.pretrain_key == twin.pretrain_key and r.key != twin.key
+    # a pre-training's steps count the 6 frames it trains on, not the 2 held out: ceil(6 / 4)
+    assert {j.steps for j in plan_jobs(plan) if j.kind == "pretrain"} == {2}
 
 
 def test_labels_differing_only_in_case_or_no_label_at_all_are_refused_up_front(domains,
