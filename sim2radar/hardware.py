@@ -150,6 +150,27 @@ DRJIT_SLACK_BYTES = 256
 DRJIT_ALIGN_BYTES = 64
 
 
+@functools.cache
+def _blas_controller():
+    try:
+        from threadpoolctl import ThreadpoolController
+    except ImportError:       # a --no-deps install (the GPU check's): BLAS keeps its count
+        return None
+    return ThreadpoolController()
+
+
+def one_blas_thread():
+    """Context manager: NumPy's BLAS on one thread inside it (threadpoolctl). After a threaded
+    product OpenBLAS's idle threads spin for a while, and on a machine whose cores Dr.Jit's
+    next kernel wants (the ray tracer's, one frame after another) that spinning slowed the
+    tracing of the next frame by ~20 %; the tracer's detection products are small enough for
+    one thread (``benchmarks radar``)."""
+    import contextlib
+
+    ctl = _blas_controller()
+    return contextlib.nullcontext() if ctl is None else ctl.limit(limits=1, user_api="blas")
+
+
 def to_drjit(array_type, values, dtype=None):
     """A Dr.Jit array of type ``array_type`` holding ``values``, safe for Dr.Jit kernels.
 

@@ -59,8 +59,9 @@ log = logging.getLogger(__name__)
 
 #: Bump when the radar_points output of the same inputs changes (simulator or table logic).
 #: (2: the ray tracer's IF response and element patterns, TI's detection chain; scene files
-#: may give each pose a speed.)
-RADAR_POINTS_STAGE_VERSION = 2
+#: may give each pose a speed. 3: the receiver noise drawn in two steps, channel-integrated
+#: power first: a new noise stream of the same distribution.)
+RADAR_POINTS_STAGE_VERSION = 3
 #: Bump when scene_meshes output changes for the same files.
 SCENE_MESHES_STAGE_VERSION = 1
 

@@ -77,6 +77,7 @@ import math
 
 import numpy as np
 
+from sim2radar.hardware import one_blas_thread
 from sim2radar.radar.config import RadarConfig
 
 __all__ = [
@@ -84,6 +85,7 @@ __all__ = [
     "ArrayGeometry",
     "TraceResult",
     "accumulate",
+    "RowNoise",
     "add_receiver_noise",
     "array_geometry",
     "azimuth_map",
@@ -94,6 +96,8 @@ __all__ = [
     "deposit",
     "direction_cosines",
     "fine_grid_index",
+    "integrated_power",
+    "row_noise",
 ]
 
 #: Fine-grid points per lambda/2 of azimuth span (phase error <= pi / (2 * this)).
@@ -291,6 +295,36 @@ class Accumulator:
             s = np.einsum("zrg,gx->zrx", g, e, optimize=False)
         return np.transpose(s, (1, 0, 2))
 
+    def slab_apertures(self, geometry: ArrayGeometry, labels: np.ndarray
+                       ) -> tuple[np.ndarray, np.ndarray]:
+        """The channel signal of each group of fine azimuth points (one Doppler slab each,
+        :func:`sim2radar.radar.detection.doppler_bins`): ``(slabs, s)`` with ``slabs`` the
+        sorted distinct ``labels`` ((M,) int) and ``s`` (S, n_range, n_z, n_x) complex64,
+        ``s[k]`` = :meth:`aperture` of the points labelled ``slabs[k]``.
+
+        Each slab is one product of its own points' columns of the grid with the fine-grid
+        phases ``e^{j pi u_g (x + x_shift)}`` (the sum the FFT of :meth:`aperture` evaluates
+        for all points at once): S slabs cost one dense transform in all, not S FFTs.
+        """
+        g = np.asarray(self.grid)
+        n_z, n_r, m = g.shape
+        labels = np.asarray(labels).reshape(-1)
+        if len(labels) != m:
+            raise ValueError(f"labels: {len(labels)} fine points, the grid has {m}")
+        slabs, inverse = np.unique(labels, return_inverse=True)
+        if len(slabs) == 1:                 # every point: the FFT of aperture()
+            return slabs, self.aperture(geometry)[None]
+        phase = np.outer(geometry.fine_u, geometry.x_half_wl + geometry.x_shift)
+        e = np.exp(1j * math.pi * phase).astype(np.complex64)               # (M, n_x)
+        out = np.empty((len(slabs), n_r, n_z, len(geometry.x_half_wl)), dtype=np.complex64)
+        flat = g.reshape(n_z * n_r, m)
+        with one_blas_thread():
+            for k in range(len(slabs)):
+                cols = np.flatnonzero(inverse == k)
+                s = (flat[:, cols] @ e[cols]).reshape(n_z, n_r, -1)
+                out[k] = np.transpose(s, (1, 0, 2))
+        return slabs, out
+
 
 @dataclasses.dataclass(frozen=True)
 class TraceResult:
@@ -427,6 +461,70 @@ def add_receiver_noise(
     out.real += re
     out.imag += im
     return out
+
+
+@dataclasses.dataclass(frozen=True)
+class RowNoise:
+    """Receiver noise of channel-signal rows, drawn in two steps (:func:`integrated_power`):
+    first what the channel-integrated power needs, then the rest of the noise of the rows
+    that are looked at (:func:`row_noise`).
+
+    Attributes
+    ----------
+    parallel : (...) complex128 — each row's noise component along its own signal vector
+        (any fixed direction for a row without signal) [sqrt(sim. |a|^2)].
+    rest : (...) float64 — the power of the noise orthogonal to it [sim. |a|^2].
+    variance : float — noise power per channel, ``E |n|^2`` [sim. |a|^2].
+    """
+
+    parallel: np.ndarray
+    rest: np.ndarray
+    variance: float
+
+
+def integrated_power(signal_power: np.ndarray, n_channels: int, variance: float,
+                     rng: np.random.Generator) -> tuple[np.ndarray, RowNoise]:
+    """``sum_c |s_c + n_c|^2`` over the ``n_channels`` channels of rows whose signal power is
+    ``signal_power`` (...) ``= sum_c |s_c|^2``, with ``n`` circular complex Gaussian noise of
+    ``variance`` per channel, independent per channel — drawn without drawing the noise
+    samples of every row.
+
+    Along the row's unit signal vector ``e = s / |s|`` the noise is ``n_par ~ CN(0,
+    variance)``; orthogonal to it, its power ``Q`` is ``variance * Gamma(C - 1, 1)``, and its
+    direction is uniform and independent of ``Q`` (a Gaussian vector's length and direction are
+    independent). So ``sum |s + n|^2 = ||s| + n_par|^2 + Q`` exactly: three numbers per row, not
+    2C. :func:`row_noise` draws the rest of a row's noise consistent with its draw here
+    (tested against the full draw in ``tests/radar/test_detection.py``).
+
+    Returns ``(power (...) float64, RowNoise)``.
+    """
+    a = np.sqrt(np.asarray(signal_power, dtype=np.float64))
+    shape = a.shape
+    z = rng.standard_normal((2, *shape)) * math.sqrt(variance / 2.0)
+    rest = (rng.gamma(n_channels - 1, variance, size=shape) if n_channels > 1
+            else np.zeros(shape))
+    power = (a + z[0]) ** 2 + z[1] ** 2 + rest
+    return power, RowNoise(z[0] + 1j * z[1], rest, float(variance))
+
+
+def row_noise(signal: np.ndarray, drawn: RowNoise, rng: np.random.Generator) -> np.ndarray:
+    """(K, C) complex128 — the whole noise of K rows whose ``signal`` (K, C) had its
+    integrated power drawn by :func:`integrated_power` (``drawn``: those rows' entries): the
+    drawn component along each row's signal plus ``sqrt(rest)`` times a uniform unit vector
+    orthogonal to it. ``sum |signal + noise|^2`` is the power drawn there, and the noise is
+    distributed as C independent ``CN(0, variance)`` samples."""
+    v = np.asarray(signal, dtype=np.complex128)
+    k, n_ch = v.shape
+    a = np.linalg.norm(v, axis=1)
+    e = np.zeros_like(v)
+    e[:, 0] = 1.0                                   # a row without signal: any direction
+    has = a > 0
+    e[has] = v[has] / a[has, None]
+    g = rng.standard_normal((k, n_ch)) + 1j * rng.standard_normal((k, n_ch))
+    g -= e * np.sum(e.conj() * g, axis=1, keepdims=True)
+    norm = np.linalg.norm(g, axis=1, keepdims=True)
+    u = np.divide(g, norm, out=np.zeros_like(g), where=norm > 0)
+    return drawn.parallel[:, None] * e + np.sqrt(drawn.rest)[:, None] * u
 
 
 def beamform(aperture: np.ndarray, geometry: ArrayGeometry) -> np.ndarray:

@@ -64,11 +64,14 @@ import numpy as np
 from sim2radar.radar import cfar
 from sim2radar.radar.binning import (
     Accumulator,
+    RowNoise,
     add_receiver_noise,
     array_geometry,
     azimuth_map,
     azimuth_response,
     beam_response,
+    integrated_power,
+    row_noise,
 )
 from sim2radar.radar.config import DetectionConfig, RadarConfig
 
@@ -214,8 +217,8 @@ def detect_points(
         points = np.concatenate([xyz, intensity_db[:, None]], axis=1).astype(np.float32)
         return _strongest_first(points, np.zeros(len(points), np.float32), radar)[0]
     if radar.detection.domain == "integrated":
-        return _detect_slabs({0: aperture}, acc, radar, noise="none" if noise_added
-                             else "expected").points
+        return _detect_slabs(np.zeros(1, np.int64), np.asarray(aperture)[None], acc, radar,
+                             noise="none" if noise_added else "expected").points
     amap = azimuth_map(aperture, geom)
     power = np.abs(amap.astype(np.complex128)) ** 2
     mask = ca_cfar_mask(power, radar.detection, n0 * geom.main_noise_factor)
@@ -277,38 +280,49 @@ def detect_frame(acc: Accumulator, radar: RadarConfig, *,
             aperture = add_receiver_noise(aperture, geom, n0, rng)
         points = detect_points(None, acc, radar, aperture=aperture, noise_added=rng is not None)
         return Detections(points, np.zeros(len(points), np.float32))
-    bins = doppler_bins(radar, velocity_mps)
-    apertures = {}
-    for d in np.unique(bins):
-        ap = acc.aperture(geom, bins == d)
-        apertures[int(d)] = ap if rng is None else add_receiver_noise(ap, geom, n0, rng)
-    return _detect_slabs(apertures, acc, radar, noise="expected" if rng is None else rng)
+    slabs, apertures = acc.slab_apertures(geom, doppler_bins(radar, velocity_mps))
+    return _detect_slabs(slabs, apertures, acc, radar,
+                         noise="expected" if rng is None else rng)
 
 
-def _detect_slabs(apertures: dict[int, np.ndarray], acc: Accumulator | None,
+def _detect_slabs(slabs: np.ndarray, apertures: np.ndarray, acc: Accumulator | None,
                   radar: RadarConfig, noise) -> Detections:
     """TI's chain on the range-Doppler map of the Doppler slabs' channel signals
-    (``apertures``: signed Doppler bin -> (n_range, n_z, n_x)): each slab's profile
-    ``sum_(x, z) |s|^2`` fills its Doppler column, the others hold receiver noise (``noise``:
-    ``"expected"`` its mean, added to the slabs too; ``"none"`` the slabs carry it already and
-    the empty columns get its mean; or a Generator to draw it); a dual-pass CFAR (range, then
-    Doppler, a cell must pass both); then in each detected cell the azimuth peaks of its slab's
-    map (local maxima over ``min_snr_db`` and within ``sidelobe_level_db`` of the cell's
-    strongest)."""
+    (``apertures`` (S, n_range, n_z, n_x) of the signed Doppler bins ``slabs`` (S,)): each
+    slab's profile ``sum_(x, z) |s|^2`` fills its Doppler column, the others hold receiver
+    noise (``noise``: ``"expected"`` its mean, added to the slabs too; ``"none"`` the slabs
+    carry it already and the empty columns get its mean; or a Generator to draw it: the
+    slabs' receiver noise per present position, ``N N0`` each
+    (:func:`~sim2radar.radar.binning.add_receiver_noise`'s model), drawn as the profile needs
+    it (:func:`~sim2radar.radar.binning.integrated_power`) and, for the detected cells' rows
+    only, in full (:func:`~sim2radar.radar.binning.row_noise`)); a dual-pass CFAR (range,
+    then Doppler, a cell must pass both); then in each detected cell the azimuth peaks of its
+    slab's map (local maxima over ``min_snr_db`` and within ``sidelobe_level_db`` of the
+    cell's strongest)."""
     cfg = radar.detection
     geom = array_geometry(radar)
     n0 = cell_noise_power(radar)
     n_r, n_d = radar.n_range_bins, radar.n_chirps
-    n_pos = int(geom.present.sum())
+    present = geom.present
+    n_pos = int(present.sum())
     chan_noise = geom.n_elements * n0                       # per position (add_receiver_noise)
     mean_noise = chan_noise * n_pos
-    if isinstance(noise, np.random.Generator):
+    drawn = isinstance(noise, np.random.Generator)
+    power = apertures.real ** 2 + apertures.imag ** 2                    # (S, n_r, n_z, n_x)
+    profile = power.sum(axis=(2, 3), dtype=np.float64)                     # (S, n_r)
+    if drawn:
+        # the receiver noise per present position (the absent positions' signal is summed too:
+        # no channel there, and no noise)
+        on = np.einsum("srzx,zx->sr", power, present.astype(power.dtype), optimize=False)
         rd = noise.gamma(n_pos, chan_noise, size=(n_r, n_d))  # noise-only Doppler columns
+        with_noise, row_draws = integrated_power(on, n_pos, chan_noise, noise)
+        profile += with_noise - on
     else:
         rd = np.full((n_r, n_d), mean_noise)
-    for d, ap in apertures.items():
-        profile = np.einsum("rzx,rzx->r", ap, ap.conj(), optimize=False).real
-        rd[:, d % n_d] = profile.astype(np.float64) + (mean_noise if noise == "expected" else 0.0)
+        if noise == "expected":
+            profile += mean_noise
+    cols = np.mod(slabs, n_d)
+    rd[:, cols] = profile.T
     det, _ = cfar.cfar_1d(rd, axis=0, kind=cfg.cfar_kind, guard=cfg.cfar_guard_cells,
                           train=cfg.cfar_training_cells,
                           alpha=10.0 ** (cfg.cfar_threshold_db / 10.0), edges="ti",
@@ -321,13 +335,18 @@ def _detect_slabs(apertures: dict[int, np.ndarray], acc: Accumulator | None,
                                 alpha=10.0 ** (cfg.doppler_cfar_threshold_db / 10.0),
                                 edges="wrap")
         det &= det_d
+    slab_of_col = np.full(n_d, -1)
+    slab_of_col[cols] = np.arange(len(slabs))
     ri, ci = np.nonzero(det)
-    d_of = np.mod(ci + n_d // 2, n_d) - n_d // 2
-    has = np.isin(d_of, list(apertures))   # a noise-only cell cannot pass the minimum SNR
-    ri, d_of = ri[has], d_of[has]
+    si = slab_of_col[ci]
+    has = si >= 0                          # a noise-only cell cannot pass the minimum SNR
+    ri, si = ri[has], si[has]
     if not len(ri):
         return Detections(np.zeros((0, 4), np.float32), np.zeros(0, np.float32))
-    rows = np.stack([apertures[int(d)][r] for r, d in zip(ri, d_of, strict=True)])
+    rows = apertures[si, ri].astype(np.complex128)                         # (K, n_z, n_x)
+    if drawn:
+        picked = RowNoise(row_draws.parallel[si, ri], row_draws.rest[si, ri], chan_noise)
+        rows[:, present] += row_noise(rows[:, present], picked, noise)
     p = np.abs(azimuth_map(rows, geom).astype(np.complex128)) ** 2          # (K, n_az)
     cand = p > n0 * geom.main_noise_factor * 10.0 ** (cfg.min_snr_db / 10.0)
     if cfg.sidelobe_level_db is not None:
@@ -336,7 +355,7 @@ def _detect_slabs(apertures: dict[int, np.ndarray], acc: Accumulator | None,
     cand[:, :-1] &= p[:, :-1] >= p[:, 1:]
     k, ia = np.nonzero(cand)
     points = peak_points(rows[k], ri[k], ia, acc, radar)
-    doppler = (d_of[k] * radar.range_rate_resolution_mps).astype(np.float32)
+    doppler = (slabs[si[k]] * radar.range_rate_resolution_mps).astype(np.float32)
     return Detections(*_strongest_first(points, doppler, radar))
 
 

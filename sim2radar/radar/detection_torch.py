@@ -4,7 +4,8 @@
 ``integrated`` domain (TI's chain; module doc there): the channel signal of every Doppler slab
 from the fine azimuth grid (:meth:`sim2radar.radar.binning.Accumulator.aperture`: an inverse FFT
 per element row and range bin), receiver noise
-(:func:`sim2radar.radar.binning.add_receiver_noise`), the range-Doppler map, the dual-pass CFAR
+(:func:`sim2radar.radar.binning.add_receiver_noise`'s model, drawn in two steps as there:
+:func:`integrated_power`, :func:`row_noise`), the range-Doppler map, the dual-pass CFAR
 (:func:`cfar_1d`, twin of :func:`sim2radar.radar.cfar.cfar_1d`), the azimuth peaks of each
 detected cell and their refined directions, intensities and ranges
 (:func:`sim2radar.radar.detection.peak_points`). Everything runs on the device of the
@@ -37,7 +38,8 @@ from sim2radar.radar.detection import (
     doppler_bins,
 )
 
-__all__ = ["DeviceAccumulator", "cfar_1d", "detect_frame", "noise_generator"]
+__all__ = ["DeviceAccumulator", "cfar_1d", "detect_frame", "integrated_power",
+           "noise_generator", "row_noise"]
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -92,17 +94,43 @@ def _aperture(grid, geom: ArrayGeometry, masks):
     return s.transpose(1, 2)
 
 
-def _add_noise(ap, geom: ArrayGeometry, noise_power: float, gen):
-    """``ap`` plus receiver noise of variance ``N * noise_power`` per present position
-    (:func:`sim2radar.radar.binning.add_receiver_noise`)."""
+def integrated_power(signal_power, n_channels: int, variance: float, gen):
+    """Torch twin of :func:`sim2radar.radar.binning.integrated_power`: ``(power, (parallel,
+    rest))`` of rows whose signal power is ``signal_power`` (float64 tensor), drawn from
+    ``gen`` on its device."""
     import torch
 
-    sigma = torch.as_tensor(np.where(geom.present, math.sqrt(geom.n_elements * noise_power
-                                                             / 2.0), 0.0),
-                            device=ap.device, dtype=torch.float32)
-    re = torch.randn(ap.shape, generator=gen, device=ap.device, dtype=torch.float32)
-    im = torch.randn(ap.shape, generator=gen, device=ap.device, dtype=torch.float32)
-    return ap + torch.complex(re * sigma, im * sigma)
+    dev, shape = signal_power.device, tuple(signal_power.shape)
+    a = signal_power.to(torch.float64).sqrt()
+    z = torch.randn((2, *shape), generator=gen, device=dev, dtype=torch.float64)
+    z = z * math.sqrt(variance / 2.0)
+    if n_channels > 1:
+        k = torch.full(shape, float(n_channels - 1), dtype=torch.float64, device=dev)
+        rest = torch._standard_gamma(k, generator=gen) * variance
+    else:
+        rest = torch.zeros(shape, dtype=torch.float64, device=dev)
+    power = (a + z[0]) ** 2 + z[1] ** 2 + rest
+    return power, (torch.complex(z[0], z[1]), rest)
+
+
+def row_noise(signal, parallel, rest, gen):
+    """Torch twin of :func:`sim2radar.radar.binning.row_noise`: (K, C) complex128 noise of K
+    rows of ``signal`` consistent with their drawn ``parallel`` component and ``rest`` power."""
+    import torch
+
+    v = signal.to(torch.complex128)
+    k, n_ch = v.shape
+    a = v.abs().pow(2).sum(dim=1).sqrt()
+    e = torch.zeros_like(v)
+    e[:, 0] = 1.0
+    has = a > 0
+    e[has] = v[has] / a[has, None]
+    g = torch.randn((2, k, n_ch), generator=gen, device=v.device, dtype=torch.float64)
+    g = torch.complex(g[0], g[1])
+    g = g - e * (e.conj() * g).sum(dim=1, keepdim=True)
+    norm = g.abs().pow(2).sum(dim=1, keepdim=True).sqrt()
+    u = torch.where(norm > 0, g / torch.where(norm > 0, norm, 1.0), torch.zeros_like(g))
+    return parallel[:, None] * e + rest.sqrt()[:, None] * u
 
 
 def cfar_1d(power, *, axis: int, kind: str, guard: int, train: int, alpha: float,
@@ -254,18 +282,20 @@ def detect_frame(acc: DeviceAccumulator, radar: RadarConfig, *,
     slabs = np.unique(bins)
     masks = torch.as_tensor(bins[None, :] == slabs[:, None], device=dev)
     ap = _aperture(acc.grid, geom, masks)                                   # (S, n_r, n_z, n_x)
-    if generator is not None:
-        ap = torch.stack([_add_noise(ap[s], geom, n0, generator) for s in range(len(slabs))])
+    present = torch.as_tensor(geom.present, device=dev)
     n_pos = int(geom.present.sum())
     chan_noise = geom.n_elements * n0
     mean_noise = chan_noise * n_pos
+    power = ap.real**2 + ap.imag**2                                         # (S, n_r, n_z, n_x)
+    profile = power.sum(dim=(-2, -1), dtype=torch.float64)                  # (S, n_r)
     if generator is not None:
         shape = torch.full((n_r, n_d), float(n_pos), dtype=torch.float64, device=dev)
         rd = torch._standard_gamma(shape, generator=generator) * chan_noise
+        on = (power * present.to(power.dtype)).sum(dim=(-2, -1), dtype=torch.float64)
+        with_noise, (parallel, rest) = integrated_power(on, n_pos, chan_noise, generator)
+        profile = profile - on + with_noise
     else:
         rd = torch.full((n_r, n_d), mean_noise, dtype=torch.float64, device=dev)
-    profile = (ap.real**2 + ap.imag**2).sum(dim=(-2, -1)).to(torch.float64)  # (S, n_r)
-    if generator is None:
         profile = profile + mean_noise
     cols = torch.as_tensor(np.mod(slabs, n_d), device=dev)
     rd[:, cols] = profile.T
@@ -287,6 +317,11 @@ def detect_frame(acc: DeviceAccumulator, radar: RadarConfig, *,
     if len(ri) == 0:
         return empty
     rows = ap[si, ri]                                                       # (K, n_z, n_x)
+    if generator is not None:
+        rows = rows.clone()
+        sig = rows[:, present]                                              # (K, n_pos)
+        noise = row_noise(sig, parallel[si, ri], rest[si, ri], generator)
+        rows[:, present] = (sig.to(torch.complex128) + noise).to(rows.dtype)
     amap = rows[:, geom.main_row, :] @ _azimuth_steer(geom, dev)            # (K, n_a)
     p = amap.to(torch.complex128).abs() ** 2
     cand = p > n0 * geom.main_noise_factor * 10.0 ** (cfg.min_snr_db / 10.0)

@@ -213,6 +213,28 @@ def test_doppler_bins_follow_the_rigs_motion(mmwcas):
     assert np.all(np.abs(bins[inner] - bins[mirror]) <= 1)
 
 
+def test_slab_apertures_are_the_aperture_of_each_slabs_points(mmwcas):
+    """One product per Doppler slab (Accumulator.slab_apertures) gives the channel signal the
+    FFT of Accumulator.aperture gives for that slab's fine points alone (complex64 rounding:
+    1e-6 of the strongest), and the slabs add up to the whole aperture."""
+    geom = array_geometry(mmwcas)
+    rng = np.random.default_rng(4)
+    n = 300
+    amp = (rng.standard_normal(n) + 1j * rng.standard_normal(n)) * 1e-3
+    acc = deposit(rng.uniform(1, 9, n), rng.uniform(-0.9, 0.9, n), rng.uniform(-0.2, 0.2, n),
+                  amp, mmwcas)
+    bins = doppler_bins(mmwcas, np.array([1.1, 0.2, 0.0]))
+    slabs, ap = acc.slab_apertures(geom, bins)
+    np.testing.assert_array_equal(slabs, np.unique(bins))
+    scale = np.abs(acc.aperture(geom)).max()
+    for k, d in enumerate(slabs):
+        np.testing.assert_allclose(ap[k], acc.aperture(geom, bins == d), rtol=0,
+                                   atol=1e-6 * scale)
+    np.testing.assert_allclose(ap.sum(axis=0), acc.aperture(geom), rtol=0, atol=1e-6 * scale)
+    one, whole = acc.slab_apertures(geom, np.zeros_like(bins))
+    assert one.tolist() == [0] and np.array_equal(whole[0], acc.aperture(geom))
+
+
 def test_a_moving_rig_separates_returns_that_a_rig_at_rest_merges(mmwcas):
     """Three scatterers at one range, far apart in azimuth: 0, -0.5 and -8 dB. At rest they
     share one range-Doppler cell and TI's 1 dB rule keeps the two strongest; on a walking rig
@@ -261,3 +283,39 @@ def test_detection_domain_and_cfar_kind_are_checked(mmwcas):
         mmwcas.with_updates(detection={"domain": "range-azimuth", "cfar_kind": "caso"})
     with pytest.raises(ValueError, match="cfar_discard_range_bins"):
         mmwcas.with_updates(detection={"cfar_discard_range_bins": [-1, 0]})
+
+
+@pytest.mark.parametrize("snr", [0.0, 0.05, 1.0])
+def test_the_integrated_noise_drawn_in_two_steps_is_the_full_draw(snr):
+    """The detector draws a row's receiver noise in two steps: the channel-integrated power
+    (three numbers per row, binning.integrated_power), then the whole noise of the rows it
+    looks at (binning.row_noise). Against C = 134 independent CN(0, var) samples per row:
+    the power is the non-central chi-square with 2C degrees of freedom (scipy), the same
+    distribution as the full draw's (two-sample KS); the completed noise adds up to the drawn
+    power, and its channels are uncorrelated with variance var and no mean."""
+    from scipy import stats
+
+    from sim2radar.radar.binning import integrated_power, row_noise
+
+    c, var, n = 134, 2.0, 4000
+    rng = np.random.default_rng(11)
+    s = rng.standard_normal(c) + 1j * rng.standard_normal(c)
+    s *= math.sqrt(snr * c * var) / max(np.linalg.norm(s), 1e-300)        # |s|^2 = snr C var
+    power, drawn = integrated_power(np.full(n, np.sum(np.abs(s) ** 2)), c, var, rng)
+    full = rng.standard_normal((n, c)) + 1j * rng.standard_normal((n, c))
+    full_power = np.sum(np.abs(s + full * math.sqrt(var / 2)) ** 2, axis=1)
+    scaled = power / (var / 2)
+    nc = 2 * np.sum(np.abs(s) ** 2) / var
+    law = stats.ncx2(2 * c, nc) if nc > 0 else stats.chi2(2 * c)
+    assert stats.kstest(scaled, law.cdf).pvalue > 1e-3
+    assert stats.ks_2samp(power, full_power).pvalue > 1e-3
+
+    noise = row_noise(np.tile(s, (n, 1)), drawn, rng)
+    assert np.allclose(np.sum(np.abs(s + noise) ** 2, axis=1), power, rtol=1e-9)
+    per_channel = np.mean(np.abs(noise) ** 2, axis=0)
+    assert np.mean(per_channel) == pytest.approx(var, rel=0.02)
+    assert np.all(np.abs(per_channel / var - 1) < 0.15)            # 4000 samples: +-4.5 sigma
+    assert np.all(np.abs(noise.mean(axis=0)) < 5 * math.sqrt(var / n))
+    cov = noise.T @ noise.conj() / n                                 # E n n^H: var I
+    assert np.max(np.abs(cov - var * np.eye(c))) < 6 * var / math.sqrt(n)
+    assert np.max(np.abs(noise.T @ noise / n)) < 6 * var / math.sqrt(n)  # circular: E n n^T = 0

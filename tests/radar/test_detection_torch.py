@@ -79,17 +79,31 @@ def test_torch_cfar_is_the_numpy_cfar(kind, edges):
 
 
 def test_torch_receiver_noise_has_the_numpy_noise_statistics(scene, mmwcas):
-    """Noise power per present position N N0 (add_receiver_noise), none at absent ones; the
-    noise-only range-Doppler columns are Gamma(n, N N0) (mean n N N0)."""
+    """The two-step noise draw in torch (integrated_power, row_noise; the NumPy pair is tested
+    against the full draw in test_detection.py): the channel-integrated power of C = 134
+    channels of noise variance N N0 is the chi-square law with 2C degrees of freedom (no
+    signal) or its non-central form (with), and the completed rows add up to it, with N N0 per
+    channel."""
+    from scipy import stats
+
     geom = array_geometry(mmwcas)
-    n0 = cell_noise_power(mmwcas)
-    zero = torch.zeros((256, len(geom.z_half_wl), len(geom.x_half_wl)), dtype=torch.complex64)
-    noise = dt._add_noise(zero, geom, n0, dt.noise_generator(1, 2, "cpu")).numpy()
-    power = (np.abs(noise.astype(np.complex128)) ** 2).mean(axis=0)       # (n_z, n_x)
-    want = geom.n_elements * n0
-    # 256 complex samples per position: relative std 1/16 each, pooled over the positions
-    assert power[geom.present].mean() == pytest.approx(want, rel=0.02)
-    assert np.all(power[~geom.present] == 0)
+    var = geom.n_elements * cell_noise_power(mmwcas)
+    c, n = int(geom.present.sum()), 4000
+    gen = dt.noise_generator(1, 2, "cpu")
+    rng = np.random.default_rng(0)
+    for snr in (0.0, 1.0):
+        s = rng.standard_normal(c) + 1j * rng.standard_normal(c)
+        s *= math.sqrt(snr * c * var) / np.linalg.norm(s)
+        s_pow = float(np.sum(np.abs(s) ** 2))
+        power, (par, rest) = dt.integrated_power(torch.full((n,), s_pow, dtype=torch.float64),
+                                                 c, var, gen)
+        nc = 2 * s_pow / var
+        law = stats.ncx2(2 * c, nc) if nc > 0 else stats.chi2(2 * c)
+        assert stats.kstest(power.numpy() / (var / 2), law.cdf).pvalue > 1e-3
+        noise = dt.row_noise(torch.as_tensor(np.tile(s, (n, 1))), par, rest, gen).numpy()
+        np.testing.assert_allclose(np.sum(np.abs(s + noise) ** 2, axis=1), power.numpy(),
+                                   rtol=1e-9)
+        assert np.mean(np.abs(noise) ** 2) == pytest.approx(var, rel=0.02)
     # a strong target keeps its strongest point, with or without noise, on either path
     host = simulate_scene_frame(scene, mmwcas, seed=9, device=None)
     dev = simulate_scene_frame(scene, mmwcas, seed=9, device="cpu")
