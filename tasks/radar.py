@@ -60,8 +60,9 @@ log = logging.getLogger(__name__)
 #: Bump when the radar_points output of the same inputs changes (simulator or table logic).
 #: (2: the ray tracer's IF response and element patterns, TI's detection chain; scene files
 #: may give each pose a speed. 3: the receiver noise drawn in two steps, channel-integrated
-#: power first: a new noise stream of the same distribution.)
-RADAR_POINTS_STAGE_VERSION = 3
+#: power first: a new noise stream of the same distribution. 4: the range-Doppler profile sums
+#: the array's channels only.)
+RADAR_POINTS_STAGE_VERSION = 4
 #: Bump when scene_meshes output changes for the same files.
 SCENE_MESHES_STAGE_VERSION = 1
 

@@ -9,7 +9,8 @@ are tested is :attr:`DetectionConfig.domain`:
 
 * ``integrated`` (the default; TI's chain for a rig at rest, :func:`integrated_detection_mask`):
   a CFAR along range on the range profile integrated over the virtual channels,
-  ``P[i] = sum_(x, z) |s(x, z)[i]|^2`` (TI's detection matrix, ``CFAR_CASO/datapath.m``, with
+  ``P[i] = sum_(x, z) |s(x, z)[i]|^2`` over the positions holding a virtual element (TI's
+  detection matrix, ``CFAR_CASO/datapath.m``, with
   the one Doppler bin a static scene fills), TI's smallest-of cell averaging by default
   (:func:`sim2radar.radar.cfar.cfar_1d`, ``edges="ti"``); then in each detected range bin the
   azimuth peaks (local maxima along azimuth) above ``min_snr_db`` over the map's noise and
@@ -82,6 +83,7 @@ __all__ = [
     "doppler_bins",
     "peak_points",
     "cell_noise_power",
+    "channel_profile",
     "detect_points",
     "direction_to_cartesian",
     "spherical_to_cartesian",
@@ -285,11 +287,23 @@ def detect_frame(acc: Accumulator, radar: RadarConfig, *,
                          noise="expected" if rng is None else rng)
 
 
+def channel_profile(apertures: np.ndarray, geometry) -> np.ndarray:
+    """(...) float64 — ``sum |s|^2`` of channel signals ``apertures`` (..., n_z, n_x) over the
+    array's channels: the positions holding a virtual element (the grid's other (x, z)
+    positions have a signal but no channel, and no receiver noise). TI's detection matrix is
+    this sum over the virtual channels (one per position here, with the position's noise
+    ``N N0``: :func:`~sim2radar.radar.binning.add_receiver_noise`)."""
+    power = apertures.real ** 2 + apertures.imag ** 2
+    on = geometry.present.astype(power.dtype)
+    return np.einsum("...zx,zx->...", power, on, optimize=False).astype(np.float64)
+
+
 def _detect_slabs(slabs: np.ndarray, apertures: np.ndarray, acc: Accumulator | None,
                   radar: RadarConfig, noise) -> Detections:
     """TI's chain on the range-Doppler map of the Doppler slabs' channel signals
     (``apertures`` (S, n_range, n_z, n_x) of the signed Doppler bins ``slabs`` (S,)): each
-    slab's profile ``sum_(x, z) |s|^2`` fills its Doppler column, the others hold receiver
+    slab's profile ``sum |s|^2`` over the array's channels (the positions holding a virtual
+    element) fills its Doppler column, the others hold receiver
     noise (``noise``: ``"expected"`` its mean, added to the slabs too; ``"none"`` the slabs
     carry it already and the empty columns get its mean; or a Generator to draw it: the
     slabs' receiver noise per present position, ``N N0`` each
@@ -308,15 +322,10 @@ def _detect_slabs(slabs: np.ndarray, apertures: np.ndarray, acc: Accumulator | N
     chan_noise = geom.n_elements * n0                       # per position (add_receiver_noise)
     mean_noise = chan_noise * n_pos
     drawn = isinstance(noise, np.random.Generator)
-    power = apertures.real ** 2 + apertures.imag ** 2                    # (S, n_r, n_z, n_x)
-    profile = power.sum(axis=(2, 3), dtype=np.float64)                     # (S, n_r)
+    profile = channel_profile(apertures, geom)                              # (S, n_r)
     if drawn:
-        # the receiver noise per present position (the absent positions' signal is summed too:
-        # no channel there, and no noise)
-        on = np.einsum("srzx,zx->sr", power, present.astype(power.dtype), optimize=False)
         rd = noise.gamma(n_pos, chan_noise, size=(n_r, n_d))  # noise-only Doppler columns
-        with_noise, row_draws = integrated_power(on, n_pos, chan_noise, noise)
-        profile += with_noise - on
+        profile, row_draws = integrated_power(profile, n_pos, chan_noise, noise)
     else:
         rd = np.full((n_r, n_d), mean_noise)
         if noise == "expected":

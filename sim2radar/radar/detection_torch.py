@@ -287,13 +287,12 @@ def detect_frame(acc: DeviceAccumulator, radar: RadarConfig, *,
     chan_noise = geom.n_elements * n0
     mean_noise = chan_noise * n_pos
     power = ap.real**2 + ap.imag**2                                         # (S, n_r, n_z, n_x)
-    profile = power.sum(dim=(-2, -1), dtype=torch.float64)                  # (S, n_r)
+    # over the array's channels (the positions holding a virtual element), as NumPy's
+    profile = (power * present.to(power.dtype)).sum(dim=(-2, -1), dtype=torch.float64)
     if generator is not None:
         shape = torch.full((n_r, n_d), float(n_pos), dtype=torch.float64, device=dev)
         rd = torch._standard_gamma(shape, generator=generator) * chan_noise
-        on = (power * present.to(power.dtype)).sum(dim=(-2, -1), dtype=torch.float64)
-        with_noise, (parallel, rest) = integrated_power(on, n_pos, chan_noise, generator)
-        profile = profile - on + with_noise
+        profile, (parallel, rest) = integrated_power(profile, n_pos, chan_noise, generator)
     else:
         rd = torch.full((n_r, n_d), mean_noise, dtype=torch.float64, device=dev)
         profile = profile + mean_noise

@@ -213,6 +213,26 @@ def test_doppler_bins_follow_the_rigs_motion(mmwcas):
     assert np.all(np.abs(bins[inner] - bins[mirror]) <= 1)
 
 
+def test_the_range_doppler_profile_sums_the_arrays_channels_only(mmwcas):
+    """TI's detection matrix sums |s|^2 over the virtual channels. A scatterer at boresight
+    gives every position the same |s| = |a|, so its range bin's profile is n |a|^2 for the
+    n = 134 positions holding an element — not 344 |a|^2 over every (x, z) of the 4 x 86 grid,
+    which would put the target 4.1 dB above the noise it is compared with (the noise is on the
+    134 channels only). A signal on the empty positions alone gives nothing."""
+    from sim2radar.radar.detection import channel_profile
+
+    geom = array_geometry(mmwcas)
+    n = int(geom.present.sum())
+    assert n == 134 and geom.present.size == 344
+    a = 2e-3
+    acc = deposit(np.array([4.0]), np.zeros(1), np.zeros(1), np.array([a + 0j]), mmwcas)
+    ap = acc.aperture(geom)
+    ir = int(np.argmax(np.abs(ap).sum(axis=(1, 2))))
+    assert channel_profile(ap, geom)[ir] == pytest.approx(n * a**2, rel=1e-3)
+    phantom = np.where(geom.present, 0.0, 1.0)[None] * np.ones((3, 1, 1), complex)
+    assert np.all(channel_profile(phantom, geom) == 0)
+
+
 def test_slab_apertures_are_the_aperture_of_each_slabs_points(mmwcas):
     """One product per Doppler slab (Accumulator.slab_apertures) gives the channel signal the
     FFT of Accumulator.aperture gives for that slab's fine points alone (complex64 rounding:
