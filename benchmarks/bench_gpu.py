@@ -19,7 +19,8 @@ Figures, each measured here:
    dispatches; each run's step at the measured speed of the runs sharing the device at that
    moment).
 4. **The radar on the device**: a ray-traced ``ti-mmwcas`` frame of a 20k-triangle corridor
-   with the Mitsuba variant in use (``cuda_ad_rgb`` on a GPU) against bare ``ray_intersect``
+   (a rig at rest, and walking at 1 m/s as the factory's frames are taken) with the Mitsuba
+   variant in use (``cuda_ad_rgb`` on a GPU) against bare ``ray_intersect``
    of the same rays, its detection where :func:`sim2radar.radar.frame.detection_device` puts
    it (torch on the GPU under ``cuda_ad_rgb``: the sums stay there,
    :mod:`sim2radar.radar.detection_torch`) and, for comparison, the same frame detected on the
@@ -145,22 +146,29 @@ def radar_frames() -> dict:
     torch_dev = str(torch_device())
     # "auto": where detection_device puts it; None: NumPy on the host; the torch chain on the
     # device torch picks (the GPU, or the CPU where there is none)
-    modes = {"auto": "auto", "host": None, "torch": torch_dev}
-    for mode in modes.values():
-        simulate_scene_frame(scene, radar, pose, seed=0, device=mode)
+    # and "walking": "auto" with the rig walking at 1 m/s, as the factory's frames are taken
+    # (its returns fill ~20 Doppler bins, each detected as a slab)
+    modes = {"auto": "auto", "host": None, "torch": torch_dev, "walking": "auto"}
+    walk = {"walking": np.array([1.0, 0.0, 0.0])}
+    for key, mode in modes.items():
+        simulate_scene_frame(scene, radar, pose, seed=0, device=mode,
+                             velocity_mps=walk.get(key))
     scene.intersect_only(radar, pose, seed=0)
     times: dict[str, list[float]] = {k: [] for k in modes}
     stages: dict[str, list[float]] = {}
+    walk_stages: dict[str, list[float]] = {}
     bare_s, where = [], ""
     for i in range(5):
         for key, mode in modes.items():  # interleaved: each sees the same machine load
             t0 = time.perf_counter()
-            f = simulate_scene_frame(scene, radar, pose, seed=i + 1, device=mode)
+            f = simulate_scene_frame(scene, radar, pose, seed=i + 1, device=mode,
+                                     velocity_mps=walk.get(key))
             times[key].append(time.perf_counter() - t0)
-            if key == "auto":
+            if key in ("auto", "walking"):
                 where = f.stats["detection_device"]
                 for stage, seconds in f.stats["seconds"].items():
-                    stages.setdefault(stage, []).append(seconds)
+                    (stages if key == "auto" else walk_stages).setdefault(
+                        stage, []).append(seconds)
         bare_s.append(scene.intersect_only(radar, pose, seed=i + 1)["seconds"])
     frame, bare = statistics.median(times["auto"]), statistics.median(bare_s)
     ref = load_radar_config("ti-mmwcas-reference")
@@ -175,10 +183,13 @@ def radar_frames() -> dict:
             ref_parts[part].append(seconds)
     host_s, torch_s = statistics.median(times["host"]), statistics.median(times["torch"])
     split = {k: round(statistics.median(v) * 1000, 2) for k, v in stages.items()}
+    walk_split = {k: round(statistics.median(v) * 1000, 2) for k, v in walk_stages.items()}
+    walking_s = statistics.median(times["walking"])
     ref_split = {k: round(statistics.median(v) * 1000, 1) for k, v in ref_parts.items()}
     res = {"variant": scene.variant, "frame_s": round(frame, 4), "bare_s": round(bare, 4),
            "ratio": round(frame / bare, 2), "detection_device": where,
-           "frame_stages_ms": split,
+           "frame_stages_ms": split, "walking_frame_s": round(walking_s, 4),
+           "walking_ratio": round(walking_s / bare, 2), "walking_frame_stages_ms": walk_split,
            "frame_host_detection_s": round(host_s, 4),
            "frame_torch_detection_s": round(torch_s, 4), "torch_device": torch_dev,
            "reference_frame_s": round(statistics.median(ref_s), 3),
@@ -189,6 +200,8 @@ def radar_frames() -> dict:
           f"{host_s * 1000:.1f} ms, by torch on {torch_dev} {torch_s * 1000:.1f} ms; "
           f"reference frame (20k paths, {out.stats['device']}): "
           f"{res['reference_frame_s']:.3f} s")
+    print(f"  the rig walking at 1 m/s: {walking_s * 1000:.1f} ms ({walking_s / bare:.2f}x; "
+          + ", ".join(f"{k} {v:.2f}" for k, v in walk_split.items()) + " ms)")
     print("  ray-traced frame's stages [ms]: "
           + ", ".join(f"{k} {v:.2f}" for k, v in split.items())
           + "; reference frame's [ms, each ended by a device sync]: "

@@ -45,4 +45,7 @@ def test_the_gpu_benchmark_runs_on_a_cpu(capsys, monkeypatch):
     assert set(radar["reference_stages_ms"]) == {"synthesis", "processing"}
     assert all(v > 0 for v in radar["reference_stages_ms"].values())
     assert "reference frame's [ms" in out
+    # a walking rig's frame, as the factory's are taken: more Doppler slabs to detect
+    assert radar["walking_frame_s"] > radar["bare_s"] and "the rig walking at 1 m/s" in out
+    assert radar["walking_frame_stages_ms"]["detect"] > 0
     assert "--runs-per-gpu auto would choose" in out and "paper grid: 75 jobs" in out
