@@ -809,8 +809,11 @@ def test_cli_bad_input_is_one_line_and_exit_2(sweep_dir, tmp_path, case):
 
 def test_cli_serve_prints_the_url_serves_and_stops_on_ctrl_c(sweep_dir):
     exe = Path(sys.executable).with_name("sim2radar")
+    # faulthandler: if it does not stop, SIGABRT makes it print every thread's stack (it has
+    # twice not stopped within 30 s in a fresh clone's full suite, never alone or under load)
     proc = subprocess.Popen([str(exe), "dashboard", str(sweep_dir), "--serve", "--port", "0"],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            env={**os.environ, "PYTHONFAULTHANDLER": "1"})
     try:
         ready, _, _ = select.select([proc.stdout], [], [], 60)
         assert ready, "no URL printed within 60 s"
@@ -825,7 +828,12 @@ def test_cli_serve_prints_the_url_serves_and_stops_on_ctrl_c(sweep_dir):
         proc.send_signal(signal.SIGINT)
         # communicate drains both pipes (a child blocked on a full stderr pipe never exits);
         # 30 s: a fresh clone's suite on 2 shared cores once took over 10 s to reap it
-        out, err = proc.communicate(timeout=30)
+        try:
+            out, err = proc.communicate(timeout=30)
+        except subprocess.TimeoutExpired:
+            proc.send_signal(signal.SIGABRT)
+            out, err = proc.communicate(timeout=30)
+            pytest.fail(f"no exit 30 s after SIGINT; its threads at SIGABRT:\n{err}")
         assert proc.returncode == 0, err
         assert "stopped" in out, (out, err)
     finally:

@@ -6,6 +6,7 @@ from __future__ import annotations
 import json
 import re
 import shutil
+import time
 from pathlib import Path
 
 import numpy as np
@@ -33,17 +34,27 @@ def capture_folder(tmp_path_factory):
     return root
 
 
-def _task_runs(flow_run_name_filter: str = "capture-dataset"):
-    """Task runs of the latest capture-dataset flow run: name -> state name."""
+def _task_runs(flow_run_name_filter: str = "capture-dataset", wait_s: float = 60.0):
+    """Task runs of the latest capture-dataset flow run: name -> state name.
+
+    Prefect 3's server records task-run states from the events the task runs emit, after the
+    fact: read right after the flow ends, a task run can still have no state (the full suite
+    once read ``None``) or a non-final one. Read again until every state is final."""
     from prefect.client.orchestration import get_client
     from prefect.client.schemas.filters import FlowFilter, FlowRunFilter
     from prefect.client.schemas.sorting import FlowRunSort
 
+    deadline = time.monotonic() + wait_s
     with get_client(sync_client=True) as client:
         run = client.read_flow_runs(flow_filter=FlowFilter(name={"any_": [flow_run_name_filter]}),
                                     sort=FlowRunSort.START_TIME_DESC, limit=1)[0]
-        runs = client.read_task_runs(flow_run_filter=FlowRunFilter(id={"any_": [run.id]}))
-    return {r.name: r.state.name for r in runs}
+        while True:
+            runs = client.read_task_runs(flow_run_filter=FlowRunFilter(id={"any_": [run.id]}))
+            if all(r.state is not None and r.state.is_final() for r in runs) or \
+                    time.monotonic() > deadline:
+                break
+            time.sleep(0.5)
+    return {r.name: (r.state.name if r.state is not None else None) for r in runs}
 
 
 def test_capture_folder_to_radar_dataset_stage_by_stage(prefect_server, capture_folder, tmp_path):
