@@ -489,12 +489,13 @@ def test_a_sweep_on_a_dask_cluster_gives_the_thread_runners_results(first, data,
 
     class Restrictions(SchedulerPlugin):
         def __init__(self, scheduler):
-            self.scheduler, self.seen = scheduler, {}
+            self.scheduler, self.seen, self.priority = scheduler, {}, {}
 
         def transition(self, key, start, finish, *args, **kwargs):
             if finish == "processing":
                 ts = self.scheduler.tasks.get(key)
                 self.seen[key] = dict(ts.resource_restrictions or {}) if ts else None
+                self.priority[key] = (ts.annotations or {}).get("priority") if ts else None
 
     plan = prepare_sweep({"sim": data["sim"], "real": data["real"]}, profile="smoke",
                          name="t", out=tmp_path / "sweeps", store=tmp_path / "store")
@@ -509,6 +510,10 @@ def test_a_sweep_on_a_dask_cluster_gives_the_thread_runners_results(first, data,
     assert summary["counts"] == {"ok": 8, "skipped": 0, "failed": 0}
     assert len(plugin.seen) == 8 + len(plan.pretrains)       # every training task ...
     assert all(r == {GPU_RESOURCE: 1} for r in plugin.seen.values()), plugin.seen  # ... a slot
+    # ... and, all handed over at once on a scheduler address, its chain of steps as priority
+    from sim2radar.experiment.cost import chain_steps, plan_jobs
+
+    assert sorted(plugin.priority.values()) == sorted(chain_steps(plan_jobs(plan)).values())
 
     def aps(path):
         rows = pq.read_table(path).to_pylist()
