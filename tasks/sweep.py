@@ -15,12 +15,12 @@ prepared, then hands the training runs to the runner's task pool as they become 
 pre-trainings and the runs from scratch at once, a pre-trained condition's runs when their
 pre-training finishes (a failed pre-training fails its runs with its error); the ready job
 with the longest chain of optimiser steps ahead goes first (:class:`Dispatch`), so the
-full-data runs do not start last and run alone at the end. Every training run is keyed by content (a finished run is
-``skipped`` on a rerun, a run killed half-way resumes from its last checkpoint:
-:mod:`sim2radar.tasks.experiment`). As runs finish, the sweep folder's ``runs.parquet``,
-``pretrainings.parquet`` and ``progress.json`` are rewritten (the dashboard's ``--serve`` mode
-shows them live); at the end the statistics (``stats.json``), the results table
-(``results.md``) and the dashboard (``dashboard.html``) are written
+full-data runs do not start last and run alone at the end. Every training run is keyed by
+content (a finished run is ``skipped`` on a rerun, a run killed half-way resumes from its last
+checkpoint: :mod:`sim2radar.tasks.experiment`). As runs finish, the sweep folder's
+``runs.parquet``, ``pretrainings.parquet`` and ``progress.json`` are rewritten (the
+dashboard's ``--serve`` mode shows them live); at the end the statistics (``stats.json``), the
+results table (``results.md``) and the dashboard (``dashboard.html``) are written
 (:func:`sim2radar.experiment.finish.finish_sweep`).
 
 The sweep folder (``<out>/<name>/``)::

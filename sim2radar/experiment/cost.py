@@ -36,8 +36,8 @@ if TYPE_CHECKING:
     from sim2radar.experiment.plan import SweepPlan
     from sim2radar.experiment.prepare import SweepSetup
 
-__all__ = ["Job", "chain_steps", "measure_step_seconds", "plan_jobs", "sweep_cost", "sweep_jobs",
-           "wall_time"]
+__all__ = ["Job", "chain_steps", "measure_step_seconds", "plan_jobs", "sim_frame_counts",
+           "sweep_cost", "sweep_jobs", "wall_time"]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -82,14 +82,22 @@ def plan_jobs(plan: SweepPlan) -> list[Job]:
     """The jobs of a prepared sweep (:class:`~sim2radar.experiment.plan.SweepPlan`), with the
     optimiser steps :func:`sweep_jobs` gives them: the sim frames each pre-training trains on
     are its dataset's planned ids less its held-out split."""
-    ctx = plan.context
+    specs = [p.spec for p in plan.pretrains]
+    return sweep_jobs(specs, [r.spec for r in plan.runs],
+                      sim_frame_counts(specs, plan.context.datasets),
+                      plan.context.finetune_config.optimization.batch_size)
+
+
+def sim_frame_counts(pretrains: Sequence[PretrainSpec], datasets: Mapping[str, Any]
+                     ) -> dict[str, int]:
+    """Sim role -> frames its pre-trainings train on: the dataset's ids (``datasets[role]
+    .ids(splits)``: an opened dataset or a plan's reference) less the held-out split."""
     n_sim = {}
-    for p in plan.pretrains:
-        sim, held = ctx.datasets[p.spec.sim_role], p.spec.holdout_split
+    for p in pretrains:
+        sim, held = datasets[p.sim_role], p.holdout_split
         out = set(sim.ids([held])) if held else set()
-        n_sim[p.spec.sim_role] = sum(i not in out for i in sim.ids())
-    return sweep_jobs([p.spec for p in plan.pretrains], [r.spec for r in plan.runs], n_sim,
-                      ctx.finetune_config.optimization.batch_size)
+        n_sim[p.sim_role] = sum(i not in out for i in sim.ids())
+    return n_sim
 
 
 def chain_steps(jobs: Sequence[Job]) -> dict[str, int]:
@@ -220,10 +228,7 @@ def sweep_cost(setup: SweepSetup, domains: Mapping[str, Any], *,
     if not train_ids:
         raise ValueError(f"{real.root}/ImageSets/{profile.train_split}.txt lists no frame")
     pretrains, runs = plan_sweep(profile, train_ids, setup.conditions)
-    held = profile.pretrain_holdout_split     # held out of every pre-training
-    n_sim = {role: len(set(ds.ids()) - set(ds.ids([held]) if held else ()))
-             for role, ds in domains.items() if role != "real"}
-    jobs = sweep_jobs(pretrains, runs, n_sim, profile.batch_size)
+    jobs = sweep_jobs(pretrains, runs, sim_frame_counts(pretrains, domains), profile.batch_size)
     measured = step_seconds is None
     if measured:
         n = 3 * profile.batch_size

@@ -84,8 +84,8 @@ __all__ = [
     "Accumulator",
     "ArrayGeometry",
     "TraceResult",
-    "accumulate",
     "RowNoise",
+    "accumulate",
     "add_receiver_noise",
     "array_geometry",
     "azimuth_map",
@@ -190,6 +190,13 @@ class ArrayGeometry:
         return czt, n, post
 
     @functools.cached_property
+    def fine_phases(self) -> np.ndarray:
+        """(M, n_x) complex128 — ``e^{j pi u_g (x + x_shift)}``: the channel signal at
+        position ``x`` is ``sum_g G[g]`` times this (:meth:`Accumulator.aperture`; an FFT
+        evaluates the same sum when the shifted positions are integers)."""
+        return np.exp(1j * math.pi * np.outer(self.fine_u, self.x_half_wl + self.x_shift))
+
+    @functools.cached_property
     def _fft_terms(self) -> tuple[np.ndarray, np.ndarray]:
         """Column indices ``n`` (n_x,) and post-phase ``M e^{-j pi n}`` (n_x,) of the FFT."""
         n = np.round(self.x_half_wl + self.x_shift).astype(np.int64)
@@ -290,9 +297,7 @@ class Accumulator:
             n, post = geometry._fft_terms
             s = scipy.fft.ifft(g, axis=-1)[..., n] * post.astype(g.dtype)
         else:
-            e = np.exp(1j * math.pi * np.outer(geometry.fine_u,
-                                                geometry.x_half_wl + geometry.x_shift))
-            s = np.einsum("zrg,gx->zrx", g, e, optimize=False)
+            s = np.einsum("zrg,gx->zrx", g, geometry.fine_phases, optimize=False)
         return np.transpose(s, (1, 0, 2))
 
     def slab_apertures(self, geometry: ArrayGeometry, labels: np.ndarray
@@ -314,8 +319,7 @@ class Accumulator:
         slabs, inverse = np.unique(labels, return_inverse=True)
         if len(slabs) == 1:                 # every point: the FFT of aperture()
             return slabs, self.aperture(geometry)[None]
-        phase = np.outer(geometry.fine_u, geometry.x_half_wl + geometry.x_shift)
-        e = np.exp(1j * math.pi * phase).astype(np.complex64)               # (M, n_x)
+        e = geometry.fine_phases.astype(np.complex64)                       # (M, n_x)
         out = np.empty((len(slabs), n_r, n_z, len(geometry.x_half_wl)), dtype=np.complex64)
         flat = g.reshape(n_z * n_r, m)
         with one_blas_thread():
@@ -474,12 +478,10 @@ class RowNoise:
     parallel : (...) complex128 — each row's noise component along its own signal vector
         (any fixed direction for a row without signal) [sqrt(sim. |a|^2)].
     rest : (...) float64 — the power of the noise orthogonal to it [sim. |a|^2].
-    variance : float — noise power per channel, ``E |n|^2`` [sim. |a|^2].
     """
 
     parallel: np.ndarray
     rest: np.ndarray
-    variance: float
 
 
 def integrated_power(signal_power: np.ndarray, n_channels: int, variance: float,
@@ -504,7 +506,7 @@ def integrated_power(signal_power: np.ndarray, n_channels: int, variance: float,
     rest = (rng.gamma(n_channels - 1, variance, size=shape) if n_channels > 1
             else np.zeros(shape))
     power = (a + z[0]) ** 2 + z[1] ** 2 + rest
-    return power, RowNoise(z[0] + 1j * z[1], rest, float(variance))
+    return power, RowNoise(z[0] + 1j * z[1], rest)
 
 
 def row_noise(signal: np.ndarray, drawn: RowNoise, rng: np.random.Generator) -> np.ndarray:

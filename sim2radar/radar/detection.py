@@ -354,7 +354,7 @@ def _detect_slabs(slabs: np.ndarray, apertures: np.ndarray, acc: Accumulator | N
         return Detections(np.zeros((0, 4), np.float32), np.zeros(0, np.float32))
     rows = apertures[si, ri].astype(np.complex128)                         # (K, n_z, n_x)
     if drawn:
-        picked = RowNoise(row_draws.parallel[si, ri], row_draws.rest[si, ri], chan_noise)
+        picked = RowNoise(row_draws.parallel[si, ri], row_draws.rest[si, ri])
         rows[:, present] += row_noise(rows[:, present], picked, noise)
     p = np.abs(azimuth_map(rows, geom).astype(np.complex128)) ** 2          # (K, n_az)
     cand = p > n0 * geom.main_noise_factor * 10.0 ** (cfg.min_snr_db / 10.0)

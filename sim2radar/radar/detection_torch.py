@@ -88,8 +88,7 @@ def _aperture(grid, geom: ArrayGeometry, masks):
         s = torch.fft.ifft(g, dim=-1)[..., torch.as_tensor(n, device=dev)]
         s = s * torch.as_tensor(post, device=dev, dtype=torch.complex64)
     else:
-        e = np.exp(1j * math.pi * np.outer(geom.fine_u, geom.x_half_wl + geom.x_shift))
-        s = torch.einsum("szrg,gx->szrx", g, torch.as_tensor(e, device=dev,
+        s = torch.einsum("szrg,gx->szrx", g, torch.as_tensor(geom.fine_phases, device=dev,
                                                              dtype=torch.complex64))
     return s.transpose(1, 2)
 
