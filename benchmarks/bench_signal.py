@@ -4,7 +4,8 @@ First synthetic corridor path sets (diffuse points on walls, floor, ceiling and 
 20 % two-bounce paths whose departure and arrival points differ) at the ``ti-mmwcas-reference``
 preset (12 TX x 16 RX = 192 channels, 256 samples, 64 loops: the full chirp cube, TI's chain),
 moving at a walking speed: synthesis, processing and total seconds per frame (median of the
-timed frames after one warm-up frame), the torch device, peak resident memory. Then the
+timed frames after one warm-up frame; points only, as the factory runs it: no range-azimuth
+heatmap), the torch device, peak resident memory. Then the
 reference radar as the factory runs it: procedural corridors (worlds 100000-100002, 3 frames
 each along the rig's trajectory), the rig walking at a speed drawn per frame (0.5-1.5 m/s, as
 ``sim2radar reference``), a new seed per frame — traced paths -> IF -> points, with seconds per
@@ -79,7 +80,7 @@ def main() -> dict:
         frames = []
         for i in range(N_FRAMES + 1):
             t0 = time.perf_counter()
-            frame = simulate_signal_frame(paths, radar, seed=i)
+            frame = simulate_signal_frame(paths, radar, seed=i, heatmap=False)
             wall = time.perf_counter() - t0
             if i:
                 frames.append((frame.stats["seconds_if_total"],
@@ -145,7 +146,7 @@ def corridor_frames(seeds=(100_000, 100_001, 100_002), n_frames: int = 3) -> dic
         "seconds_trace_median": round(float(np.median(trace)), 3),
         "seconds_synthesis_median": round(float(np.median(synth)), 3),
         "seconds_processing_median": round(float(np.median(proc)), 3),
-            "kernels_compiled_after_first_frame": compiled,
+        "kernels_compiled_after_first_frame": compiled,
         "paths_per_frame_median": int(np.median(paths)),
         "points_per_frame_median": int(np.median(points)),
         "points_per_frame_range": [int(points.min()), int(points.max())],

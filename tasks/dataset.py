@@ -82,7 +82,7 @@ log = logging.getLogger(__name__)
 
 #: Bump when a ``dataset_frames`` artifact of the same inputs changes (labels, filtering,
 #: table logic): every dataset frame is recomputed, world renders and reconstructions are not.
-DATASET_STAGE_VERSION = 7
+DATASET_STAGE_VERSION = 8
 #: (2: door labels need the radar to see >= LabelConfig.min_visibility of the doorway instead
 #: of only the box centre in FOV and range; label visibility and Doppler stored; derived
 #: receiver noise in the ray tracer. 3: the reference radar runs TI's cascade detection chain
@@ -91,7 +91,9 @@ DATASET_STAGE_VERSION = 7
 #: 5: the ray tracer weights each return by the antenna elements' two-way gain.
 #: 6: the ray tracer's receiver noise drawn in two steps, channel-integrated power first: a new
 #: noise stream of the same distribution. 7: the ray tracer's range-Doppler profile sums the
-#: array's channels only, not the empty positions of its position grid)
+#: array's channels only, not the empty positions of its position grid. 8: the reference
+#: radar's IF synthesis inverse-FFTs each Doppler group before forming the chirps: float32
+#: rounding, so an ADC sample can land one LSB over)
 #: Short tags used in frame ids and artifact maps.
 _TAG = {"ground_truth": "gt", "reconstructed": "rec"}
 

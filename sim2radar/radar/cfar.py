@@ -513,8 +513,8 @@ def hysteresis_peaks(spectrum: np.ndarray, *, gamma: float, sidelobe_db: float) 
     if s.ndim != 2:
         raise ValueError(f"spectrum must be (D, N), got shape {s.shape}")
     d, n = s.shape
-    rows = np.arange(d)
-    abs_max = np.zeros(d)
+    cols = np.ascontiguousarray(s.T)             # the scan reads one bin of every row at a time
+    abs_max = np.maximum(s.max(axis=1), 0.0) if n else np.zeros(d)  # the scan sees every bin
     max_val = np.zeros(d)
     max_loc = np.zeros(d, dtype=np.int64)
     min_val = np.full(d, np.inf)
@@ -522,25 +522,46 @@ def hysteresis_peaks(spectrum: np.ndarray, *, gamma: float, sidelobe_db: float) 
     extend = np.zeros(d, dtype=np.int64)  # TI's extendLoc (1-based scan index), 0 = not yet
     peaks = np.zeros((d, n), dtype=bool)
     peak_val = np.zeros((d, n))
-    for i in range(1, 2 * n):  # TI: i = i + 1 while i < N + extendLoc - 1 held before
-        active = i < n + extend
+    # TI: i = i + 1 while i < N + extendLoc - 1 held before. Scan index i = 1..N-1 runs on
+    # every row; from i = N on only the armed rows go on (to N + extendLoc - 1), each on its own
+    for i in range(1, n):
+        loc = i - 1
+        cur = cols[loc]
+        higher = cur > max_val
+        np.copyto(max_val, cur, where=higher)
+        np.copyto(max_loc, loc, where=higher)
+        np.minimum(min_val, cur, out=min_val)
+        declare = locate & (cur < max_val / gamma)
+        if declare.any():
+            r = np.flatnonzero(declare)
+            peaks[r, max_loc[r]] = True
+            peak_val[r, max_loc[r]] = max_val[r]
+            min_val[r] = cur[r]
+        arm = ~locate & (cur > min_val * gamma)
+        np.copyto(max_val, cur, where=arm)
+        np.copyto(max_loc, loc, where=arm)
+        np.copyto(extend, i, where=arm & (extend == 0))
+        locate = (locate & ~declare) | arm
+    rows = np.flatnonzero(extend > 0)
+    mx, ml, mn, lc, ext = max_val[rows], max_loc[rows], min_val[rows], locate[rows], extend[rows]
+    for i in range(n, 2 * n):
+        active = i < n + ext
         if not active.any():
             break
         loc = (i - 1) % n
-        cur = s[:, loc]
-        abs_max = np.where(active, np.maximum(abs_max, cur), abs_max)
-        higher = active & (cur > max_val)
-        max_val = np.where(higher, cur, max_val)
-        max_loc = np.where(higher, loc, max_loc)
-        min_val = np.where(active & (cur < min_val), cur, min_val)
-        declare = active & locate & (cur < max_val / gamma)
-        peaks[rows[declare], max_loc[declare]] = True
-        peak_val[rows[declare], max_loc[declare]] = max_val[declare]
-        min_val = np.where(declare, cur, min_val)
-        arm = active & ~locate & (cur > min_val * gamma)
-        max_val = np.where(arm, cur, max_val)
-        max_loc = np.where(arm, loc, max_loc)
-        extend = np.where(arm & (extend == 0), i, extend)
-        locate = (locate & ~declare) | arm
+        cur = cols[loc, rows]
+        higher = active & (cur > mx)
+        np.copyto(mx, cur, where=higher)
+        np.copyto(ml, loc, where=higher)
+        np.copyto(mn, cur, where=active & (cur < mn))
+        declare = active & lc & (cur < mx / gamma)
+        if declare.any():
+            peaks[rows[declare], ml[declare]] = True
+            peak_val[rows[declare], ml[declare]] = mx[declare]
+            np.copyto(mn, cur, where=declare)
+        arm = active & ~lc & (cur > mn * gamma)
+        np.copyto(mx, cur, where=arm)
+        np.copyto(ml, loc, where=arm)
+        lc = (lc & ~declare) | arm
     keep = peaks & (peak_val >= abs_max[:, None] * 10.0 ** (-float(sidelobe_db) / 10.0))
     return keep

@@ -56,8 +56,9 @@ tested). Per path and chirp ``m`` of TX ``t`` the slow-time factor is ``e^{j 2 p
 T_{m,t}}`` with the Doppler ``f_D`` at mid-window; paths are grouped by ``f_D`` rounded to
 1/:data:`DOPPLER_SUBBINS` of a Doppler bin (a tone at most 1/8 bin off, no leakage), each
 group's fast-time tones gridded as in ``frequency`` (one sparse-times-dense product per
-sub-array), and the chirps formed by one matrix product per channel over the groups,
-``x[m] = sum_g e^{j 2 pi f_g T_{m,t}} y_g``, then one inverse FFT per chirp and channel. Left
+sub-array) and inverse-FFT'd to the group's fast-time samples ``y_g`` (one transform per group
+and channel, where the chirps would need one per chirp), and the chirps formed by one matrix
+product per channel over the groups, ``x[m] = sum_g e^{j 2 pi f_g T_{m,t}} y_g``. Left
 out: the range migration over the frame (``2 rdot T / c``: <= 1.2 range bins at 1.5 m/s
 radial over the 39 ms frame, <= 0.5 dB at the peak).
 
@@ -350,15 +351,25 @@ class _PathTerms:
 
 def _distances_m(points: np.ndarray, elements: np.ndarray) -> np.ndarray:
     """(P, E) float64 ``|points_p - elements_e|`` [m], the squares summed coordinate by
-    coordinate in place: the same values as ``np.linalg.norm(points[:, None] - elements,
-    axis=2)`` (the same additions in the same order) at ~4x its speed (no (P, E, 3)
-    temporaries, no reduction over an axis of 3)."""
+    coordinate: the same values as ``np.linalg.norm(points[:, None] - elements, axis=2)`` (the
+    same additions in the same order) at several times its speed (no (P, E, 3) temporaries, no
+    reduction over an axis of 3, and a coordinate all elements share, such as the array
+    plane's x = 0, is squared once per point)."""
     acc = None
     for k in range(3):
-        d = points[:, k, None] - elements[None, :, k]
+        e_k = elements[:, k]
+        if np.all(e_k == e_k[0]):
+            d = (points[:, k] - e_k[0])[:, None]                               # (P, 1)
+        else:
+            d = points[:, k, None] - e_k[None, :]                              # (P, E)
         d *= d
-        acc = d if acc is None else np.add(acc, d, out=acc)
-    return np.sqrt(acc, out=acc)
+        if acc is None:
+            acc = d
+        elif acc.shape == np.broadcast_shapes(acc.shape, d.shape):
+            acc += d
+        else:
+            acc = acc + d
+    return np.sqrt(np.broadcast_to(acc, (len(points), len(elements))))
 
 
 def _path_terms(paths: PathSet, radar: RadarConfig) -> tuple[_PathTerms, dict[str, int]]:
@@ -601,15 +612,21 @@ def _synth_narrowband(torch, radar: RadarConfig, terms: _PathTerms, w_d: np.ndar
         e = np.einsum("m,mtg->tg", w_d, e)[:, None, :]                      # (T, 1, G)
     else:
         e = np.transpose(e, (1, 0, 2))                                      # (T, M, G)
-    e_c = torch.as_tensor(e[np.arange(nt * nr) // nr].astype(np.complex64), device=device)
+    e_t = torch.as_tensor(e.astype(np.complex64), device=device)           # (T, S, G)
     taps_at = torch.arange(w, dtype=torch.float64, device=device)
     group_row = (g0 - g_lo) * row_len
-    # per sub-array: its fast-time grid (wrapped by the kernel width), then one product per
-    # channel over the Doppler groups, written straight into the sub-array's rows of `chirps`
-    # (the channels in sub-array order, `perm`; put back in order with the fast-time samples)
+    # per sub-array: its fast-time grid (wrapped by the kernel width), each Doppler group's
+    # grid inverse-FFT'd to its fast-time samples (G transforms per channel where the chirps
+    # would need S, and only the N samples kept), then one product per channel over the
+    # groups, x[m] = sum_g e^{j 2 pi f_g T_m} y_g, into the sub-array's rows of `chirps`
+    # (the channels in sub-array order, `perm`; put back in order at the end)
     perm = np.concatenate(subs)
     n_slow = e.shape[1]
-    chirps = torch.empty((nt * nr, n_slow, m_grid), dtype=torch.complex64, device=device)
+    # the inverse FFT's scale M (a power of two: exact) folded into the deapodisation
+    deapod = torch.as_tensor(m_grid * _deapodisation(n, w, NUFFT_OVERSAMPLING), device=device,
+                             dtype=torch.float32)
+    h = n // 2
+    chirps = torch.empty((nt * nr, n_slow, n), dtype=torch.complex64, device=device)
     start = 0
     for chans in subs:
         # one tone per path and sub-array at the sub-array's mean delay (eq. (1); frequency and
@@ -625,27 +642,27 @@ def _synth_narrowband(torch, radar: RadarConfig, terms: _PathTerms, w_d: np.ndar
         taps = _es_kernel_inplace(torch, (l0 - u)[:, None] + taps_at, w).to(torch.float32)
         key = group_row + torch.remainder(l0.to(torch.int64), m_grid)
         chans_t = torch.as_tensor(chans, device=device)
-        # (advanced indexing gathers these columns ~3x faster than index_select on a CPU)
-        wts = a_t[:, chans_t // nr] * b_r[:, chans_t % nr] * cis(cycles, amp_abs)[:, None]
+        # (advanced indexing gathers these columns ~3x faster than index_select on a CPU; the
+        # products in place: no new (P, c) arrays)
+        wts = a_t[:, chans_t // nr]
+        wts.mul_(b_r[:, chans_t % nr]).mul_(cis(cycles, amp_abs)[:, None])
         v = torch.view_as_real(wts).reshape(len(amp), -1)
         part = torch.view_as_complex(_grid_rows(v, key, taps, n_groups * row_len).reshape(
-            -1, len(chans), 2)).reshape(n_groups, row_len, len(chans))
-        folded = part[:, :m_grid].clone()
-        folded[:, :w] += part[:, m_grid:]
-        torch.bmm(e_c[chans_t], folded.permute(2, 0, 1),
-                  out=chirps[start:start + len(chans)])                     # (c, S, M)
+            -1, len(chans), 2)).reshape(n_groups, row_len, len(chans)).permute(2, 0, 1)
+        folded = part[..., :m_grid].contiguous()                            # (c, G, M)
+        folded[..., :w] += part[..., m_grid:]
+        spec = torch.fft.ifft(folded, dim=-1)
+        del folded
+        # fast-time sample k is grid bin k - n//2 (mod M): the grid's last n//2 bins, then its
+        # first n - n//2
+        y = torch.empty((len(chans), n_groups, n), dtype=torch.complex64, device=device)
+        torch.mul(spec[..., m_grid - h:], deapod[:h], out=y[..., :h])
+        torch.mul(spec[..., :n - h], deapod[h:], out=y[..., h:])
+        del spec
+        torch.bmm(e_t[chans_t // nr], y, out=chirps[start:start + len(chans)])  # (c, S, N)
         start += len(chans)
-    g_t = torch.fft.ifft(chirps, dim=-1).permute(1, 0, 2)                   # (S, C perm, M)
-    # the inverse FFT's scale M (a power of two: exact) folded into the deapodisation
-    deapod = torch.as_tensor(m_grid * _deapodisation(n, w, NUFFT_OVERSAMPLING), device=device,
-                             dtype=torch.float32)
-    # fast-time sample k is grid bin k - n//2 (mod M): the grid's last n//2 bins, then its
-    # first n - n//2, each channel back in its place
-    h = n // 2
-    inv = torch.as_tensor(np.argsort(perm), device=device)
     out = torch.empty((n_slow, nt * nr, n), dtype=torch.complex64, device=device)
-    torch.mul(g_t[:, inv, m_grid - h:], deapod[:h], out=out[..., :h])
-    torch.mul(g_t[:, inv, :n - h], deapod[h:], out=out[..., h:])
+    out.transpose(0, 1).index_copy_(0, torch.as_tensor(perm, device=device), chirps)
     return out.reshape(n_slow, nt, nr, n)                                   # (S, T, R, N)
 
 
@@ -671,29 +688,31 @@ def _couple(torch, ctx, crx, x):
     return torch.matmul(ctx, y.reshape(s, nt, nr * n)).reshape(s, nt, nr, n)
 
 
-def _thermal_noise(torch, shape: tuple[int, ...], seed: int, power_w: float, device,
-                   on_device: bool | None = None):
-    """Circular complex Gaussian noise of ``power_w`` [W] per sample, (shape) complex64.
+def _add_thermal_noise(torch, x, seed: int, power_w: float, on_device: bool | None = None):
+    """Add circular complex Gaussian noise of ``power_w`` [W] per sample to ``x`` (complex64,
+    in place).
 
-    On the CPU from NumPy's ``default_rng(seed)`` (real parts, then imaginary parts); on any
-    other torch device (or with ``on_device``) drawn there, from a ``torch.Generator`` seeded
-    with ``seed`` (no host draw and no 25 MB copy per frame; a different stream of the same
-    distribution).
+    On the CPU from NumPy's ``default_rng(seed)`` (real parts, then imaginary parts, each scaled
+    in float32); on any other torch device (or with ``on_device``) drawn there, from a
+    ``torch.Generator`` seeded with ``seed`` (no host draw and no 25 MB copy per frame; a
+    different stream of the same distribution).
     """
     scale = math.sqrt(0.5 * power_w)
     if on_device is None:
-        on_device = torch.device(device).type != "cpu"
+        on_device = x.device.type != "cpu"
+    rails = torch.view_as_real(x)                                          # (..., 2) float32
     if not on_device:
         rng = np.random.default_rng(seed)
-        noise = np.empty(shape, np.complex64)  # filled in place: no complex temporaries
-        noise.real = rng.standard_normal(shape, dtype=np.float32)
-        noise.imag = rng.standard_normal(shape, dtype=np.float32)
-        noise *= np.float32(scale)
-        return torch.as_tensor(noise, device=device)
-    gen = torch.Generator(device=device).manual_seed(int(seed))
-    re = torch.randn(shape, generator=gen, device=device, dtype=torch.float32)
-    im = torch.randn(shape, generator=gen, device=device, dtype=torch.float32)
-    return torch.complex(re, im) * scale
+        part = np.empty(x.shape, np.float32)  # one rail at a time, drawn in place
+        for k in range(2):
+            rng.standard_normal(dtype=np.float32, out=part)
+            part *= np.float32(scale)
+            rails[..., k].add_(torch.from_numpy(part))
+        return x
+    gen = torch.Generator(device=x.device).manual_seed(int(seed))
+    re = torch.randn(x.shape, generator=gen, device=x.device, dtype=torch.float32)
+    im = torch.randn(x.shape, generator=gen, device=x.device, dtype=torch.float32)
+    return x.add_(torch.complex(re, im).mul_(scale))
 
 
 def _adc_lsb(radar: RadarConfig) -> float:
@@ -704,14 +723,12 @@ def _adc_lsb(radar: RadarConfig) -> float:
     return 2.0 * full_scale / 2 ** radar.signal.adc_bits
 
 
-def _quantise(torch, x, lsb: float, bits: int):
-    """Mid-rise quantiser with clipping, applied to I and Q."""
+def _quantise_(torch, x, lsb: float, bits: int):
+    """Mid-rise quantiser with clipping, applied to I and Q of ``x`` (complex64) in place."""
     top = 2 ** (bits - 1)
-
-    def q(v):
-        return (torch.clamp(torch.floor(v / lsb), -top, top - 1) + 0.5) * lsb
-
-    return torch.complex(q(x.real), q(x.imag))
+    rails = torch.view_as_real(x)
+    rails.div_(lsb).floor_().clamp_(-top, top - 1).add_(0.5).mul_(lsb)
+    return x
 
 
 def synthesize_if(paths: PathSet, radar: RadarConfig, *, seed: int | None = None,
@@ -783,10 +800,10 @@ def synthesize_if(paths: PathSet, radar: RadarConfig, *, seed: int | None = None
         ctx = torch.as_tensor(imp.tx_coupling, device=device, dtype=torch.complex64)
         crx = torch.as_tensor(imp.rx_coupling, device=device, dtype=torch.complex64)
         gain = torch.as_tensor(imp.gain, device=device, dtype=torch.complex64)
-        x = _couple(torch, ctx, crx, x) * gain[None, :, :, None]
-    if leak is not None:
-        x = x + torch.as_tensor(leak * (doppler_gain if sig.doppler == "integrated" else 1.0),
-                                device=device, dtype=torch.complex64)[None]
+        x = _couple(torch, ctx, crx, x).mul_(gain[None, :, :, None])
+    if leak is not None:  # (x is this function's own array from here on: changed in place)
+        x.add_(torch.as_tensor(leak * (doppler_gain if sig.doppler == "integrated" else 1.0),
+                               device=device, dtype=torch.complex64)[None])
 
     # thermal noise added here; quantisation noise (Widrow & Kollar: LSB^2/12 per rail) is
     # drawn with it when integrated, produced by the quantiser itself when full
@@ -802,13 +819,13 @@ def synthesize_if(paths: PathSet, radar: RadarConfig, *, seed: int | None = None
             stats["adc_clipped_fraction"] = float(
                 ((per_chirp.real.abs() > top) | (per_chirp.imag.abs() > top)).float().mean())
     if seed is not None:
-        x = x + _thermal_noise(torch, (n_slow, nt, nr, n), seed, added_w, device)
+        _add_thermal_noise(torch, x, seed, added_w)
     if sig.adc_bits is not None and sig.doppler == "full":
         lsb = _adc_lsb(radar)
         top = 2 ** (sig.adc_bits - 1) * lsb
         stats["adc_clipped_fraction"] = float(
             ((x.real.abs() > top) | (x.imag.abs() > top)).float().mean())
-        x = _quantise(torch, x, lsb, sig.adc_bits)
+        _quantise_(torch, x, lsb, sig.adc_bits)
     stats.update(seconds_synthesis=t_synth, seconds_if_total=time.perf_counter() - t0,
                  noise_power_w=noise_out_w,
                  echo_power_scale_w=link_budget.echo_power_scale_w(radar))

@@ -249,7 +249,7 @@ def _simulate_signal_scene_frame(
     t0 = time.perf_counter()
     paths = scene.trace_paths(radar, pose, seed=seed, velocity_mps=velocity_mps)
     t1 = time.perf_counter()
-    sf = simulate_signal_frame(paths, radar, seed=seed)
+    sf = simulate_signal_frame(paths, radar, seed=seed, heatmap=False)  # points only
     t2 = time.perf_counter()
     stats = {
         "fidelity": radar.fidelity,

@@ -178,8 +178,8 @@ class ProcessingResult:
         radial velocity [m/s] (positive = receding); strongest first.
     range_m : (n_range,) float32 — range-bin centres [m].
     azimuth_sin : (n_az,) float32 — ``u = sin(az) cos(el)`` of the azimuth bins in the FOV [-].
-    range_azimuth_db : (n_range, n_az) float32 — max over Doppler of the azimuth map of the
-        virtual array's row, on the intensity scale [dB].
+    range_azimuth_db : (n_range, n_az) float32 or None — max over Doppler of the azimuth map
+        of the virtual array's row, on the intensity scale [dB] (None: ``heatmap=False``).
     range_doppler_db : (n_range, n_doppler) float32 — the non-coherently integrated map ``sum_v
         |X_v|^2`` [dB re 1 W per sample^2] (what the range-doppler CFAR runs on).
     noise_floor_db : float — thermal noise per range-Doppler-azimuth cell, intensity scale [dB].
@@ -191,7 +191,7 @@ class ProcessingResult:
     points: np.ndarray
     range_m: np.ndarray
     azimuth_sin: np.ndarray
-    range_azimuth_db: np.ndarray
+    range_azimuth_db: np.ndarray | None
     range_doppler_db: np.ndarray
     noise_floor_db: float
     stats: dict[str, Any]
@@ -217,23 +217,34 @@ def _front_end(cube: IFCube, radar: RadarConfig) -> _Front:
     x = cube.samples
     device = x.device
     n = x.shape[-1]
-    if sig.range_dc_removal:
-        x = x - x.mean(dim=-1, keepdim=True)
     w_r = window_weights(sig.range_window, n)
     w_d = window_weights(sig.doppler_window, radar.n_chirps)
-    big = torch.fft.fft(x * torch.as_tensor(w_r, device=device, dtype=torch.float32), dim=-1)
+    w_r_t = torch.as_tensor(w_r, device=device, dtype=torch.float32)
+    # one new array, then in place (the cube's samples are the caller's, left as they are)
+    if sig.range_dc_removal:
+        x = torch.sub(x, x.mean(dim=-1, keepdim=True)).mul_(w_r_t)
+    else:
+        x = x * w_r_t
+    big = torch.fft.fft(x, dim=-1)
+    del x
     t_loop = radar.n_tx * radar.chirp_period_s
     if cube.doppler_integrated:
         return _Front(big, w_r, w_d, cube.noise_power_w, 1.0, t_loop)
-    n_dop = x.shape[0]
-    big = big * torch.as_tensor(w_d, device=device, dtype=torch.float32)[:, None, None, None]
+    n_dop = big.shape[0]
+    if np.any(w_d != 1.0):  # (a rectangular window multiplies by exact ones)
+        big.mul_(torch.as_tensor(w_d, device=device, dtype=torch.float32)[:, None, None, None])
     if sig.doppler_clutter_removal:
-        big = big - big.mean(dim=0, keepdim=True)
-    big = torch.fft.fftshift(torch.fft.fft(big, dim=0), dim=0)
+        big.sub_(big.mean(dim=0, keepdim=True))
+    spec = torch.fft.fft(big, dim=0)
     f_d = (np.arange(n_dop) - n_dop // 2) / (n_dop * t_loop)              # [Hz]
     slot_s = tx_slots(radar) * radar.chirp_period_s                       # [s]
-    comp = np.exp(-2j * np.pi * f_d[:, None] * slot_s[None, :])           # (D, T)
-    big = big * torch.as_tensor(comp, device=device, dtype=torch.complex64)[:, :, None, None]
+    comp = torch.as_tensor(np.exp(-2j * np.pi * f_d[:, None] * slot_s[None, :]), device=device,
+                           dtype=torch.complex64)[:, :, None, None]      # (D, T, 1, 1)
+    # fftshift along Doppler and the TDM compensation in one pass: bin k - D/2 is row k of the
+    # shifted cube, FFT row (k - D/2) mod D
+    h = n_dop - n_dop // 2                                                # rows before 0 Hz
+    torch.mul(spec[h:], comp[:n_dop - h], out=big[:n_dop - h])
+    torch.mul(spec[:h], comp[n_dop - h:], out=big[n_dop - h:])
     return _Front(big, w_r, w_d, cube.noise_power_w, float(np.sum(w_d**2)), t_loop)
 
 
@@ -293,8 +304,16 @@ def _row_signals(torch, xc, row_mat: np.ndarray):
     return torch.einsum("dcn,ca->dna", xc, mat)
 
 
+def _azimuth_power(torch, xc, row_mat: np.ndarray, n_az: int):
+    """(D, N, A) float32 — ``|Z|^2`` of the row's azimuth spectrum (:func:`_spectrum_bins`) at
+    every cell of ``xc`` (D, C, N), fftshifted."""
+    y_row = _row_signals(torch, xc, row_mat)                              # (D, N, A_pos)
+    # |.|^2 before the fftshift (a permutation: the same values, half the bytes moved)
+    return torch.fft.fftshift(_spectrum_values(y_row, n_az).abs().square(), dim=-1)
+
+
 def process_if(cube: IFCube, radar: RadarConfig, *, noise_free: bool = False,
-               keep_cube: bool = False) -> ProcessingResult:
+               keep_cube: bool = False, heatmap: bool = True) -> ProcessingResult:
     """Run the chain (module doc) on synthesised IF samples.
 
     Parameters
@@ -304,6 +323,11 @@ def process_if(cube: IFCube, radar: RadarConfig, *, noise_free: bool = False,
     noise_free : bool — the cube has no noise: CFAR then runs on the *expected* power (the
         maps plus the known noise per cell), so detections are deterministic.
     keep_cube : bool — return the range-Doppler cube.
+    heatmap : bool — also form the range-azimuth map of every (Doppler, range) cell
+        (``range_azimuth_db``). The range-doppler CFAR does not need it: without it the
+        azimuth spectra are taken only at the cells the points read (a frame's few hundred
+        detections and their neighbours), the same values. The range-azimuth CFAR always
+        forms it.
     """
     import torch
 
@@ -336,10 +360,11 @@ def process_if(cube: IFCube, radar: RadarConfig, *, noise_free: bool = False,
     # the range-azimuth map of the row (every cell; the heatmap and the range-azimuth CFAR)
     t = time.perf_counter()
     xc = X.reshape(n_dop, nt * nr, n)
-    y_row = _row_signals(torch, xc, row_w * w_a[None, :])                 # (D, N, A_pos)
-    # |.|^2 before the fftshift (a permutation: the same values, half the bytes moved)
-    power_t = torch.fft.fftshift(_spectrum_values(y_row, n_az).abs().square(), dim=-1)
-    ra = power_t[:, :, torch.as_tensor(fov, device=device)].amax(dim=0).cpu().numpy()
+    row_mat = row_w * w_a[None, :]
+    power_t = ra = None
+    if heatmap or sig.cfar_domain != "range-doppler":
+        power_t = _azimuth_power(torch, xc, row_mat, n_az)                # (D, N, A)
+        ra = power_t[:, :, torch.as_tensor(fov, device=device)].amax(dim=0).cpu().numpy()
     timings["seconds_azimuth_fft"] = time.perf_counter() - t
 
     # range-Doppler map summed over the virtual channels (TI's detection matrix)
@@ -368,9 +393,14 @@ def process_if(cube: IFCube, radar: RadarConfig, *, noise_free: bool = False,
     t = time.perf_counter()
 
     def logp_at(d, r, a):  # log power of the azimuth map at (Doppler, range, azimuth) bins
-        cells = power_t[torch.as_tensor(d % n_dop, device=device),
-                        torch.as_tensor(r % n, device=device),
-                        torch.as_tensor(a % n_az, device=device)]
+        d_t, r_t = (torch.as_tensor(d % n_dop, device=device),
+                    torch.as_tensor(r % n, device=device))
+        a_t = torch.as_tensor(a % n_az, device=device)
+        if power_t is not None:
+            cells = power_t[d_t, r_t, a_t]
+        else:  # only these cells' spectra (K, A), each as the map would have it
+            rows = _azimuth_power(torch, xc[d_t, :, r_t][:, :, None], row_mat, n_az)[:, 0]
+            cells = rows[torch.arange(len(a_t), device=device), a_t]
         return np.log(np.maximum(cells.cpu().numpy().astype(np.float64), 1e-300))
 
     n_el_fft = sig.elevation_fft_size
@@ -406,8 +436,8 @@ def process_if(cube: IFCube, radar: RadarConfig, *, noise_free: bool = False,
         points = points[: sig.max_points]
     timings["seconds_points"] = time.perf_counter() - t
 
-    ra_db = (10.0 * np.log10(4.0 * math.pi * np.maximum(ra.astype(np.float64), 1e-300) * to_a2)
-             ).astype(np.float32)
+    ra_db = None if ra is None else (10.0 * np.log10(
+        4.0 * math.pi * np.maximum(ra.astype(np.float64), 1e-300) * to_a2)).astype(np.float32)
     stats = {
         **timings,
         **design,

@@ -58,8 +58,8 @@ class SignalFrame:
         ``cfar_design_pfa``, ``cfar_n_train``, ``cfar_n_eff``), ``seed``, ``device``.
     range_m : (n_range,) float32 — range-bin centres [m].
     azimuth_sin : (n_az,) float32 — ``sin(az) cos(el)`` of the azimuth bins in the FOV [-].
-    range_azimuth_db : (n_range, n_az) float32 — range-azimuth map (max over Doppler),
-        intensity scale [dB].
+    range_azimuth_db : (n_range, n_az) float32 or None — range-azimuth map (max over
+        Doppler), intensity scale [dB]; None with ``heatmap=False``.
     range_doppler_db : (n_range, n_doppler) float32 — the map summed over virtual channels that
         TI's CFAR runs on [dB re 1 W per sample^2].
     if_samples : (n_slow, N_tx, N_rx, N_adc) complex64 or None — IF samples [sqrt(W)]
@@ -72,7 +72,7 @@ class SignalFrame:
     stats: dict[str, Any]
     range_m: np.ndarray
     azimuth_sin: np.ndarray
-    range_azimuth_db: np.ndarray
+    range_azimuth_db: np.ndarray | None
     range_doppler_db: np.ndarray | None = None
     if_samples: np.ndarray | None = None
     range_doppler_cube: np.ndarray | None = None
@@ -89,6 +89,7 @@ def simulate_signal_frame(
     seed: int | None = None,
     return_cubes: bool = False,
     device: Any = None,
+    heatmap: bool = True,
 ) -> SignalFrame:
     """Simulate one frame of the signal-level radar.
 
@@ -101,6 +102,9 @@ def simulate_signal_frame(
         on the expected power, signal + known noise per cell).
     return_cubes : bool — also return the IF samples and the range-Doppler cube.
     device : torch device, optional — default :func:`sim2radar.hardware.torch_device`.
+    heatmap : bool — also form the range-azimuth map (``range_azimuth_db``) over every cell;
+        the factory's frames, which keep only the points, pass False
+        (:func:`~sim2radar.radar.processing.process_if`).
 
     Returns
     -------
@@ -109,7 +113,8 @@ def simulate_signal_frame(
     t0 = time.perf_counter()
     cube = synthesize_if(paths, radar, seed=seed, device=device)
     t1 = time.perf_counter()
-    result = process_if(cube, radar, noise_free=seed is None, keep_cube=return_cubes)
+    result = process_if(cube, radar, noise_free=seed is None, keep_cube=return_cubes,
+                        heatmap=heatmap)
     t2 = time.perf_counter()
     stats = {**cube.stats, **result.stats, "seed": seed, "seconds_processing": t2 - t1,
              "seconds_total": t2 - t0}

@@ -145,6 +145,28 @@ def test_hysteresis_peaks_equal_the_matlab_port():
             assert got == ti.peak_det_loc(mag, gamma, sl)
 
 
+def test_hysteresis_peaks_of_many_rows_are_each_rows_own():
+    """The scan runs on all rows at once, and past the end only on the rows that armed, each
+    to its own end: every row's peaks are those it gets alone (rows that arm late or never,
+    ties, spectra whose peak wraps around)."""
+    rng = np.random.default_rng(1)
+    n = 64
+    rows = [np.abs(np.fft.fft(rng.standard_normal(20) + 1j * rng.standard_normal(20), n))
+            for _ in range(40)]
+    rows += [np.linspace(0.0, 1.0, n),                           # rising: arms only at the end
+             np.linspace(1.0, 0.0, n),                           # falling: never arms
+             np.round(rng.random(n) * 3),                        # ties
+             np.roll(np.exp(-0.5 * ((np.arange(n) - 32) / 3.0) ** 2), 32)]  # peak at the wrap
+    spectra = np.array(rows)
+    gamma = 10 ** (0.2 / 10)
+    for sl in (1.0, 0.0):
+        together = cfar.hysteresis_peaks(spectra, gamma=gamma, sidelobe_db=sl)
+        alone = np.array([cfar.hysteresis_peaks(r[None], gamma=gamma, sidelobe_db=sl)[0]
+                          for r in spectra])
+        assert np.array_equal(together, alone)
+    assert together.any(axis=1).sum() > 40
+
+
 def test_one_source_gives_one_azimuth_peak():
     """An unwindowed 86-element aperture: its -13 dB sidelobes are far below TI's 1 dB rule,
     so one source is one peak at its bin."""

@@ -342,24 +342,28 @@ def test_coupling_applied_per_side_is_the_kronecker_coupling():
 
 def test_thermal_noise_on_the_host_keeps_numpys_stream_and_on_a_device_its_power():
     """On the CPU the noise is NumPy's default_rng(seed) stream (the frames of earlier
-    releases); drawn on the device (a torch stream) it has the same power per sample and
-    independent, zero-mean rails."""
-    from sim2radar.radar.fmcw import _thermal_noise
+    releases), added in place to the samples as the complex sum would; drawn on the device (a
+    torch stream) it has the same power per sample and independent, zero-mean rails."""
+    from sim2radar.radar.fmcw import _add_thermal_noise
 
     shape, power_w = (4, 12, 16, 256), 2.5e-12
-    host = _thermal_noise(torch, shape, 7, power_w, "cpu").numpy()
+    signal = (np.random.default_rng(1).standard_normal(shape) * 1e-6).astype(np.complex64)
+    x = torch.as_tensor(signal.copy())
+    assert _add_thermal_noise(torch, x, 7, power_w) is x
     rng = np.random.default_rng(7)
-    want = (rng.standard_normal(shape, dtype=np.float32)
-            + 1j * rng.standard_normal(shape, dtype=np.float32)).astype(np.complex64)
-    want *= np.float32(math.sqrt(0.5 * power_w))
-    assert host.tobytes() == want.tobytes()
-    dev = _thermal_noise(torch, shape, 7, power_w, "cpu", on_device=True).numpy()
+    noise = (rng.standard_normal(shape, dtype=np.float32)
+             + 1j * rng.standard_normal(shape, dtype=np.float32)).astype(np.complex64)
+    noise *= np.float32(math.sqrt(0.5 * power_w))
+    assert x.numpy().tobytes() == (signal + noise).tobytes()
+    dev = _add_thermal_noise(torch, torch.zeros(shape, dtype=torch.complex64), 7, power_w,
+                             on_device=True).numpy()
     dev = dev.astype(np.complex128)
     n = dev.size  # 196k samples: relative std of the power estimate 1 / sqrt(n) ~ 0.2 %
     assert np.mean(np.abs(dev) ** 2) == pytest.approx(power_w, rel=0.02)
     assert abs(np.mean(dev.real * dev.imag)) < 5 * power_w / math.sqrt(n)
     assert abs(np.mean(dev)) < 5 * math.sqrt(power_w / n)
-    again = _thermal_noise(torch, shape, 7, power_w, "cpu", on_device=True).numpy()
+    again = _add_thermal_noise(torch, torch.zeros(shape, dtype=torch.complex64), 7, power_w,
+                               on_device=True).numpy()
     assert again.tobytes() == dev.astype(np.complex64).tobytes()
 
 
@@ -398,5 +402,10 @@ def test_element_distances_equal_numpys_norm():
     rng = np.random.default_rng(0)
     points = rng.uniform(-8.0, 8.0, (1000, 3))
     elements = rng.uniform(-0.1, 0.1, (16, 3))
-    want = np.linalg.norm(points[:, None, :] - elements[None, :, :], axis=2)
-    assert np.array_equal(_distances_m(points, elements), want)
+    planar = elements.copy()   # an array in the plane x = 0, one row at z = 0.02 (shared)
+    planar[:, 0] = 0.0
+    planar[:, 2] = 0.02
+    for els in (elements, planar, planar[:1]):
+        want = np.linalg.norm(points[:, None, :] - els[None, :, :], axis=2)
+        got = _distances_m(points, els)
+        assert got.shape == want.shape and np.array_equal(got, want)
