@@ -773,7 +773,6 @@ def synthesize_if(paths: PathSet, radar: RadarConfig, *, seed: int | None = None
         x = (_synth_narrowband(torch, radar, terms, w_d, integrated, device) if len(terms.amp)
              else torch.zeros((1 if integrated else radar.n_chirps, nt, nr, n),
                               dtype=torch.complex64, device=device))
-        n_slow = 1 if integrated else radar.n_chirps
         doppler_gain = float(w_d.sum()) if integrated else 1.0
         noise_scale = float(np.sum(w_d**2)) if integrated else 1.0
     elif integrated:
@@ -782,7 +781,7 @@ def synthesize_if(paths: PathSet, radar: RadarConfig, *, seed: int | None = None
         if dc is None:
             x = x * float(w_d.sum())
         x = x[None]
-        n_slow, doppler_gain = 1, float(w_d.sum())
+        doppler_gain = float(w_d.sum())
         noise_scale = float(np.sum(w_d**2))
     else:
         times = slot_times_s(radar)
@@ -792,7 +791,7 @@ def synthesize_if(paths: PathSet, radar: RadarConfig, *, seed: int | None = None
         else:  # static: every chirp is the same
             x = synth(torch, radar, terms, None, None, device)[None].expand(
                 radar.n_chirps, nt, nr, n).clone()
-        n_slow, doppler_gain, noise_scale = radar.n_chirps, 1.0, 1.0
+        doppler_gain, noise_scale = 1.0, 1.0
     t_synth = time.perf_counter() - t0
 
     # board impairments: coupling (antenna level) then channel gain errors (electronics)
