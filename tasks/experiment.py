@@ -67,8 +67,9 @@ __all__ = ["EXPERIMENT_STAGE_VERSION", "prepare_sweep", "read_plan", "plan_cost"
 log = logging.getLogger(__name__)
 
 #: Bump when a training run of the same inputs gives a different result (training, evaluation
-#: or the row's content changed): every run is recomputed.
-EXPERIMENT_STAGE_VERSION = 1
+#: or the row's content changed): every run is recomputed. (2: the pillar net's linear layer
+#: runs in float32 under bfloat16 autocast)
+EXPERIMENT_STAGE_VERSION = 2
 #: store stage of each kind of training job
 STAGES = {"pretrain": "experiment_pretrain", "finetune": "experiment_runs"}
 #: folder under the sweeps root holding the measured precision decisions

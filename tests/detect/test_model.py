@@ -144,6 +144,22 @@ def test_pillar_net_on_real_points_matches_the_padded_net(crowded, device):
                                dense(voxels.double(), num_points, coords), rtol=1e-5, atol=1e-5)
 
 
+def test_pillar_net_product_stays_float32_under_bfloat16_autocast():
+    """Under CPU bfloat16 autocast the pillar net's linear layer runs in float32 (a new row
+    count every step: oneDNN's bfloat16 matmul kept state per count, ~1 MB each); its output
+    is the float32 net's, rounded once to bfloat16 for the canvas."""
+    pil = _pillars(2, 2000, seed=5)
+    torch.manual_seed(2)
+    vfe = PointPillars().vfe.eval()
+    args = (pil.voxels, pil.num_points, pil.coords)
+    with torch.no_grad():
+        want = vfe(*args)
+        with torch.autocast("cpu", dtype=torch.bfloat16):
+            got = vfe(*args)
+    assert got.dtype == torch.bfloat16 and want.dtype == torch.float32
+    assert torch.equal(got, want.to(torch.bfloat16))
+
+
 def test_detection_head_runs_its_three_convolutions_as_one():
     """The head stacks conv_cls / conv_box / conv_dir_cls (OpenPCDet's names, kept in the state
     dict) into one 1x1 convolution: each output equals its own convolution's."""
