@@ -217,7 +217,7 @@ def test_a_sweep_refuses_changed_settings_but_not_changed_execution(first, data)
 def test_content_keys_keep_their_recipe(monkeypatch):
     """A rerun of an existing sweep finds its cached runs only while the keys' recipe (stage,
     stage version, input names, key inputs, code version) stays what it was: these literals are
-    the keys sweeps have been written under since stage version 1. Change them only with
+    the keys sweeps have been written under since stage version 2 (2026-11-28). Change them only with
     EXPERIMENT_STAGE_VERSION, when every run must be recomputed."""
     from sim2radar.experiment.plan import (
         PretrainSpec,
@@ -236,9 +236,9 @@ def test_content_keys_keep_their_recipe(monkeypatch):
     run = RunSpec(condition="sim-pretrain", fraction=0.5, trial=0, seed=7, n_real=2,
                   pretrain=pre, epochs=200, train_ids=("a", "b"))
     pkey = tasks._key_of("pretrain", {"sim": "s" * 20}, pretrain_key_inputs(pre, det, {"q": [1.0]}))
-    assert pkey == "41cade8d6c72e05919e1"
+    assert pkey == "eed4f037a0470cab6dca"
     assert tasks._key_of("finetune", {"real": "r" * 20}, run_key_inputs(
-        run, ExperimentProfile(detector=Path("x.yaml")), det, pkey)) == "07a41ba87ad85e6e283b"
+        run, ExperimentProfile(detector=Path("x.yaml")), det, pkey)) == "2f7151d9a38b2e81e3a1"
 
 
 def test_a_paper_sized_plan_reaches_the_flow_as_a_file(data, tmp_path):
