@@ -213,8 +213,12 @@ def decide_precision(cfg, device, *, table: str | os.PathLike | None = None,
         return PrecisionDecision(True, mixed, name, "fixed", reason="runtime.amp: true")
     if known and known.get("device") == name and "amp" in known:
         fields = {f.name for f in dataclasses.fields(PrecisionDecision)}
-        return dataclasses.replace(PrecisionDecision(**{k: v for k, v in known.items()
-                                                        if k in fields}), source="recorded")
+        kept = PrecisionDecision(**{k: v for k, v in known.items() if k in fields})
+        # "recorded" names a measurement taken earlier; a decision nothing measured (the
+        # table's rule for a CPU without native bfloat16) keeps its own source
+        if kept.source in ("probe", "recorded"):
+            kept = dataclasses.replace(kept, source="recorded")
+        return kept
     path = None
     if table is not None:
         path = Path(table) / f"{_slug(name)}-{_digest(cfg)}.json"

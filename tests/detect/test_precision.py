@@ -111,6 +111,10 @@ def test_only_a_decision_that_can_be_recorded_is_measured_and_a_known_one_is_kep
                                         "probe", {"float32": 1.0}, 4, "earlier").to_dict()
     got = precision.decide_precision(_cfg(), "cpu", table=tmp_path, known=known)
     assert (got.amp, got.source) == (False, "recorded") and calls == []
+    # a decision nothing measured is kept with its own source: "recorded" means figures
+    table = dict(known, source="table", seconds_per_step={}, steps=0)
+    kept = precision.decide_precision(_cfg(), "cpu", table=tmp_path, known=table)
+    assert (kept.amp, kept.source, kept.seconds_per_step) == (False, "table", {})
     elsewhere = dict(known, device="cuda:Some GPU")
     assert precision.decide_precision(_cfg(), "cpu", table=tmp_path,
                                       known=elsewhere).source == "probe"
