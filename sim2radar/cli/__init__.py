@@ -8,7 +8,7 @@ imports Prefect.
 
 from __future__ import annotations
 
-from sim2radar.cli._app import app
+from sim2radar.cli._app import app, finish
 
 # Registration imports: each module adds its commands to ``app``.
 from sim2radar.cli import info as _info  # noqa: E402,F401  isort: skip
@@ -34,5 +34,10 @@ __all__ = ["app", "main"]
 
 
 def main() -> None:
-    """Console-script entry point."""
-    app()
+    """Console-script entry point: the command, then :func:`~sim2radar.cli._app.finish` with
+    its exit status (an exception other than an exit propagates as usual)."""
+    try:
+        app()
+    except SystemExit as exc:
+        finish(exc.code)
+    finish(0)

@@ -217,6 +217,43 @@ def exit_now(code: int) -> None:
     os._exit(code)
 
 
+def exit_status(code) -> int:
+    """The process status ``sys.exit(code)`` would give: None is 0, an int itself, anything
+    else is printed on stderr and gives 1."""
+    import sys
+
+    if code is None:
+        return 0
+    if isinstance(code, int):
+        return code
+    print(code, file=sys.stderr)
+    return 1
+
+
+def finish(code) -> None:
+    """End the process with ``sys.exit(code)``'s status after Python's own shutdown steps (the
+    non-daemon threads joined, the ``atexit`` handlers run: logging, Prefect, Dask, temporary
+    folders; stdio flushed), but without tearing the native libraries down. Arrow's and other
+    C++ thread pools can abort the finished process there, "terminate called without an active
+    exception" (a worker still joinable when its static object is destroyed; apache/arrow
+    #34314): a command that printed its result and exit code then ended with SIGABRT."""
+    import atexit
+    import ctypes
+    import os
+    import sys
+    import threading
+
+    status = exit_status(code)
+    threading._shutdown()      # what Py_FinalizeEx does first: thread atexits, join threads
+    atexit._run_exitfuncs()    # then the atexit handlers (they run once: the list is cleared)
+    for stream in (sys.stdout, sys.stderr):
+        with contextlib.suppress(Exception):
+            stream.flush()
+    with contextlib.suppress(Exception):
+        ctypes.CDLL(None).fflush(None)  # C stdio buffers (a native library's printf)
+    os._exit(status)
+
+
 @contextlib.contextmanager
 def export_folder_lock(folder):
     """Hold ``folder``'s writer lock while a command exports to it (None: nothing to lock);
