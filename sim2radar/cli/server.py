@@ -536,7 +536,14 @@ def use_managed_server() -> None:
         typer.secho(f"error: {MODE_ENV}={mode!r}: expected 'managed' or 'ephemeral'",
                     fg="red", err=True)
         raise typer.Exit(2)
-    if mode == "ephemeral" or os.environ.get("PREFECT_API_URL") or "prefect" in sys.modules:
+    if mode == "ephemeral":
+        # Prefect's temporary server gets the managed server's start-up budget, not Prefect's
+        # 20 s: a fresh database migrates first, and on slow cores that took longer than 20 s
+        # ("Timed out while attempting to connect to ephemeral Prefect API server")
+        os.environ.setdefault("PREFECT_SERVER_EPHEMERAL_STARTUP_TIMEOUT_SECONDS",
+                              str(int(STARTUP_TIMEOUT_S)))
+        return
+    if os.environ.get("PREFECT_API_URL") or "prefect" in sys.modules:
         return
     home = prefect_home()
     if _profile_api_url(home):

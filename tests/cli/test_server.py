@@ -197,7 +197,15 @@ def test_the_users_own_prefect_settings_win(tmp_path, monkeypatch):
     srv.use_managed_server()
     monkeypatch.delenv("PREFECT_API_URL")
     monkeypatch.setenv(srv.MODE_ENV, "ephemeral")
+    # Prefect's temporary server gets the managed one's start-up budget (its own is 20 s,
+    # which a fresh database outlasted on slow cores); a user's own value is kept
+    timeout = "PREFECT_SERVER_EPHEMERAL_STARTUP_TIMEOUT_SECONDS"
+    monkeypatch.delenv(timeout, raising=False)
     srv.use_managed_server()
+    assert os.environ[timeout] == str(int(srv.STARTUP_TIMEOUT_S))
+    monkeypatch.setenv(timeout, "7")
+    srv.use_managed_server()
+    assert os.environ[timeout] == "7"
     monkeypatch.setenv(srv.MODE_ENV, "managed")
     (tmp_path / "profiles.toml").write_text(
         'active = "mine"\n[profiles.mine]\nPREFECT_API_URL = "http://10.0.0.1:4200/api"\n')
