@@ -8,8 +8,9 @@ per frame; a moving rig's returns fill ~20 Doppler bins, each detected as a slab
 its detection stage's median. Every frame has a new seed (new ray jitter, speckle and noise
 draws), as the factory runs them, and the Dr.Jit kernels compiled after the warm-up frame are
 counted (0 expected). Also the reference radar's tracer output on the same corridor:
-``trace_paths`` seconds (unpolarised and polarised) and path counts with the reference model (3 bounces, directive lobes,
-transmission through plasterboard/glass/wood slabs), before and after 1 cm voxel merging.
+``trace_paths`` seconds (unpolarised and polarised) and path counts with the reference model
+(3 bounces, directive lobes, transmission through plasterboard/glass/wood slabs), before and
+after 1 cm voxel merging.
 
     python -m benchmarks radar
     SIM2RADAR_MITSUBA_VARIANT=cuda_ad_rgb python -m benchmarks radar   # on a GPU

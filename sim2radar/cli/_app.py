@@ -212,8 +212,9 @@ def exit_now(code: int) -> None:
     import os
     import sys
 
-    sys.stdout.flush()
-    sys.stderr.flush()
+    for stream in (sys.stdout, sys.stderr):
+        with contextlib.suppress(Exception):  # a closed pipe: nothing more can be said
+            stream.flush()
     os._exit(code)
 
 
@@ -239,19 +240,14 @@ def finish(code) -> None:
     #34314): a command that printed its result and exit code then ended with SIGABRT."""
     import atexit
     import ctypes
-    import os
-    import sys
     import threading
 
     status = exit_status(code)
     threading._shutdown()      # what Py_FinalizeEx does first: thread atexits, join threads
     atexit._run_exitfuncs()    # then the atexit handlers (they run once: the list is cleared)
-    for stream in (sys.stdout, sys.stderr):
-        with contextlib.suppress(Exception):
-            stream.flush()
     with contextlib.suppress(Exception):
         ctypes.CDLL(None).fflush(None)  # C stdio buffers (a native library's printf)
-    os._exit(status)
+    exit_now(status)           # Python's stdio flushed, then os._exit
 
 
 @contextlib.contextmanager

@@ -1,9 +1,9 @@
 """The CLI ends through :func:`sim2radar.cli._app.finish`: Python's own shutdown steps run (the
 non-daemon threads finish, ``atexit`` handlers run, the output is flushed) and the exit status
-is the command's, but the native libraries are not torn down (a C++ static destructor that
-aborts, as the test registers one, is never called) (Arrow's thread pools aborted a
-finished ``store verify`` with SIGABRT there, "terminate called without an active exception",
-in two of the last three full test suites)."""
+is the command's, but the native libraries are not torn down: a C++ static destructor that
+aborts, as the test registers one, is never called. Arrow's thread pools aborted a finished
+``store verify`` with SIGABRT there ("terminate called without an active exception") in two of
+the last three full test suites."""
 
 from __future__ import annotations
 

@@ -217,8 +217,8 @@ def test_a_sweep_refuses_changed_settings_but_not_changed_execution(first, data)
 def test_content_keys_keep_their_recipe(monkeypatch):
     """A rerun of an existing sweep finds its cached runs only while the keys' recipe (stage,
     stage version, input names, key inputs, code version) stays what it was: these literals are
-    the keys sweeps have been written under since stage version 2 (2026-11-28). Change them only with
-    EXPERIMENT_STAGE_VERSION, when every run must be recomputed."""
+    the keys sweeps have been written under since stage version 2 (2026-11-28). Change them
+    only with EXPERIMENT_STAGE_VERSION, when every run must be recomputed."""
     from sim2radar.experiment.plan import (
         PretrainSpec,
         RunSpec,
