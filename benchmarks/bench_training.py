@@ -83,7 +83,7 @@ def step_breakdown(profile: str, device: torch.device, n_steps: int) -> dict[str
     db = build_gt_database(frames, mcfg.class_names, cfg.augmentation.min_points_in_gt)
     torch.manual_seed(0)
     model = PointPillars(mcfg).to(device).train()
-    opt = torch.optim.AdamW(model.parameters(), lr=1e-3)
+    opt = torch.optim.AdamW(model.parameters(), lr=1e-3, foreach=True)  # as train() asks
     rng = np.random.default_rng(0)
     parts: dict[str, list[float]] = {"augment": [], "collate": [], "assign": [], "model": [],
                                      "step": []}

@@ -17,6 +17,7 @@ from sim2radar.detect.train import (
     load_checkpoint,
     load_encoder_from,
     predict_frames,
+    seeded_model,
     train,
     validation_ap,
 )
@@ -260,6 +261,30 @@ def test_one_cycle_schedule_matches_openpcdet(tmp_path):
     assert all(a < b for a, b in zip(lrs[:peak], lrs[1:peak + 1], strict=True))
     assert all(a > b for a, b in zip(lrs[peak:-1], lrs[peak + 1:], strict=True))
     assert lrs[-1] < 3e-5
+
+
+def test_the_multi_tensor_update_trains_the_weights_of_the_per_parameter_loop(tmp_path,
+                                                                            monkeypatch):
+    """train() asks AdamW for its multi-tensor (foreach) update on every device: on a CPU the
+    same arithmetic as the per-parameter loop, bit for bit (two parameter groups, the one-cycle
+    schedule's moving betas, gradient clipping), so runs trained before it stay valid."""
+    frames = make_door_frames(4, seed=5, points_per_frame=300)
+    cfg = small_config(optimization=dict(batch_size=2, epochs=2, encoder_lr_scale=0.1))
+    fast = train(cfg, out_dir=tmp_path / "foreach", frames=frames)
+    real = torch.optim.AdamW
+
+    def per_parameter(*args, **kwargs):
+        assert kwargs.pop("foreach") is True
+        return real(*args, foreach=False, **kwargs)
+
+    monkeypatch.setattr(torch.optim, "AdamW", per_parameter)
+    loop = train(cfg, out_dir=tmp_path / "loop", frames=frames)
+    a = load_checkpoint(fast.checkpoint)[0].state_dict()
+    b = load_checkpoint(loop.checkpoint)[0].state_dict()
+    start = seeded_model(cfg.model, cfg.seed).state_dict()
+    assert a.keys() == b.keys()
+    assert all(torch.equal(a[k], b[k]) for k in a)
+    assert any(not torch.equal(a[k], start[k]) for k in a)  # it trained
 
 
 @pytest.mark.gpu
