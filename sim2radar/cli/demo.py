@@ -31,7 +31,13 @@ from sim2radar.cli._app import app, exit_unless_writable
 from sim2radar.experiment.folder import SweepFolder
 from sim2radar.factory.spec import MAX_FRAMES_PER_WORLD, MAX_WORLDS
 
-__all__ = ["DEMO_SIZES", "demo", "demo_sizes", "run_demo"]
+__all__ = ["DEMO_SIZES", "DEMO_WORKERS", "demo", "demo_sizes", "run_demo"]
+
+#: worlds at once in each of the demo's data stages (threads): on 2 cores two worlds overlap one
+#: world's single-threaded work (NumPy, mesh decimation, the store) with the other's multi-threaded
+#: rendering and tracing, 15-20 % faster than one with the same outputs bit for bit; three were no
+#: faster and took more memory (BENCHMARKS.md, "The main job")
+DEMO_WORKERS = 2
 
 #: the data each demo profile makes unless told otherwise: the ``smoke`` profile (a toy
 #: detector whose APs mean nothing) checks the whole chain in a few minutes on 2 cores with
@@ -69,7 +75,8 @@ def _manifest_status(summary: dict[str, Any], name: str, role: str) -> dict[str,
 def _reference_dataset(store: str, dataset: str, export_dir: Path, png_dir: Path | None,
                        verbose: bool, **plan: Any) -> dict[str, Any]:
     """The reference radar's dataset of a plan (:class:`sim2radar.tasks.reference.ReferenceRequest`
-    fields: ``first_seed``, ``worlds``, ``frames_per_world``), exported to ``export_dir``."""
+    fields: ``first_seed``, ``worlds``, ``frames_per_world``, ``run``), exported to
+    ``export_dir``."""
     from sim2radar.cli.generate import run_generate
     from sim2radar.tasks.reference import ReferenceRequest
 
@@ -88,14 +95,17 @@ def run_demo(
     ablations: bool = False,
     ablation_material: str = "concrete",
     rig: dict | None = None,
+    workers: int = DEMO_WORKERS,
     verbose: bool = False,
 ) -> dict[str, Any]:
-    """The main job (see the module docstring); returns a summary with every output's path."""
+    """The main job (see the module docstring); returns a summary with every output's path.
+    ``workers``: worlds at once in each data stage (threads; the outputs do not depend on it)."""
     from sim2radar.cli.experiment import run_sweep
     from sim2radar.cli.generate import run_generate
     from sim2radar.evaluate.gap import write_gap_report
     from sim2radar.fileio import write_json
     from sim2radar.tasks.generate import GenerateRequest
+    from sim2radar.tasks.runner import RunOptions
 
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
@@ -104,23 +114,27 @@ def run_demo(
     typer.secho("1/5 simulated domain (ray tracer on reconstructed and ground-truth geometry)",
                 bold=True)
     spec = {"frames_per_world": frames, "rig": rig or {}}
+    run = RunOptions(workers=workers)
     sim = run_generate(GenerateRequest(spec={**spec, "geometry": "both"},
                                        seeds=list(range(worlds)), store=store, dataset="demo",
-                                       export_dir=str(data)),
+                                       export_dir=str(data), run=run),
                        png_dir=out / "bev", verbose=verbose)
     one_material = None
     if ablations:
         one_material = run_generate(GenerateRequest(
             spec={**spec, "material_override": ablation_material}, seeds=list(range(worlds)),
-            store=store, dataset="demo-one-material", export_dir=str(data / "one_material")),
+            store=store, dataset="demo-one-material", export_dir=str(data / "one_material"),
+            run=run),
             verbose=verbose)
     typer.secho("2/5 proxy-real domain (reference radar on other worlds)", bold=True)
     real = _reference_dataset(store, "reference", data / "proxy_real", out / "bev", verbose,
-                              worlds=reference_worlds, frames_per_world=reference_frames)
+                              worlds=reference_worlds, frames_per_world=reference_frames,
+                              run=run)
     typer.secho("3/5 sim-real gap (reference radar on the simulated domain's own frames)",
                 bold=True)
     paired = _reference_dataset(store, "reference-paired", data / "proxy_real_paired", None,
-                                verbose, first_seed=0, worlds=worlds, frames_per_world=frames)
+                                verbose, first_seed=0, worlds=worlds, frames_per_world=frames,
+                                run=run)
     gap = write_gap_report(data / "reconstructed", data / "proxy_real_paired",
                            SweepFolder(sweep_dir).gap_dir)
     write_json(SweepFolder(sweep_dir).generation_json, {"datasets": [
@@ -169,6 +183,7 @@ def demo(
     width: int | None = typer.Option(None, help="Camera width [px] [640; smoke 160]."),
     height: int | None = typer.Option(None, help="Camera height [px] [480; smoke 120]."),
     spp: int | None = typer.Option(None, help="RGB samples per pixel [rig default; smoke 4]."),
+    workers: int = typer.Option(DEMO_WORKERS, min=1, help="Worlds processed at once in each data stage (threads; the outputs do not depend on it)."),
     verbose: bool = typer.Option(False, "--verbose", "-v", help="Show Prefect's logs."),
 ) -> None:
     """Run the whole mission on the built-in default: simulated and proxy-real radar datasets,
@@ -190,7 +205,7 @@ def demo(
         res = run_demo(out, worlds=size["worlds"], frames=size["frames"],
                        reference_worlds=size["reference_worlds"],
                        reference_frames=size["reference_frames"], profile=profile,
-                       ablations=ablations, rig=rig, verbose=verbose)
+                       ablations=ablations, rig=rig, workers=workers, verbose=verbose)
     except (ValueError, FileNotFoundError) as exc:
         typer.secho(f"error: {exc}", fg="red", err=True)
         raise typer.Exit(2) from None

@@ -60,3 +60,30 @@ def test_reference_cli_refuses_a_bad_preset_with_exit_2(tmp_path):
     result = runner.invoke(app, ["reference", "--worlds", "3", "--radar", "no-such-radar",
                                  "--out", str(tmp_path / "s"), "--no-prefect"])
     assert result.exit_code == 2 and "no-such-radar" in result.output
+
+
+def _clouds(points_dir):
+    return {p.name: np.load(p) for p in sorted(points_dir.glob("*.npy"))}
+
+
+def test_two_worlds_at_once_give_the_frames_of_one_at_a_time(prefect_server, tmp_path):
+    """The demo's data stages run two worlds at once on worker threads (``--workers 2``): the
+    simulated domain (render, reconstruction, the ray tracer on both geometries) and the
+    reference radar give the frames, bit for bit, that one world at a time gives."""
+    jobs = {"generate": ["generate", "--worlds", "2", "--frames", "1", "--geometry", "both",
+                         "--width", "160", "--height", "120", "--spp", "4"],
+            "reference": ["reference", "--worlds", "2", "--frames", "1"]}
+    for job, args in jobs.items():
+        frames = {}
+        for how, extra in (("alone", ["--no-prefect"]), ("threads", ["--workers", "2"])):
+            out = tmp_path / job / how
+            result = runner.invoke(app, [*args, "--out", str(out / "store"), "--no-png",
+                                         "--export-openpcdet", str(out / "export"), *extra])
+            assert result.exit_code == 0, result.output
+            exported = sorted(p for p in (out / "export").rglob("points") if p.is_dir())
+            frames[how] = {str(p.relative_to(out)): _clouds(p) for p in exported}
+        alone, threads = frames["alone"], frames["threads"]
+        assert alone.keys() == threads.keys() and sum(len(v) for v in alone.values()) >= 2
+        for folder, clouds in alone.items():
+            assert clouds.keys() == threads[folder].keys()
+            assert all(np.array_equal(clouds[n], threads[folder][n]) for n in clouds), job
