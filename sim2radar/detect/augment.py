@@ -16,7 +16,7 @@ import numpy as np
 from sim2radar.boxes import box_corners, points_in_boxes
 from sim2radar.datasets.openpcdet import Frame
 from sim2radar.detect.config import AugmentConfig
-from sim2radar.evaluate.iou import bev_iou
+from sim2radar.evaluate.iou import bev_overlaps
 
 __all__ = [
     "GTDatabase",
@@ -100,11 +100,10 @@ def sample_ground_truth(
         pick = rng.choice(len(pool), size=min(n, len(pool)), replace=False)
         cand = np.stack([pool[i] for i in pick]).astype(np.float64)
         existing = np.concatenate(out_boxes).astype(np.float64)
-        iou = bev_iou(cand, np.concatenate([cand, existing]))   # one call: its fixed cost once
-        iou_self, iou_exist = iou[:, :len(cand)], iou[:, len(cand):]
-        np.fill_diagonal(iou_self, 0.0)
-        clash = iou_self.max(axis=1) + (iou_exist.max(axis=1) if iou_exist.shape[1] else 0.0)
-        ok = np.flatnonzero(clash == 0)
+        # IoU > 0 with another candidate or a box already there (one call: its fixed cost once)
+        overlap = bev_overlaps(cand, np.concatenate([cand, existing]))
+        np.fill_diagonal(overlap[:, :len(cand)], False)
+        ok = np.flatnonzero(~overlap.any(axis=1))
         if ok.size == 0:
             continue
         new_boxes = cand[ok].astype(np.float32)

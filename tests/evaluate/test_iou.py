@@ -7,7 +7,8 @@ import pytest
 import torch
 from shapely.geometry import Polygon
 
-from sim2radar.evaluate.iou import bev_iou, box_corners_bev, iou_3d
+from sim2radar.evaluate import iou as iou_mod
+from sim2radar.evaluate.iou import bev_iou, bev_overlaps, box_corners_bev, iou_3d
 
 
 def _poly(box: np.ndarray) -> Polygon:
@@ -66,6 +67,33 @@ def test_door_like_thin_boxes_and_special_cases():
     assert iou_3d(boxes[:1], boxes[4:5])[0, 0] == pytest.approx(1.0, abs=1e-9)
     # edge-adjacent boxes do not overlap
     assert bev_iou(boxes[:1], boxes[5:6])[0, 0] == pytest.approx(0.0, abs=1e-9)
+
+
+def test_overlaps_are_positive_ious_for_every_pair(monkeypatch):
+    """bev_overlaps (separating axes) says what bev_iou > 0 says, pair by pair: random boxes,
+    door-like boxes side by side at gaps from -1 mm to +1 mm (touching within the band goes to
+    the polygon clip), identical, rotated and nested boxes."""
+    rng = np.random.default_rng(7)
+    a, b = _random_boxes(rng, 60), _random_boxes(rng, 50)
+    got = bev_overlaps(a, b)
+    assert np.array_equal(got, bev_iou(a, b) > 0) and 0.2 < got.mean() < 0.8
+    door = np.array([2.0, 0.5, 0.0, 0.95, 0.15, 2.05, 0.3])
+    along = np.array([np.cos(0.3), np.sin(0.3), 0, 0, 0, 0, 0])
+    across = np.array([-np.sin(0.3), np.cos(0.3), 0, 0, 0, 0, 0])
+    gaps = np.array([-1e-3, -2e-4, -1e-5, -1e-8, 0.0, 1e-8, 1e-5, 2e-4, 1e-3])
+    others = np.concatenate([door + (0.95 + gaps)[:, None] * along,        # end to end
+                             door + (0.15 + gaps)[:, None] * across,       # side by side
+                             [door, door + [0, 0, 0, 0, 0, 0, np.pi],      # itself, turned
+                              door + [0, 0, 0, 0, 0, 0, np.pi / 2],       # crossed
+                              door * [1, 1, 1, 0.5, 0.5, 1, 1]]])         # inside it
+    clip = bev_iou(door[None], others)[0] > 0
+    calls = []
+    real = iou_mod.bev_iou
+    monkeypatch.setattr(iou_mod, "bev_iou", lambda x, y: calls.append(1) or real(x, y))
+    assert np.array_equal(bev_overlaps(door[None], others)[0], clip)
+    assert clip[:2].all() and not clip[7:9].any() and clip[-4:].all()   # clear in and out
+    assert 0 < len(calls) <= 10       # only the pairs within the band asked the polygon clip
+    assert bev_overlaps(a[:0], b).shape == (0, 50) and bev_overlaps(a, b[:0]).shape == (60, 0)
 
 
 def test_torch_float32_path_and_empty_inputs():
