@@ -298,6 +298,12 @@ def bev_iou(boxes_a, boxes_b):
     return inter / clamp_min(union, 1e-12)
 
 
+def _bev_axes(boxes: np.ndarray) -> np.ndarray:
+    """(N, 2, 2) each box's two BEV unit axes: along its heading (dx), then across (dy)."""
+    c, s = np.cos(boxes[:, 6]), np.sin(boxes[:, 6])
+    return np.stack([np.stack([c, s], -1), np.stack([-s, c], -1)], 1)
+
+
 def bev_overlaps(boxes_a, boxes_b) -> np.ndarray:
     """Whether each pair's bird's-eye-view rectangles overlap with positive area: ``bev_iou(
     boxes_a, boxes_b) > 0``, decided by the separating-axis theorem (two convex polygons are
@@ -315,15 +321,11 @@ def bev_overlaps(boxes_a, boxes_b) -> np.ndarray:
     -------
     (N, M) bool.
     """
-    a = np.asarray(boxes_a, dtype=np.float64).reshape(-1, np.shape(boxes_a)[-1])[:, :7]
-    b = np.asarray(boxes_b, dtype=np.float64).reshape(-1, np.shape(boxes_b)[-1])[:, :7]
+    a = _as_array(np.asarray(boxes_a, dtype=np.float64))[:, :7]
+    b = _as_array(np.asarray(boxes_b, dtype=np.float64))[:, :7]
     if len(a) == 0 or len(b) == 0:
         return np.zeros((len(a), len(b)), dtype=bool)
-    # each box's two axes (heading, and its normal) and half sizes along them
-    ua = np.stack([np.cos(a[:, 6]), np.sin(a[:, 6])], -1)                   # (N, 2)
-    ub = np.stack([np.cos(b[:, 6]), np.sin(b[:, 6])], -1)                   # (M, 2)
-    axes_a = np.stack([ua, np.stack([-ua[:, 1], ua[:, 0]], -1)], 1)         # (N, 2, 2)
-    axes_b = np.stack([ub, np.stack([-ub[:, 1], ub[:, 0]], -1)], 1)         # (M, 2, 2)
+    axes_a, axes_b = _bev_axes(a), _bev_axes(b)                             # (N|M, 2, 2)
     half_a, half_b = 0.5 * a[:, 3:5], 0.5 * b[:, 3:5]                       # (N, 2), (M, 2)
     centre = b[None, :, :2] - a[:, None, :2]                                # (N, M, 2)
     # cosines between every axis of one box and every axis of the other: (N, M, 2, 2)
