@@ -13,15 +13,11 @@ import functools
 import logging
 import os
 import threading
+import traceback
 
 import numpy as np
 
 log = logging.getLogger(__name__)
-#: held while the Mitsuba variant is chosen: worlds on a thread pool reach it at once, and a
-#: second thread must not see Mitsuba half-initialised by the first (``functools.cache`` does
-#: not lock: a ``--workers 2`` run failed a world with "module 'mitsuba' has no attribute
-#: 'variants'")
-_VARIANT_LOCK = threading.Lock()
 
 #: Mitsuba variants in order of preference. ``*_ad_rgb`` keeps Dr.Jit's JIT (and AD, unused).
 MITSUBA_VARIANTS: tuple[str, ...] = ("cuda_ad_rgb", "llvm_ad_rgb", "scalar_rgb")
@@ -49,17 +45,73 @@ def _variant_works(mi, variant: str) -> bool:
 #: frame of a ``--workers 2`` run). The Dr.Jit work of the renderer, the ray tracer and the
 #: reconstruction's scene is done one thread at a time (:func:`drjit_serial`); each launch
 #: already uses every core through Dr.Jit's own thread pool, and the threads' other work (NumPy,
-#: torch, the store) still overlaps.
+#: torch, the store) still overlaps. The lock is also held while the Mitsuba variant is chosen
+#: (a second thread must not see Mitsuba half-initialised by the first: a ``--workers 2`` run
+#: failed a world with "module 'mitsuba' has no attribute 'variants'") and while Mitsuba objects
+#: are destroyed (:func:`release_under_lock`).
 DRJIT_LOCK = threading.RLock()
+
+#: Mitsuba objects whose owner died while another thread held :data:`DRJIT_LOCK`; the lock's
+#: holder destroys them on its way out (:func:`release_under_lock`)
+_RELEASED: list = []
 
 
 def drjit_serial(fn):
-    """Decorator: call ``fn`` holding :data:`DRJIT_LOCK` (re-entrant)."""
+    """Decorator: call ``fn`` holding :data:`DRJIT_LOCK` (re-entrant).
+
+    On the way out it destroys the objects handed to :func:`release_under_lock` meanwhile, and
+    an exception leaves with its finished frames' locals cleared, so the Dr.Jit values they held
+    die here, under the lock, and not wherever the exception is handled."""
     @functools.wraps(fn)
     def serial(*args, **kwargs):
         with DRJIT_LOCK:
-            return fn(*args, **kwargs)
+            try:
+                return fn(*args, **kwargs)
+            except BaseException as exc:
+                traceback.clear_frames(exc.__traceback__)
+                raise
+            finally:
+                _destroy_released()
     return serial
+
+
+def release_under_lock(obj) -> None:
+    """Destroy ``obj`` (anything holding Mitsuba objects) while holding :data:`DRJIT_LOCK`.
+
+    A Mitsuba scene, shape, BSDF or texture is registered with Dr.Jit for its virtual calls;
+    destroying one unregisters it, and a thread doing that while another records a symbolic
+    call over the same registry (Mitsuba's render) hung or crashed the process: the recorder's
+    error path waited for the GIL, held by the destroyer spinning on Dr.Jit's state lock (a
+    ``--workers 2`` world generation hung there; ``tests/test_hardware.py`` has the race). So an
+    owner that dies hands its Mitsuba objects here: they are destroyed now when no other thread
+    holds the lock (a one-thread program sees no difference), else by the lock's holder when its
+    :func:`drjit_serial` call ends. This never blocks, so it is safe in ``__del__`` and weakref
+    callbacks, which run wherever the last reference is dropped.
+
+    Plain Dr.Jit arrays (and NumPy or torch views of them) need none of this: Dr.Jit frees
+    them under its own lock."""
+    _RELEASED.append(obj)
+    del obj
+    _destroy_released()
+
+
+def _destroy_released() -> None:
+    """Destroy the objects handed to :func:`release_under_lock`, if the lock can be had."""
+    if not _RELEASED or not DRJIT_LOCK.acquire(blocking=False):
+        return
+    try:
+        while _RELEASED:
+            _RELEASED.pop()  # the last reference: destroyed here, under the lock
+    finally:
+        DRJIT_LOCK.release()
+
+
+class ReleasedUnderLock:
+    """Base of an object that owns Mitsuba objects: when it dies, its attributes go to
+    :func:`release_under_lock`, so whichever thread drops it last, they die under the lock."""
+
+    def __del__(self) -> None:
+        release_under_lock(dict(vars(self)))
 
 
 def mitsuba_variant(prefer: str | None = None) -> str:
@@ -76,7 +128,7 @@ def mitsuba_variant(prefer: str | None = None) -> str:
     str
         The active variant, e.g. ``"llvm_ad_rgb"``.
     """
-    with _VARIANT_LOCK:
+    with DRJIT_LOCK:
         return _choose_variant(prefer)
 
 

@@ -2,6 +2,7 @@
 
 import subprocess
 import sys
+import threading
 
 import pytest
 
@@ -121,3 +122,110 @@ def test_native_bf16_is_read_from_the_cpu_flags():
                  "")
     assert hardware.cpu_has_native_bf16() == any(f in flags.split()
                                                  for f in hardware.CPU_BF16_FLAGS)
+
+
+# -- Mitsuba objects die under DRJIT_LOCK (tests/worlds/test_threads.py has the race itself) --
+
+class _Sentinel:
+    """Stands in for a Mitsuba object: records the thread it died in."""
+
+    def __init__(self, died_in: list):
+        self.died_in = died_in
+
+    def __del__(self):
+        self.died_in.append(threading.get_ident())
+
+
+def _holding_the_lock(fn):
+    """Run ``fn`` in a thread that holds DRJIT_LOCK (through drjit_serial) until told to stop;
+    returns (stop, thread, ident)."""
+    from sim2radar.hardware import drjit_serial
+
+    holding, stop, ident = threading.Event(), threading.Event(), []
+
+    @drjit_serial
+    def hold():
+        ident.append(threading.get_ident())
+        holding.set()
+        stop.wait(30)
+
+    thread = threading.Thread(target=hold)
+    thread.start()
+    assert holding.wait(30)
+    fn()
+    return stop, thread, ident[0]
+
+
+def test_an_object_released_while_another_thread_holds_the_lock_dies_in_that_thread():
+    from sim2radar.hardware import release_under_lock
+
+    died_in: list = []
+    release_under_lock(_Sentinel(died_in))  # lock free: destroyed at once, here
+    assert died_in == [threading.get_ident()]
+
+    died_in.clear()
+    stop, thread, holder = _holding_the_lock(lambda: release_under_lock(_Sentinel(died_in)))
+    assert died_in == []  # kept while the other thread is inside Dr.Jit
+    stop.set()
+    thread.join(30)
+    assert died_in == [holder]  # destroyed by the holder, on its way out, under the lock
+
+
+def test_an_owner_dropped_outside_the_lock_hands_its_attributes_to_the_holder():
+    from sim2radar.hardware import ReleasedUnderLock
+
+    class Owner(ReleasedUnderLock):
+        def __init__(self, died_in):
+            self.scene = _Sentinel(died_in)
+
+    died_in: list = []
+    owner = [Owner(died_in)]
+    stop, thread, holder = _holding_the_lock(owner.clear)
+    assert died_in == []
+    stop.set()
+    thread.join(30)
+    assert died_in == [holder]
+
+
+def test_an_exception_leaves_drjit_serial_with_its_frames_locals_destroyed():
+    from sim2radar.hardware import drjit_serial
+
+    died_in: list = []
+
+    @drjit_serial
+    def fail():
+        scene = _Sentinel(died_in)  # noqa: F841 - a Dr.Jit value held by the failing frame
+        raise ValueError("bad input")
+
+    with pytest.raises(ValueError, match="bad input") as info:
+        fail()
+    assert died_in == [threading.get_ident()]  # not kept alive by the traceback
+    assert "bad input" in str(info.value)
+
+
+def test_a_world_dropped_while_another_thread_is_in_drjit_leaves_its_scene_to_that_thread():
+    """The two owners of Mitsuba scenes, the renderer's cache and the radar's RadarScene."""
+    import numpy as np
+
+    from sim2radar import hardware
+    from sim2radar.radar import RadarScene
+    from sim2radar.worlds import cast_rays, generate_world
+    from sim2radar.worlds.render import _SCENES
+
+    world = [generate_world(3)]
+    cast_rays(world[0], np.zeros(3), np.array([[1.0, 0.0, 0.0]]))  # builds and caches its scene
+    assert len(_SCENES._cache) >= 1
+    before = len(_SCENES._cache)
+    stop, thread, _ = _holding_the_lock(world.clear)
+    assert len(_SCENES._cache) == before - 1  # out of the cache ...
+    assert len(hardware._RELEASED) == 1       # ... and its Mitsuba scene waits for the holder
+    stop.set()
+    thread.join(30)
+    assert hardware._RELEASED == []
+
+    radar_scene = [RadarScene(list(generate_world(3).meshes))]
+    stop, thread, _ = _holding_the_lock(radar_scene.clear)
+    assert len(hardware._RELEASED) == 1
+    stop.set()
+    thread.join(30)
+    assert hardware._RELEASED == []

@@ -38,7 +38,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from sim2radar.hardware import drjit_serial, to_drjit
+from sim2radar.hardware import ReleasedUnderLock, drjit_serial, to_drjit
 from sim2radar.mesh import MaterialMesh
 from sim2radar.radar.binning import Accumulator, TraceResult, array_geometry
 from sim2radar.radar.config import RadarConfig, load_radar_config
@@ -80,7 +80,7 @@ def _element_gain(dr, x, y, z, q_az: float, q_el: float):
     return dr.power(cos_az, q_az) * dr.power(cos_el, q_el)
 
 
-class RadarScene:
+class RadarScene(ReleasedUnderLock):
     """A scene built once for Mitsuba, simulated from many radar poses.
 
     Parameters

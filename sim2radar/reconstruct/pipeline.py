@@ -333,7 +333,8 @@ class LabeledScene:
         """A Mitsuba scene dict with one in-memory ``mi.Mesh`` per segment (needs mitsuba; the
         variant comes from :func:`sim2radar.hardware.mitsuba_variant`). Each shape carries its
         material name as the BSDF id (``diffuse`` placeholder; the radar reads materials by
-        name from the mesh list)."""
+        name from the mesh list). A program that renders on other threads meanwhile should drop
+        the dict through :func:`sim2radar.hardware.release_under_lock`."""
         import mitsuba as mi
 
         from sim2radar.hardware import mitsuba_variant, to_drjit

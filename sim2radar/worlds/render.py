@@ -23,7 +23,7 @@ import numpy as np
 
 from sim2radar.boxes import boxes_to_frame
 from sim2radar.camera import CameraIntrinsics
-from sim2radar.hardware import drjit_serial, mitsuba_variant, to_drjit
+from sim2radar.hardware import ReleasedUnderLock, drjit_serial, mitsuba_variant, to_drjit
 from sim2radar.vocab import material_id, semantic_id
 from sim2radar.worlds.appearance import texture_image
 from sim2radar.worlds.config import RigConfig, radar_view
@@ -87,13 +87,24 @@ def camera_rays(intrinsics: CameraIntrinsics) -> tuple[np.ndarray, np.ndarray]:
     return d, np.linalg.norm(d, axis=1)
 
 
+class _WorldScene(ReleasedUnderLock):
+    """A world's Mitsuba scene and the look-up tables from Mitsuba's shape ids to the world's
+    instance, semantic, material and door ids. It dies under :data:`DRJIT_LOCK` wherever the
+    last reference goes (:class:`~sim2radar.hardware.ReleasedUnderLock`), so only this object,
+    never its ``scene`` alone, is held outside a :func:`drjit_serial` call."""
+
+    def __init__(self, scene, lut: np.ndarray, sem: np.ndarray, mat: np.ndarray,
+                 door: np.ndarray) -> None:
+        self.scene, self.lut, self.sem, self.mat, self.door = scene, lut, sem, mat, door
+
+
 class _SceneCache:
     """The Mitsuba scene of the most recently rendered worlds (weakly keyed by World)."""
 
     def __init__(self) -> None:
         self._cache: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 
-    def get(self, world: World):
+    def get(self, world: World) -> _WorldScene:
         entry = self._cache.get(world)
         if entry is None:
             entry = _build_scene(world)
@@ -171,7 +182,7 @@ def _build_scene(world: World):
     sem = np.array([semantic_id(o.semantic) for o in world.objects], dtype=np.uint8)
     mat = np.array([material_id(o.material) for o in world.objects], dtype=np.uint8)
     door = np.array([o.door_index for o in world.objects], dtype=np.int32)
-    return scene, lut, sem, mat, door
+    return _WorldScene(scene, lut, sem, mat, door)
 
 
 @drjit_serial
@@ -191,7 +202,8 @@ def cast_rays(world: World, origins: np.ndarray, directions: np.ndarray) -> dict
     import drjit as dr
     import mitsuba as mi
 
-    scene, lut, _, _, _ = _SCENES.get(world)
+    entry = _SCENES.get(world)
+    scene, lut = entry.scene, entry.lut
     d = np.asarray(directions, dtype=np.float64)
     o = np.broadcast_to(np.asarray(origins, dtype=np.float64), d.shape)
     ray = mi.Ray3f(to_drjit(mi.Point3f, o.T, np.float32), to_drjit(mi.Vector3f, d.T, np.float32))
@@ -240,7 +252,8 @@ def render_frame(
         raise ValueError(f"pose must be a (4, 4) rig-to-world matrix, got {rig_to_world.shape}")
     timings: dict[str, float] = {}
     t_start = t0 = time.perf_counter()
-    scene, lut, sem_lut, mat_lut, door_lut = _SCENES.get(world)
+    entry = _SCENES.get(world)
+    sem_lut, mat_lut, door_lut = entry.sem, entry.mat, entry.door
     timings["scene_s"] = time.perf_counter() - t0
 
     ext = rig_extrinsics(rig)
@@ -295,7 +308,7 @@ def render_frame(
     # -- RGB
     t0 = time.perf_counter()
     if rgb:
-        linear = _render_rgb(world, scene, cam_to_world, k, rig, frame_index)
+        linear = _render_rgb(world, entry, cam_to_world, k, rig, frame_index)
         timings["path_trace_s"] = time.perf_counter() - t0
         if rig.denoise:
             points_w = cam_to_world[:3, 3] + d_world * np.where(valid, hit["t"], 0.0)[:, None]
@@ -349,8 +362,8 @@ def render_frame(
 
 
 @drjit_serial
-def _render_rgb(world: World, scene, cam_to_world: np.ndarray, k: CameraIntrinsics,
-                rig: RigConfig, frame_index: int) -> np.ndarray:
+def _render_rgb(world: World, entry: _WorldScene, cam_to_world: np.ndarray,
+                k: CameraIntrinsics, rig: RigConfig, frame_index: int) -> np.ndarray:
     import mitsuba as mi
 
     # Mitsuba's camera frame is (x left, y up, z forward): flip OpenCV's x and y.
@@ -367,7 +380,7 @@ def _render_rgb(world: World, scene, cam_to_world: np.ndarray, k: CameraIntrinsi
     })
     integrator = mi.load_dict({"type": "path", "max_depth": rig.max_depth})
     seed = int(np.random.SeedSequence([world.seed, frame_index]).generate_state(1)[0])
-    img = mi.render(scene, sensor=sensor, integrator=integrator, spp=rig.spp, seed=seed)
+    img = mi.render(entry.scene, sensor=sensor, integrator=integrator, spp=rig.spp, seed=seed)
     return np.asarray(img, dtype=np.float32)[..., :3]
 
 
