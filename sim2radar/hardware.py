@@ -82,14 +82,16 @@ def release_under_lock(obj) -> None:
     destroying one unregisters it, and a thread doing that while another records a symbolic
     call over the same registry (Mitsuba's render) hung or crashed the process: the recorder's
     error path waited for the GIL, held by the destroyer spinning on Dr.Jit's state lock (a
-    ``--workers 2`` world generation hung there; ``tests/test_hardware.py`` has the race). So an
+    ``--workers 2`` world generation hung there; ``tests/worlds/test_threads.py`` has the race). So an
     owner that dies hands its Mitsuba objects here: they are destroyed now when no other thread
     holds the lock (a one-thread program sees no difference), else by the lock's holder when its
-    :func:`drjit_serial` call ends. This never blocks, so it is safe in ``__del__`` and weakref
+    :func:`drjit_serial` call ends (or, handed over in the instant it was leaving, by the next
+    call or release). This never blocks, so it is safe in ``__del__`` and weakref
     callbacks, which run wherever the last reference is dropped.
 
-    Plain Dr.Jit arrays (and NumPy or torch views of them) need none of this: Dr.Jit frees
-    them under its own lock."""
+    Plain Dr.Jit arrays (and NumPy or torch views of them) are not routed here: they are not in
+    the registry, and Dr.Jit frees them under its own state lock (from its design; the race test
+    drops scenes, not arrays)."""
     _RELEASED.append(obj)
     del obj
     _destroy_released()
