@@ -116,6 +116,7 @@ class ReleasedUnderLock:
         release_under_lock(dict(vars(self)))
 
 
+@drjit_serial
 def mitsuba_variant(prefer: str | None = None) -> str:
     """Select, activate and return the fastest working Mitsuba variant.
 
@@ -130,8 +131,7 @@ def mitsuba_variant(prefer: str | None = None) -> str:
     str
         The active variant, e.g. ``"llvm_ad_rgb"``.
     """
-    with DRJIT_LOCK:
-        return _choose_variant(prefer)
+    return _choose_variant(prefer)
 
 
 @functools.cache

@@ -57,8 +57,8 @@ def test_threads_rendering_and_tracing_at_once_give_the_serial_results(world3):
 
 #: one thread renders while another drops worlds whose Mitsuba scenes it built: a scene
 #: destroyed outside the lock, while the renderer records its symbolic calls, crashed or hung the
-#: process (before ``release_under_lock``: a segmentation fault in 3 of 4 runs of this script,
-#: and a ``generate --workers 2`` world that hung the demo's test for 25 minutes)
+#: process (before ``release_under_lock`` this script failed 4 of 4 runs: 2 segmentation faults,
+#: 2 hangs; and a ``generate --workers 2`` world hung the demo's test for 25 minutes)
 _DROP_WHILE_RENDERING = """
 import sys, threading, time
 import numpy as np
