@@ -9,6 +9,8 @@ export PREFECT_HOME ?= $(CURDIR)/.prefect
 export PREFECT_SERVER_ANALYTICS_ENABLED ?= false
 export PREFECT_LOGGING_LEVEL ?= WARNING
 OUT ?= out
+# test processes (pytest-xdist); 0 runs the suite in this one process
+TEST_WORKERS ?= 2
 
 .PHONY: setup demo test test-all bench lint clean
 
@@ -49,10 +51,10 @@ demo: setup
 	$(BIN)/sim2radar demo --out $(OUT)
 
 test: setup
-	$(BIN)/python -m pytest -q
+	$(BIN)/python -m pytest -q -n $(TEST_WORKERS) --dist worksteal
 
 test-all: setup
-	$(BIN)/python -m pytest -q -m ''
+	$(BIN)/python -m pytest -q -m '' -n $(TEST_WORKERS) --dist worksteal
 
 bench: setup
 	$(BIN)/python -m benchmarks

@@ -2,11 +2,19 @@
 
 from __future__ import annotations
 
+import atexit
 import os
+import shutil
+import tempfile
 
 import pytest
 
-# Keep Prefect's state out of ~ and make it quiet; tests never need a running server.
+# Keep Prefect's state out of ~ (and out of the Makefile's .prefect) and make it quiet; tests
+# never need a running server. One PREFECT_HOME per test process: `make test` runs two
+# (pytest-xdist), and the CLI runs each starts would otherwise share one SQLite database.
+_PREFECT_HOME = tempfile.mkdtemp(prefix="sim2radar-test-prefect-")
+os.environ["PREFECT_HOME"] = _PREFECT_HOME
+atexit.register(shutil.rmtree, _PREFECT_HOME, ignore_errors=True)
 os.environ.setdefault("PREFECT_SERVER_ANALYTICS_ENABLED", "false")
 os.environ.setdefault("PREFECT_LOGGING_LEVEL", "WARNING")
 # CLI runs in tests keep Prefect's per-process temporary API instead of leaving a managed
