@@ -99,6 +99,23 @@ def documents(files: list[Path], root: Path = ROOT) -> list[Path]:
             or (f.suffix == ".py" and f.relative_to(root).parts[0] in PY_FOLDERS)]
 
 
+@functools.cache
+def _tree(path: Path) -> ast.Module:
+    """A ``*.py`` file's syntax tree (read once for ``prose`` and ``written_names``)."""
+    return ast.parse(path.read_text(encoding="utf-8"), str(path))
+
+
+def _statements(node: ast.AST):
+    """``node`` and every statement below it: where docstrings can be (a definition is always
+    a statement, so no expression is walked; a tenth of ``ast.walk``'s nodes)."""
+    yield node
+    for _, value in ast.iter_fields(node):
+        if isinstance(value, list):
+            for child in value:
+                if isinstance(child, ast.stmt | ast.excepthandler | ast.match_case):
+                    yield from _statements(child)
+
+
 def prose(path: Path) -> list[tuple[int, str]]:
     """(line, text) of what a file says in words: all of a ``*.md``; the comments and
     docstrings of a ``*.py``; the ``#`` comments of the Makefile, a ``*.yaml`` or ``*.toml``."""
@@ -112,7 +129,7 @@ def prose(path: Path) -> list[tuple[int, str]]:
              for tok in tokenize.generate_tokens(io.StringIO(text).readline)
              if tok.type == tokenize.COMMENT]
     source = text.splitlines()
-    for node in ast.walk(ast.parse(text, str(path))):
+    for node in _statements(_tree(path)):
         if isinstance(node, ast.Module | ast.ClassDef | ast.FunctionDef | ast.AsyncFunctionDef):
             doc = node.body[0] if node.body else None
             if (isinstance(doc, ast.Expr) and isinstance(doc.value, ast.Constant)
@@ -192,7 +209,7 @@ def written_names(files: list[Path], root: Path = ROOT) -> set[str]:
     names = set()
     for f in files:
         if f.suffix == ".py" and f.relative_to(root).parts[0] in WRITERS:
-            for node in ast.walk(ast.parse(f.read_text(encoding="utf-8"), str(f))):
+            for node in ast.walk(_tree(f)):
                 if (isinstance(node, ast.Constant) and isinstance(node.value, str)
                         and re.fullmatch(r"[\w-][\w.-]*\.(?:md|tex|pdf)", node.value)):
                     names.add(node.value)

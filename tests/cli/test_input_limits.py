@@ -40,11 +40,12 @@ def _bounded(*args: str, timeout: float = 240.0, gib: int = 3) -> subprocess.Com
                           env={**os.environ, "COLUMNS": "300"})
 
 
-def test_load_yaml_refuses_a_bomb_without_expanding_it():
+def test_load_yaml_refuses_a_bomb_without_expanding_it(monkeypatch):
     import time
 
     import yaml
 
+    from sim2radar import configio
     from sim2radar.configio import MAX_YAML_VALUES, YamlTooLargeError, load_yaml
 
     t0 = time.perf_counter()
@@ -55,9 +56,12 @@ def test_load_yaml_refuses_a_bomb_without_expanding_it():
     # shared anchors that stay small are fine, and counted per reference
     doc = load_yaml("a: &a [1, 2, 3]\nb: *a\nc: *a\n")
     assert doc == {"a": [1, 2, 3], "b": [1, 2, 3], "c": [1, 2, 3]}
-    big = "x: [" + ", ".join(["1"] * (MAX_YAML_VALUES + 10)) + "]\n"
+    # a plain list over the limit too (a smaller limit: parsing 200,000 values takes ~10 s)
+    assert MAX_YAML_VALUES == 200_000
+    monkeypatch.setattr(configio, "MAX_YAML_VALUES", 1_000)
+    load_yaml("x: [" + ", ".join(["1"] * 990) + "]\n")
     with pytest.raises(YamlTooLargeError):
-        load_yaml(big)
+        load_yaml("x: [" + ", ".join(["1"] * 1_010) + "]\n")
 
 
 @pytest.mark.parametrize("where", ["generate", "radar"])
