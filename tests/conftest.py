@@ -33,6 +33,19 @@ def pytest_collection_modifyitems(config, items):
             item.add_marker(skip)
 
 
+@pytest.fixture(scope="session")
+def prefect_server():
+    """One temporary Prefect API for the whole test process, for the tests that run flows in
+    this process (its state in the process's temporary PREFECT_HOME)."""
+    from prefect.settings import PREFECT_HOME, temporary_settings
+    from prefect.testing.utilities import prefect_test_harness
+
+    with temporary_settings(updates={PREFECT_HOME: _PREFECT_HOME}), prefect_test_harness(
+        server_startup_timeout=120
+    ):
+        yield
+
+
 @pytest.fixture
 def unwritable_dir(tmp_path, monkeypatch):
     """A folder in which nothing can be created (mode 0o555). Root ignores permission bits, so

@@ -1,25 +1,18 @@
 """Flow/task test fixtures: tiny scene files (good and broken) and a Prefect test server.
 
-Prefect state lives in a temporary PREFECT_HOME; the engine-backed tests share one temporary
-server (``prefect_test_harness``, ~10 s to start), so keep them few.
+The engine-backed tests share the session's temporary Prefect server (``prefect_server`` in
+``tests/conftest.py``, ~10 s to start), so keep them few.
 """
 
 from __future__ import annotations
 
-import os
-import tempfile
 from pathlib import Path
 
 import pytest
 
 import sim2radar.radar as radar_mod
-
-_PREFECT_HOME = tempfile.mkdtemp(prefix="sim2radar-prefect-home-")
-os.environ.setdefault("PREFECT_HOME", _PREFECT_HOME)
-os.environ.setdefault("PREFECT_SERVER_ANALYTICS_ENABLED", "false")
-
-from sim2radar.scenes import pose_matrix  # noqa: E402
-from tests.flows._scenes import PLATE_RANGE_M, RADAR_POSITION, RADAR_YAW_DEG, write_scene  # noqa: E402
+from sim2radar.scenes import pose_matrix
+from tests.flows._scenes import PLATE_RANGE_M, RADAR_POSITION, RADAR_YAW_DEG, write_scene
 
 
 @pytest.fixture
@@ -47,18 +40,6 @@ def broken_scenes(tmp_path) -> dict[str, Path]:
     corrupt = write_scene(tmp_path / "corrupt", "corrupt_mesh", [("wall", "concrete", (3, 0, 0), (0.1, 2, 2))])
     (corrupt.parent / "wall.ply").write_bytes(b"this is not a ply file")
     return {"missing": missing, "unknown": unknown, "corrupt": corrupt}
-
-
-@pytest.fixture(scope="session")
-def prefect_server():
-    """One temporary Prefect API for the whole session (Prefect state in a temp PREFECT_HOME)."""
-    from prefect.settings import PREFECT_HOME, temporary_settings
-    from prefect.testing.utilities import prefect_test_harness
-
-    with temporary_settings(updates={PREFECT_HOME: _PREFECT_HOME}), prefect_test_harness(
-        server_startup_timeout=120
-    ):
-        yield
 
 
 @pytest.fixture

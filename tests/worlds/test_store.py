@@ -2,11 +2,7 @@
 
 from __future__ import annotations
 
-import os
-import tempfile
-
 import numpy as np
-import pytest
 
 from sim2radar.storage import ArtifactStore, meshes_from_table
 from sim2radar.storage.worlds import decode_png, encode_png, frames_from_table
@@ -97,20 +93,7 @@ def test_plain_run_records_manifest_and_failures(tmp_path, monkeypatch):
     assert rows["world_000008"]["status"] == "failed" and "boom" in rows["world_000008"]["error"]
 
 
-@pytest.fixture(scope="module")
-def prefect_home():
-    home = tempfile.mkdtemp(prefix="sim2radar-worlds-prefect-")
-    os.environ.setdefault("PREFECT_HOME", home)
-    from prefect.settings import PREFECT_HOME, temporary_settings
-    from prefect.testing.utilities import prefect_test_harness
-
-    with temporary_settings(updates={PREFECT_HOME: home}), prefect_test_harness(
-        server_startup_timeout=120
-    ):
-        yield
-
-
-def test_flow_generates_and_then_skips(tmp_path, prefect_home):
+def test_flow_generates_and_then_skips(tmp_path, prefect_server):
     from sim2radar.flows.worlds import generate_worlds_flow
 
     request = WorldsRequest(seeds=[3], n_frames=1, store=str(tmp_path / "store"),
