@@ -11,6 +11,7 @@ export PREFECT_LOGGING_LEVEL ?= WARNING
 OUT ?= out
 # test processes (pytest-xdist); 0 runs the suite in this one process
 TEST_WORKERS ?= 2
+PYTEST = $(BIN)/python -m pytest -q -n $(TEST_WORKERS) --dist worksteal
 
 .PHONY: setup demo test test-all bench lint clean
 
@@ -51,10 +52,10 @@ demo: setup
 	$(BIN)/sim2radar demo --out $(OUT)
 
 test: setup
-	$(BIN)/python -m pytest -q -n $(TEST_WORKERS) --dist worksteal
+	$(PYTEST)
 
 test-all: setup
-	$(BIN)/python -m pytest -q -m '' -n $(TEST_WORKERS) --dist worksteal
+	$(PYTEST) -m ''
 
 bench: setup
 	$(BIN)/python -m benchmarks
