@@ -15,6 +15,13 @@ two warm-up steps. Host-side work on the critical path is augmentation + collati
 GPU, whatever of the assignment waits for the host); the issue #31 goal is <= 5 ms per step on
 the GPU machine's CPU.
 
+How far the step could go on this device: the step's floating-point work (``gflop``: the
+forward and backward of one step as ``torch.utils.flop_counter`` counts it, nearly all of it
+in the convolutions), the rate the timed step achieves (``gflops``), and this device's float32
+matrix-product rate at the run's thread count (``matmul_gflops``, a square ``torch.mm``): the
+step cannot run faster than ``floor_ms = gflop / matmul_gflops`` in float32 here, so a goal
+below that floor needs faster hardware or lower precision, not better code.
+
 Then the same step inside :func:`sim2radar.detect.train.train` (the profile's precision as
 ``amp: auto`` resolves here) with ``runtime.loader_workers`` 0 (each batch made in this process
 just before its step), 1 and 2 (DataLoader worker processes make the batches during the steps;
@@ -69,8 +76,39 @@ def _timed_assignment(device: torch.device, spent: list[float]):
         model_mod.assign_targets = real
 
 
+def matmul_gflops(device: torch.device, n: int | None = None, repeats: int = 5) -> float:
+    """Float32 ``torch.mm`` of two ``n x n`` matrices on ``device`` at torch's thread count:
+    GFLOP/s (``2 n^3`` per product), over ``repeats`` products after a warm-up."""
+    n = n or (2048 if device.type == "cpu" else 8192)
+    gen = torch.Generator(device=device).manual_seed(0)
+    a = torch.randn(n, n, device=device, generator=gen)
+    b = torch.randn(n, n, device=device, generator=gen)
+    torch.mm(a, b)
+    _sync(device)
+    t0 = time.perf_counter()
+    for _ in range(repeats):
+        torch.mm(a, b)
+    _sync(device)
+    return 2.0 * n**3 * repeats / (time.perf_counter() - t0) / 1e9
+
+
+def step_flops(model, pts: torch.Tensor, gt: torch.Tensor, batch: int) -> float:
+    """Floating-point operations of one training step's forward and backward (``torch.utils.
+    flop_counter``: matrix products and convolutions; the optimiser's elementwise update is
+    not counted). The gradients it leaves are cleared."""
+    from torch.utils.flop_counter import FlopCounterMode
+
+    counter = FlopCounterMode(display=False)
+    with counter:
+        loss, _ = model.loss(model(pts, batch), gt)
+        loss.backward()
+    model.zero_grad(set_to_none=True)
+    return float(counter.get_total_flops())
+
+
 def step_breakdown(profile: str, device: torch.device, n_steps: int) -> dict[str, float]:
-    """Median milliseconds per training step of ``profile``'s fine-tuning model, by part."""
+    """Median milliseconds per training step of ``profile``'s fine-tuning model, by part, and
+    its floating-point work per step (``gflop``) and rate (``gflops``)."""
     from sim2radar.datasets import make_door_frames
     from sim2radar.detect import PointPillars
     from sim2radar.detect.augment import augment_frame, build_gt_database
@@ -116,7 +154,11 @@ def step_breakdown(profile: str, device: torch.device, n_steps: int) -> dict[str
             parts["assign"].append(a)
             parts["model"].append(t3 - t2 - a)
             parts["step"].append(t3 - t0)
-    return {k: round(1000 * statistics.median(v), 1) for k, v in parts.items()}
+    out = {k: round(1000 * statistics.median(v), 1) for k, v in parts.items()}
+    flop = step_flops(model, pts, gt, BATCH)
+    out["gflop"] = round(flop / 1e9, 3)
+    out["gflops"] = round(flop / 1e9 / (out["step"] / 1000), 1)
+    return out
 
 
 LOADER_WORKERS = (0, 1, 2)
@@ -198,6 +240,14 @@ def main() -> dict:
         res[profile] = ms
         print(f"{profile:8s} {ms['augment']:9.1f} {ms['collate']:9.1f} {ms['assign']:9.1f} "
               f"{ms['model']:9.1f} {ms['step']:9.1f} {ms['host']:9.1f}")
+    peak = res["matmul_gflops"] = round(matmul_gflops(device), 1)
+    print(f"float32 matrix product here: {peak:.1f} GFLOP/s ({torch.get_num_threads()} threads)")
+    for profile in profiles:
+        ms = res[profile]
+        ms["floor_ms"] = round(1000 * ms["gflop"] / peak, 1)
+        print(f"{profile:8s} {ms['gflop']:9.3f} GFLOP per step (forward + backward), "
+              f"{ms['gflops']:.1f} GFLOP/s in the timed step ({100 * ms['gflops'] / peak:.0f} % "
+              f"of the matrix product's); float32 floor {ms['floor_ms']:.1f} ms per step")
     print(f"{'profile':8s} " + " ".join(f"{f'{w} workers':>17s}" for w in LOADER_WORKERS)
           + "  [train() s/step | loop's wait for a batch, ms/step]")
     for profile in profiles:

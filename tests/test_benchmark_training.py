@@ -34,6 +34,13 @@ def test_the_training_benchmark_runs_ci_sized(capsys, monkeypatch):
     assert parts == pytest.approx(demo["step"], rel=0.2)
     for w in (0, 1, 2):
         assert demo[f"workers_{w}"] > 0 and demo[f"wait_ms_{w}"] >= 0
+    # the demo model's step is ~0.9 GFLOP (its convolutions, forward and backward) and cannot
+    # beat the float32 floor that the device's own matrix-product rate sets
+    assert 0.3 < demo["gflop"] < 3.0
+    assert res["matmul_gflops"] > 0
+    assert demo["gflops"] == pytest.approx(demo["gflop"] / (demo["step"] / 1000), rel=0.01)
+    assert 0 < demo["floor_ms"] < demo["step"]
+    assert "float32 floor" in out
     if "demo_1_thread" in res:  # a CPU with a core to spare for the worker
         spare = res["demo_1_thread"]
         assert spare["workers_0"] > 0 and spare["workers_1"] > 0
