@@ -1,6 +1,7 @@
 """Where a training step's time goes: target assignment, augmentation, collation, the model.
 
-    python -m benchmarks training                      # paper + demo models (~2 min, 2 cores)
+    python -m benchmarks training                      # paper + demo models (2 cores: ~2 min
+                                                       # with bfloat16, ~6 min in float32)
     SIM2RADAR_BENCH_STEPS=20 SIM2RADAR_BENCH_ROUNDS=3 python -m benchmarks training
     SIM2RADAR_BENCH_PROFILES=demo SIM2RADAR_BENCH_STEPS=2 SIM2RADAR_BENCH_ROUNDS=1 \
         python -m benchmarks training                  # CI-sized (tests/test_benchmark_training.py)
