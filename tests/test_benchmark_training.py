@@ -38,7 +38,8 @@ def test_the_training_benchmark_runs_ci_sized(capsys, monkeypatch):
     # beat the float32 floor that the device's own matrix-product rate sets
     assert 0.3 < demo["gflop"] < 3.0
     assert res["matmul_gflops"] > 0
-    assert demo["gflops"] == pytest.approx(demo["gflop"] / (demo["step"] / 1000), rel=0.01)
+    # (the rate is rounded to 0.1 GFLOP/s)
+    assert demo["gflops"] == pytest.approx(demo["gflop"] / (demo["step"] / 1000), abs=0.06)
     assert 0 < demo["floor_ms"] < demo["step"]
     assert "float32 floor" in out
     if "demo_1_thread" in res:  # a CPU with a core to spare for the worker
