@@ -142,17 +142,24 @@ def test_prefect_artifacts_are_published(first):
     assert found.get("sweep-t-progress") == "progress"
 
 
-def test_a_rerun_trains_nothing(first, data, monkeypatch):
+def test_a_rerun_trains_nothing(first, data, monkeypatch, tmp_path):
+    import shutil
+
     import sim2radar.detect.train as train_mod
 
+    # rerun on a copy of the sweep and its store: a rerun rewrites the sweep's tables (its
+    # pre-trainings "skipped"), and pytest-xdist's worksteal may run this test before the
+    # ones that read the first run's
+    out, store = tmp_path / "sweeps", tmp_path / "store"
+    shutil.copytree(first["out"], out)
+    shutil.copytree(first["store"], store)
     calls = []
     real_train = train_mod.train
     monkeypatch.setattr(train_mod, "train", lambda *a, **k: calls.append(1) or real_train(*a, **k))
-    again = _sweep(data["sim"], data["real"], profile="smoke", name="t",
-                           out=first["out"], store=first["store"])
+    again = _sweep(data["sim"], data["real"], profile="smoke", name="t", out=out, store=store)
     assert again["counts"] == {"ok": 0, "skipped": 8, "failed": 0}
     assert calls == []                                     # pre-trainings found finished too
-    pre = pq.read_table(first["dir"] / "pretrainings.parquet").to_pylist()
+    pre = pq.read_table(out / "t" / "pretrainings.parquet").to_pylist()
     assert {r["status"] for r in pre} == {"skipped"} and len(pre) == 4
     assert again["stats"]["cells"] == first["summary"]["stats"]["cells"]
 

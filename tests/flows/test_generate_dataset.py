@@ -142,7 +142,9 @@ def test_second_run_recomputes_nothing(run, monkeypatch):
     files = sorted(p for p in (run["root"] / "store").rglob("*.parquet")
                    if "manifests" not in p.parts)
     mtimes = [os.path.getmtime(p) for p in files]
-    again = _plain([SEED], _spec(), run["store"], "gen")
+    # its own dataset name: the module's tests share one store, and pytest-xdist's worksteal
+    # may run this test before the ones that read the first run's "gen" manifest
+    again = _plain([SEED], _spec(), run["store"], "gen_again")
     assert again["counts"]["skipped"] == 1 and again["frame_counts"]["skipped"] == 2
     assert [os.path.getmtime(p) for p in files] == mtimes
     assert again["geometry"]["ground_truth"]["points_per_frame"] == \
