@@ -11,7 +11,9 @@ export PREFECT_LOGGING_LEVEL ?= WARNING
 OUT ?= out
 # test processes (pytest-xdist); 0 runs the suite in this one process
 TEST_WORKERS ?= 2
-PYTEST = $(BIN)/python -m pytest -q -n $(TEST_WORKERS) --dist worksteal
+# extra pytest arguments, e.g. PYTEST_ARGS=--reverse-within-modules
+PYTEST_ARGS ?=
+PYTEST = $(BIN)/python -m pytest -q -n $(TEST_WORKERS) --dist worksteal $(PYTEST_ARGS)
 
 .PHONY: setup demo test test-all bench lint clean
 

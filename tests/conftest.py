@@ -22,9 +22,22 @@ os.environ.setdefault("PREFECT_LOGGING_LEVEL", "WARNING")
 os.environ.setdefault("SIM2RADAR_PREFECT_SERVER", "ephemeral")
 
 
+def pytest_addoption(parser):
+    parser.addoption(
+        "--reverse-within-modules", action="store_true",
+        help="run each module's tests in reverse order (module fixtures are shared, and "
+             "`--dist worksteal` may run a module's later tests first: this finds a test "
+             "that changes what an earlier one reads)")
+
+
 def pytest_collection_modifyitems(config, items):
+    from itertools import groupby
+
     from sim2radar.hardware import has_cuda
 
+    if config.getoption("--reverse-within-modules"):
+        items[:] = [it for _, group in groupby(items, key=lambda it: it.nodeid.split("::")[0])
+                    for it in reversed(list(group))]
     if has_cuda():
         return
     skip = pytest.mark.skip(reason="needs a CUDA GPU")
