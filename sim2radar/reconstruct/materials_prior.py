@@ -274,22 +274,26 @@ def _plane_masks(points_cam: np.ndarray, normals: np.ndarray, mask: np.ndarray,
     instance): the most common normal direction, then the most common offset along it."""
     out = []
     rest = mask & np.isfinite(normals).all(axis=-1) & np.isfinite(points_cam).all(axis=-1)
+    normals_0, points_0 = np.nan_to_num(normals), np.nan_to_num(points_cam)  # once, not per plane
     for _ in range(max_planes):
         if rest.sum() < min_px:
             break
         n = normals[rest].astype(np.float64)
-        q = np.round(n * 3).astype(np.int64)
-        keys, inv, cnt = np.unique(q, axis=0, return_inverse=True, return_counts=True)
-        n0 = n[inv.ravel() == np.argmax(cnt)].mean(axis=0)
+        # the most common direction on a 7^3 lattice (unit normals x 3, rounded): one integer
+        # per cell, in the lexicographic order of its (x, y, z), so a tie goes to the same
+        # cell as np.unique(axis=0) + argmax would pick (a counting pass instead of a sort)
+        q = np.round(n * 3).astype(np.int64) + 3
+        cell = (q[:, 0] * 7 + q[:, 1]) * 7 + q[:, 2]
+        n0 = n[cell == np.argmax(np.bincount(cell, minlength=343))].mean(axis=0)
         n0 /= np.linalg.norm(n0)
-        cand = rest & (np.abs(np.nan_to_num(normals) @ n0) > 0.95)
-        d = np.nan_to_num(points_cam) @ n0
+        cand = rest & (np.abs(normals_0 @ n0) > 0.95)
+        d = points_0 @ n0
         hist_d = d[cand]
         if len(hist_d) < min_px:
             break
         bins = np.floor(hist_d / 0.05).astype(np.int64)
-        b, c = np.unique(bins, return_counts=True)
-        mode = (b[np.argmax(c)] + 0.5) * 0.05
+        low = bins.min()
+        mode = (low + np.argmax(np.bincount(bins - low)) + 0.5) * 0.05  # the lowest of ties
         plane = cand & (np.abs(d - mode) < 0.1)
         if plane.sum() >= min_px:
             out.append(plane)

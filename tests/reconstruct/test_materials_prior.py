@@ -225,3 +225,34 @@ def test_wall_tile_grid_from_both_directions(ph, sh, pv, sv, tile):
     post, fired = PriorMaterials().posterior("wall", f)
     assert ("tile grout grid" in fired) == tile, fired
     assert (max(post, key=post.get) == "ceramic_tile") == tile, (post, fired)
+
+
+def test_plane_masks_split_a_segment_into_its_planes_largest_first_ties_to_the_lower_cell():
+    """Two walls at a corner in one segment (as one oracle instance can hold both walls of a
+    corridor): the larger wall comes out first, then the other; at equal sizes the wall whose
+    rounded normal is lower in (x, y, z) order is taken first, and of two equally full offsets
+    along a normal the nearer one, as a sort-based mode (np.unique + argmax) would pick."""
+    from sim2radar.reconstruct.materials_prior import _plane_masks
+
+    h, w = 60, 100
+    yy, xx = np.mgrid[0:h, 0:w].astype(np.float64)
+
+    def corner(split: int):
+        left = xx < split                       # wall 1: x = 2 m (normal -x); wall 2: y = 3 m
+        pts = np.where(left[..., None], np.stack([np.full_like(xx, 2.0), xx * 0.02, yy * 0.02], -1),
+                       np.stack([xx * 0.02, np.full_like(xx, 3.0), yy * 0.02], -1))
+        nrm = np.where(left[..., None], np.array([-1.0, 0, 0]), np.array([0, -1.0, 0]))
+        return pts, nrm, left
+
+    pts, nrm, left = corner(70)                 # 70 % of the pixels on wall 1
+    planes = _plane_masks(pts, nrm, np.ones((h, w), bool), min_px=500)
+    assert [p.sum() for p in planes] == [left.sum(), (~left).sum()]
+    assert np.array_equal(planes[0], left)
+    pts, nrm, left = corner(50)                 # a tie: (-1, 0, 0) < (0, -1, 0)
+    planes = _plane_masks(pts, nrm, np.ones((h, w), bool), min_px=500)
+    assert np.array_equal(planes[0], left) and np.array_equal(planes[1], ~left)
+    # one normal, two parallel sheets 0.5 m apart with the same pixel count: the nearer first
+    pts = np.stack([np.where(xx < 50, 2.0, 2.5), xx * 0.02, yy * 0.02], -1)
+    nrm = np.broadcast_to(np.array([1.0, 0, 0]), pts.shape)
+    planes = _plane_masks(pts, nrm, np.ones((h, w), bool), min_px=500)
+    assert len(planes) == 2 and np.array_equal(planes[0], xx < 50)
