@@ -98,6 +98,7 @@ from sim2radar.reconstruct.segment_builtin_geometry import (
     UnionFind,
     fill_columns,
     fill_nearest,
+    finite_rows,
     footprint_gap_m,
     region_geometry,
 )
@@ -199,7 +200,7 @@ def segment_frame(frame: FrameInput, depth: DepthResult,
             f"{frame.name}: depth is {depth_m.shape} but the image is {frame.shape}"
         )
     points = points_from_depth(depth_m, k)
-    valid = np.isfinite(points).all(axis=-1)
+    valid = finite_rows(points)
     if valid.sum() < config.thresholds.min_valid_px:
         raise ReconstructionInputError(
             f"{frame.name}: no segments — the depth map has {int(valid.sum())} valid pixels; "

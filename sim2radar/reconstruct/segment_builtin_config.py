@@ -16,6 +16,7 @@ Nothing of a call is kept after it returns, so one segmenter serves any number o
 from __future__ import annotations
 
 import dataclasses
+import functools
 from collections.abc import Mapping
 from typing import Any
 
@@ -24,6 +25,7 @@ import numpy as np
 from sim2radar.boxes import DOOR_THICKNESS_M
 from sim2radar.camera import CameraIntrinsics
 from sim2radar.reconstruct.facade import FacadeConfig
+from sim2radar.reconstruct.segment_builtin_geometry import finite_rows
 from sim2radar.reconstruct.segment_builtin_thresholds import (
     SegmenterThresholds,
     config_from_options,
@@ -177,6 +179,14 @@ class SegmentContext:
     @property
     def thresholds(self) -> SegmenterThresholds:
         return self.config.thresholds
+
+    @functools.cached_property
+    def valid(self) -> np.ndarray:
+        """(H, W) bool — pixels with depth (every coordinate of ``points_level`` finite);
+        made once per context, as the steps all read it."""
+        valid = finite_rows(self.points_level)
+        valid.flags.writeable = False  # shared by every step: none may change it
+        return valid
 
     def with_levels(self, floor_z_m: float, ceiling_z_m: float) -> SegmentContext:
         """This context with the floor and ceiling levels [m]."""

@@ -126,7 +126,7 @@ def wall_openings(ctx: SegmentContext, regions: np.ndarray, labels, scores):
     opts, cfg, pl = ctx.config, ctx.thresholds, ctx.points_level
     floor_z, ceil_z = ctx.floor_z_m, ctx.ceiling_z_m
     h, w = regions.shape
-    valid = np.isfinite(pl).all(axis=-1)
+    valid = ctx.valid
     n_reg = int(regions.max()) + 1
     counts = np.bincount(regions[regions >= 0], minlength=n_reg)
     walls = [i for i in np.argsort(-counts) if labels[i] == "wall"

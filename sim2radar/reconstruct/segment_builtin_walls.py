@@ -35,7 +35,7 @@ def wall_plane(ctx: SegmentContext, mask: np.ndarray):
     has fewer than ``wall_min_points`` pixels with depth (a region grown over pixels the
     LiDAR missed)."""
     cfg, pl = ctx.thresholds, ctx.points_level
-    wp = pl[mask & np.isfinite(pl).all(axis=-1)]
+    wp = pl[mask & ctx.valid]
     if len(wp) < cfg.wall_min_points:
         return None
     g = region_geometry(pl, mask, pixel_angle_rad=ctx.pixel_angle_rad)
@@ -51,7 +51,7 @@ def large_walls(ctx: SegmentContext, regions: np.ndarray, labels, min_frac: floa
     """``(region id, (nrm, d, geometry, points))`` of the ``wall`` regions among the
     ``top`` largest regions that hold at least ``min_frac`` of the valid pixels and have a
     vertical plane (:func:`wall_plane`), largest first."""
-    n_valid = int(np.isfinite(ctx.points_level).all(axis=-1).sum())
+    n_valid = int(ctx.valid.sum())
     counts = np.bincount(regions[regions >= 0], minlength=len(labels))
     out = []
     for wi in np.argsort(-counts)[:top]:
@@ -103,7 +103,7 @@ def proud_of_walls(ctx: SegmentContext, regions: np.ndarray, labels, scores):
     """
     opts, cfg, pl, floor_z = ctx.config, ctx.thresholds, ctx.points_level, ctx.floor_z_m
     lo, hi = opts.proud_m
-    valid = np.isfinite(pl).all(axis=-1)
+    valid = ctx.valid
     counts = np.bincount(regions[regions >= 0], minlength=len(labels))
     walls = wall_extents(ctx, regions, labels, cfg.wall_min_frac, cfg.wall_top_n)
     labels, scores = list(labels), list(scores)
@@ -175,7 +175,7 @@ def flush_with_walls(ctx: SegmentContext, regions: np.ndarray, labels, skip=froz
     its extent is that wall (furniture stands proud of it, :func:`proud_of_walls`)."""
     cfg, pl = ctx.thresholds, ctx.points_level
     labels = list(labels)
-    valid = np.isfinite(pl).all(axis=-1)
+    valid = ctx.valid
     walls = wall_extents(ctx, regions, labels, cfg.wall_min_frac, cfg.wall_top_n)
     if not walls:
         return labels
@@ -226,7 +226,7 @@ def below_floor(ctx: SegmentContext, regions: np.ndarray, labels, scores, rays: 
     """
     opts, cfg, pl = ctx.config, ctx.thresholds, ctx.points_level
     floor_z, ceil_z = ctx.floor_z_m, ctx.ceiling_z_m
-    valid = np.isfinite(pl).all(axis=-1)
+    valid = ctx.valid
     h = valid.shape[0]
     rng = np.linalg.norm(np.where(valid[..., None], pl, 0), axis=-1)
     tol = opts.below_floor_m + cfg.below_floor_per_m * rng
