@@ -55,6 +55,28 @@ def test_context_levels_are_a_new_context():
     assert ctx.floor_z_m is None and later.points_level is pl and later.pixel_angle_rad == 1e-3
 
 
+
+def test_the_context_s_pixels_with_depth_are_every_coordinate_finite_and_read_only():
+    """``valid``: a pixel has depth when all three coordinates are finite (a NaN or inf in any
+    one of them drops it), as ``np.isfinite(points).all(axis=-1)`` says; one array per
+    context, which no step may change."""
+    from sim2radar.reconstruct.segment_builtin_geometry import finite_rows
+
+    rng = np.random.default_rng(3)
+    pl = rng.normal(size=(6, 7, 3)).astype(np.float32)
+    for k, bad in enumerate((np.nan, np.inf, -np.inf)):
+        pl[rng.random((6, 7)) < 0.2, k] = bad
+    ctx = SegmentContext(SegmenterConfig(), pl)
+    assert np.array_equal(ctx.valid, np.isfinite(pl).all(axis=-1)) and ctx.valid is ctx.valid
+    assert 0 < ctx.valid.sum() < 42
+    with pytest.raises(ValueError, match="read-only"):
+        ctx.valid[0, 0] = True
+    for n in (1, 2, 4):                               # any short last axis, and flat rows
+        a = rng.normal(size=(50, n))
+        a[rng.random((50, n)) < 0.1] = np.nan
+        assert np.array_equal(finite_rows(a), np.isfinite(a).all(axis=-1))
+
+
 def _key(seg):
     return (seg.segment_id.tobytes(), seg.labels, seg.scores.tobytes(),
             seg.door_boxes_level.tobytes(), sorted(seg.info.items()))
