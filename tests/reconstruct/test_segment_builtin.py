@@ -75,6 +75,36 @@ def test_region_geometry_of_a_wall(frames):
     assert g.planarity < 1e-3
     assert g.height_m == pytest.approx(2.7, abs=0.15)
 
+    assert g.fill > 0.9  # a whole wall: its pixels cover their convex hull
+
+
+def test_a_region_s_hull_from_its_rows_ends_is_the_hull_of_all_its_pixels():
+    """The fill's convex hull is taken over each row's first and last pixel: the same hull
+    vertices ``cv2.convexHull`` gives for every pixel (blobs, scattered pixels, one row, one
+    column, polygons), so the fill is the same number."""
+    import cv2
+
+    from sim2radar.reconstruct.segment_builtin_geometry import row_ends
+
+    rng = np.random.default_rng(7)
+    for k in range(200):
+        m = np.zeros((40, 50), np.uint8)
+        if k % 5 == 0:
+            m[:] = rng.random((40, 50)) < 0.05
+        elif k % 5 == 1:
+            m[rng.integers(0, 40), rng.integers(0, 25):rng.integers(26, 50)] = 1
+        elif k % 5 == 2:
+            m[rng.integers(0, 20):rng.integers(21, 40), rng.integers(0, 50)] = 1
+        elif k % 5 == 3:
+            cv2.fillPoly(m, [rng.integers(0, 40, (int(rng.integers(3, 8)), 2)).astype(np.int32)], 1)
+        else:
+            m[:] = cv2.GaussianBlur(rng.random((40, 50)), (0, 0), 2.5) > 0.53
+        mask = m.astype(bool)
+        if mask.sum() < 3:
+            continue
+        every = cv2.convexHull(np.argwhere(mask)[:, ::-1].astype(np.int32))
+        assert np.array_equal(cv2.convexHull(row_ends(mask)), every), k
+
 
 def test_empty_depth_is_a_clear_error(frames):
     f = frames[0]
