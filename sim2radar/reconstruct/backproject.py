@@ -19,6 +19,7 @@ from sim2radar.camera import CameraIntrinsics, back_project, project
 
 __all__ = [
     "points_from_depth",
+    "finite_rows",
     "normals_from_points",
     "estimate_up",
     "gravity_up",
@@ -55,6 +56,17 @@ def points_from_depth(depth_m: np.ndarray, intrinsics: CameraIntrinsics) -> np.n
     return back_project(depth, intrinsics)
 
 
+def finite_rows(a: np.ndarray) -> np.ndarray:
+    """``np.isfinite(a).all(axis=-1)``: every value along the last axis finite (a point with
+    depth). The same booleans; NumPy's reduction over a last axis of 3 takes ~6x longer than
+    these two ``&`` of its columns (9 against 1.4 ms on a 640 x 480 point map)."""
+    f = np.isfinite(a)
+    out = f[..., 0].copy()
+    for k in range(1, a.shape[-1]):
+        out &= f[..., k]
+    return out
+
+
 def normals_from_points(points: np.ndarray, step_px: int = 2) -> np.ndarray:
     """Surface normals from the gradients of a point grid.
 
@@ -73,24 +85,36 @@ def normals_from_points(points: np.ndarray, step_px: int = 2) -> np.ndarray:
     """
     p = np.asarray(points, dtype=np.float64)
     s = int(step_px)
-    pad = np.pad(p, ((s, s), (s, s), (0, 0)), constant_values=np.nan)
     h, w = p.shape[:2]
-    right, left = pad[s:s + h, 2 * s:], pad[s:s + h, : w]
-    down, up = pad[2 * s:, s:s + w], pad[: h, s:s + w]
-    # central difference where both sides are valid, else one-sided
-    dx = right - left
-    dx = np.where(np.isnan(dx), right - p, dx)
-    dx = np.where(np.isnan(dx), p - left, dx)
-    dy = down - up
-    dy = np.where(np.isnan(dy), down - p, dy)
-    dy = np.where(np.isnan(dy), p - up, dy)
-    n = np.cross(dx, dy)
-    norm = np.linalg.norm(n, axis=-1, keepdims=True)
+    # one coordinate plane at a time, (H, W) contiguous: the same operations as on the (H, W, 3)
+    # grid (np.cross's products and differences, the norm's sum in x, y, z order), in a third
+    # of the time
+    dx, dy, pc = [], [], []
+    for k in range(3):
+        c = p[..., k]
+        pad = np.pad(c, s, constant_values=np.nan)
+        right, left = pad[s:s + h, 2 * s:], pad[s:s + h, :w]
+        down, up = pad[2 * s:, s:s + w], pad[:h, s:s + w]
+        # central difference where both sides are valid, else one-sided
+        gx = right - left
+        gx = np.where(np.isnan(gx), right - c, gx)
+        dx.append(np.where(np.isnan(gx), c - left, gx))
+        gy = down - up
+        gy = np.where(np.isnan(gy), down - c, gy)
+        dy.append(np.where(np.isnan(gy), c - up, gy))
+        pc.append(c)
+    n = [dx[1] * dy[2] - dx[2] * dy[1],
+         dx[2] * dy[0] - dx[0] * dy[2],
+         dx[0] * dy[1] - dx[1] * dy[0]]
+    norm = np.sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2])
     with np.errstate(invalid="ignore", divide="ignore"):
-        n = n / norm
-    flip = np.sum(n * p, axis=-1) > 0
-    n[flip] *= -1
-    return n.astype(np.float32)
+        n = [nk / norm for nk in n]
+    flip = (n[0] * pc[0] + n[1] * pc[1] + n[2] * pc[2]) > 0
+    out = np.empty((h, w, 3), np.float32)
+    for k in range(3):
+        np.negative(n[k], out=n[k], where=flip)
+        out[..., k] = n[k]
+    return out
 
 
 def surface_normals(points: np.ndarray, step_px: int | None = None) -> np.ndarray:
@@ -105,7 +129,7 @@ def surface_normals(points: np.ndarray, step_px: int | None = None) -> np.ndarra
     (H, W, 3) float32 — unit normals, camera frame.
     """
     step = int(step_px) if step_px is not None else max(1, round(points.shape[1] / 200))
-    valid = np.isfinite(points).all(axis=-1)
+    valid = finite_rows(points)
     n = normals_from_points(points, step_px=step)
     n = np.where(np.isfinite(n), n, 0).astype(np.float32)
     n = cv2.blur(n, (2 * step + 1, 2 * step + 1))

@@ -28,7 +28,7 @@ import dataclasses
 import cv2
 import numpy as np
 
-from sim2radar.reconstruct.backproject import normals_from_points, points_from_depth
+from sim2radar.reconstruct.backproject import finite_rows, normals_from_points, points_from_depth
 from sim2radar.reconstruct.types import (
     MATERIAL_BACKENDS,
     DepthResult,
@@ -273,7 +273,7 @@ def _plane_masks(points_cam: np.ndarray, normals: np.ndarray, mask: np.ndarray,
     """Split a segment into its largest planes (e.g. both walls of a corridor in one oracle
     instance): the most common normal direction, then the most common offset along it."""
     out = []
-    rest = mask & np.isfinite(normals).all(axis=-1) & np.isfinite(points_cam).all(axis=-1)
+    rest = mask & finite_rows(normals) & finite_rows(points_cam)
     normals_0, points_0 = np.nan_to_num(normals), np.nan_to_num(points_cam)  # once, not per plane
     for _ in range(max_planes):
         if rest.sum() < min_px:
@@ -361,7 +361,7 @@ def _plane_structure(line: np.ndarray, points_cam: np.ndarray, mask: np.ndarray,
     cell_m : float [m] — rectification cell size; default: the 30th percentile of the pixel
         footprints, within 1.5–3 cm.
     """
-    m = mask & np.isfinite(points_cam).all(axis=-1)
+    m = mask & finite_rows(points_cam)
     ys, xs = np.nonzero(m)
     if len(ys) < 300:
         return SurfaceStructure()

@@ -82,6 +82,7 @@ import numpy as np
 from sim2radar.reconstruct.backproject import (
     FloorPlane,
     find_floor,
+    finite_rows,
     gravity_up,
     level_from_camera,
     points_from_depth,
@@ -98,7 +99,6 @@ from sim2radar.reconstruct.segment_builtin_geometry import (
     UnionFind,
     fill_columns,
     fill_nearest,
-    finite_rows,
     footprint_gap_m,
     region_geometry,
 )

@@ -24,8 +24,8 @@ import numpy as np
 
 from sim2radar.boxes import DOOR_THICKNESS_M
 from sim2radar.camera import CameraIntrinsics
+from sim2radar.reconstruct.backproject import finite_rows
 from sim2radar.reconstruct.facade import FacadeConfig
-from sim2radar.reconstruct.segment_builtin_geometry import finite_rows
 from sim2radar.reconstruct.segment_builtin_thresholds import (
     SegmenterThresholds,
     config_from_options,

@@ -15,19 +15,10 @@ import math
 import cv2
 import numpy as np
 
-__all__ = ["SegmentGeometry", "UnionFind", "fill_columns", "fill_nearest", "finite_rows",
-           "footprint_gap_m", "region_geometry", "row_ends"]
+from sim2radar.reconstruct.backproject import finite_rows
 
-
-def finite_rows(a: np.ndarray) -> np.ndarray:
-    """``np.isfinite(a).all(axis=-1)``: every value along the last axis finite (a point with
-    depth). The same booleans; NumPy's reduction over a last axis of 3 takes ~6x longer than
-    these two ``&`` of its columns (9 against 1.4 ms on a 640 x 480 point map)."""
-    f = np.isfinite(a)
-    out = f[..., 0].copy()
-    for k in range(1, a.shape[-1]):
-        out &= f[..., k]
-    return out
+__all__ = ["SegmentGeometry", "UnionFind", "fill_columns", "fill_nearest", "footprint_gap_m",
+           "region_geometry", "row_ends"]
 
 
 @dataclasses.dataclass(frozen=True)

@@ -60,7 +60,7 @@ def test_the_context_s_pixels_with_depth_are_every_coordinate_finite_and_read_on
     """``valid``: a pixel has depth when all three coordinates are finite (a NaN or inf in any
     one of them drops it), as ``np.isfinite(points).all(axis=-1)`` says; one array per
     context, which no step may change."""
-    from sim2radar.reconstruct.segment_builtin_geometry import finite_rows
+    from sim2radar.reconstruct.backproject import finite_rows
 
     rng = np.random.default_rng(3)
     pl = rng.normal(size=(6, 7, 3)).astype(np.float32)
