@@ -87,8 +87,8 @@ def normals_from_points(points: np.ndarray, step_px: int = 2) -> np.ndarray:
     s = int(step_px)
     h, w = p.shape[:2]
     # one coordinate plane at a time, (H, W) contiguous: the same operations as on the (H, W, 3)
-    # grid (np.cross's products and differences, the norm's sum in x, y, z order), in a third
-    # of the time
+    # grid (np.cross's products and differences, the norm's sum in x, y, z order), the same
+    # bits in two thirds of the time
     dx, dy, pc = [], [], []
     for k in range(3):
         c = p[..., k]
