@@ -17,6 +17,7 @@ import threading
 import numpy as np
 
 from sim2radar.mesh import MaterialMesh
+from sim2radar.reconstruct.backproject import finite_rows
 
 __all__ = ["MeshingConfig", "grid_triangulate", "simplify_mesh", "segment_meshes"]
 
@@ -75,7 +76,7 @@ def grid_triangulate(
     """
     s = int(stride_px)
     p = np.asarray(points, dtype=np.float32)[::s, ::s]
-    m = np.asarray(mask, dtype=bool)[::s, ::s] & np.isfinite(p).all(axis=-1)
+    m = np.asarray(mask, dtype=bool)[::s, ::s] & finite_rows(p)
     h, w = m.shape
     if h < 2 or w < 2:
         return np.zeros((0, 3), np.float32), np.zeros((0, 3), np.int32)
