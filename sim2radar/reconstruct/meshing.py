@@ -9,17 +9,32 @@ Heckbert 1997) with boundary edges heavily weighted, and its faces are turned to
 
 from __future__ import annotations
 
+import atexit
 import dataclasses
 import math
+import os
+import pickle
 import queue
+import subprocess
+import sys
 import threading
+from concurrent.futures import Future, ThreadPoolExecutor
 
 import numpy as np
 
 from sim2radar.mesh import MaterialMesh
+from sim2radar.reconstruct import meshlab_process
 from sim2radar.reconstruct.backproject import finite_rows
+from sim2radar.reconstruct.meshlab_process import decimate as _decimate
 
-__all__ = ["MeshingConfig", "grid_triangulate", "simplify_mesh", "segment_meshes"]
+__all__ = ["MeshingConfig", "grid_triangulate", "simplify_mesh", "segment_meshes",
+           "meshlab_processes", "MESHLAB_PROCESSES_ENV"]
+
+#: Environment variable: worker processes that decimate meshes, shared by the process's
+#: threads (:func:`meshlab_processes`); ``0`` decimates on one thread of this process.
+MESHLAB_PROCESSES_ENV = "SIM2RADAR_MESHLAB_PROCESSES"
+#: The default's cap on decimation processes (the default is the usable cores).
+MAX_DEFAULT_MESHLAB_PROCESSES = 8
 
 
 @dataclasses.dataclass(frozen=True)
@@ -120,35 +135,162 @@ def simplify_mesh(
 
     Boundary edges carry a heavy quadric weight (``boundaryweight`` 10) so outlines and holes
     stay where the depth grid put them while straight runs of boundary vertices may collapse;
-    planar regions collapse to few triangles (``planarquadric``).
+    planar regions collapse to few triangles (``planarquadric``). It runs in a decimation
+    worker process (:func:`meshlab_processes`): the same result as in this process, bit for
+    bit.
     """
+    return _start_simplify(vertices, faces, target_faces).result()
+
+
+def meshlab_processes() -> int:
+    """Decimation worker processes: ``SIM2RADAR_MESHLAB_PROCESSES`` (an integer >= 0; 0: one
+    thread of this process), by default the usable cores, at most
+    :data:`MAX_DEFAULT_MESHLAB_PROCESSES`.
+
+    pymeshlab is not thread-safe (:mod:`~sim2radar.reconstruct.meshlab_process`), so each
+    process decimates one mesh at a time; several let a frame's segments, and the worlds that
+    ``--workers`` runs on threads, decimate side by side. With one thread for all of them the
+    worlds queued behind each other's decimations with a core idle (BENCHMARKS.md)."""
+    raw = os.environ.get(MESHLAB_PROCESSES_ENV, "").strip()
+    if not raw:
+        try:
+            cores = len(os.sched_getaffinity(0))
+        except AttributeError:       # not Linux
+            cores = os.cpu_count() or 1
+        return max(1, min(MAX_DEFAULT_MESHLAB_PROCESSES, cores))
+    try:
+        n = int(raw)
+        if n < 0:
+            raise ValueError
+    except ValueError:
+        raise ValueError(f"{MESHLAB_PROCESSES_ENV} must be an integer >= 0 (0: decimate on one "
+                         f"thread of this process), got {raw!r}") from None
+    return n
+
+
+def _start_simplify(vertices: np.ndarray, faces: np.ndarray, target_faces: int) -> Future:
+    """:func:`simplify_mesh` started: a future of ``(vertices, faces)``."""
+    future: Future = Future()
     if target_faces <= 0 or len(faces) <= target_faces:
-        return vertices, faces
-    return _on_meshlab_thread(_decimate, vertices, faces, int(target_faces))
+        future.set_result((vertices, faces))
+        return future
+    args = (np.ascontiguousarray(vertices), np.ascontiguousarray(faces), int(target_faces))
+    n = meshlab_processes()
+    if n > 0:
+        return _decimation_pool(n).submit(args)
+    try:
+        future.set_result(_on_meshlab_thread(_decimate, *args))
+    except Exception as exc:  # noqa: BLE001 - raised by the future's result()
+        future.set_exception(exc)
+    return future
 
 
-def _decimate(vertices: np.ndarray, faces: np.ndarray, target_faces: int):
-    import pymeshlab
+class _WorkerProcess:
+    """One decimation process (``meshlab_process.py``), started on first use and again after
+    it ended."""
 
-    ms = pymeshlab.MeshSet()
-    ms.add_mesh(pymeshlab.Mesh(np.asarray(vertices, np.float64), np.asarray(faces, np.int32)))
-    ms.meshing_decimation_quadric_edge_collapse(
-        targetfacenum=target_faces,
-        preserveboundary=False,
-        boundaryweight=10.0,
-        preservenormal=True,
-        planarquadric=True,
-        qualitythr=0.3,
-        autoclean=True,
-    )
-    out = ms.current_mesh()
-    return out.vertex_matrix().astype(np.float32), out.face_matrix().astype(np.int32)
+    def __init__(self) -> None:
+        self.proc: subprocess.Popen | None = None
+
+    def decimate(self, args: tuple) -> tuple[np.ndarray, np.ndarray]:
+        if self.proc is None or self.proc.poll() is not None:
+            self.close()
+            self.proc = subprocess.Popen([sys.executable, meshlab_process.__file__],
+                                         stdin=subprocess.PIPE, stdout=subprocess.PIPE)
+        proc = self.proc
+        try:
+            pickle.dump(args, proc.stdin, protocol=pickle.HIGHEST_PROTOCOL)
+            proc.stdin.flush()
+            ok, value = pickle.load(proc.stdout)
+        except (EOFError, OSError, pickle.UnpicklingError) as exc:
+            self.close()
+            raise RuntimeError(
+                f"the pymeshlab decimation process (pid {proc.pid}) ended with exit status "
+                f"{proc.returncode} while decimating a mesh of {len(args[1])} faces; the next "
+                f"mesh starts a new one. To decimate in this process instead, set "
+                f"{MESHLAB_PROCESSES_ENV}=0") from exc
+        if not ok:
+            raise value
+        return value
+
+    def close(self) -> None:
+        """End the process: its input closed, it leaves; killed if it has not within 5 s."""
+        proc, self.proc = self.proc, None
+        if proc is None:
+            return
+        try:
+            proc.stdin.close()
+        except OSError:
+            pass
+        try:
+            proc.wait(timeout=5.0)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait()
+        proc.stdout.close()
 
 
-# pymeshlab keeps per-thread state that crashes the whole process at interpreter exit
-# ("malloc_consolidate(): unaligned fastbin chunk", exit status 134) when a worker thread that
-# used it has ended -- e.g. a Prefect task-runner thread. Every pymeshlab call therefore runs on
-# one long-lived daemon thread, which never ends before the process does.
+class _DecimationPool:
+    """``size`` decimation processes fed by as many threads of this process: a submitted mesh
+    goes to a free process."""
+
+    def __init__(self, size: int) -> None:
+        self.size = size
+        self._workers = [_WorkerProcess() for _ in range(size)]
+        self._free: queue.SimpleQueue = queue.SimpleQueue()
+        for worker in self._workers:
+            self._free.put(worker)
+        self._threads = ThreadPoolExecutor(size, thread_name_prefix="sim2radar-meshlab")
+
+    def submit(self, args: tuple) -> Future:
+        return self._threads.submit(self._run, args)
+
+    def _run(self, args: tuple) -> tuple[np.ndarray, np.ndarray]:
+        worker = self._free.get()          # never waits: as many threads as processes
+        try:
+            return worker.decimate(args)
+        finally:
+            self._free.put(worker)
+
+    def close(self) -> None:
+        self._threads.shutdown(wait=True, cancel_futures=True)
+        for worker in self._workers:
+            worker.close()
+
+
+_POOL: _DecimationPool | None = None
+_POOL_LOCK = threading.Lock()
+
+
+def _decimation_pool(size: int) -> _DecimationPool:
+    """This process's decimation pool of ``size`` processes (made on first use, shared by its
+    threads; made again when ``SIM2RADAR_MESHLAB_PROCESSES`` changed)."""
+    global _POOL
+    with _POOL_LOCK:
+        if _POOL is None or _POOL.size != size:
+            if _POOL is None:
+                atexit.register(_close_pool)
+            else:
+                _POOL.close()
+            _POOL = _DecimationPool(size)
+        return _POOL
+
+
+def _close_pool() -> None:
+    """End the decimation processes (at exit; they would also leave when this process's end
+    closes their input)."""
+    global _POOL
+    with _POOL_LOCK:
+        pool, _POOL = _POOL, None
+    if pool is not None:
+        pool.close()
+
+
+# With SIM2RADAR_MESHLAB_PROCESSES=0 pymeshlab runs in this process, where it keeps per-thread
+# state that crashes the whole process at interpreter exit ("malloc_consolidate(): unaligned
+# fastbin chunk", exit status 134) when a worker thread that used it has ended -- e.g. a
+# Prefect task-runner thread. Its calls therefore run on one long-lived daemon thread, which
+# never ends before the process does.
 _MESHLAB_QUEUE: queue.SimpleQueue | None = None
 _MESHLAB_LOCK = threading.Lock()
 
@@ -216,23 +358,30 @@ def segment_meshes(
     ``config.min_faces`` triangles are skipped.
     """
     seg = np.asarray(segment_id)
-    meshes = []
-    for k, (label, material) in enumerate(zip(labels, materials, strict=True)):
-        mask = seg == k
-        if not mask.any():
-            continue
-        v, f = grid_triangulate(
-            points, mask, stride_px=config.stride_px, focal_px=focal_px,
-            max_incidence_deg=config.max_incidence_deg, min_jump_rel=config.min_jump_rel,
-        )
-        if len(f) < config.min_faces:
-            continue
-        v, f = simplify_mesh(v, f, config.target_faces)
-        if len(f) < config.min_faces:
-            continue
-        f = _face_camera(v, f)
-        meshes.append(
-            MaterialMesh(v, f, material=material if material else "unknown",
-                         name=f"seg_{k}_{label}", semantic=label)
-        )
+    started = []              # every segment's decimation first, so that they run side by side
+    try:
+        for k, (label, material) in enumerate(zip(labels, materials, strict=True)):
+            mask = seg == k
+            if not mask.any():
+                continue
+            v, f = grid_triangulate(
+                points, mask, stride_px=config.stride_px, focal_px=focal_px,
+                max_incidence_deg=config.max_incidence_deg, min_jump_rel=config.min_jump_rel,
+            )
+            if len(f) < config.min_faces:
+                continue
+            started.append((k, label, material, _start_simplify(v, f, config.target_faces)))
+        meshes = []
+        for k, label, material, simplified in started:
+            v, f = simplified.result()
+            if len(f) < config.min_faces:
+                continue
+            f = _face_camera(v, f)
+            meshes.append(
+                MaterialMesh(v, f, material=material if material else "unknown",
+                             name=f"seg_{k}_{label}", semantic=label)
+            )
+    finally:                  # after a failure the other segments' decimations are not needed
+        for *_, simplified in started:
+            simplified.cancel()
     return meshes
