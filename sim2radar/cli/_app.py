@@ -59,6 +59,19 @@ def exit_unless_writable_outputs(outputs: dict[str, object]) -> None:
             exit_unless_writable(str(path), option)
 
 
+def exit_unless_engine_fits(no_prefect: bool, workers: int, dask: str | None) -> None:
+    """Before any work: exit with status 2 when ``--workers`` above 1 or ``--dask`` comes with
+    ``--no-prefect``, whose plain loop runs one unit at a time in this process (it ran them
+    that way without a word before)."""
+    if not no_prefect or (workers <= 1 and not dask):
+        return
+    flag = "--dask" if dask else f"--workers {workers}"
+    typer.secho(f"error: {flag} needs the Prefect engine; --no-prefect runs one unit at a time "
+                f"in this process: drop --no-prefect"
+                + ("" if dask else ", or use --workers 1"), fg="red", err=True)
+    raise typer.Exit(2)
+
+
 class _RecordedTaskFailures(logging.Filter):
     """Drops, from a console handler, the ERROR records Prefect's task engine writes when one
     of ``task_names`` fails (the exception with its traceback, then "Finished in state

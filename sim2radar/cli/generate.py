@@ -20,6 +20,7 @@ import typer
 
 from sim2radar.cli._app import (
     app,
+    exit_unless_engine_fits,
     exit_unless_valid_dataset,
     exit_unless_writable,
     exit_unless_writable_outputs,
@@ -190,6 +191,7 @@ def generate(
     exit_unless_writable_outputs({"--export-openpcdet": export_openpcdet,
                                   "--png-dir": None if no_png else png_dir,
                                   "--json": None if json_out is None else json_out.parent})
+    exit_unless_engine_fits(no_prefect, workers, dask)
     for option, value, most in (("--frames", frames, MAX_FRAMES_PER_WORLD),
                                 ("--worlds", worlds, MAX_WORLDS)):
         if value is not None and not 1 <= value <= most:

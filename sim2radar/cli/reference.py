@@ -18,6 +18,7 @@ import typer
 
 from sim2radar.cli._app import (
     app,
+    exit_unless_engine_fits,
     exit_unless_valid_dataset,
     exit_unless_writable,
     exit_unless_writable_outputs,
@@ -69,6 +70,7 @@ def reference(
     exit_unless_writable_outputs({"--export-openpcdet": export_openpcdet,
                                   "--png-dir": None if no_png else png_dir,
                                   "--json": None if json_out is None else json_out.parent})
+    exit_unless_engine_fits(no_prefect, workers, dask)
     if not no_prefect:
         _prefect_env(verbose)
     try:

@@ -19,6 +19,7 @@ import typer
 
 from sim2radar.cli._app import (
     app,
+    exit_unless_engine_fits,
     exit_unless_valid_dataset,
     exit_unless_writable,
     quiet_recorded_failures,
@@ -160,6 +161,7 @@ def simulate(
 
     exit_unless_writable(out)
     exit_unless_valid_dataset(dataset)
+    exit_unless_engine_fits(no_prefect, workers, dask)
     try:
         load_radar_config(radar)
     except RadarConfigError as exc:

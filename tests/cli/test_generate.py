@@ -53,3 +53,19 @@ def test_unwritable_store_fails_up_front(tmp_path, unwritable_dir):
         lines = res.output.strip().splitlines()
         assert len(lines) == 1 and lines[0].startswith("error: --out: "), res.output
         assert str(out) in lines[0] and expect in lines[0], lines[0]
+
+
+@pytest.mark.parametrize("command", [["generate"], ["reference"], ["simulate", "scene.yaml"]])
+@pytest.mark.parametrize("engine", [["--workers", "2"], ["--dask", "local"]])
+def test_the_plain_loop_refuses_workers_and_dask(tmp_path, command, engine):
+    # --no-prefect runs one unit at a time in this process: it used to drop --workers (and
+    # simulate's --dask) without a word
+    store = tmp_path / "store"
+    res = CliRunner().invoke(app, [*command, "--no-prefect", *engine, "--out", str(store)],
+                             env={"COLUMNS": "400"})
+    assert res.exit_code == 2, res.output
+    line = res.output.strip()
+    assert line.startswith(f"error: {' '.join(engine) if engine[0] == '--workers' else '--dask'}"
+                           " needs the Prefect engine"), line
+    assert "drop --no-prefect" in line and "\n" not in line
+    assert not store.exists()                    # refused before any work
