@@ -195,7 +195,9 @@ class _WorkerProcess:
     def decimate(self, args: tuple) -> tuple[np.ndarray, np.ndarray]:
         if self.proc is None or self.proc.poll() is not None:
             self.close()
-            self.proc = subprocess.Popen([sys.executable, meshlab_process.__file__],
+            # -P: the script's folder is not put on sys.path, where its modules (check.py,
+            # inputs.py, pipeline.py, ...) would shadow top-level modules of those names
+            self.proc = subprocess.Popen([sys.executable, "-P", meshlab_process.__file__],
                                          stdin=subprocess.PIPE, stdout=subprocess.PIPE)
         proc = self.proc
         try:

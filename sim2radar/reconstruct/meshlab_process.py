@@ -5,12 +5,13 @@ pymeshlab is not thread-safe (two decimations on two threads of one process fail
 ``std::bad_alloc``, then a double free), so meshing runs it in worker processes, one mesh at a
 time each: this file run as a script,
 
-    python .../sim2radar/reconstruct/meshlab_process.py
+    python -P .../sim2radar/reconstruct/meshlab_process.py
 
 reads pickled ``(vertices, faces, target_faces)`` jobs from its standard input and writes a
 pickled ``(True, (vertices, faces))`` or ``(False, exception)`` for each to its standard
 output, until its input ends (its parent closed it, or died). It is started by path, not as
-``-m sim2radar...``, so it imports NumPy and pymeshlab only, not the package. Whatever pymeshlab
+``-m sim2radar...``, so it imports NumPy and pymeshlab only, not the package (``-P``: nor this
+folder's, which would shadow top-level modules of their names). Whatever pymeshlab
 prints goes to standard error, never into the results. Ctrl-C is left to the parent, whose
 exit ends the workers' input.
 """
