@@ -278,6 +278,16 @@ def _decimation_pool(size: int) -> _DecimationPool:
         return _POOL
 
 
+def _forget_pool_in_child() -> None:
+    """A forked child (a DataLoader worker) owns neither its parent's decimation processes
+    nor the threads that feed them: it starts its own if it decimates."""
+    global _POOL, _POOL_LOCK
+    _POOL, _POOL_LOCK = None, threading.Lock()
+
+
+os.register_at_fork(after_in_child=_forget_pool_in_child)
+
+
 def _close_pool() -> None:
     """End the decimation processes (at exit; they would also leave when this process's end
     closes their input)."""

@@ -169,3 +169,45 @@ def _alive(pid: int) -> bool:
             return fh.read().rsplit(")", 1)[1].split()[0] != "Z"
     except FileNotFoundError:
         return False
+
+
+def test_a_forked_child_decimates_with_processes_of_its_own(tmp_path):
+    # a DataLoader worker forked from a process that decimated must not write into its
+    # parent's decimation processes' pipes (their answers would go to whoever reads first)
+    script = textwrap.dedent(
+        """
+        import os, warnings
+        import numpy as np
+        from sim2radar.reconstruct import meshing
+        warnings.simplefilter("ignore", DeprecationWarning)   # fork() with threads (3.12+)
+        os.environ[meshing.MESHLAB_PROCESSES_ENV] = "1"
+        n = 20
+        xs, ys = np.meshgrid(np.arange(n), np.arange(n))
+        v = np.stack([xs.ravel(), ys.ravel(), np.zeros(n * n)], 1).astype(np.float32)
+        i, j = np.meshgrid(np.arange(n - 1), np.arange(n - 1))
+        a = (i * n + j).ravel()
+        f = np.concatenate([np.stack([a, a + 1, a + n], 1),
+                            np.stack([a + 1, a + n + 1, a + n], 1)]).astype(np.int32)
+        meshing.simplify_mesh(v, f, 50)
+        mine = meshing._decimation_pool(1)._workers[0].proc.pid
+        r, w = os.pipe()
+        pid = os.fork()
+        if pid == 0:
+            try:
+                faces = len(meshing.simplify_mesh(v, f, 50)[1])
+                theirs = meshing._decimation_pool(1)._workers[0].proc.pid
+                os.write(w, f"{faces} {theirs}".encode())
+            finally:
+                os._exit(0)
+        os.close(w)
+        faces, theirs = map(int, os.read(r, 100).split())
+        os.waitpid(pid, 0)
+        assert faces <= 60 and theirs != mine, (faces, theirs, mine)
+        assert len(meshing.simplify_mesh(v, f, 50)[1]) <= 60   # the parent's still answer
+        assert meshing._decimation_pool(1)._workers[0].proc.pid == mine
+        print("ok")
+        """
+    )
+    proc = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True,
+                          timeout=120, cwd=str(tmp_path))
+    assert proc.returncode == 0 and "ok" in proc.stdout, proc.stderr[-2000:]
