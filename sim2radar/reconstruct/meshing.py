@@ -270,9 +270,7 @@ def _decimation_pool(size: int) -> _DecimationPool:
     global _POOL
     with _POOL_LOCK:
         if _POOL is None or _POOL.size != size:
-            if _POOL is None:
-                atexit.register(_close_pool)
-            else:
+            if _POOL is not None:
                 _POOL.close()
             _POOL = _DecimationPool(size)
         return _POOL
@@ -296,6 +294,9 @@ def _close_pool() -> None:
         pool, _POOL = _POOL, None
     if pool is not None:
         pool.close()
+
+
+atexit.register(_close_pool)
 
 
 # With SIM2RADAR_MESHLAB_PROCESSES=0 pymeshlab runs in this process, where it keeps per-thread
