@@ -143,8 +143,6 @@ def generate_from_captures(captures: Path, *, config: Path | None, out: str,
             raise ValueError(f"{given} describe procedural worlds; drop them with --captures")
         if workers < 1:
             raise ValueError(f"--workers must be >= 1, got {workers}")
-        if dask and no_prefect:
-            raise ValueError("--dask needs the Prefect engine: drop --no-prefect")
         cfg = load_generate_config(config) if config is not None else {}
         from sim2radar.factory.captures import CaptureSpec, capture_settings, find_captures
 

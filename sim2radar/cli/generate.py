@@ -224,8 +224,6 @@ def generate(
             raise ValueError(f"--worlds must be >= 1, got {n_worlds}")
         if workers < 1:
             raise ValueError(f"--workers must be >= 1, got {workers}")
-        if dask and no_prefect:
-            raise ValueError("--dask needs the Prefect engine: drop --no-prefect")
         if dask:
             from sim2radar.flows.runners import task_runner
 

@@ -3,6 +3,7 @@ threads, or one dedicated thread; neither may crash the process at exit."""
 
 from __future__ import annotations
 
+import inspect
 import os
 import signal
 import subprocess
@@ -25,6 +26,10 @@ def _grid(n: int = 20):
     a = (i * n + j).ravel()
     f = np.concatenate([np.stack([a, a + 1, a + n], 1), np.stack([a + 1, a + n + 1, a + n], 1)])
     return v, f.astype(np.int32)
+
+
+#: :func:`_grid` for the scripts the tests run in a process of their own
+_GRID_SOURCE = "import numpy as np\n" + inspect.getsource(_grid)
 
 
 def _wavy_grid(n: int, seed: int):
@@ -129,19 +134,13 @@ def test_reconstruction_in_short_lived_threads_exits_cleanly(tmp_path):
 
 
 def test_decimation_processes_end_with_their_parent(tmp_path):
-    script = textwrap.dedent(
+    script = _GRID_SOURCE + textwrap.dedent(
         """
         import os, signal, sys
         import numpy as np
         from sim2radar.reconstruct import meshing
         os.environ[meshing.MESHLAB_PROCESSES_ENV] = "2"
-        n = 30
-        xs, ys = np.meshgrid(np.arange(n), np.arange(n))
-        v = np.stack([xs.ravel(), ys.ravel(), np.zeros(n * n)], 1).astype(np.float32)
-        i, j = np.meshgrid(np.arange(n - 1), np.arange(n - 1))
-        a = (i * n + j).ravel()
-        f = np.concatenate([np.stack([a, a + 1, a + n], 1),
-                            np.stack([a + 1, a + n + 1, a + n], 1)]).astype(np.int32)
+        v, f = _grid(30)
         jobs = [meshing._start_simplify(v, f, 50) for _ in range(4)]
         [j.result() for j in jobs]
         pids = [w.proc.pid for w in meshing._decimation_pool(2)._workers]
@@ -174,20 +173,14 @@ def _alive(pid: int) -> bool:
 def test_a_forked_child_decimates_with_processes_of_its_own(tmp_path):
     # a DataLoader worker forked from a process that decimated must not write into its
     # parent's decimation processes' pipes (their answers would go to whoever reads first)
-    script = textwrap.dedent(
+    script = _GRID_SOURCE + textwrap.dedent(
         """
         import os, warnings
         import numpy as np
         from sim2radar.reconstruct import meshing
         warnings.simplefilter("ignore", DeprecationWarning)   # fork() with threads (3.12+)
         os.environ[meshing.MESHLAB_PROCESSES_ENV] = "1"
-        n = 20
-        xs, ys = np.meshgrid(np.arange(n), np.arange(n))
-        v = np.stack([xs.ravel(), ys.ravel(), np.zeros(n * n)], 1).astype(np.float32)
-        i, j = np.meshgrid(np.arange(n - 1), np.arange(n - 1))
-        a = (i * n + j).ravel()
-        f = np.concatenate([np.stack([a, a + 1, a + n], 1),
-                            np.stack([a + 1, a + n + 1, a + n], 1)]).astype(np.int32)
+        v, f = _grid(20)
         meshing.simplify_mesh(v, f, 50)
         mine = meshing._decimation_pool(1)._workers[0].proc.pid
         r, w = os.pipe()
